@@ -1,0 +1,38 @@
+"""The single numba wrapper every compiled kernel goes through.
+
+All numba flags live here: ``cache=True``, a fastmath subset that keeps NaN/inf checks
+working (no ``nnan``/``ninf``), and ``FLEXMM_NO_JIT=1`` in the environment to run every
+kernel as plain Python for debugging.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numba
+
+NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
+
+# Reassociation and contraction are allowed; NaN/inf semantics are kept so blow-ups are seen.
+FASTMATH = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
+
+prange = range if NO_JIT else numba.prange
+
+
+def jit(fn=None, *, parallel: bool = False):
+    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT)."""
+
+    def wrap(f):
+        if NO_JIT:
+            return f
+        return numba.njit(
+            f,
+            cache=True,
+            fastmath=set(FASTMATH),
+            parallel=parallel,
+            nogil=True,
+            error_model="numpy",
+            boundscheck=False,
+        )
+
+    return wrap if fn is None else wrap(fn)

@@ -1,0 +1,48 @@
+"""``flexmm run CONFIG``: integrate a scene, write its dataset, print what it measured."""
+
+from __future__ import annotations
+
+import typer
+
+from flexmm.analysis import PulseNotFound, leading_pulse
+from flexmm.api import run_scene
+from flexmm.assemble import UnstableStepError
+from flexmm.cli.common import EXIT_FAILED_RUN, OverrideOption, error, load_or_exit, stderr_is_tty
+from flexmm.io.dataset import open_run
+
+
+def run(
+    config: str = typer.Argument(..., help="Scene YAML file."),
+    overrides: list[str] = OverrideOption,
+    out: str = typer.Option(None, "--out", "-o", help="Run directory (default output.directory/name)."),
+    force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path."),
+) -> None:
+    """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units)."""
+    ov = list(overrides or [])
+    if force:
+        ov.append("solver.allow_unstable=true")
+    scene = load_or_exit(config, ov)
+    log = None if quiet else (lambda m: typer.echo(m, err=True))
+    try:
+        result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log)
+    except UnstableStepError as exc:
+        raise error(f"{config}: {exc}") from None
+    typer.echo(f"dataset: {result.path}")
+    if not result.ok:
+        typer.echo(f"status: {result.status}: {result.reason}", err=True)
+        raise typer.Exit(EXIT_FAILED_RUN)
+    if quiet:
+        return
+    ds = open_run(result.path)
+    field = "theta" if "theta" in ds else next(v for v in ds.data_vars if ds[v].dims == ("time", "site"))
+    try:
+        p = leading_pulse(ds, field)
+    except PulseNotFound as exc:
+        typer.echo(f"no pulse measured: {exc}")
+        return
+    typer.echo(
+        f"leading {field} pulse: speed {p.speed_m_s:.4g} ± {p.speed_stderr_m_s:.2g} m/s, "
+        f"amplitude {p.amplitude:.4g} {p.amplitude_units}, width (FWHM) {p.fwhm_m * 1e3:.4g} mm "
+        f"({p.fwhm_sites:.2f} sites), fitted over sites {p.first_site}-{p.last_site}"
+    )

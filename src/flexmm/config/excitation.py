@@ -1,0 +1,82 @@
+"""Excitations of a scene: impact, shaker, prescribed boundary pulse, launched soliton."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, model_validator
+
+from flexmm.config.base import End, Finite, NonNegative, Positive, Strict
+
+
+class Striker(Strict):
+    """A free mass that hits the first unit through a one-sided contact spring."""
+
+    mass_kg: Positive
+    contact_stiffness_n_per_m: Positive = Field(
+        description="contact stiffness; with exponent 1.5 in N/m^1.5 (Hertz)"
+    )
+    exponent: Literal[1.0, 1.5] = 1.0
+
+
+class Impact(Strict):
+    """Initial velocity on the end unit, or a striker mass hitting it (PHYSICS.md §1)."""
+
+    kind: Literal["impact"]
+    velocity_m_s: Finite = Field(description="impact velocity, positive into the lattice")
+    end: End = "left"
+    angular_velocity_rad_s: Finite = Field(0.0, description="initial spin of the hit unit")
+    striker: Striker | None = None
+
+
+class Shaker(Strict):
+    """Harmonic boundary drive at 10 Hz–10 kHz, with a smooth ramp-up (and ramp-down)."""
+
+    kind: Literal["shaker"]
+    end: End = "left"
+    frequency_hz: float = Field(ge=10.0, le=10_000.0, description="drive frequency (Hz)")
+    amplitude_m: Positive | None = Field(None, description="displacement amplitude (m)")
+    amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
+    ramp_cycles: NonNegative = Field(3.0, description="cycles of smooth ramp-up")
+    duration_s: Positive | None = Field(None, description="drive stops (smoothly) after this")
+
+    @model_validator(mode="after")
+    def _one_amplitude(self):
+        if (self.amplitude_m is None) == (self.amplitude_n is None):
+            raise ValueError("give exactly one of amplitude_m (displacement) or amplitude_n (force)")
+        return self
+
+    @property
+    def mode(self) -> str:
+        return "displacement" if self.amplitude_m is not None else "force"
+
+
+class BoundaryDisplacement(Strict):
+    """A prescribed displacement pulse u_0(t) of the end unit."""
+
+    kind: Literal["boundary_displacement"]
+    end: End = "left"
+    shape: Literal["half_sine", "smooth_step", "gaussian"] = "half_sine"
+    amplitude_m: Finite = Field(description="peak displacement, positive into the lattice (m)")
+    duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")
+
+
+class Soliton(Strict):
+    """Start from the exact continuum vector soliton (PHYSICS.md §1.3) at a given site."""
+
+    kind: Literal["soliton"]
+    amplitude_rad: Finite = Field(description="peak staggered rotation A (sign = polarity)")
+    center_site: int = Field(ge=0)
+    direction: Literal[1, -1] = 1
+
+
+class NoExcitation(Strict):
+    """Nothing drives the lattice (free vibration of the imperfection or initial state)."""
+
+    kind: Literal["none"]
+
+
+ExcitationConfig = Annotated[
+    Union[Impact, Shaker, BoundaryDisplacement, Soliton, NoExcitation],
+    Field(discriminator="kind"),
+]

@@ -1,0 +1,231 @@
+"""Read a scene from YAML, apply ``--set`` overrides, validate, and report errors by file:line.
+
+Every error names the file and line, the dotted field path, what was given and what was
+expected; the CLI prints them and exits with status 2 (no traceback).
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from flexmm.config.scene import Scene
+
+Path_ = tuple[Any, ...]
+
+
+class _Loader(yaml.SafeLoader):
+    """Safe YAML loader that also reads 1e-3 and 1E+6 as floats (YAML 1.2 style)."""
+
+
+_FLOAT = re.compile(
+    r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+    |\.[0-9_]+(?:[eE][-+][0-9]+)?
+    |[-+]?\.(?:inf|Inf|INF)
+    |\.(?:nan|NaN|NAN))$""",
+    re.X,
+)
+_Loader.yaml_implicit_resolvers = {
+    k: [r for r in v if r[0] != "tag:yaml.org,2002:float"]
+    for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT, list("-+0123456789."))
+
+
+@dataclass
+class ConfigIssue:
+    """One problem: where it is and what is wrong."""
+
+    source: str
+    line: int | None
+    path: str
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.source}:{self.line}" if self.line else self.source
+        field = f" {self.path}:" if self.path else ""
+        return f"{where}:{field} {self.message}"
+
+
+class ConfigError(Exception):
+    """A user error in a config; ``str()`` is the full, readable report."""
+
+    def __init__(self, issues: list[ConfigIssue]):
+        self.issues = issues
+        super().__init__("\n".join(str(i) for i in issues))
+
+
+def _line_map(node: yaml.Node, path: Path_ = (), out: dict | None = None) -> dict[Path_, int]:
+    """Map every key path in a composed YAML tree to its 1-based line."""
+    out = {} if out is None else out
+    out.setdefault(path, node.start_mark.line + 1)
+    if isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            key = k.value
+            out[path + (key,)] = k.start_mark.line + 1
+            _line_map(v, path + (key,), out)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, v in enumerate(node.value):
+            out[path + (i,)] = v.start_mark.line + 1
+            _line_map(v, path + (i,), out)
+    return out
+
+
+def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
+    """Parse a YAML file into a dict plus a key-path -> line map; ConfigError on failure."""
+    src = str(path)
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise ConfigError([ConfigIssue(src, None, "", f"cannot read file: {exc.strerror}")]) from None
+    try:
+        node = yaml.compose(text, Loader=_Loader)
+        data = yaml.load(text, Loader=_Loader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = mark.line + 1 if mark else None
+        what = getattr(exc, "problem", None) or str(exc)
+        raise ConfigError([ConfigIssue(src, line, "", f"invalid YAML: {what}")]) from None
+    if not isinstance(data, dict):
+        raise ConfigError([ConfigIssue(src, 1, "", "expected a mapping of sections (name, lattice, ...)")])
+    return data, _line_map(node) if node is not None else {}
+
+
+def parse_overrides(pairs: list[str]) -> list[tuple[tuple[str, ...], Any, str]]:
+    """Parse ``a.b.c=value`` strings; values are read as YAML scalars (1e-3 is a number)."""
+    parsed = []
+    for raw in pairs:
+        if "=" not in raw:
+            raise ConfigError([ConfigIssue("--set", None, raw, "expected KEY.PATH=VALUE")])
+        key, value = raw.split("=", 1)
+        keys = tuple(k for k in key.strip().split(".") if k)
+        if not keys:
+            raise ConfigError([ConfigIssue("--set", None, raw, "empty key path")])
+        try:
+            val = yaml.load(value, Loader=_Loader) if value.strip() else None
+        except yaml.YAMLError:
+            val = value
+        parsed.append((keys, val, raw))
+    return parsed
+
+
+def apply_overrides(data: dict, overrides, lines: dict, source: str) -> None:
+    """Set each override into ``data`` (in place); record their origin for error messages."""
+    for keys, val, raw in overrides:
+        node = data
+        for k in keys[:-1]:
+            if not isinstance(node.get(k), dict):
+                node[k] = {}
+            node = node[k]
+        node[keys[-1]] = val
+        lines[keys] = f"--set {raw}"
+
+
+def _yaml_path(loc: tuple, data: Any) -> tuple:
+    """Drop pydantic's union-tag entries from ``loc`` so it matches keys in the data."""
+    out, node = [], data
+    for part in loc:
+        if isinstance(node, dict) and part in node:
+            out.append(part)
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
+            out.append(part)
+            node = node[part]
+        elif isinstance(node, dict) and isinstance(part, str) and part not in node:
+            if node.get("kind") == part or part.startswith("function-"):
+                continue  # discriminated-union tag or validator wrapper
+            out.append(part)
+            node = None
+        else:
+            out.append(part)
+            node = None
+    return tuple(out)
+
+
+def _model_at(path: tuple, data: dict) -> type[BaseModel] | None:
+    """The pydantic model class that describes the mapping at ``path``."""
+    from typing import get_args
+
+    cls: Any = Scene
+    node: Any = data
+    for part in path:
+        if not (isinstance(cls, type) and issubclass(cls, BaseModel)) or part not in cls.model_fields:
+            return None
+        node = node.get(part) if isinstance(node, dict) else None
+        cls = _pick_model(cls.model_fields[part].annotation, node, get_args)
+    return cls if isinstance(cls, type) and issubclass(cls, BaseModel) else None
+
+
+def _pick_model(ann, node, get_args):
+    models = []
+    stack = [ann]
+    while stack:
+        a = stack.pop()
+        if isinstance(a, type) and issubclass(a, BaseModel):
+            models.append(a)
+        else:
+            stack.extend(get_args(a))
+    if len(models) == 1:
+        return models[0]
+    kind = node.get("kind") if isinstance(node, dict) else None
+    for m in models:
+        f = m.model_fields.get("kind")
+        if f is not None and kind in get_args(f.annotation):
+            return m
+    return None
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    text = text if len(text) <= 60 else text[:57] + "..."
+    return f"{text} ({type(value).__name__})"
+
+
+def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
+    path = _yaml_path(err["loc"], data)
+    dotted = ".".join(str(p) for p in path)
+    line = None
+    for k in range(len(path), -1, -1):
+        if path[:k] in lines:
+            line = lines[path[:k]]
+            break
+    where = source
+    if isinstance(line, str):  # from --set
+        where, line = line, None
+    etype, msg = err["type"], err["msg"]
+    if etype == "extra_forbidden":
+        model = _model_at(path[:-1], data)
+        valid = sorted(model.model_fields) if model else []
+        close = difflib.get_close_matches(str(path[-1]), valid, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        text = f"unknown key{hint} expected one of: {', '.join(valid)}" if valid else "unknown key"
+    elif etype == "missing":
+        text = "required field is missing"
+    else:
+        given = f"got {_describe(err['input'])}; " if "input" in err and not isinstance(err["input"], dict) else ""
+        text = f"{given}expected: {msg[0].lower() + msg[1:] if msg else msg}"
+    return ConfigIssue(where, line, dotted, text)
+
+
+def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<config>") -> Scene:
+    """Validate a plain dict as a Scene, converting pydantic errors into a ConfigError."""
+    lines = lines or {}
+    try:
+        return Scene.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError([_issue(e, data, lines, source) for e in exc.errors()]) from None
+
+
+def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
+    """Read, override and validate a scene file."""
+    data, lines = read_yaml(path)
+    if overrides:
+        apply_overrides(data, parse_overrides(overrides), lines, str(path))
+    return scene_from_dict(data, lines=lines, source=str(path))

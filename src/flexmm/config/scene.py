@@ -1,0 +1,126 @@
+"""The scene: the top-level config a user writes (``flexmm run scene.yaml``)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import AliasChoices, Field, model_validator
+
+from flexmm.config.base import NonNegative, Positive, Strict
+from flexmm.config.excitation import ExcitationConfig, NoExcitation
+from flexmm.config.lattice import LatticeConfig
+
+
+class Viscous(Strict):
+    """Viscous damping on every DOF: a coefficient, or a damping ratio ζ.
+
+    A ratio gives the same decay rate γ = 2ζω_ref to every DOF, with ω_ref the model's
+    reference frequency (sqrt(k_l/m) for rotating squares): c_u = γm, c_θ = γJ.
+    """
+
+    coefficient_n_s_per_m: NonNegative | None = None
+    rotational_coefficient_n_m_s: NonNegative | None = Field(
+        None, description="on θ DOFs (N m s/rad); defaults to the rate implied by the linear one"
+    )
+    damping_ratio: NonNegative | None = None
+
+    @model_validator(mode="after")
+    def _one_way(self):
+        if (self.coefficient_n_s_per_m is None) == (self.damping_ratio is None):
+            raise ValueError("give exactly one of coefficient_n_s_per_m or damping_ratio")
+        if self.damping_ratio is not None and self.rotational_coefficient_n_m_s is not None:
+            raise ValueError("rotational_coefficient_n_m_s goes with coefficient_n_s_per_m, not damping_ratio")
+        return self
+
+
+class Damping(Strict):
+    """On-site viscous damping and dashpots between neighbouring units."""
+
+    viscous: Viscous | None = None
+    dashpot_n_s_per_m: NonNegative = Field(0.0, description="between neighbours' u (N s/m)")
+
+
+class RotationSeed(Strict):
+    """Add a small rotation to chosen sites (θ ≡ 0 is invariant under a longitudinal impact)."""
+
+    kind: Literal["rotation_seed"]
+    theta_rad: float = Field(description="added staggered rotation (rad)")
+    sites: list[Annotated[int, Field(ge=0)]] = Field(default_factory=lambda: [0])
+
+
+class RandomRotation(Strict):
+    """Gaussian random rotations on every site, reproducible from ``seed``."""
+
+    kind: Literal["random_rotation"]
+    std_rad: Positive
+    seed: int = 0
+
+
+ImperfectionConfig = Annotated[Union[RotationSeed, RandomRotation], Field(discriminator="kind")]
+
+
+class Solver(Strict):
+    """Time integration: method, step and duration."""
+
+    integrator: Literal["velocity_verlet"] = "velocity_verlet"
+    dt_s: Positive | None = Field(
+        None,
+        validation_alias=AliasChoices("dt_s", "dt"),
+        description="time step (s); omitted: a fraction `dt_fraction` of the stable limit",
+    )
+    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit")
+    duration_s: Positive
+    allow_unstable: bool = Field(False, description="run even if dt exceeds the stable limit")
+
+
+class Output(Strict):
+    """What to save and how often (always including the first and last time)."""
+
+    directory: str = "runs"
+    fields: list[str] | None = Field(None, description="coordinates to save; default all")
+    velocities: bool = True
+    every_s: Positive | None = Field(None, description="output interval; default from n_frames")
+    n_frames: int = Field(201, ge=2, le=10_000_000)
+    site_stride: int = Field(1, ge=1)
+    energy: bool = True
+
+
+class Scene(Strict):
+    """A complete, validated scene."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$", max_length=120)
+    description: str = ""
+    lattice: LatticeConfig = Field(discriminator="kind")
+    excitation: ExcitationConfig = Field(default_factory=lambda: NoExcitation(kind="none"))
+    damping: Damping = Field(default_factory=Damping)
+    imperfection: ImperfectionConfig | None = None
+    solver: Solver
+    output: Output = Field(default_factory=Output)
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        lat, exc = self.lattice, self.excitation
+        n = lat.n_units
+        ends = {"left": lat.left, "right": lat.right}
+        boundary = exc.kind in ("shaker", "boundary_displacement", "impact")
+        for end, cond in ends.items():
+            if cond == "driven" and not (boundary and exc.end == end):
+                raise ValueError(
+                    f"lattice.{end} is 'driven' but no impact, shaker or boundary_displacement acts on the {end} end"
+                )
+        if boundary and ends[exc.end] == "fixed":
+            raise ValueError(f"excitation acts on the {exc.end} end, which lattice.{exc.end} fixes")
+        if exc.kind == "soliton" and exc.center_site >= n:
+            raise ValueError(f"excitation.center_site={exc.center_site} is outside 0..{n - 1}")
+        if isinstance(self.imperfection, RotationSeed):
+            bad = [s for s in self.imperfection.sites if s >= n]
+            if bad:
+                raise ValueError(f"imperfection.sites {bad} outside 0..{n - 1}")
+        if self.output.fields is not None:
+            from flexmm.models import model_fields
+
+            valid = model_fields(lat.kind)
+            unknown = [f for f in self.output.fields if f not in valid]
+            if unknown:
+                raise ValueError(f"output.fields {unknown} not in this model's fields {list(valid)}")
+        return self

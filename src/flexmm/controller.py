@@ -1,0 +1,237 @@
+"""Advance a built problem in time, calling the compiled stepper between output times.
+
+The controller owns the schedule (frames always include t = 0 and the final time), the
+blow-up checks, progress reporting and the dataset writer; kernels only see arrays.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from flexmm.assemble import Problem
+from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.common import apply_prescribed, contact_energy
+from flexmm.io.dataset import DatasetWriter, estimate_bytes
+from flexmm.io.provenance import provenance_attrs
+from flexmm.units import UNITS
+
+RUNAWAY_FACTOR = 1e4
+
+
+@dataclass
+class RunResult:
+    """Outcome of a run: status ('finished', 'failed', 'interrupted'), reason, counters."""
+
+    status: str
+    reason: str
+    path: Path | None
+    n_steps: int
+    n_frames: int
+    t_end_s: float
+    dt_s: float
+    stable_dt_s: float
+    compile_s: float
+    wall_s: float
+    log: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "finished"
+
+    @property
+    def unit_steps_per_s(self) -> float:
+        return 0.0 if self.wall_s <= 0 else self.n_steps * self.n_units / self.wall_s
+
+    n_units: int = 0
+
+
+def schedule(duration: float, dt: float, n_frames: int, every: float | None) -> tuple[float, list[int]]:
+    """Uniform step ``h ≤ dt`` and the step counts between successive frames."""
+    if every is None:
+        every = duration / (n_frames - 1)
+    spf = max(1, math.ceil(every / dt - 1e-9))
+    h = every / spf
+    n_full = int(math.floor(duration / every + 1e-9))
+    chunks = [spf] * n_full
+    rest = duration - n_full * every
+    if rest > 1e-9 * every:
+        chunks.append(max(1, round(rest / h)))
+    return h, chunks
+
+
+class _Observer:
+    """Turns the nondimensional state into SI frames for the writer."""
+
+    def __init__(self, problem: Problem, writer_path: Path):
+        sys_, out = problem.system, problem.scene.output
+        self.sys = sys_
+        self.sites = np.arange(0, sys_.n_sites, out.site_stride)
+        names = out.fields or [f.name for f in sys_.fields]
+        self.fields = [f for f in sys_.fields if f.name in names]
+        self.velocities = out.velocities
+        self.energy = out.energy
+        sc = sys_.scales
+        site_vars, time_vars = {}, {}
+        for f in self.fields:
+            u, du = UNITS[f.kind]
+            site_vars[f.name] = (u, f.long_name)
+            if self.velocities:
+                site_vars[f.name + "_dot"] = (du, f"rate of {f.long_name}")
+        if self.energy:
+            for name, long in (
+                ("kinetic_energy", "kinetic energy"),
+                ("potential_energy", "potential energy"),
+                ("total_energy", "kinetic + potential energy"),
+                ("dissipated_energy", "energy dissipated by damping since t = 0"),
+                ("applied_work", "work done by applied forces since t = 0"),
+            ):
+                time_vars[name] = ("J", long)
+        for name, (idx, kind) in sys_.extra_dofs.items():
+            u, du = UNITS[kind]
+            time_vars[name + "_position"] = (u, f"{name} displacement")
+            time_vars[name + "_velocity"] = (du, f"{name} velocity")
+        coords = {k: (v[self.sites], "m", f"rest {k} position") for k, v in sys_.site_coords.items()}
+        self.site_vars, self.time_vars = site_vars, time_vars
+        self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords)
+        self.sc = sc
+
+    def energies(self, problem: Problem, q, v, acc) -> tuple[float, float]:
+        s, t = self.sys, problem.terms
+        pot = s.energy(q, s.args) + contact_energy(q, t["con_ij"], t["con_prm"])
+        return s.kinetic_energy(v), float(pot)
+
+    def frame(self, problem: Problem, t: float, q, v, acc) -> float:
+        s, sc = self.sys, self.sc
+        site_vals, time_vals = {}, {}
+        for f in self.fields:
+            k = s.field_index(f.name) * s.n_sites
+            site_vals[f.name] = q[k + self.sites] * sc.coordinate(f.kind)
+            if self.velocities:
+                site_vals[f.name + "_dot"] = v[k + self.sites] * sc.rate(f.kind)
+        kin, pot = self.energies(problem, q, v, acc)
+        if self.energy:
+            e = sc.energy
+            time_vals.update(
+                kinetic_energy=kin * e, potential_energy=pot * e, total_energy=(kin + pot) * e,
+                dissipated_energy=acc[0] * e, applied_work=acc[1] * e,
+            )
+        for name, (idx, kind) in s.extra_dofs.items():
+            time_vals[name + "_position"] = q[idx] * sc.coordinate(kind)
+            time_vals[name + "_velocity"] = v[idx] * sc.rate(kind)
+        self.writer.append(t * sc.time_s, site_vals, time_vals)
+        return kin + pot
+
+
+def _progress(total: int, enabled: bool):
+    if not enabled:
+        return None
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    prog = Progress(TextColumn("[bold]run"), BarColumn(), TextColumn("{task.percentage:>5.1f}%"),
+                    TimeRemainingColumn(), transient=True)
+    prog.start()
+    prog.add_task("run", total=total)
+    return prog
+
+
+def run_problem(
+    problem: Problem, run_dir: Path, *, progress: bool = False,
+    log: Callable[[str], None] | None = None, extra_attrs: dict | None = None,
+) -> RunResult:
+    """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up."""
+    scene, s = problem.scene, problem.system
+    spec = INTEGRATORS[scene.solver.integrator]
+    sc = s.scales
+    lines: list[str] = []
+
+    def say(msg: str) -> None:
+        lines.append(msg)
+        if log:
+            log(msg)
+
+    for note in problem.notes:
+        say(note)
+    h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, 
+                         scene.output.every_s / sc.time_s if scene.output.every_s else None)
+    obs = _Observer(problem, run_dir / "dataset.nc")
+    n_frames = len(chunks) + 1
+    size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
+    say(f"{s.model}: {s.n_sites} units, {s.ndof} DOFs, {sum(chunks)} steps of {h * sc.time_s:.4g} s "
+        f"(stable limit {problem.stable_dt * sc.time_s:.4g} s), {n_frames} frames, ~{size / 2**20:.1f} MiB")
+
+    q, v = s.q0.copy(), s.v0.copy()
+    f = np.zeros_like(q)
+    acc = np.zeros(2)
+    terms = problem.terms_tuple()
+    t = 0.0
+    drv = terms[4:]
+    apply_prescribed(q, v, t, *drv)
+    tc = _time.perf_counter()
+    spec.init(s.force, s.args, q, v, t, f, terms)
+    spec.advance(s.force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, t, h, 0, acc.copy())
+    compile_s = _time.perf_counter() - tc
+    e_max = abs(obs.frame(problem, t, q, v, acc))
+    drive_scale = float(np.sum(s.mass * s.v0**2)) + float(np.sum(np.abs(terms[7][:, 0]))) ** 2 * s.n_sites + 1e-12
+    status, reason, n_steps = "finished", "", 0
+    prog = _progress(len(chunks), progress)
+    t_wall = _time.perf_counter()
+    try:
+        for k, nsteps in enumerate(chunks):
+            t_prev, q_prev = t, q.copy()
+            t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, nsteps, acc)
+            n_steps += nsteps
+            bad = not (np.isfinite(q).all() and np.isfinite(v).all())
+            if not bad:
+                kin, pot = obs.energies(problem, q, v, acc)
+                bad = (kin + pot) > RUNAWAY_FACTOR * max(e_max, drive_scale + acc[1])
+            if bad:
+                status = "failed"
+                reason = (f"blow-up between t = {t_prev * sc.time_s:.6g} s and {t * sc.time_s:.6g} s "
+                          f"(non-finite state or runaway energy) with dt = {h * sc.time_s:.4g} s; "
+                          f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
+                          f"last good time {t_prev * sc.time_s:.6g} s kept")
+                del q_prev
+                break
+            e_max = max(e_max, abs(obs.frame(problem, t, q, v, acc)))
+            if prog:
+                prog.advance(prog.task_ids[0])
+    except KeyboardInterrupt:
+        status, reason = "interrupted", f"interrupted by the user at t = {t * sc.time_s:.6g} s"
+    finally:
+        if prog:
+            prog.stop()
+    wall = _time.perf_counter() - t_wall
+    mups = n_steps * s.n_sites / wall / 1e6 if wall > 0 else float("nan")
+    say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
+    if reason:
+        say(reason)
+    attrs = {
+        **provenance_attrs(scene),
+        "title": scene.name,
+        "description": scene.description,
+        "model": s.model,
+        "integrator": spec.name,
+        "dt_s": h * sc.time_s,
+        "stable_dt_s": problem.stable_dt * sc.time_s,
+        "omega_max_rad_s": problem.omega_max / sc.time_s,
+        "n_steps": n_steps,
+        "compile_time_s": compile_s,
+        "wall_time_s": wall,
+        "status": status,
+        "status_reason": reason,
+        "length_scale_m": sc.length_m,
+        "time_scale_s": sc.time_s,
+        "mass_scale_kg": sc.mass_kg,
+        "spacing_m": s.spacing_m,
+        "log": "\n".join(lines),
+        **(extra_attrs or {}),
+    }
+    path = obs.writer.close(attrs)
+    return RunResult(status, reason, path, n_steps, obs.writer.n_written, t * sc.time_s, h * sc.time_s,
+                     problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites)

@@ -1,0 +1,106 @@
+"""Streaming, atomic netCDF4 writer for run outputs (readable with xarray, engine h5netcdf).
+
+Frames are buffered and flushed in chunks along an unlimited ``time`` dimension, so a run
+far larger than memory streams to disk. Everything goes to a hidden temporary file that is
+renamed into place only when closed: a reader never sees a half-written dataset.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import h5netcdf
+import numpy as np
+
+BUFFER_BYTES = 32 * 2**20
+CHUNK_BYTES = 4 * 2**20
+
+
+class DatasetWriter:
+    """Write (time, site) fields and per-time scalars; call ``close`` to publish the file.
+
+    ``site_vars``: name -> (units, long_name); ``time_vars`` likewise; ``site_coords``:
+    name -> (values (n_site,), units, long_name).
+    """
+
+    def __init__(self, path: Path, n_site: int, site_vars: dict, time_vars: dict, site_coords: dict):
+        self.path = Path(path)
+        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.n_site = n_site
+        self.site_names = list(site_vars)
+        self.time_names = list(time_vars)
+        self.file = h5netcdf.File(self.tmp, "w")
+        self.file.dimensions = {"time": None, "site": n_site}
+        chunk_t = int(max(1, min(256, CHUNK_BYTES // (8 * max(n_site, 1)))))
+        t = self.file.create_variable("time", ("time",), "f8", chunks=(1024,))
+        t.attrs.update(units="s", long_name="time")
+        s = self.file.create_variable("site", ("site",), "i8", data=np.arange(n_site))
+        s.attrs["long_name"] = "site index"
+        coord_names = " ".join(site_coords)
+        for name, (values, units, long_name) in site_coords.items():
+            c = self.file.create_variable(name, ("site",), np.asarray(values).dtype, data=values)
+            c.attrs.update(units=units, long_name=long_name)
+        for name, (units, long_name) in site_vars.items():
+            v = self.file.create_variable(name, ("time", "site"), "f8", chunks=(chunk_t, n_site))
+            v.attrs.update(units=units, long_name=long_name)
+            if coord_names:
+                v.attrs["coordinates"] = coord_names
+        for name, (units, long_name) in time_vars.items():
+            v = self.file.create_variable(name, ("time",), "f8", chunks=(1024,))
+            v.attrs.update(units=units, long_name=long_name)
+        self.n_written = 0
+        self._buf: list[tuple[float, dict, dict]] = []
+        self._buf_frames = max(1, BUFFER_BYTES // (8 * max(1, n_site * len(self.site_names))))
+
+    def append(self, t: float, site_values: dict, time_values: dict) -> None:
+        """Queue one frame (SI values); flushed to disk in batches."""
+        self._buf.append((t, {k: np.array(v, float) for k, v in site_values.items()}, dict(time_values)))
+        if len(self._buf) >= self._buf_frames:
+            self.flush()
+
+    def flush(self) -> None:
+        if not self._buf:
+            return
+        i0, k = self.n_written, len(self._buf)
+        f = self.file
+        f.resize_dimension("time", i0 + k)
+        f.variables["time"][i0 : i0 + k] = [b[0] for b in self._buf]
+        for name in self.site_names:
+            f.variables[name][i0 : i0 + k, :] = np.stack([b[1][name] for b in self._buf])
+        for name in self.time_names:
+            f.variables[name][i0 : i0 + k] = [b[2][name] for b in self._buf]
+        self.n_written += k
+        self._buf.clear()
+
+    def close(self, attrs: dict) -> Path:
+        """Flush, stamp global attributes, and atomically move the file into place."""
+        self.flush()
+        self.file.attrs.update({k: v for k, v in attrs.items() if v is not None})
+        self.file.close()
+        os.replace(self.tmp, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        """Drop the temporary file (nothing is published)."""
+        try:
+            self.file.close()
+        except Exception:  # noqa: BLE001 - best effort on an already failing path
+            pass
+        self.tmp.unlink(missing_ok=True)
+
+
+def estimate_bytes(n_frames: int, n_site: int, n_site_vars: int, n_time_vars: int) -> int:
+    """Size of the data a run will write (excluding HDF5 overhead)."""
+    return 8 * n_frames * (n_site * n_site_vars + n_time_vars + 1)
+
+
+def open_run(path: str | Path):
+    """Open a run's dataset (a run directory or the .nc file) as an xarray Dataset."""
+    import xarray as xr
+
+    p = Path(path)
+    if p.is_dir():
+        p = p / "dataset.nc"
+    return xr.load_dataset(p, engine="h5netcdf")

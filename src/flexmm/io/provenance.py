@@ -1,0 +1,71 @@
+"""What makes an output self-describing: resolved config, its hash, versions, git commit."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import subprocess
+from functools import lru_cache
+from importlib import metadata
+from pathlib import Path
+
+import yaml
+
+import flexmm
+
+LIBRARIES = ("numpy", "scipy", "numba", "xarray", "h5netcdf", "h5py", "pydantic")
+
+
+def resolved_config(scene) -> dict:
+    """The scene with every default filled in, as plain JSON-compatible data."""
+    return scene.model_dump(mode="json")
+
+
+def config_text(scene) -> str:
+    return yaml.safe_dump(resolved_config(scene), sort_keys=False)
+
+
+def config_hash(scene) -> str:
+    """sha256 of the canonical JSON of the resolved config (independent of YAML layout)."""
+    canon = json.dumps(resolved_config(scene), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(canon.encode()).hexdigest()
+
+
+@lru_cache(maxsize=1)
+def git_commit() -> str:
+    """Commit of the flexmm source tree ('+dirty' if modified), or 'unknown'."""
+    here = Path(flexmm.__file__).resolve().parent
+    try:
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5
+        )
+        if sha.returncode != 0:
+            return "unknown"
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=here, capture_output=True, text=True, timeout=5,
+        )
+        return sha.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def library_versions() -> str:
+    parts = [f"python={platform.python_version()}"]
+    for lib in LIBRARIES:
+        try:
+            parts.append(f"{lib}={metadata.version(lib)}")
+        except metadata.PackageNotFoundError:
+            pass
+    return " ".join(parts)
+
+
+def provenance_attrs(scene) -> dict[str, str]:
+    return {
+        "config": config_text(scene),
+        "config_sha256": config_hash(scene),
+        "flexmm_version": flexmm.__version__,
+        "git_commit": git_commit(),
+        "libraries": library_versions(),
+    }

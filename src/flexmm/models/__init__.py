@@ -1,0 +1,37 @@
+"""Model registry: ``MODELS[kind]`` builds a System from a lattice config.
+
+Each entry is a plain record (no import side effects); tests parametrise over it so a new
+model is checked automatically (force = −∇E, compiled = numpy reference).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from flexmm.models import rotating_chain
+from flexmm.models.base import FieldSpec, System
+
+
+@dataclass(frozen=True)
+class ModelEntry:
+    """How to build one lattice kind, and what it offers."""
+
+    build: Callable[..., System]
+    fields: tuple[FieldSpec, ...]
+    launch_soliton: Callable[..., None] | None = None
+
+
+MODELS: dict[str, ModelEntry] = {
+    "rotating_squares_chain": ModelEntry(
+        rotating_chain.build, rotating_chain.FIELDS, rotating_chain.launch_soliton
+    ),
+}
+
+
+def model_fields(kind: str) -> tuple[str, ...]:
+    """Names of the per-site coordinates of a model kind."""
+    return tuple(f.name for f in MODELS[kind].fields)
+
+
+__all__ = ["MODELS", "ModelEntry", "System", "FieldSpec", "model_fields"]

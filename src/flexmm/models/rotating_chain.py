@@ -1,0 +1,115 @@
+"""Build the rotating-squares chain (PHYSICS.md §1.1) from its config.
+
+Nondimensionalisation: length a, time sqrt(m/k_l), mass m, so k_l = 1, K_s = k_s/k_l,
+K_θ = k_θ/(k_l a²), α² = J/(m a²) and speeds are in units of c0 = a sqrt(k_l/m).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flexmm.config.lattice import RotatingSquaresChain
+from flexmm.models.base import FieldSpec, System
+from flexmm.models.hinge import (
+    N_HINGE_PARAMS,
+    N_SITE_PARAMS,
+    chain_energy,
+    chain_force,
+    chain_reference,
+)
+from flexmm.units import Scales
+
+FIELDS = (
+    FieldSpec("u", "length", "longitudinal displacement"),
+    FieldSpec("theta", "angle", "staggered rotation"),
+)
+
+
+def nondimensional(cfg: RotatingSquaresChain) -> dict[str, float]:
+    """K_s, K_θ, α² of PHYSICS.md §1.1 from the SI config."""
+    return {
+        "Ks": cfg.k_shear_n_per_m / cfg.k_long_n_per_m,
+        "Ktheta": cfg.k_rot_n_m_per_rad / (cfg.k_long_n_per_m * cfg.a_m**2),
+        "alpha2": cfg.inertia_kg_m2 / (cfg.mass_kg * cfg.a_m**2),
+    }
+
+
+def chain_tables(
+    n: int, theta0: np.ndarray, Ks: np.ndarray | float, Ktheta: np.ndarray | float,
+    n_lateral: int, lateral_stretch: bool,
+) -> tuple:
+    """Connectivity and parameter tables of an n-unit chain (nondimensional, a = 1).
+
+    ``theta0`` may vary per site; ``Ks``, ``Ktheta`` per hinge (scalars broadcast).
+    Returns the ``args`` tuple of ``chain_force``.
+    """
+    theta0 = np.broadcast_to(np.asarray(theta0, float), (n,))
+    ha = np.arange(n - 1, dtype=np.int64)
+    hb = ha + 1
+    hprm = np.empty((n - 1, N_HINGE_PARAMS))
+    hprm[:, 0] = 0.5 * (np.cos(theta0[ha]) + np.cos(theta0[hb]))
+    hprm[:, 1] = 0.5
+    hprm[:, 2] = 0.5
+    hprm[:, 3] = np.where(ha % 2 == 0, 1.0, -1.0)
+    hprm[:, 4] = 1.0
+    hprm[:, 5] = Ks
+    hprm[:, 6] = Ktheta
+    sprm = np.empty((n, N_SITE_PARAMS))
+    sprm[:, 0] = theta0
+    sprm[:, 1] = n_lateral * (1.0 if lateral_stretch else 0.0) * 0.5
+    sprm[:, 2] = 2.0 * n_lateral * np.broadcast_to(np.asarray(Ktheta, float), (n - 1,)).mean()
+    return ha, hb, hprm, sprm, np.zeros(n), np.zeros(n)
+
+
+def build(cfg: RotatingSquaresChain) -> System:
+    """The chain as a System: state (u_0..u_{N−1}, θ_0..θ_{N−1}), ends free or fixed."""
+    n = cfg.n_units
+    nd = nondimensional(cfg)
+    scales = Scales(cfg.a_m, math.sqrt(cfg.mass_kg / cfg.k_long_n_per_m), cfg.mass_kg)
+    args = chain_tables(n, cfg.theta0_rad, nd["Ks"], nd["Ktheta"], cfg.n_lateral, cfg.lateral_stretch)
+    mass = np.concatenate([np.ones(n), np.full(n, nd["alpha2"])])
+    inv_mass = 1.0 / mass
+    for end, site in (("left", 0), ("right", n - 1)):
+        if getattr(cfg, end) == "fixed":
+            inv_mass[[site, n + site]] = 0.0
+    spacing = cfg.a_m * math.cos(cfg.theta0_rad)
+    return System(
+        model=cfg.kind,
+        fields=FIELDS,
+        n_sites=n,
+        scales=scales,
+        mass=mass,
+        inv_mass=inv_mass,
+        force=chain_force,
+        energy=chain_energy,
+        args=args,
+        q0=np.zeros(2 * n),
+        v0=np.zeros(2 * n),
+        spacing_m=spacing,
+        site_coords={"x": np.arange(n) * spacing},
+        reference=chain_reference,
+        meta={
+            **nd,
+            "theta0": cfg.theta0_rad,
+            "n_v": cfg.n_lateral,
+            "s_v": int(cfg.lateral_stretch),
+            "omega_ref": 1.0,
+            "ends": {"left": [0], "right": [n - 1]},
+            "longitudinal_field": "u",
+            "rotation_field": "theta",
+        },
+    )
+
+
+def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
+    """Overwrite q0, v0 with the exact continuum vector soliton (PHYSICS.md §1.3)."""
+    from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
+
+    m = system.meta
+    p = RotatingChainND(m["theta0"], m["Ks"], m["Ktheta"], m["alpha2"], m["n_v"], m["s_v"])
+    U, T, dU, dT = soliton_initial_state(p, amplitude, system.n_sites, center, direction)
+    n = system.n_sites
+    system.q0[:n], system.q0[n : 2 * n] = U, T
+    system.v0[:n], system.v0[n : 2 * n] = dU, dT

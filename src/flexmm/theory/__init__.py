@@ -1,0 +1,63 @@
+"""Analytical theory for flexmm: closed forms and reduced ODEs used to seed and check simulations.
+
+Pure numpy/scipy and nondimensional (PHYSICS.md §1.1 scales for the rotating-squares chain).
+`rotating` covers the rotating-squares chain (PHYSICS.md §1.3, §1.4); `chains` covers chains of
+masses with nonlinear springs and on-site potentials (PHYSICS.md §2).
+"""
+from flexmm.theory.chains import (
+    BistableFront,
+    SechWave,
+    bistable_front,
+    bistable_front_profile,
+    evanescent_decay,
+    front_kinetic_energy,
+    linear_chain_band,
+    linear_chain_cutoff_frequency,
+    linear_chain_dispersion,
+    nesterenko_profile,
+    nesterenko_speed,
+    nesterenko_speed_from_force,
+    nesterenko_support,
+    softening_profile,
+    softening_solitary_wave,
+    toda_soliton,
+    toda_speed,
+)
+from flexmm.theory.rotating import (
+    BandEdges,
+    RotatingChainND,
+    TravellingState,
+    amplitude_gap,
+    band_edges,
+    cnoidal_wave,
+    continuum_coefficients,
+    dispersion_chain,
+    dispersion_rotational,
+    exact_soliton,
+    gradient_coefficient,
+    hinge_stretch,
+    lego_parameters,
+    long_wave_speed,
+    min_phase_speed_rotational,
+    omega_max_chain,
+    rotational_cutoff_speed,
+    soliton_amplitude,
+    soliton_exists,
+    soliton_initial_state,
+    soliton_profile,
+    soliton_speed,
+    soliton_width,
+)
+
+__all__ = [
+    "BandEdges", "BistableFront", "RotatingChainND", "SechWave", "TravellingState",
+    "amplitude_gap", "band_edges", "bistable_front", "bistable_front_profile", "cnoidal_wave",
+    "continuum_coefficients", "dispersion_chain", "dispersion_rotational", "evanescent_decay",
+    "exact_soliton", "front_kinetic_energy", "gradient_coefficient", "hinge_stretch",
+    "lego_parameters", "linear_chain_band", "linear_chain_cutoff_frequency",
+    "linear_chain_dispersion", "long_wave_speed", "min_phase_speed_rotational",
+    "nesterenko_profile", "nesterenko_speed", "nesterenko_speed_from_force", "nesterenko_support",
+    "omega_max_chain", "rotational_cutoff_speed", "softening_profile", "softening_solitary_wave",
+    "soliton_amplitude", "soliton_exists", "soliton_initial_state", "soliton_profile",
+    "soliton_speed", "soliton_width", "toda_soliton", "toda_speed",
+]

@@ -1,0 +1,196 @@
+"""Analytical travelling waves in chains of point masses (PHYSICS.md §2).
+
+Chain: m x''_i = F(x_{i+1} - x_i) - F(x_i - x_{i-1}) - V'(x_i) - eta x'_i. Functions take plain floats
+in any consistent unit system (a: spacing, m: mass, k: linear coupling stiffness); array arguments
+broadcast and the outputs take their broadcast shape.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _sech2(z):
+    """sech^2 z without overflow: 4 e^(-2|z|)/(1 + e^(-2|z|))^2."""
+    e = np.exp(-2 * np.abs(z))
+    return 4 * e / (1 + e) ** 2
+
+
+# ---------------------------------------------------------------- bistable on-site fronts
+@dataclass(frozen=True)
+class BistableFront:
+    """Steady transition front of the cubic bistable chain: released energy, speed, width, c0, jump L."""
+
+    dphi: float
+    v: float
+    w: float
+    c0: float
+    L: float
+
+    def profile(self, x, t=0.0):
+        """u(x, t) = (L/2)(1 - tanh((x - vt)/w)); see bistable_front_profile."""
+        return bistable_front_profile(x, t, self.L, self.v, self.w)
+
+
+def bistable_front(alpha: float, beta: float, L: float, k: float, m: float, a: float,
+                   eta: float) -> BistableFront:
+    """Front of the chain with on-site force V'(u) = alpha u (u - beta L)(u - L), 0 < beta < 1/2 (§2).
+
+    Continuum travelling wave (ka^2 - mv^2) u'' + eta v u' - V'(u) = 0 gives (derived, PHYSICS.md §2):
+    dphi = V(0) - V(L) = alpha L^4 (1 - 2 beta)/12, v = c0/sqrt(1 + 2 eta^2/(m alpha L^2 (1 - 2beta)^2)),
+    w = sqrt(8 (k a^2 - m v^2)/(alpha L^2)), c0 = a sqrt(k/m). The front converts u = 0 (ahead) into
+    u = L (behind). Without damping the continuum front degenerates (v = c0, w = 0). Discrete fronts
+    only a few sites wide (w ~ a) pin instead (propagation failure).
+    """
+    if not 0 < beta < 0.5:
+        raise ValueError(f"need 0 < beta < 1/2 for a forward-moving front, got {beta}")
+    if min(alpha, L, k, m, a) <= 0 or eta < 0:
+        raise ValueError("need alpha, L, k, m, a > 0 and eta >= 0")
+    c0 = a * math.sqrt(k / m)
+    v = c0 / math.sqrt(1 + 2 * eta**2 / (m * alpha * L**2 * (1 - 2 * beta) ** 2))
+    w = math.sqrt(8 * max(k * a * a - m * v * v, 0.0) / (alpha * L * L))  # eta = 0: v = c0, w = 0
+    return BistableFront(alpha * L**4 * (1 - 2 * beta) / 12, v, w, c0, L)
+
+
+def bistable_front_profile(x, t, L: float, v: float, w: float):
+    """u(x, t) = (L/2)(1 - tanh((x - v t)/w)) (PHYSICS.md §2); broadcast shape of x and t."""
+    return 0.5 * L * (1 - np.tanh((np.asarray(x, dtype=float) - v * np.asarray(t, dtype=float)) / w))
+
+
+def front_kinetic_energy(m: float, v: float, dphi: float, eta: float, a: float) -> float:
+    """Total kinetic energy carried by a steady damped front, K = m v dphi/(2 eta a) (Nadkarni PRB 2016, §2).
+
+    Follows from power balance: released energy per unit time dphi v/a equals the dissipation
+    2 eta K/m. Infinite for eta = 0.
+    """
+    return math.inf if eta == 0 else m * v * dphi / (2 * eta * a)
+
+
+# ---------------------------------------------------------------- strain-softening chain
+@dataclass(frozen=True)
+class SechWave:
+    """sech^2 solitary wave of a chain with bond tension T(D) = k1 D + k2 D^2.
+
+    Dm: peak bond elongation (sign = polarity), v: speed [length/time], W: width [sites], c0 = a sqrt(k1/m).
+    """
+
+    Dm: float
+    v: float
+    W: float
+    c0: float
+    a: float = 1.0
+
+    @property
+    def polarity(self) -> int:
+        """+1 for a tensile (rarefaction) pulse, -1 for a compressive one."""
+        return 1 if self.Dm > 0 else -1
+
+    def profile(self, n, t=0.0):
+        """Bond elongation D_n(t) = Dm sech^2((n - v t/a)/W); broadcast shape of n and t."""
+        return softening_profile(n, t, self.Dm, self.v, self.W, self.a)
+
+
+def softening_solitary_wave(k1: float, k2: float, Dm: float, m: float = 1.0, a: float = 1.0) -> SechWave:
+    """Long-wave solitary wave D = Dm sech^2((n - vt/a)/W) for T(D) = k1 D + k2 D^2 (PHYSICS.md §2).
+
+    From the Boussinesq limit m D_tt = a^2 [T(D) + (1/12) T(D)_nn]_nn (n in sites): travelling waves obey
+    (k1/12) D'' = (m v^2/a^2 - k1) D - k2 D^2, giving v = c0 sqrt(1 + 2 k2 Dm/(3 k1)), c0 = a sqrt(k1/m),
+    W = sqrt(k1/(2 k2 Dm)) sites. Requires sign(Dm) = sign(k2): softening under compression (k2 > 0)
+    carries tensile (rarefaction) pulses. Valid for W >> 1 (|k2 Dm| << k1).
+    """
+    if k1 <= 0 or m <= 0 or a <= 0:
+        raise ValueError("need k1, m, a > 0")
+    if not k2 * Dm > 0:
+        raise ValueError(f"no solitary wave: the pulse sign must equal sign(k2) (k2={k2}, Dm={Dm})")
+    v = a * math.sqrt(k1 / m) * math.sqrt(1 + 2 * k2 * Dm / (3 * k1))
+    return SechWave(Dm, v, math.sqrt(k1 / (2 * k2 * Dm)), a * math.sqrt(k1 / m), a)
+
+
+def softening_profile(n, t, Dm: float, v: float, W: float, a: float = 1.0):
+    """D_n(t) = Dm sech^2((n - v t/a)/W); broadcast shape of n and t."""
+    z = (np.asarray(n, dtype=float) - v * np.asarray(t, dtype=float) / a) / W
+    return Dm * _sech2(z)
+
+
+# ---------------------------------------------------------------- Hertzian chain (Nesterenko)
+def nesterenko_speed(A: float, m: float, D: float, xi_m: float) -> float:
+    """Solitary-wave speed V = (2/sqrt 5) c xi_m^(1/4), c^2 = A D^(5/2)/m (Nesterenko; PHYSICS.md §2).
+
+    A: Hertz constant in F = A delta^(3/2); D: bead diameter; xi_m: peak strain (overlap/D).
+    """
+    return 2 / math.sqrt(5) * math.sqrt(A * D**2.5 / m) * xi_m**0.25
+
+
+def nesterenko_speed_from_force(A: float, m: float, D: float, F_m: float) -> float:
+    """Speed from the peak contact force: xi_m = (F_m/A)^(2/3)/D, so V = (2/sqrt5) c (F_m/A)^(1/6) D^(-1/4)."""
+    return nesterenko_speed(A, m, D, (F_m / A) ** (2 / 3) / D)
+
+
+def nesterenko_support(D: float) -> float:
+    """Full length of the solitary wave's support, 5 pi D/sqrt(10) ~ 4.97 D."""
+    return 5 * math.pi * D / math.sqrt(10)
+
+
+def nesterenko_profile(A: float, m: float, D: float, xi_m: float, x, t=0.0):
+    """Strain xi(x, t) = xi_m cos^4(sqrt(10)(x - Vt)/(5D)) on |x - Vt| < 5 pi D/(2 sqrt 10), else 0.
+
+    Nesterenko's long-wave equation for the compressive strain xi = -u_x,
+    xi_tt = c^2 [xi^(3/2) + (D^2/10) xi^(1/4) (xi^(5/4))_xx]_xx, has travelling waves obeying
+    V^2 xi = c^2 [xi^(3/2) + (D^2/10) xi^(1/4) (xi^(5/4))'']. Substituting B cos^4(kx) cancels the cos^6
+    terms iff k = sqrt(10)/(5D) and leaves V^2 = (4/5) c^2 B^(1/2). Shape: broadcast of x and t.
+    """
+    s = np.asarray(x, dtype=float) - nesterenko_speed(A, m, D, xi_m) * np.asarray(t, dtype=float)
+    k = math.sqrt(10) / (5 * D)
+    return np.where(np.abs(k * s) < math.pi / 2, xi_m * np.cos(k * s) ** 4, 0.0)
+
+
+# ---------------------------------------------------------------- Toda lattice
+def toda_soliton(a: float, b: float, m: float, kappa: float, n, t):
+    """Bond stretch r_n(t) of the Toda soliton, e^(-b r_n) - 1 = sinh^2(kappa) sech^2(kappa n - beta t) (§2).
+
+    Potential V(r) = (a/b) e^(-b r) + a r, m r''_n = V'(r_{n+1}) - 2 V'(r_n) + V'(r_{n-1});
+    beta = sqrt(ab/m) sinh(kappa). Compressive (r < 0) for b > 0; broadcast shape of n and t.
+    """
+    beta = math.sqrt(a * b / m) * math.sinh(kappa)
+    z = kappa * np.asarray(n, dtype=float) - beta * np.asarray(t, dtype=float)
+    return -np.log1p(math.sinh(kappa) ** 2 * _sech2(z)) / b
+
+
+def toda_speed(a: float, b: float, m: float, kappa: float) -> float:
+    """Toda soliton speed beta/kappa in sites per unit time; tends to sqrt(ab/m) as kappa -> 0."""
+    return math.sqrt(a * b / m) * math.sinh(kappa) / kappa
+
+
+# ---------------------------------------------------------------- linear chain
+def linear_chain_dispersion(k: float, m: float, q, k_onsite: float = 0.0):
+    """omega(q) = sqrt((k_onsite + 4 k sin^2(q/2))/m), q the phase per site (q a) (PHYSICS.md §2); shape of q."""
+    return np.sqrt((k_onsite + 4 * k * np.sin(np.asarray(q, dtype=float) / 2) ** 2) / m)
+
+
+def linear_chain_band(k: float, m: float, k_onsite: float = 0.0) -> tuple[float, float]:
+    """Pass band [sqrt(k_onsite/m), sqrt((k_onsite + 4k)/m)] in angular frequency."""
+    return math.sqrt(k_onsite / m), math.sqrt((k_onsite + 4 * k) / m)
+
+
+def linear_chain_cutoff_frequency(k: float, m: float, k_onsite: float = 0.0) -> float:
+    """Upper cut-off in cycles per unit time, omega_max/(2 pi) (= sqrt(k/m)/pi without on-site springs)."""
+    return linear_chain_band(k, m, k_onsite)[1] / (2 * math.pi)
+
+
+def evanescent_decay(k: float, m: float, omega: float, k_onsite: float = 0.0) -> tuple[float, float]:
+    """Decay per site kappa and neighbour ratio u_{n+1}/u_n of a drive outside the pass band (§2).
+
+    With u_n = r^n: r + 1/r = 2 + (k_onsite - m omega^2)/k. Above the band r = -e^(-kappa),
+    cosh kappa = (m omega^2 - k_onsite)/(2k) - 1; below it (k_onsite > 0) r = +e^(-kappa),
+    cosh kappa = 1 + (k_onsite - m omega^2)/(2k). ValueError inside the band.
+    """
+    lo, hi = linear_chain_band(k, m, k_onsite)
+    if lo <= omega <= hi:
+        raise ValueError(f"omega = {omega} lies in the pass band [{lo}, {hi}]: no evanescent decay")
+    if omega > hi:
+        kappa = math.acosh((m * omega**2 - k_onsite) / (2 * k) - 1)
+        return kappa, -math.exp(-kappa)
+    kappa = math.acosh(1 + (k_onsite - m * omega**2) / (2 * k))
+    return kappa, math.exp(-kappa)
