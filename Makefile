@@ -7,8 +7,19 @@ BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
+# `make reproduce`: every scene in configs/ and every sweep in sweeps/ as a file target, so
+# `make -j2 reproduce` runs two at a time and an interrupted `make` resumes where it stopped
+# (a dataset appears only when its run finished; a sweep skips its finished points).
+CONFIGS   := $(wildcard configs/*.yaml)
+SWEEPS    := $(wildcard sweeps/*.yaml)
+RUN_OUT   := $(patsubst configs/%.yaml,runs/%/dataset.nc,$(CONFIGS))
+SWEEP_OUT := $(patsubst sweeps/%.yaml,runs/sweeps/%/sweep.nc,$(SWEEPS))
+FIGURES   := $(patsubst sweeps/%.yaml,runs/figures/%.png,$(SWEEPS))
+# worker processes per sweep: one per core, or one when make itself runs jobs in parallel (-jN)
+SWEEP_WORKERS ?= $(if $(filter -j%,$(MAKEFLAGS)),1,0)
+
 .DELETE_ON_ERROR:
-.PHONY: install demo test test-slow bench clean
+.PHONY: install demo test test-slow bench clean reproduce figures
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +37,23 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow $(PYTEST_ARGS)
+
+reproduce: $(RUN_OUT) $(SWEEP_OUT)
+
+runs/%/dataset.nc: configs/%.yaml | $(STAMP)
+	$(BIN)/flexmm run $< --out runs/$* --quiet
+
+runs/sweeps/%/sweep.nc: sweeps/%.yaml $(CONFIGS) | $(STAMP)
+	$(BIN)/flexmm sweep $< --out runs/sweeps/$* --workers $(SWEEP_WORKERS)
+
+figures: $(FIGURES)
+
+runs/figures/%.png: runs/sweeps/%/sweep.nc
+	$(BIN)/python -m flexmm.sweep.plot runs/sweeps/$* $@
+
+bench: $(STAMP)
+	@if [ -f benchmarks/run.py ]; then $(BIN)/python benchmarks/run.py; \
+	else echo "bench: benchmarks/run.py does not exist yet"; fi
 
 clean:
 	rm -rf runs/*/ benchmarks/results

@@ -19,15 +19,21 @@ FASTMATH = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 prange = range if NO_JIT else numba.prange
 
 
-def jit(fn=None, *, parallel: bool = False):
-    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT)."""
+def jit(fn=None, *, parallel: bool = False, cache: bool = True):
+    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT).
+
+    ``cache=False`` for kernels that take other compiled functions as arguments (integrator
+    steppers receive the model's ``force``): numba cannot reuse such entries across processes,
+    so caching them only adds an index entry per process, and re-pickling that index fails
+    ("underlying object has vanished") once it holds a dispatcher that no longer exists.
+    """
 
     def wrap(f):
         if NO_JIT:
             return f
         return numba.njit(
             f,
-            cache=True,
+            cache=cache,
             fastmath=set(FASTMATH),
             parallel=parallel,
             nogil=True,

@@ -17,12 +17,29 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 
 
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
-              log: Callable[[str], None] | None = None) -> RunResult:
-    """Build and integrate a scene; write dataset.nc, config.yaml and run.log in its run dir."""
+              log: Callable[[str], None] | None = None, fidelity: str = "full",
+              analysis: str | None = None) -> RunResult:
+    """Plan, build and integrate a scene; write dataset.nc, config.yaml and run.log in its run dir.
+
+    ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
+    declared; the CLI uses 'auto'); the plan is logged and stored in the dataset attrs, and
+    config.yaml holds the scene that actually ran.
+    """
+    from flexmm.plan import make_plan
+    from flexmm.plan.continuum import run_continuum
+    from flexmm.plan.output import parse_analysis
+
     out = run_dir_for(scene, run_dir)
     out.mkdir(parents=True, exist_ok=True)
-    problem = build_problem(scene)
-    result = run_problem(problem, out, progress=progress, log=log)
+    plan = make_plan(scene, fidelity, parse_analysis(analysis))
+    if plan.skip_discrete:
+        result = run_continuum(plan.scene, plan.prediction, out, extra_attrs=plan.attrs(), log=log)
+    else:
+        problem = plan.problem or build_problem(plan.scene)
+        problem.notes[:0] = plan.lines()
+        result = run_problem(problem, out, progress=progress, log=log, extra_attrs=plan.attrs(),
+                             on_finish=plan.finisher(problem))
+    scene = plan.scene
     _atomic_write(out / "config.yaml", config_text(scene))
     _atomic_write(out / "run.log", "\n".join(result.log) + "\n")
     return result

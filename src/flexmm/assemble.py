@@ -12,8 +12,9 @@ import numpy as np
 
 from flexmm.config.scene import RandomRotation, RotationSeed, Scene
 from flexmm.integrators import INTEGRATORS
-from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, SHAPES, empty_terms
+from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, MODE_FRICTION, SHAPES, empty_terms
 from flexmm.models import MODELS, System
+from flexmm.models.predeform import INWARD
 from flexmm.stability import omega_max
 
 
@@ -41,9 +42,47 @@ class UnstableStepError(Exception):
     """dt is above the integrator's stable limit (a user error unless forced)."""
 
 
-def _end_dofs(system: System, end: str, field_name: str | None = None) -> list[int]:
-    fname = field_name or system.meta["longitudinal_field"]
-    return [system.dof(fname, s) for s in system.meta["ends"][end]]
+class SceneError(ValueError):
+    """A scene that validates but cannot be built (a user error; the CLI exits with status 2)."""
+
+
+def _end_dofs(system: System, end: str, field_name: str | None = None,
+              sites: list[int] | None = None) -> list[int]:
+    """DOFs of ``field_name`` (default: the end's normal field) at an end's units (or ``sites``)."""
+    fname = field_name or system.meta.get("end_fields", {}).get(end, system.meta["longitudinal_field"])
+    return [system.dof(fname, s) for s in (system.meta["ends"][end] if sites is None else sites)]
+
+
+def _launch_solitons(system: System, scene: Scene, pulses) -> None:
+    """Superpose launched solitons (each launcher overwrites q0, v0; their states are added)."""
+    launch = MODELS[scene.lattice.kind].launch_soliton
+    if launch is None:
+        raise SceneError(f"model {scene.lattice.kind} has no soliton launcher")
+    q, v = np.zeros_like(system.q0), np.zeros_like(system.v0)
+    for p in pulses:
+        system.q0[:], system.v0[:] = 0.0, 0.0
+        try:
+            launch(system, p.amplitude_rad, p.center_site, p.direction)
+        except ValueError as err:  # e.g. no soliton of that amplitude for these parameters
+            raise SceneError(f"excitation.amplitude_rad = {p.amplitude_rad}: {err}") from None
+        q += system.q0
+        v += system.v0
+    system.q0[:], system.v0[:] = q, v
+
+
+def _apply_kicks(system: System, kicks) -> None:
+    """Add initial velocities (x, y, rotation) to the kicked units."""
+    sc, axes = system.scales, system.meta.get("axis_fields", {"x": system.meta["longitudinal_field"]})
+    for kick in kicks:
+        sites = system.meta["ends"][kick.end] if kick.sites is None else kick.sites
+        for axis, value in (("x", kick.velocity_x_m_s), ("y", kick.velocity_y_m_s)):
+            if value:
+                if axis not in axes:
+                    raise SceneError(f"kick velocity along {axis}: model {system.model!r} has no {axis} motion")
+                system.v0[[system.dof(axes[axis], s) for s in sites]] += value / sc.velocity
+        if kick.angular_velocity_rad_s:
+            rot = _rotation_field(system, "angular_velocity_rad_s")
+            system.v0[[system.dof(rot, s) for s in sites]] += kick.angular_velocity_rad_s * sc.time_s
 
 
 def _add_striker(system: System, exc, dof: int, direction: float) -> tuple[np.ndarray, np.ndarray]:
@@ -65,17 +104,23 @@ def _add_striker(system: System, exc, dof: int, direction: float) -> tuple[np.nd
 def apply_excitation(system: System, scene: Scene, terms: dict) -> None:
     """Initial conditions, striker or drive tables for the scene's excitation."""
     exc = scene.excitation
+    for part in exc.parts if exc.kind == "combined" else [exc]:
+        _apply_one(system, scene, part, terms)
+
+
+def _apply_one(system: System, scene: Scene, exc, terms: dict) -> None:
+    """One excitation; drive rows are appended to ``terms`` (several may act together)."""
     sc = system.scales
     if exc.kind == "none":
         return
-    if exc.kind == "soliton":
-        launch = MODELS[scene.lattice.kind].launch_soliton
-        if launch is None:
-            raise ValueError(f"model {scene.lattice.kind} has no soliton launcher")
-        launch(system, exc.amplitude_rad, exc.center_site, exc.direction)
+    if exc.kind in ("soliton", "solitons"):
+        _launch_solitons(system, scene, [exc] if exc.kind == "soliton" else exc.pulses)
         return
-    direction = 1.0 if exc.end == "left" else -1.0
-    dofs = _end_dofs(system, exc.end)
+    if exc.kind == "kicks":
+        _apply_kicks(system, exc.kicks)
+        return
+    direction = INWARD[exc.end]
+    dofs = _end_dofs(system, exc.end, sites=getattr(exc, "sites", None))
     if exc.kind == "impact":
         if exc.striker is not None:
             ij, prm = _add_striker(system, exc, dofs[0], direction)
@@ -83,7 +128,7 @@ def apply_excitation(system: System, scene: Scene, terms: dict) -> None:
         else:
             system.v0[dofs] += direction * exc.velocity_m_s / sc.velocity
         if exc.angular_velocity_rad_s:
-            rot = _end_dofs(system, exc.end, system.meta["rotation_field"])
+            rot = _end_dofs(system, exc.end, _rotation_field(system, "angular_velocity_rad_s"), exc.sites)
             system.v0[rot] += exc.angular_velocity_rad_s * sc.time_s
         return
     if exc.kind == "shaker":
@@ -96,7 +141,13 @@ def apply_excitation(system: System, scene: Scene, terms: dict) -> None:
         stop = exc.duration_s / sc.time_s if exc.duration_s else np.inf
         row, shape = [amp, omega, ramp, stop], SHAPES["harmonic"]
     else:  # boundary_displacement
-        amp, mode = direction * exc.amplitude_m / sc.length_m, MODE_DISPLACEMENT
+        mode = MODE_DISPLACEMENT
+        if exc.amplitude_rad is not None:  # a prescribed rotation of the end units
+            rot = _rotation_field(system, "amplitude_rad")
+            dofs = _end_dofs(system, exc.end, rot, exc.sites)
+            amp = exc.amplitude_rad
+        else:
+            amp = direction * exc.amplitude_m / sc.length_m
         dur = exc.duration_s / sc.time_s
         shape = SHAPES[exc.shape]
         if exc.shape == "gaussian":
@@ -105,19 +156,48 @@ def apply_excitation(system: System, scene: Scene, terms: dict) -> None:
         else:
             row = [amp, dur, 0.0, 0.0]
     k = len(dofs)
-    terms["drv_dof"] = np.asarray(dofs, np.int64)
-    terms["drv_mode"] = np.full(k, mode, np.int64)
-    terms["drv_shape"] = np.full(k, shape, np.int64)
-    terms["drv_prm"] = np.tile(np.asarray(row, float), (k, 1))
+    terms["drv_dof"] = np.concatenate([terms["drv_dof"], np.asarray(dofs, np.int64)])
+    terms["drv_mode"] = np.concatenate([terms["drv_mode"], np.full(k, mode, np.int64)])
+    terms["drv_shape"] = np.concatenate([terms["drv_shape"], np.full(k, shape, np.int64)])
+    terms["drv_prm"] = np.concatenate([terms["drv_prm"], np.tile(np.asarray(row, float), (k, 1))])
     if mode == MODE_DISPLACEMENT:
+        if np.any(np.abs(system.q0[dofs]) > 1e-12):
+            raise SceneError(f"a prescribed displacement drives the {exc.end} end from 0, but the "
+                             "initial (predeformed) state displaces it; drive it with a force instead")
         system.inv_mass[dofs] = 0.0
+
+
+def _rotation_field(system: System, what: str) -> str:
+    """The model's rotation field, or a clear error for models without one."""
+    rot = system.meta.get("rotation_field")
+    if rot is None:
+        raise SceneError(f"{what} needs a rotation field; model {system.model!r} has none")
+    return rot
+
+
+def apply_friction(system: System, terms: dict) -> float:
+    """Append the model's ground friction as drive rows (mode 2); return its max rate F/(m v_ε)."""
+    fr = system.meta.get("friction")
+    if fr is None:
+        return 0.0
+    k = system.field_index(system.meta["longitudinal_field"]) * system.n_sites
+    dofs = fr["sites"] + k
+    n = dofs.size
+    prm = np.zeros((n, 4))
+    prm[:, 0], prm[:, 1], prm[:, 2] = fr["forward"], fr["velocity"], fr["backward"]
+    terms["drv_dof"] = np.concatenate([terms["drv_dof"], dofs]).astype(np.int64)
+    terms["drv_mode"] = np.concatenate([terms["drv_mode"], np.full(n, MODE_FRICTION)]).astype(np.int64)
+    terms["drv_shape"] = np.concatenate([terms["drv_shape"], np.zeros(n, np.int64)]).astype(np.int64)
+    terms["drv_prm"] = np.concatenate([terms["drv_prm"], prm])
+    level = np.maximum(fr["forward"], fr["backward"])
+    return float(np.max(level * system.inv_mass[dofs]) / fr["velocity"]) if n else 0.0
 
 
 def apply_imperfection(system: System, scene: Scene) -> None:
     imp = scene.imperfection
     if imp is None:
         return
-    rot = system.meta["rotation_field"]
+    rot = _rotation_field(system, f"imperfection {imp.kind!r}")
     if isinstance(imp, RotationSeed):
         for s in imp.sites:
             system.q0[system.dof(rot, s)] += imp.theta_rad
@@ -147,24 +227,51 @@ def damping_arrays(system: System, scene: Scene, terms: dict) -> np.ndarray:
                     damp[sl] = rate * system.mass[sl]
     if scene.damping.dashpot_n_s_per_m > 0:
         k = system.field_index(system.meta["longitudinal_field"]) * system.n_sites
-        idx = np.arange(system.n_sites - 1, dtype=np.int64) + k
-        terms["dash_ij"] = np.stack([idx, idx + 1], axis=1)
-        terms["dash_c"] = np.full(idx.size, scene.damping.dashpot_n_s_per_m * sc.time_s / sc.mass_kg)
+        pairs = system.meta.get("neighbour_pairs")
+        if pairs is None:
+            idx = np.arange(system.n_sites - 1, dtype=np.int64)
+            pairs = np.stack([idx, idx + 1], axis=1)
+        terms["dash_ij"] = np.asarray(pairs, np.int64) + k
+        terms["dash_c"] = np.full(len(pairs), scene.damping.dashpot_n_s_per_m * sc.time_s / sc.mass_kg)
+    if scene.damping.absorbing is not None:
+        from flexmm.plan.domain import absorbing_damping
+
+        damp = damp + absorbing_damping(system, scene.damping.absorbing)
     return damp
 
 
 def build_problem(scene: Scene) -> Problem:
     """Build the system of a scene and resolve its time step against the stable limit."""
+    try:
+        return _build_problem(scene)
+    except (ArithmeticError, np.linalg.LinAlgError) as err:  # e.g. a_m = 1e-300 with mass_kg = 1e300
+        raise SceneError(f"the scene's parameters are out of floating-point range "
+                         f"({type(err).__name__}: {err})") from None
+
+
+def _build_problem(scene: Scene) -> Problem:
     system = MODELS[scene.lattice.kind].build(scene.lattice)
     terms = empty_terms()
     apply_imperfection(system, scene)
     apply_excitation(system, scene, terms)
+    friction_rate = apply_friction(system, terms)
     damp = damping_arrays(system, scene, terms)
     spec = INTEGRATORS[scene.solver.integrator]
-    w_max = omega_max(system, terms)
+    if friction_rate > 0 and not spec.velocity_dependent_forces:
+        raise SceneError(f"ground friction is velocity dependent; {spec.name} does not accept that")
+    rest = system.meta.get("rest_state")  # predeformed equilibrium: linearise about it
+    q_ref = None if rest is None else np.concatenate([rest, system.q0[rest.size:]])
+    w_max = omega_max(system, terms, q_ref)
+    if not math.isfinite(w_max):
+        raise SceneError(f"ω_max = {w_max} is not finite: lattice parameters out of floating-point range")
     stable = spec.stability_limit / w_max if w_max > 0 else math.inf
+    if friction_rate > 0:  # explicit regularised friction: keep h F/(m v_ε) <= 1
+        stable = min(stable, 1.0 / friction_rate)
     sc = system.scales
     notes = []
+    if scene.solver.dt_s is None and not math.isfinite(stable):
+        raise SceneError("cannot pick dt: no stiffness at rest (ω_max = 0, e.g. an uncompressed "
+                         "Hertz chain); set solver.dt_s")
     if scene.solver.dt_s is None:
         dt = scene.solver.dt_fraction * stable
         notes.append(f"dt chosen as {scene.solver.dt_fraction} x stable limit = {dt * sc.time_s:.4g} s")

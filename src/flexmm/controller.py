@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -22,6 +23,9 @@ from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
 RUNAWAY_FACTOR = 1e4
+#: frames count towards the runaway reference only once this many steps old, so an unstable
+#: mode (energy × ≥ 1.5 per step) cannot raise its own threshold when frames are frequent
+RUNAWAY_LAG_STEPS = 100
 
 
 @dataclass
@@ -96,7 +100,9 @@ class _Observer:
             u, du = UNITS[kind]
             time_vars[name + "_position"] = (u, f"{name} displacement")
             time_vars[name + "_velocity"] = (du, f"{name} velocity")
-        coords = {k: (v[self.sites], "m", f"rest {k} position") for k, v in sys_.site_coords.items()}
+        attrs = sys_.meta.get("site_coord_attrs", {})  # (units, long_name) of non-length coordinates
+        coords = {k: (v[self.sites], *attrs.get(k, ("m", f"rest {k} position")))
+                  for k, v in sys_.site_coords.items()}
         self.site_vars, self.time_vars = site_vars, time_vars
         self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords)
         self.sc = sc
@@ -143,8 +149,13 @@ def _progress(total: int, enabled: bool):
 def run_problem(
     problem: Problem, run_dir: Path, *, progress: bool = False,
     log: Callable[[str], None] | None = None, extra_attrs: dict | None = None,
+    on_finish: Callable | None = None,
 ) -> RunResult:
-    """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up."""
+    """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up.
+
+    ``on_finish(q, v, h, say) -> dict`` (if given) sees the final state of a finished run
+    and returns extra attrs (used by flexmm.plan for its accuracy check).
+    """
     scene, s = problem.scene, problem.system
     spec = INTEGRATORS[scene.solver.integrator]
     sc = s.scales
@@ -177,6 +188,7 @@ def run_problem(
     spec.advance(s.force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, t, h, 0, acc.copy())
     compile_s = _time.perf_counter() - tc
     e_max = abs(obs.frame(problem, t, q, v, acc))
+    recent: deque[tuple[int, float]] = deque()  # (step, |E|) of frames not yet RUNAWAY_LAG_STEPS old
     drive_scale = float(np.sum(s.mass * s.v0**2)) + float(np.sum(np.abs(terms[7][:, 0]))) ** 2 * s.n_sites + 1e-12
     status, reason, n_steps = "finished", "", 0
     prog = _progress(len(chunks), progress)
@@ -198,7 +210,9 @@ def run_problem(
                           f"last good time {t_prev * sc.time_s:.6g} s kept")
                 del q_prev
                 break
-            e_max = max(e_max, abs(obs.frame(problem, t, q, v, acc)))
+            recent.append((n_steps, abs(obs.frame(problem, t, q, v, acc))))
+            while recent and recent[0][0] <= n_steps - RUNAWAY_LAG_STEPS:
+                e_max = max(e_max, recent.popleft()[1])
             if prog:
                 prog.advance(prog.task_ids[0])
     except KeyboardInterrupt:
@@ -211,6 +225,8 @@ def run_problem(
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
     if reason:
         say(reason)
+    if on_finish is not None and status == "finished":
+        extra_attrs = {**(extra_attrs or {}), **on_finish(q, v, h, say)}
     attrs = {
         **provenance_attrs(scene),
         "title": scene.name,

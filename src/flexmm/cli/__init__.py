@@ -8,8 +8,12 @@ from __future__ import annotations
 
 import typer
 
+from flexmm.cli import analyze as _analyze
+from flexmm.cli import compare as _compare
+from flexmm.cli import plan as _plan
 from flexmm.cli import run as _run
 from flexmm.cli import schema as _schema
+from flexmm.cli import sweep as _sweep
 from flexmm.cli import validate as _validate
 
 app = typer.Typer(
@@ -20,8 +24,12 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 app.command("run")(_run.run)
+app.command("analyze")(_analyze.analyze)
 app.command("validate")(_validate.validate)
 app.command("schema")(_schema.schema)
+app.command("sweep")(_sweep.sweep)
+app.command("plan")(_plan.plan)
+app.command("compare")(_compare.compare)
 
 
 def main() -> None:

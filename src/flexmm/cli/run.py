@@ -6,9 +6,12 @@ import typer
 
 from flexmm.analysis import PulseNotFound, leading_pulse
 from flexmm.api import run_scene
-from flexmm.assemble import UnstableStepError
+from flexmm.assemble import SceneError, UnstableStepError
 from flexmm.cli.common import EXIT_FAILED_RUN, OverrideOption, error, load_or_exit, stderr_is_tty
+from flexmm.cli.plan import AnalysisOption, FidelityOption
 from flexmm.io.dataset import open_run
+from flexmm.plan import PlanError
+from flexmm.plan.continuum import alongside
 
 
 def run(
@@ -17,6 +20,8 @@ def run(
     out: str = typer.Option(None, "--out", "-o", help="Run directory (default output.directory/name)."),
     force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path."),
+    fidelity: str = FidelityOption,
+    analysis: str = AnalysisOption,
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units)."""
     ov = list(overrides or [])
@@ -25,8 +30,9 @@ def run(
     scene = load_or_exit(config, ov)
     log = None if quiet else (lambda m: typer.echo(m, err=True))
     try:
-        result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log)
-    except UnstableStepError as exc:
+        result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
+                           fidelity=fidelity, analysis=analysis)
+    except (UnstableStepError, SceneError, PlanError) as exc:
         raise error(f"{config}: {exc}") from None
     typer.echo(f"dataset: {result.path}")
     if not result.ok:
@@ -46,3 +52,6 @@ def run(
         f"amplitude {p.amplitude:.4g} {p.amplitude_units}, width (FWHM) {p.fwhm_m * 1e3:.4g} mm "
         f"({p.fwhm_sites:.2f} sites), fitted over sites {p.first_site}-{p.last_site}"
     )
+    line = alongside(ds, field, p.amplitude, p.fwhm_sites, p.speed_m_s)
+    if line:
+        typer.echo(line)

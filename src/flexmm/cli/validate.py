@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from flexmm.assemble import UnstableStepError, build_problem
+from flexmm.assemble import SceneError, UnstableStepError, build_problem
 from flexmm.cli.common import OverrideOption, error, load_or_exit
 
 
@@ -18,7 +18,7 @@ def validate(
     if build:
         try:
             problem = build_problem(scene)
-        except UnstableStepError as exc:
+        except (UnstableStepError, SceneError) as exc:
             raise error(f"{config}: {exc}") from None
         sc = problem.system.scales
         typer.echo(

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-End = Literal["left", "right"]
+End = Literal["left", "right", "bottom", "top"]  # bottom/top: edges of 2D lattices
 
 
 class Strict(BaseModel):

@@ -27,6 +27,15 @@ class Impact(Strict):
     end: End = "left"
     angular_velocity_rad_s: Finite = Field(0.0, description="initial spin of the hit unit")
     striker: Striker | None = None
+    sites: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None, description="units hit (a point or a line); default every unit of the end"
+    )
+
+    @model_validator(mode="after")
+    def _one_striker_site(self):
+        if self.striker is not None and self.sites is not None and len(self.sites) != 1:
+            raise ValueError("a striker hits one unit: give a single site (or none)")
+        return self
 
 
 class Shaker(Strict):
@@ -39,6 +48,9 @@ class Shaker(Strict):
     amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
     ramp_cycles: NonNegative = Field(3.0, description="cycles of smooth ramp-up")
     duration_s: Positive | None = Field(None, description="drive stops (smoothly) after this")
+    sites: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None, description="units driven (a point or a line); default every unit of the end"
+    )
 
     @model_validator(mode="after")
     def _one_amplitude(self):
@@ -52,13 +64,25 @@ class Shaker(Strict):
 
 
 class BoundaryDisplacement(Strict):
-    """A prescribed displacement pulse u_0(t) of the end unit."""
+    """A prescribed displacement pulse u_0(t) of the end unit (or a prescribed rotation θ_0(t))."""
 
     kind: Literal["boundary_displacement"]
     end: End = "left"
     shape: Literal["half_sine", "smooth_step", "gaussian"] = "half_sine"
-    amplitude_m: Finite = Field(description="peak displacement, positive into the lattice (m)")
+    amplitude_m: Finite | None = Field(None, description="peak displacement, positive into the lattice (m)")
+    amplitude_rad: Finite | None = Field(
+        None, description="instead: peak staggered rotation θ of the driven units (rad); u, v stay free"
+    )
     duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")
+    sites: list[Annotated[int, Field(ge=0)]] | None = Field(
+        None, description="units driven (a point or a line); default every unit of the end"
+    )
+
+    @model_validator(mode="after")
+    def _one_amplitude(self):
+        if (self.amplitude_m is None) == (self.amplitude_rad is None):
+            raise ValueError("give exactly one of amplitude_m (displacement) or amplitude_rad (rotation)")
+        return self
 
 
 class Soliton(Strict):
@@ -70,6 +94,59 @@ class Soliton(Strict):
     direction: Literal[1, -1] = 1
 
 
+class Kick(Strict):
+    """Initial velocities of chosen units: an end's units, or listed sites."""
+
+    end: End | None = None
+    sites: list[Annotated[int, Field(ge=0)]] | None = None
+    velocity_x_m_s: Finite = 0.0
+    velocity_y_m_s: Finite = Field(0.0, description="2D lattices only")
+    angular_velocity_rad_s: Finite = Field(0.0, description="rate of the staggered rotation θ")
+
+    @model_validator(mode="after")
+    def _where(self):
+        if (self.end is None) == (self.sites is None):
+            raise ValueError("give exactly one of end or sites")
+        return self
+
+
+class Kicks(Strict):
+    """Several kicks at once (e.g. opposite spins at both ends: two colliding transition waves)."""
+
+    kind: Literal["kicks"]
+    kicks: list[Kick] = Field(min_length=1)
+
+
+class SolitonLaunch(Strict):
+    """One launched soliton of a ``solitons`` excitation (fields as in ``soliton``)."""
+
+    amplitude_rad: Finite
+    center_site: int = Field(ge=0)
+    direction: Literal[1, -1] = 1
+
+
+class Solitons(Strict):
+    """Superposed exact solitons (well separated), e.g. two launched towards each other to collide."""
+
+    kind: Literal["solitons"]
+    pulses: list[SolitonLaunch] = Field(min_length=1)
+
+
+class Combined(Strict):
+    """Several excitations acting together, e.g. a drive or an impact at each end."""
+
+    kind: Literal["combined"]
+    parts: list[Annotated[Union[Impact, Shaker, BoundaryDisplacement, Kicks], Field(discriminator="kind")]] = (
+        Field(min_length=2)
+    )
+
+    @model_validator(mode="after")
+    def _one_striker(self):
+        if sum(1 for p in self.parts if p.kind == "impact" and p.striker is not None) > 1:
+            raise ValueError("at most one part may use a striker")
+        return self
+
+
 class NoExcitation(Strict):
     """Nothing drives the lattice (free vibration of the imperfection or initial state)."""
 
@@ -77,6 +154,6 @@ class NoExcitation(Strict):
 
 
 ExcitationConfig = Annotated[
-    Union[Impact, Shaker, BoundaryDisplacement, Soliton, NoExcitation],
+    Union[Impact, Shaker, BoundaryDisplacement, Soliton, Solitons, Kicks, Combined, NoExcitation],
     Field(discriminator="kind"),
 ]

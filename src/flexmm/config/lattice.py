@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, Union
 
 from pydantic import Field, model_validator
 
 from flexmm.config.base import Finite, NonNegative, Positive, Strict
+from flexmm.config.mass_chain import MassChain, MassGrid, MassNetwork
+from flexmm.config.rigid import BistableLinkage, RotatingSquaresSheet, RigidOptions, check_variation
 
 EndCondition = Literal["free", "fixed", "driven"]
 
 
-class RotatingSquaresChain(Strict):
+class RotatingSquaresChain(RigidOptions):
     """1D chain of rigid squares joined by hinges (PHYSICS.md §1.1), DOFs u and θ per unit."""
 
     kind: Literal["rotating_squares_chain"]
@@ -37,7 +39,10 @@ class RotatingSquaresChain(Strict):
     def _geometry(self):
         if not abs(self.theta0_rad) < math.pi / 4:
             raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
+        check_variation(self.variation, self.n_units, 1, self.n_units)
         return self
 
 
-LatticeConfig = RotatingSquaresChain
+LatticeConfig = Union[
+    RotatingSquaresChain, RotatingSquaresSheet, BistableLinkage, MassChain, MassNetwork, MassGrid
+]

@@ -78,6 +78,23 @@ def _line_map(node: yaml.Node, path: Path_ = (), out: dict | None = None) -> dic
     return out
 
 
+def _duplicate_keys(node: yaml.Node, path: Path_ = ()) -> list[tuple[Path_, int, int]]:
+    """(path, line, first line) of keys repeated in one mapping (YAML keeps the last silently)."""
+    out: list[tuple[Path_, int, int]] = []
+    if isinstance(node, yaml.MappingNode):
+        seen: dict[Any, int] = {}
+        for k, v in node.value:
+            line = k.start_mark.line + 1
+            if k.value in seen:
+                out.append((path + (k.value,), line, seen[k.value]))
+            seen.setdefault(k.value, line)
+            out += _duplicate_keys(v, path + (k.value,))
+    elif isinstance(node, yaml.SequenceNode):
+        for i, v in enumerate(node.value):
+            out += _duplicate_keys(v, path + (i,))
+    return out
+
+
 def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
     """Parse a YAML file into a dict plus a key-path -> line map; ConfigError on failure."""
     src = str(path)
@@ -95,6 +112,10 @@ def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
         raise ConfigError([ConfigIssue(src, line, "", f"invalid YAML: {what}")]) from None
     if not isinstance(data, dict):
         raise ConfigError([ConfigIssue(src, 1, "", "expected a mapping of sections (name, lattice, ...)")])
+    dups = _duplicate_keys(node)
+    if dups:
+        raise ConfigError([ConfigIssue(src, line, ".".join(map(str, keys)), f"duplicate key (first given at line {first})")
+                           for keys, line, first in dups])
     return data, _line_map(node) if node is not None else {}
 
 
@@ -120,9 +141,10 @@ def apply_overrides(data: dict, overrides, lines: dict, source: str) -> None:
     """Set each override into ``data`` (in place); record their origin for error messages."""
     for keys, val, raw in overrides:
         node = data
-        for k in keys[:-1]:
+        for depth, k in enumerate(keys[:-1]):
             if not isinstance(node.get(k), dict):
-                node[k] = {}
+                node[k] = {}  # replaces a scalar: errors there come from this override
+                lines[keys[: depth + 1]] = f"--set {raw}"
             node = node[k]
         node[keys[-1]] = val
         lines[keys] = f"--set {raw}"
@@ -188,8 +210,41 @@ def _describe(value: Any) -> str:
     return f"{text} ({type(value).__name__})"
 
 
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*")
+
+
+def _given(data: Any, keys: tuple) -> bool:
+    for k in keys:
+        if not (isinstance(data, dict) and k in data):
+            return False
+        data = data[k]
+    return True
+
+
+def _rule_path(path: tuple, message: str, data: dict) -> tuple:
+    """Locate a cross-field rule (a model validator has no location of its own).
+
+    The rule's message names the fields it checks ('lattice.left is ...', 'give exactly one of
+    amplitude_m or amplitude_n'): the first dotted name, else the first plain name, that is a
+    key given in the config (relative to the validated mapping, or absolute) becomes the path.
+    """
+    names = _NAME.findall(message)
+    for name in [n for n in names if "." in n] + [n for n in names if "." not in n]:
+        keys = tuple(name.split("."))
+        for cand in (path + keys, keys):
+            if _given(data, cand):
+                return cand
+    return path
+
+
 def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
     path = _yaml_path(err["loc"], data)
+    etype, msg = err["type"], err["msg"]
+    if etype == "value_error":
+        msg = str(err.get("ctx", {}).get("error", msg))
+        path = _rule_path(path, msg, data)
+    elif etype == "union_tag_invalid":  # the wrong value sits at the discriminator key
+        path = path + (str(err.get("ctx", {}).get("discriminator", "kind")).strip("'\""),)
     dotted = ".".join(str(p) for p in path)
     line = None
     for k in range(len(path), -1, -1):
@@ -199,7 +254,6 @@ def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
     where = source
     if isinstance(line, str):  # from --set
         where, line = line, None
-    etype, msg = err["type"], err["msg"]
     if etype == "extra_forbidden":
         model = _model_at(path[:-1], data)
         valid = sorted(model.model_fields) if model else []

@@ -6,6 +6,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import AliasChoices, Field, model_validator
 
+from flexmm.config.absorbing import AbsorbingLayer
 from flexmm.config.base import NonNegative, Positive, Strict
 from flexmm.config.excitation import ExcitationConfig, NoExcitation
 from flexmm.config.lattice import LatticeConfig
@@ -38,6 +39,7 @@ class Damping(Strict):
 
     viscous: Viscous | None = None
     dashpot_n_s_per_m: NonNegative = Field(0.0, description="between neighbours' u (N s/m)")
+    absorbing: AbsorbingLayer | None = Field(None, description="graded damping layer at an end")
 
 
 class RotationSeed(Strict):
@@ -71,6 +73,9 @@ class Solver(Strict):
     dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit")
     duration_s: Positive
     allow_unstable: bool = Field(False, description="run even if dt exceeds the stable limit")
+    accuracy: Positive | None = Field(
+        None, lt=1, description="target relative error of the final state: picks integrator and dt (flexmm.plan)"
+    )
 
 
 class Output(Strict):
@@ -101,17 +106,27 @@ class Scene(Strict):
     def _consistent(self):
         lat, exc = self.lattice, self.excitation
         n = lat.n_units
-        ends = {"left": lat.left, "right": lat.right}
-        boundary = exc.kind in ("shaker", "boundary_displacement", "impact")
+        ends = {e: getattr(lat, e) for e in ("left", "right", "bottom", "top") if hasattr(lat, e)}
+        parts = exc.parts if exc.kind == "combined" else [exc]
+        bounds = [p for p in parts if p.kind in ("shaker", "boundary_displacement", "impact")]
         for end, cond in ends.items():
-            if cond == "driven" and not (boundary and exc.end == end):
+            if cond == "driven" and not any(p.end == end for p in bounds):
                 raise ValueError(
                     f"lattice.{end} is 'driven' but no impact, shaker or boundary_displacement acts on the {end} end"
                 )
-        if boundary and ends[exc.end] == "fixed":
-            raise ValueError(f"excitation acts on the {exc.end} end, which lattice.{exc.end} fixes")
-        if exc.kind == "soliton" and exc.center_site >= n:
-            raise ValueError(f"excitation.center_site={exc.center_site} is outside 0..{n - 1}")
+        targets = bounds + [k for p in parts if p.kind == "kicks" for k in p.kicks]
+        for t in targets:
+            if t.end is not None and t.end not in ends:
+                raise ValueError(f"excitation end {t.end!r}: this lattice's ends are {', '.join(ends)}")
+            if t.end is not None and ends[t.end] in ("fixed", "periodic"):
+                raise ValueError(f"excitation acts on the {t.end} end, which lattice.{t.end} makes {ends[t.end]}")
+            bad = [s for s in (getattr(t, "sites", None) or []) if s >= n]
+            if bad:
+                raise ValueError(f"excitation sites {bad} outside 0..{n - 1}")
+        pulses = [exc] if exc.kind == "soliton" else (exc.pulses if exc.kind == "solitons" else [])
+        for p in pulses:
+            if p.center_site >= n:
+                raise ValueError(f"excitation.center_site={p.center_site} is outside 0..{n - 1}")
         if isinstance(self.imperfection, RotationSeed):
             bad = [s for s in self.imperfection.sites if s >= n]
             if bad:

@@ -1,8 +1,10 @@
 """Compiled pieces shared by all integrators: drives, contacts, dashpots and the total force.
 
 Arrays (nondimensional):
-- drives: ``drv_dof (D,)``, ``drv_mode (D,)`` (0 prescribed displacement, 1 applied force),
-  ``drv_shape (D,)`` (see SHAPES), ``drv_prm (D, 4)``;
+- drives: ``drv_dof (D,)``, ``drv_mode (D,)`` (0 prescribed displacement, 1 applied force,
+  2 ground friction), ``drv_shape (D,)`` (see SHAPES), ``drv_prm (D, 4)``; a friction row is
+  (F₊, v_ε, F₋, 0): force −F tanh(v/v_ε) with F = F₊ for v > 0, F₋ otherwise (regularised
+  Coulomb, explicit, so h F/(m v_ε) must stay below ~1); its (negative) work counts as applied;
 - contacts (one-sided power law, e.g. a striker): ``con_ij (C, 2)``, ``con_prm (C, 3)`` =
   (k, exponent p, direction d); overlap δ = d (q_i − q_j), force k δ₊^p pushes i back, j on;
 - dashpots between DOFs: ``dash_ij (P, 2)``, ``dash_c (P,)``.
@@ -25,6 +27,19 @@ SHAPES = {
 }
 MODE_DISPLACEMENT = 0
 MODE_FORCE = 1
+MODE_FRICTION = 2
+
+#: Slots of the accumulator ``acc`` every ``advance`` updates. ``acc[:2]`` is the energy ledger;
+#: an accumulator from ``IntegratorSpec.new_acc`` (``ACC_HEADER`` slots, plus the state of an
+#: adaptive method) also counts work, and a bare ``np.zeros(2)`` is still accepted.
+ACC_DISSIPATED = 0  # energy removed by damping, dashpots since t = 0
+ACC_WORK = 1  # work of applied forces (and ground friction) since t = 0
+ACC_FEVALS = 2  # model-force evaluations
+ACC_STEPS = 3  # steps taken (accepted steps for adaptive methods)
+ACC_REJECTED = 4  # rejected steps (adaptive) / Newton iterations (implicit)
+ACC_LINEAR = 5  # Krylov iterations (implicit)
+ACC_FAILED = 6  # steps whose Newton iteration did not converge (implicit)
+ACC_HEADER = 8
 
 
 @jit
@@ -82,8 +97,8 @@ def apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm):
 
 
 @jit
-def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm):
-    """Add contact, dashpot and applied-force terms to ``f``; return the applied-force power."""
+def position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Add the forces that depend on (q, t) only: one-sided contacts and applied forces."""
     for c in range(con_ij.shape[0]):
         i = con_ij[c, 0]
         j = con_ij[c, 1]
@@ -93,19 +108,112 @@ def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_m
             fc = con_prm[c, 0] * overlap ** con_prm[c, 1]
             f[i] -= d * fc
             f[j] += d * fc
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == 1:
+            g, _ = waveform(drv_shape[d], drv_prm[d], t)
+            f[drv_dof[d]] += g
+
+
+@jit
+def _friction(prm, vel):
+    level = prm[0] if vel > 0.0 else prm[2]
+    return -level * math.tanh(vel / prm[1])
+
+
+@jit
+def velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm):
+    """Add the velocity-dependent forces: dashpots between DOFs and ground friction."""
     for p in range(dash_ij.shape[0]):
         i = dash_ij[p, 0]
         j = dash_ij[p, 1]
         fd = dash_c[p] * (v[j] - v[i])
         f[i] += fd
         f[j] -= fd
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == 2:
+            f[drv_dof[d]] += _friction(drv_prm[d], v[drv_dof[d]])
+
+
+@jit
+def applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Power of the applied forces and of ground friction at (v, t) (the 'applied work' rate)."""
     power = 0.0
     for d in range(drv_dof.shape[0]):
         if drv_mode[d] == 1:
             g, _ = waveform(drv_shape[d], drv_prm[d], t)
-            f[drv_dof[d]] += g
             power += g * v[drv_dof[d]]
+        elif drv_mode[d] == 2:
+            vel = v[drv_dof[d]]
+            power += _friction(drv_prm[d], vel) * vel
     return power
+
+
+@jit
+def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Add contact, dashpot, applied and friction forces to ``f``; return the applied power."""
+    position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
+    velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
+    return applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+
+
+@jit
+def total_force(force, args, q, v, t, f, terms):
+    """Model force plus every external term at (q, v, t) into ``f``; returns the applied power."""
+    con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
+    force(q, args, f)
+    return external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm)
+
+
+@jit
+def has_velocity_terms(terms):
+    """Whether the external terms depend on velocity (dashpots or ground friction)."""
+    dash_ij, drv_mode = terms[2], terms[5]
+    if dash_ij.shape[0] > 0:
+        return True
+    for d in range(drv_mode.shape[0]):
+        if drv_mode[d] == MODE_FRICTION:
+            return True
+    return False
+
+
+@jit
+def damping_power(v, cd, dash_ij, dash_c):
+    """Power dissipated by on-site damping (``cd``: coefficients, 0 on held DOFs) and dashpots."""
+    s = 0.0
+    for k in range(v.shape[0]):
+        s += cd[k] * v[k] * v[k]
+    return s + dashpot_power(v, dash_ij, dash_c)
+
+
+@jit
+def free_damping(damp, minv):
+    """On-site damping coefficients with held (fixed or prescribed) DOFs zeroed."""
+    cd = np.empty_like(damp)
+    for k in range(damp.shape[0]):
+        cd[k] = damp[k] if minv[k] > 0.0 else 0.0
+    return cd
+
+
+@jit
+def acceleration(force, args, terms, minv, damp, t, q, v, f, a):
+    """Impose prescribed DOFs at ``t``, then a = M⁻¹(F(q, v, t) − c v); ``f`` gets F.
+
+    Returns (applied power, dissipated power) at (q, v, t): the rates of the energy ledger.
+    """
+    drv_dof, drv_mode, drv_shape, drv_prm = terms[4], terms[5], terms[6], terms[7]
+    apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+    power = total_force(force, args, q, v, t, f, terms)
+    diss = dashpot_power(v, terms[2], terms[3])
+    for k in range(q.shape[0]):
+        a[k] = minv[k] * (f[k] - damp[k] * v[k])
+        if minv[k] > 0.0:
+            diss += damp[k] * v[k] * v[k]
+    return power, diss
+
+
+def count(acc: np.ndarray, slot: int) -> float:
+    """A counter from an accumulator (0 if the caller passed the bare 2-slot ledger)."""
+    return float(acc[slot]) if acc.shape[0] > slot else 0.0
 
 
 @jit

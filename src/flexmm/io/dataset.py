@@ -37,7 +37,7 @@ class DatasetWriter:
         t = self.file.create_variable("time", ("time",), "f8", chunks=(1024,))
         t.attrs.update(units="s", long_name="time")
         s = self.file.create_variable("site", ("site",), "i8", data=np.arange(n_site))
-        s.attrs["long_name"] = "site index"
+        s.attrs.update(units="1", long_name="site index")
         coord_names = " ".join(site_coords)
         for name, (values, units, long_name) in site_coords.items():
             c = self.file.create_variable(name, ("site",), np.asarray(values).dtype, data=values)

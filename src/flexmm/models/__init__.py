@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from flexmm.models import rotating_chain
+from flexmm.models import linkage, mass_chain, rotating_chain, rotating_sheet
 from flexmm.models.base import FieldSpec, System
 
 
@@ -26,6 +26,13 @@ MODELS: dict[str, ModelEntry] = {
     "rotating_squares_chain": ModelEntry(
         rotating_chain.build, rotating_chain.FIELDS, rotating_chain.launch_soliton
     ),
+    "rotating_squares_sheet": ModelEntry(
+        rotating_sheet.build, rotating_sheet.FIELDS, rotating_sheet.launch_soliton
+    ),
+    "bistable_linkage": ModelEntry(linkage.build, rotating_sheet.FIELDS),
+    "mass_chain": ModelEntry(mass_chain.build, mass_chain.FIELDS),
+    "mass_network": ModelEntry(mass_chain.build, mass_chain.FIELDS),
+    "mass_grid": ModelEntry(mass_chain.build, mass_chain.FIELDS),
 }
 
 

@@ -11,10 +11,15 @@ import math
 import numpy as np
 
 from flexmm.config.lattice import RotatingSquaresChain
+from flexmm.models import predeform, variation
 from flexmm.models.base import FieldSpec, System
 from flexmm.models.hinge import (
+    H_KL,
+    H_REST,
     N_HINGE_PARAMS,
     N_SITE_PARAMS,
+    S_KG,
+    S_KR,
     chain_energy,
     chain_force,
     chain_reference,
@@ -63,19 +68,52 @@ def chain_tables(
     return ha, hb, hprm, sprm, np.zeros(n), np.zeros(n)
 
 
+def varied_tables(cfg: RotatingSquaresChain) -> tuple[tuple, np.ndarray, np.ndarray]:
+    """``chain_tables`` with the config's per-unit/per-hinge variation; also (mass (2N,), x (N,)).
+
+    Lateral hinges of a unit (n_v of them) take the mean k_l, k_θ of the unit's chain hinges.
+    """
+    n, kl, a, m = cfg.n_units, cfg.k_long_n_per_m, cfg.a_m, cfg.mass_kg
+    base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": cfg.inertia_kg_m2,
+            "k_long_n_per_m": kl, "k_shear_n_per_m": cfg.k_shear_n_per_m,
+            "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}
+    ha = np.arange(n - 1)
+    site, hinge = variation.parameter_arrays(base, cfg.variation, np.arange(n), np.zeros(n, int), ha, ha + 1)
+    kt = hinge["k_rot_n_m_per_rad"] / (kl * a * a)
+    args = chain_tables(n, site["theta0_rad"], hinge["k_shear_n_per_m"] / kl, kt,
+                        cfg.n_lateral, cfg.lateral_stretch)
+    hprm, sprm = args[2], args[3]
+    hprm[:, H_KL] = hinge["k_long_n_per_m"] / kl
+    deg = np.bincount(ha, minlength=n) + np.bincount(ha + 1, minlength=n)
+    local_kl = (np.bincount(ha, hprm[:, H_KL], n) + np.bincount(ha + 1, hprm[:, H_KL], n)) / deg
+    local_kt = (np.bincount(ha, kt, n) + np.bincount(ha + 1, kt, n)) / deg
+    sprm[:, S_KG] = cfg.n_lateral * float(cfg.lateral_stretch) * 0.5 * local_kl
+    sprm[:, S_KR] = 2.0 * cfg.n_lateral * local_kt
+    mass = np.concatenate([site["mass_kg"], site["inertia_kg_m2"] / a**2]) / m
+    x = np.concatenate([[0.0], np.cumsum(hprm[:, H_REST])]) * a
+    return args, mass, x
+
+
 def build(cfg: RotatingSquaresChain) -> System:
-    """The chain as a System: state (u_0..u_{N−1}, θ_0..θ_{N−1}), ends free or fixed."""
+    """The chain as a System: state (u_0..u_{N−1}, θ_0..θ_{N−1}), ends free or fixed.
+
+    ``cfg.variation`` makes parameters vary by unit or hinge; ``cfg.predeform`` starts the
+    dynamics from the static equilibrium under an applied strain or load (``predeform.relax``).
+    """
     n = cfg.n_units
     nd = nondimensional(cfg)
     scales = Scales(cfg.a_m, math.sqrt(cfg.mass_kg / cfg.k_long_n_per_m), cfg.mass_kg)
     args = chain_tables(n, cfg.theta0_rad, nd["Ks"], nd["Ktheta"], cfg.n_lateral, cfg.lateral_stretch)
     mass = np.concatenate([np.ones(n), np.full(n, nd["alpha2"])])
+    x = np.arange(n) * cfg.a_m * math.cos(cfg.theta0_rad)
+    if cfg.variation:
+        args, mass, x = varied_tables(cfg)
     inv_mass = 1.0 / mass
     for end, site in (("left", 0), ("right", n - 1)):
         if getattr(cfg, end) == "fixed":
             inv_mass[[site, n + site]] = 0.0
     spacing = cfg.a_m * math.cos(cfg.theta0_rad)
-    return System(
+    system = System(
         model=cfg.kind,
         fields=FIELDS,
         n_sites=n,
@@ -88,7 +126,7 @@ def build(cfg: RotatingSquaresChain) -> System:
         q0=np.zeros(2 * n),
         v0=np.zeros(2 * n),
         spacing_m=spacing,
-        site_coords={"x": np.arange(n) * spacing},
+        site_coords={"x": x},
         reference=chain_reference,
         meta={
             **nd,
@@ -101,6 +139,9 @@ def build(cfg: RotatingSquaresChain) -> System:
             "rotation_field": "theta",
         },
     )
+    if cfg.predeform is not None:
+        predeform.relax(system, cfg.predeform)
+    return system
 
 
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:

@@ -1,0 +1,213 @@
+"""Measured against predicted: a registry of theories, one entry per model kind.
+
+``THEORY[kind]`` is a ``ModelTheory``: plain functions that take the run's context and a
+measurement and return ``Comparison`` rows (or a curve for figures). A model without an entry,
+or a measurement a theory does not cover, simply gets no prediction. To plug in a new model, add
+``"my_kind": ModelTheory(pulse=..., front=...)`` to ``THEORY`` below (see ``predict_rotating``
+for a complete example and ``predict_chains`` for ready-made chain-of-masses relations).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import yaml
+
+from flexmm.analysis import predict_rotating
+
+
+@dataclass
+class Comparison:
+    """One measured quantity, with the theory's value where one applies."""
+
+    item: str
+    quantity: str
+    measured: float
+    predicted: float | None
+    units: str
+    note: str = ""
+
+    @property
+    def rel_diff(self) -> float | None:
+        """(measured − predicted)/|predicted|, or None without a usable prediction."""
+        if self.predicted is None or not math.isfinite(self.predicted) or self.predicted == 0:
+            return None
+        return (self.measured - self.predicted) / abs(self.predicted)
+
+    def as_dict(self) -> dict:
+        return {"item": self.item, "quantity": self.quantity, "measured": self.measured,
+                "predicted": self.predicted, "units": self.units, "rel_diff": self.rel_diff,
+                "note": self.note}
+
+
+@dataclass
+class RunContext:
+    """What a theory may read about a run: model kind, resolved config (dict) and the dataset."""
+
+    model: str
+    config: dict
+    ds: Any = None
+    cache: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dataset(cls, ds) -> "RunContext":
+        text = ds.attrs.get("config", "")
+        config = yaml.safe_load(text) if text else {}
+        model = ds.attrs.get("model") or (config.get("lattice") or {}).get("kind", "unknown")
+        return cls(model=str(model), config=config or {}, ds=ds)
+
+    def scene(self):
+        """The validated Scene of the run (cached); ConfigError if the config does not validate."""
+        if "scene" not in self.cache:
+            from flexmm.config import scene_from_dict
+
+            self.cache["scene"] = scene_from_dict(self.config)
+        return self.cache["scene"]
+
+
+Predictor = Callable[..., list[Comparison]]
+
+
+@dataclass(frozen=True)
+class ModelTheory:
+    """Prediction functions of one model kind (any may be None).
+
+    pulse(ctx, PulseMeasurement) -> [Comparison]; front(ctx, FrontMeasurement) -> [Comparison];
+    driven(ctx, DrivenMeasurement) -> [Comparison]; speed_curve(ctx, field, amplitudes) -> speeds
+    (m/s, NaN where no pulse exists); profile(ctx, PulseMeasurement, x_m) -> field values;
+    bands_hz(ctx) -> [(f_lo, f_hi)] linear pass bands; analysis(ctx) -> 'pulse' or 'front', the
+    default analysis of a run that is not driven (e.g. 'front' for multistable chains).
+    """
+
+    pulse: Predictor | None = None
+    front: Predictor | None = None
+    driven: Predictor | None = None
+    speed_curve: Callable[..., np.ndarray] | None = None
+    profile: Callable[..., np.ndarray] | None = None
+    bands_hz: Callable[..., list] | None = None
+    analysis: Callable[..., str] | None = None
+
+
+THEORY: dict[str, ModelTheory] = {
+    "rotating_squares_chain": ModelTheory(
+        pulse=predict_rotating.pulse,
+        speed_curve=predict_rotating.speed_curve,
+        profile=predict_rotating.profile,
+        bands_hz=predict_rotating.bands_hz,
+    ),
+}
+
+
+def theory_for(ctx: RunContext) -> ModelTheory:
+    """The registered theory of the run's model, or an empty one."""
+    return THEORY.get(ctx.model, ModelTheory())
+
+
+def _rows(item: str, measured: dict, predicted: list[Comparison]) -> list[Comparison]:
+    """Measured rows (units given), with predictions merged in by quantity name."""
+    pred = {c.quantity: c for c in predicted}
+    rows = []
+    for q, (value, units) in measured.items():
+        c = pred.pop(q, None)
+        rows.append(Comparison(item, q, value, c.predicted if c else None, units, c.note if c else ""))
+    rows.extend(Comparison(item, c.quantity, c.measured, c.predicted, c.units, c.note) for c in pred.values())
+    return rows
+
+
+def _safe(fn, *args) -> list[Comparison]:
+    """Call a predictor; a theory that does not apply (ValueError) or a stored config that no
+    longer validates (ConfigError) contributes nothing."""
+    from flexmm.config import ConfigError
+
+    if fn is None:
+        return []
+    try:
+        return fn(*args)
+    except (ValueError, KeyError, ArithmeticError, ConfigError):
+        return []
+
+
+def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
+    """Rows for one PulseMeasurement: speed, amplitude, widths, attenuation, with theory."""
+    u = p.units
+    measured = {
+        "speed": (p.speed_m_s, "m/s"),
+        "amplitude": (p.amplitude, u),
+        "width W (sech fit)": (p.width_sech_m, "m"),
+        "width W (sech² fit)": (p.width_sech2_m, "m"),
+        "width W (§1.3 fit)": (p.width_kg_m, "m"),
+        "FWHM": (p.fwhm_m, "m"),
+        "temporal FWHM": (p.temporal_fwhm_s, "s"),
+        "attenuation": (p.attenuation_per_m, "1/m"),
+    }
+    return _rows(f"pulse {p.index}", measured, _safe(theory_for(ctx).pulse, ctx, p))
+
+
+def compare_front(ctx: RunContext, f) -> list[Comparison]:
+    measured = {
+        "speed": (f.speed_m_s, "m/s"),
+        "width 10–90 %": (f.width_10_90_m, "m"),
+        "distance": (f.distance_m, "m"),
+        "switched sites": (float(f.n_switched), "sites"),
+    }
+    return _rows(f"front {f.index}", measured, _safe(theory_for(ctx).front, ctx, f))
+
+
+def generic_bands_hz(ctx: RunContext) -> list[tuple[float, float]]:
+    """Linear pass bands (Hz) of any 1D model from its Bloch eigenproblem (theory.dispersion).
+
+    Built on a short copy of the lattice (n_units = 32); ValueError for models without
+    ``n_units`` or whose Hessian is not periodic.
+    """
+    from flexmm.models import MODELS
+    from flexmm.theory.dispersion import band_edges_numeric
+
+    lat = ctx.scene().lattice
+    if "n_units" not in type(lat).model_fields:
+        raise ValueError(f"no generic dispersion for {ctx.model}: not a chain with n_units")
+    system = MODELS[lat.kind].build(lat.model_copy(update={"n_units": 32}))
+    f = 1.0 / (2 * math.pi * system.scales.time_s)
+    return [(lo * f, hi * f) for lo, hi in band_edges_numeric(system)]
+
+
+def bands_for(ctx: RunContext) -> list[tuple[float, float]]:
+    """The model's linear pass bands (Hz): its registered formula, else the generic Bloch one."""
+    if "bands" not in ctx.cache:
+        fn = theory_for(ctx).bands_hz or generic_bands_hz
+        try:
+            ctx.cache["bands"] = fn(ctx)
+        except (ValueError, KeyError, ArithmeticError) as exc:
+            ctx.cache["bands"] = []
+            ctx.cache["bands_error"] = str(exc)
+    return ctx.cache["bands"]
+
+
+def _band_note(ctx: RunContext, f_hz: float) -> list[Comparison]:
+    try:
+        bands = bands_for(ctx)
+    except Exception as exc:  # noqa: BLE001 - an invalid stored config only loses the note
+        ctx.cache["bands_error"] = str(exc)
+        bands = []
+    if not bands:
+        return []
+    inside = any(lo <= f_hz <= hi for lo, hi in bands)
+    text = ", ".join(f"{lo:.4g}–{hi:.4g} Hz" for lo, hi in bands)
+    return [Comparison("", "drive frequency", f_hz, None, "Hz",
+                       f"{'inside' if inside else 'outside'} the linear pass bands {text}")]
+
+
+def compare_driven(ctx: RunContext, d) -> list[Comparison]:
+    measured = {
+        "drive frequency": (d.frequency_hz, "Hz"),
+        "amplitude at drive": (d.amplitude_drive, d.units),
+        "amplitude at far end": (d.amplitude_far, d.units),
+        "transmission": (d.transmission, "1"),
+        "decay per site": (d.decay_per_site, "1/site"),
+        "dominant far-end frequency": (d.dominant_far_hz, "Hz"),
+        "2nd harmonic / fundamental": (d.scalars().get("harmonic_2_ratio", np.nan), "1"),
+        "3rd harmonic / fundamental": (d.scalars().get("harmonic_3_ratio", np.nan), "1"),
+    }
+    return _rows("driven", measured, _band_note(ctx, d.frequency_hz) + _safe(theory_for(ctx).driven, ctx, d))

@@ -1,0 +1,169 @@
+"""Write a RunAnalysis as ``analysis.nc`` (xarray, h5netcdf), JSON or CSV rows.
+
+analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
+
+- dims ``pulse``, ``front``, ``position`` (the analysed line: sites, or bonds for strain),
+  ``time`` (the run's frames), ``comparison``, and for driven runs ``harmonic`` and ``frequency``;
+- per pulse: every scalar of PulseMeasurement (``pulse_speed_m_s``, ...), ``arrival_time``
+  and ``peak`` on (pulse, position), ``track_position`` on (pulse, time);
+- per front: scalars, ``switch_time`` on (front, position), ``front_position`` on (front, time);
+- driven: ``steady_amplitude`` (position), ``harmonic_amplitude`` (harmonic),
+  ``far_spectrum`` (frequency) and scalars;
+- the comparison table (``item``, ``quantity``, ``measured``, ``predicted``, ``rel_diff``,
+  ``units``, ``note`` on ``comparison``), energy budget scalars ``energy_*``;
+- attrs: source dataset, its config hash, model, analysis kind and field, flexmm version.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+import flexmm
+
+_SKIP = {"index", "field", "units"}
+
+
+def _scalar_vars(prefix: str, dim: str, items: list[dict]) -> dict:
+    if not items:
+        return {}
+    out = {}
+    for key in items[0]:
+        if key in _SKIP:
+            continue
+        vals = [d[key] for d in items]
+        if isinstance(vals[0], str):
+            arr = np.asarray(vals, dtype=str)
+        elif all(isinstance(x, (bool, int, np.bool_, np.integer)) for x in vals):
+            arr = np.asarray(vals, dtype=np.int64)
+        else:
+            arr = np.asarray(vals, dtype=float)
+        unit = next((u for suffix, u in (("_m_s", "m/s"), ("_per_m", "1/m"), ("_s", "s"), ("_m", "m"))
+                     if key.endswith(suffix)), "")
+        out[f"{prefix}_{key}"] = ((dim,), arr, {"units": unit, "long_name": key.replace("_", " ")})
+    return out
+
+
+def _on_positions(view, rows: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """(n_rows, n_pos) array with values placed at their sites, NaN elsewhere."""
+    out = np.full((len(rows), view.n_pos), np.nan)
+    index = {float(s): k for k, s in enumerate(view.site)}
+    for r, (sites, vals) in enumerate(rows):
+        for s, v in zip(sites, vals):
+            out[r, index[float(s)]] = v
+    return out
+
+
+def _on_time(view, rows: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    out = np.full((len(rows), view.n_time), np.nan)
+    for r, (t, pos) in enumerate(rows):
+        k = np.searchsorted(view.time, t)
+        ok = (k < view.n_time) & np.isclose(view.time[np.minimum(k, view.n_time - 1)], t)
+        out[r, k[ok]] = pos[ok]
+    return out
+
+
+def to_dataset(res) -> xr.Dataset:
+    """The analysis of one run as an xarray Dataset (see module docstring)."""
+    v = res.view
+    coords = {"position": ("position", v.x, {"units": "m", "long_name": "position along the line"}),
+              "site": ("position", v.site, {"long_name": "site index (k + 0.5: bond)"}),
+              "time": ("time", v.time, {"units": "s"})}
+    data = {}
+    if res.pulses:
+        data.update(_scalar_vars("pulse", "pulse", [p.scalars() for p in res.pulses]))
+        data["arrival_time"] = (("pulse", "position"), _on_positions(v, [(p.sites, p.arrival_time_s) for p in res.pulses]),
+                                {"units": "s", "long_name": "pulse arrival time"})
+        data["peak"] = (("pulse", "position"), _on_positions(v, [(p.sites, p.peak) for p in res.pulses]),
+                        {"units": v.units, "long_name": f"pulse peak of {v.spec}"})
+        data["track_position"] = (("pulse", "time"), _on_time(v, [(p.track_time_s, p.track_pos_m) for p in res.pulses]),
+                                  {"units": "m", "long_name": "tracked peak position"})
+    if res.fronts:
+        data.update(_scalar_vars("front", "front", [f.scalars() for f in res.fronts]))
+        data["switch_time"] = (("front", "position"), _on_positions(v, [(f.sites, f.switch_time_s) for f in res.fronts]),
+                               {"units": "s", "long_name": "time of the 50 % crossing"})
+        data["front_position"] = (("front", "time"), _on_time(v, [(f.track_time_s, f.track_pos_m) for f in res.fronts]),
+                                  {"units": "m", "long_name": "50 % crossing position"})
+    d = res.driven
+    if d is not None:
+        data["steady_amplitude"] = (("position",), d.amplitude, {"units": v.units, "long_name": "steady amplitude at the drive frequency"})
+        data["harmonic_amplitude"] = (("harmonic",), d.harmonics, {"units": v.units, "long_name": "far-end amplitude of n f"})
+        data["far_spectrum"] = (("frequency",), d.spectrum, {"units": v.units, "long_name": "far-end amplitude spectrum"})
+        coords["harmonic"] = ("harmonic", np.arange(1, d.harmonics.size + 1))
+        coords["frequency"] = ("frequency", d.spectrum_hz, {"units": "Hz"})
+        for k, val in d.scalars().items():
+            if isinstance(val, (int, float)):
+                data[f"driven_{k}"] = ((), float(val))
+    if res.energy is not None:
+        for k, val in res.energy.scalars().items():
+            data[f"energy_{k}"] = ((), val, {"units": "J" if k.endswith("_j") else "1"})
+    rows = [c.as_dict() for c in res.comparisons]
+    if rows:
+        for key in ("item", "quantity", "units", "note"):
+            data[f"comparison_{key}"] = (("comparison",), np.array([r[key] for r in rows], dtype=str))
+        for key in ("measured", "predicted", "rel_diff"):
+            data[f"comparison_{key}"] = (("comparison",), np.array([np.nan if r[key] is None else r[key] for r in rows], float))
+    ds = xr.Dataset(data, coords=coords)
+    src = res.ctx.ds.attrs
+    ds.attrs.update(source=str(res.path), source_config_sha256=str(src.get("config_sha256", "")),
+                    model=res.ctx.model, analysis=res.kind, field=v.spec, field_units=v.units,
+                    flexmm_version=flexmm.__version__)
+    return ds
+
+
+def write_dataset(res, path: str | Path | None = None) -> Path:
+    """Write analysis.nc beside the run's dataset (atomic rename); returns its path."""
+    base = Path(res.path)
+    target = Path(path) if path else (base if base.is_dir() else base.parent) / "analysis.nc"
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    to_dataset(res).to_netcdf(tmp, engine="h5netcdf")
+    os.replace(tmp, target)
+    return target
+
+
+def _clean(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, (np.floating, np.integer)):
+        return _clean(v.item())
+    if isinstance(v, np.bool_):
+        return bool(v)
+    return v
+
+
+def to_dict(res) -> dict:
+    """JSON-ready summary of one run (scalars only; NaN becomes null)."""
+    out = {
+        "run": str(res.path), "name": res.name, "model": res.ctx.model, "analysis": res.kind,
+        "field": res.view.spec, "field_units": res.view.units,
+        "pulses": [{k: _clean(x) for k, x in p.scalars().items()} for p in res.pulses],
+        "fronts": [{k: _clean(x) for k, x in f.scalars().items()} for f in res.fronts],
+        "driven": {k: _clean(x) for k, x in res.driven.scalars().items()} if res.driven else None,
+        "energy": {k: _clean(x) for k, x in res.energy.scalars().items()} if res.energy else None,
+        "comparisons": [{k: _clean(x) for k, x in c.as_dict().items()} for c in res.comparisons],
+    }
+    return out
+
+
+def to_json(results: list, errors: list[dict] | None = None, bands: dict | None = None) -> str:
+    """JSON of several runs: {"runs": [...], "errors": [...], "bands": {...} or null}."""
+    return json.dumps({"runs": [to_dict(r) for r in results], "errors": errors or [], "bands": bands},
+                      indent=2, default=_clean)
+
+
+CSV_COLUMNS = ("run", "analysis", "field", "item", "quantity", "measured", "predicted", "rel_diff", "units", "note")
+
+
+def csv_rows(results: list) -> list[dict]:
+    """One row per measured quantity of every run (the comparison table, long format)."""
+    rows = []
+    for r in results:
+        for c in r.comparisons:
+            d = {k: _clean(x) for k, x in c.as_dict().items()}
+            rows.append({"run": str(r.path), "analysis": r.kind, "field": r.view.spec, **d})
+    return rows

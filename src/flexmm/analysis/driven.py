@@ -1,0 +1,131 @@
+"""Driven (shaker) runs: steady-state response per site, transmission, harmonics, bands.
+
+The steady window is the last ``steady_fraction`` of the run, trimmed to a whole number of drive
+periods. Amplitude of harmonic n at a site = 2|⟨(y − ȳ) e^{−i n ω t}⟩| over the window (a lock-in
+average; exact for a stationary signal over whole periods). Transmission = fundamental amplitude
+at the far end / at the driven end. The far-end spectrum is a Hann-windowed one-sided amplitude
+spectrum (scipy.signal.periodogram). A set of runs at different frequencies gives transmission
+against frequency; frequencies whose transmission is above ``pass_level`` (relative to the best)
+form the pass bands.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.signal import periodogram
+
+
+class NotDriven(Exception):
+    """The run has no harmonic drive (or no drive frequency could be found)."""
+
+
+@dataclass
+class DrivenMeasurement:
+    """Steady response of one driven run; SI units, amplitudes in the field's units."""
+
+    field: str
+    units: str
+    frequency_hz: float
+    drive_site: int
+    far_site: int
+    window_s: tuple[float, float]
+    amplitude_drive: float
+    amplitude_far: float
+    transmission: float
+    decay_per_site: float
+    dominant_far_hz: float
+    harmonics: np.ndarray  # (n_harmonics,) amplitude of n f at the far end, n = 1..
+    amplitude: np.ndarray  # (n_pos,) fundamental amplitude per site
+    spectrum_hz: np.ndarray
+    spectrum: np.ndarray
+
+    def scalars(self) -> dict:
+        d = {k: v for k, v in asdict(self).items() if not isinstance(v, (np.ndarray, tuple))}
+        d["window_start_s"], d["window_end_s"] = self.window_s
+        for n, a in enumerate(self.harmonics, start=1):
+            d[f"harmonic_{n}_ratio"] = float(a / self.harmonics[0]) if self.harmonics[0] > 0 else np.nan
+        return d
+
+
+def steady_window(time: np.ndarray, frequency_hz: float, steady_fraction: float = 0.4) -> np.ndarray:
+    """Indices of the last ``steady_fraction`` of the run, cut to whole drive periods."""
+    t_end = time[-1]
+    period = 1.0 / frequency_hz
+    span = steady_fraction * (t_end - time[0])
+    n_per = max(1, int(span / period))
+    return np.flatnonzero(time >= t_end - n_per * period - 1e-12 * period)
+
+
+def lockin(y: np.ndarray, t: np.ndarray, frequency_hz: float) -> np.ndarray:
+    """Amplitude of the component at ``frequency_hz`` of y (n_t, ...) sampled at times t (n_t,)."""
+    # trapezoid weights: the average over whole periods, also for non-uniform sampling
+    wt = np.zeros_like(t)
+    wt[1:] += 0.5 * np.diff(t)
+    wt[:-1] += 0.5 * np.diff(t)
+    wt /= wt.sum()
+    yc = y - np.tensordot(wt, y, axes=(0, 0))
+    z = np.tensordot(wt * np.exp(-2j * np.pi * frequency_hz * t), yc, axes=(0, 0))
+    return 2 * np.abs(z)
+
+
+def drive_frequency(config: dict | None) -> tuple[float | None, str]:
+    """(frequency_hz, driven end) from a resolved config dict, or (None, 'left')."""
+    exc = (config or {}).get("excitation") or {}
+    if exc.get("kind") != "shaker":
+        return None, exc.get("end", "left")
+    return float(exc["frequency_hz"]), exc.get("end", "left")
+
+
+def measure_driven(view, frequency_hz: float | None = None, *, end: str = "left",
+                   steady_fraction: float = 0.4, n_harmonics: int = 5) -> DrivenMeasurement:
+    """Steady-state response of a driven FieldView (frequency from the config or given)."""
+    t, y = view.time, view.values
+    drive, far = (0, view.n_pos - 1) if end == "left" else (view.n_pos - 1, 0)
+    if frequency_hz is None:
+        f, p = periodogram(y[:, drive] - y[:, drive].mean(), fs=1.0 / float(np.median(np.diff(t))))
+        if not np.any(p > 0):
+            raise NotDriven(f"no drive frequency: {view.spec!r} does not move at the driven end")
+        frequency_hz = float(f[np.argmax(p)])
+    win = steady_window(t, frequency_hz, steady_fraction)
+    if win.size < 8:
+        raise NotDriven(f"too few frames ({win.size}) in the steady window to resolve {frequency_hz:g} Hz")
+    tw, yw = t[win], y[win]
+    amp = lockin(yw, tw, frequency_hz)
+    harm = np.array([float(lockin(yw[:, far], tw, n * frequency_hz)) for n in range(1, n_harmonics + 1)])
+    fs = 1.0 / float(np.median(np.diff(tw)))
+    fsp, psd = periodogram(yw[:, far], fs=fs, window="hann", scaling="spectrum")
+    spec = np.sqrt(2 * psd)
+    order = np.arange(view.n_pos) if end == "left" else np.arange(view.n_pos)[::-1]
+    good = amp[order] > 1e-12 * max(amp.max(), 1e-300)
+    k = np.arange(view.n_pos)[good]
+    decay = float(-np.polyfit(k, np.log(amp[order][good]), 1)[0]) if k.size >= 2 else np.nan
+    return DrivenMeasurement(
+        field=view.spec, units=view.units, frequency_hz=float(frequency_hz), drive_site=int(view.site[drive]),
+        far_site=int(view.site[far]), window_s=(float(tw[0]), float(tw[-1])),
+        amplitude_drive=float(amp[drive]), amplitude_far=float(amp[far]),
+        transmission=float(amp[far] / amp[drive]) if amp[drive] > 0 else np.nan,
+        decay_per_site=decay, dominant_far_hz=float(fsp[1:][np.argmax(spec[1:])]) if fsp.size > 1 else np.nan,
+        harmonics=harm, amplitude=amp, spectrum_hz=fsp, spectrum=spec,
+    )
+
+
+def pass_bands(frequency_hz, transmission, pass_level: float = 0.1) -> list[tuple[float, float]]:
+    """Frequency intervals where transmission ≥ pass_level × its maximum (runs sorted by f)."""
+    f = np.asarray(frequency_hz, float)
+    tr = np.asarray(transmission, float)
+    order = np.argsort(f)
+    f, tr = f[order], tr[order]
+    ok = tr >= pass_level * np.nanmax(tr)
+    bands, start = [], None
+    for fi, o in zip(f, ok):
+        if o and start is None:
+            start = fi
+        if not o and start is not None:
+            bands.append((start, prev))
+            start = None
+        prev = fi
+    if start is not None:
+        bands.append((start, f[-1]))
+    return bands

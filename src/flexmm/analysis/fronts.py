@@ -1,0 +1,127 @@
+"""Transition fronts: sites switching from one well to another (Raney et al. PNAS 2016 method).
+
+Each site's progress is s_i(t) = (u_i(t) − u_i(0))/L, with L the well-to-well jump (given, or
+the median final jump of the sites that switched). Front position = where s crosses ½ between
+neighbouring sites (linear interpolation), followed through time with the pulse tracker, so two
+fronts leaving a trigger in opposite directions are measured separately. Per front: the time each
+site first crosses ½ (its switching time), speed from the line through (x, switching time) with
+its standard error, 10–90 % width (sites between the 10 % and 90 % crossings next to the front,
+median over frames), distance travelled, and whether it stopped before reaching the end (arrest).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from flexmm.analysis.detect import link, merge_tracks
+
+
+class FrontNotFound(Exception):
+    """No site switched state, or no front could be followed."""
+
+
+@dataclass
+class FrontMeasurement:
+    """One transition front; SI units; arrays are per switched site (``sites``) or per frame."""
+
+    index: int
+    field: str
+    direction: int
+    jump: float
+    speed_m_s: float
+    speed_stderr_m_s: float
+    width_10_90_m: float
+    width_10_90_sites: float
+    distance_m: float
+    start_m: float
+    stop_m: float
+    arrested: bool
+    n_switched: int
+    sites: np.ndarray
+    x_m: np.ndarray
+    switch_time_s: np.ndarray
+    track_time_s: np.ndarray
+    track_pos_m: np.ndarray
+
+    def scalars(self) -> dict:
+        return {k: v for k, v in asdict(self).items() if not isinstance(v, np.ndarray)}
+
+
+def _crossings(x: np.ndarray, s: np.ndarray, level: float) -> np.ndarray:
+    """Positions where s(x) crosses ``level`` between neighbouring samples."""
+    d = s - level
+    k = np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0)
+    return x[k] + (x[k + 1] - x[k]) * d[k] / (d[k] - d[k + 1])
+
+
+def switched_sites(u: np.ndarray, jump: float | None = None, tail: int = 5) -> tuple[np.ndarray, float]:
+    """Mask of sites whose last ``tail`` frames sit more than half a jump from their start, and L."""
+    final = np.median(u[-tail:], axis=0) - u[0]
+    if jump is None:
+        mag = np.abs(final)
+        big = mag >= 0.5 * np.percentile(mag, 95)
+        if not big.any() or np.percentile(mag, 95) == 0:
+            return np.zeros(u.shape[1], bool), 0.0
+        jump = float(np.median(final[big]))
+    return (final / jump) > 0.5, jump
+
+
+def _width(x, s, pos, spacing):
+    """Distance between the 10 % and 90 % crossings nearest to ``pos``."""
+    c10, c90 = _crossings(x, s, 0.1), _crossings(x, s, 0.9)
+    if not (c10.size and c90.size):
+        return np.nan
+    return abs(c10[np.argmin(np.abs(c10 - pos))] - c90[np.argmin(np.abs(c90 - pos))])
+
+
+def measure_fronts(view, *, jump: float | None = None, min_travel_sites: float = 3.0) -> list[FrontMeasurement]:
+    """Find and measure the transition fronts of a displacement FieldView; FrontNotFound if none."""
+    u = view.values
+    mask, L = switched_sites(u, jump)
+    if L == 0 or not mask.any():
+        raise FrontNotFound(f"no site of {view.spec!r} switched state (no persistent jump)")
+    s = (u - u[0]) / L
+    h = view.spacing_m
+    dets = [[(float(p), 1.0) for p in _crossings(view.x, s[j], 0.5)] for j in range(view.n_time)]
+    tracks = merge_tracks(link(view.time, dets, gate=4 * h, max_gap=10), 4 * h)
+    tracks = [tr for tr in tracks if tr.travel >= min_travel_sites * h and len(tr.frames) >= 3]
+    if not tracks:
+        raise FrontNotFound(f"{int(mask.sum())} sites of {view.spec!r} switched but no moving front was found")
+    first = np.full(view.n_pos, np.nan)
+    for i in np.flatnonzero(mask):
+        k = np.flatnonzero(s[:, i] >= 0.5)
+        if k.size and k[0] > 0:
+            j = k[0]
+            first[i] = np.interp(0.5, [s[j - 1, i], s[j, i]], view.time[j - 1 : j + 1])
+    out = []
+    for tr in sorted(tracks, key=lambda tr: tr.time[0]):
+        out.append(_measure(view, tr, len(out), first, mask, s, L, h))
+    return out
+
+
+def _measure(view, tr, index, first, mask, s, L, h) -> FrontMeasurement:
+    frames, t, pos, _ = tr.arrays()
+    direction = 1 if pos[-1] >= pos[0] else -1
+    lo, hi = min(pos[0], pos[-1]), max(pos[0], pos[-1])
+    sel = np.flatnonzero(mask & np.isfinite(first) & (view.x >= lo - h) & (view.x <= hi + h))
+    speed = err = np.nan
+    if sel.size >= 3:
+        coef, cov = np.polyfit(view.x[sel], first[sel], 1, cov=True) if sel.size > 3 else (
+            np.polyfit(view.x[sel], first[sel], 1), np.full((2, 2), np.nan))
+        speed, err = 1.0 / abs(coef[0]), float(np.sqrt(cov[0, 0])) / coef[0] ** 2
+    widths = [_width(view.x, s[j], p, h) for j, p in zip(frames, pos)
+              if view.x.min() + 3 * h < p < view.x.max() - 3 * h]
+    w = float(np.nanmedian(widths)) if widths and np.isfinite(widths).any() else np.nan
+    end_x = view.x.max() if direction > 0 else view.x.min()
+    late = t >= t[0] + 0.9 * (view.time[-1] - t[0])
+    still = np.ptp(pos[late]) < h if late.sum() >= 2 else False
+    arrested = bool(still and abs(pos[-1] - end_x) > 3 * h)
+    return FrontMeasurement(
+        index=index, field=view.spec, direction=direction, jump=float(L), speed_m_s=float(speed),
+        speed_stderr_m_s=float(err), width_10_90_m=w, width_10_90_sites=w / h,
+        distance_m=float(abs(pos[-1] - pos[0])), start_m=float(pos[0]), stop_m=float(pos[-1]),
+        arrested=arrested, n_switched=int(sel.size), sites=view.site[sel], x_m=view.x[sel],
+        switch_time_s=first[sel], track_time_s=t, track_pos_m=pos,
+    )

@@ -1,0 +1,128 @@
+"""Analyse one run directory: choose the analysis, measure, compare with theory.
+
+``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
+if the excitation is a shaker, transition fronts if the model's theory says so, travelling
+pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
+of ``compare.THEORY``, and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from flexmm.analysis.compare import (
+    Comparison, RunContext, compare_driven, compare_front, compare_pulse, theory_for,
+)
+from flexmm.analysis.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
+from flexmm.analysis.energy import EnergyBudget, energy_budget
+from flexmm.analysis.fields import FieldView, field_view
+from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fronts
+from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
+
+KINDS = ("auto", "pulse", "front", "driven")
+
+
+class RunNotFound(Exception):
+    """The path is not a run directory (no dataset.nc) or the dataset cannot be read."""
+
+
+@dataclass
+class RunAnalysis:
+    """Everything measured on one run."""
+
+    path: Path
+    kind: str
+    ctx: RunContext
+    view: FieldView
+    pulses: list[PulseMeasurement] = field(default_factory=list)
+    fronts: list[FrontMeasurement] = field(default_factory=list)
+    driven: DrivenMeasurement | None = None
+    energy: EnergyBudget | None = None
+    comparisons: list[Comparison] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return str(self.ctx.ds.attrs.get("title") or self.path.name)
+
+
+def dataset_path(path: str | Path) -> Path:
+    """``RUN_DIR/dataset.nc`` (or the file itself); RunNotFound if missing."""
+    p = Path(path)
+    nc = p / "dataset.nc" if p.is_dir() else p
+    if not nc.is_file():
+        what = "no dataset.nc in" if p.is_dir() else "no such run directory or file:"
+        raise RunNotFound(f"{what} {p}")
+    return nc
+
+
+def open_dataset(path: str | Path):
+    import xarray as xr
+
+    nc = dataset_path(path)
+    try:
+        return xr.load_dataset(nc, engine="h5netcdf")
+    except (OSError, ValueError) as exc:
+        raise RunNotFound(f"cannot read {nc}: {exc}") from None
+
+
+def choose_kind(ctx: RunContext) -> str:
+    """'driven' for a shaker, else the model theory's preference, else 'pulse'."""
+    if drive_frequency(ctx.config)[0] is not None:
+        return "driven"
+    pick = theory_for(ctx).analysis
+    return pick(ctx) if pick is not None else "pulse"
+
+
+def default_field_for(kind: str, ds) -> str | None:
+    """Field used when none is given: displacement for fronts and drives, else θ or strain."""
+    from flexmm.analysis.fields import displacement_field
+
+    if kind in ("front", "driven"):
+        return displacement_field(ds)
+    return None
+
+
+def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = "auto",
+                row: int | None = None, threshold_fraction: float = 0.25,
+                jump: float | None = None) -> RunAnalysis:
+    """Measure one run. Raises RunNotFound, FieldError, PulseNotFound, FrontNotFound, NotDriven."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
+    ds = open_dataset(path)
+    ctx = RunContext.from_dataset(ds)
+    kind = choose_kind(ctx) if kind == "auto" else kind
+    view = field_view(ds, field_spec or default_field_for(kind, ds), row=row)
+    out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
+    if kind == "pulse":
+        out.pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
+        for p in out.pulses:
+            out.comparisons += compare_pulse(ctx, p)
+    elif kind == "front":
+        out.fronts = measure_fronts(view, jump=jump)
+        for f in out.fronts:
+            out.comparisons += compare_front(ctx, f)
+    else:
+        freq, end = drive_frequency(ctx.config)
+        out.driven = measure_driven(view, freq, end=end)
+        out.comparisons += compare_driven(ctx, out.driven)
+    return out
+
+
+__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "open_dataset",
+           "FrontNotFound", "NotDriven", "PulseNotFound"]
+
+
+def sweep_bands(results: list[RunAnalysis], pass_level: float = 0.1) -> dict | None:
+    """Pass bands measured over a set of driven runs (transmission ≥ pass_level × max) and the
+    linear theory's bands of the first run's model; None with fewer than two driven runs."""
+    from flexmm.analysis.compare import bands_for
+    from flexmm.analysis.driven import pass_bands
+
+    driven = [r for r in results if r.driven is not None]
+    if len(driven) < 2:
+        return None
+    f = [r.driven.frequency_hz for r in driven]
+    tr = [r.driven.transmission for r in driven]
+    return {"pass_level": pass_level, "frequencies_hz": sorted(f),
+            "measured_hz": pass_bands(f, tr, pass_level), "predicted_hz": bands_for(driven[0].ctx)}

@@ -1,0 +1,174 @@
+"""``flexmm analyze RUN_DIR [RUN_DIR ...]``: measure runs and print them against theory.
+
+Exit status: 0 when every run was measured, 1 when some run has no pulse/front/drive to
+measure, 2 for user errors (missing run directory, unknown field or analysis).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from flexmm.analysis import dataset as out_ds
+from flexmm.analysis import figures as plots
+from flexmm.analysis import report
+from flexmm.analysis.fields import FieldError
+from flexmm.cli.common import EXIT_FAILED_RUN, EXIT_USER_ERROR, error
+
+
+def _fmt(x) -> str:
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "—"
+    return f"{x:.4g}"
+
+
+def _rel(x) -> str:
+    return "—" if x is None else f"{100 * x:+.2f} %"
+
+
+def run_table(res) -> Table:
+    """Measured against predicted for one run."""
+    t = Table(title=f"{res.name} — {res.ctx.model}, {res.kind} analysis of {res.view.spec}",
+              title_justify="left", header_style="bold")
+    for col, just in (("item", "left"), ("quantity", "left"), ("measured", "right"),
+                      ("predicted", "right"), ("rel. diff", "right"), ("units", "left"), ("note", "left")):
+        t.add_column(col, justify=just, overflow="fold")
+    for c in res.comparisons:
+        t.add_row(c.item, c.quantity, _fmt(c.measured), _fmt(c.predicted), _rel(c.rel_diff), c.units, c.note)
+    return t
+
+
+def energy_line(res) -> str | None:
+    e = res.energy
+    if e is None:
+        return None
+    work = f"work {e.work_j:.4g} J" if e.work_recorded else f"work {e.work_j:.4g} J (inferred: prescribed drive)"
+    check = (f"; balance error ≤ {100 * e.max_relative_balance_error:.2g} %" if e.work_recorded else "")
+    return (f"energy: initial {e.initial_total_j:.4g} J, {work}, final kinetic "
+            f"{e.final_kinetic_j:.4g} J + potential {e.final_potential_j:.4g} J, dissipated "
+            f"{e.dissipated_j:.4g} J{check}")
+
+
+SUMMARY = {
+    "pulse": ("amplitude", "speed", "width W (sech fit)"),
+    "front": ("speed", "width 10–90 %", "distance"),
+    "driven": ("drive frequency", "transmission", "decay per site"),
+}
+
+
+def summary_tables(results) -> list[Table]:
+    """Per analysis kind, one line per run and feature with the headline numbers side by side."""
+    tables = []
+    for kind, quantities in SUMMARY.items():
+        rows = [r for r in results if r.kind == kind]
+        if not rows:
+            continue
+        t = Table(title=f"{kind} runs", title_justify="left", header_style="bold")
+        for col in ("run", "field", "item"):
+            t.add_column(col)
+        for q in quantities:
+            for col in (q, "predicted", "rel. diff"):
+                t.add_column(col, justify="right")
+        for r in rows:
+            by_item: dict[str, dict] = {}
+            for c in r.comparisons:
+                by_item.setdefault(c.item, {})[c.quantity] = c
+            for item, qs in by_item.items():
+                cells = []
+                for q in quantities:
+                    c = qs.get(q)
+                    cells += [_fmt(c.measured if c else None), _fmt(c.predicted if c else None),
+                              _rel(c.rel_diff if c else None)]
+                t.add_row(r.name, r.view.spec, item, *cells)
+        tables.append(t)
+    return tables
+
+
+def _write_text(target: str, text: str) -> None:
+    if target == "-":
+        sys.stdout.write(text)
+    else:
+        Path(target).write_text(text)
+
+
+def _csv_text(results) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=out_ds.CSV_COLUMNS)
+    w.writeheader()
+    w.writerows(out_ds.csv_rows(results))
+    return buf.getvalue()
+
+
+def analyze(
+    runs: list[str] = typer.Argument(..., help="Run directories (or dataset.nc files)."),
+    field: str = typer.Option(None, "--field", "-f", help="Field: theta, u, u_dot, strain[:NAME], velocity[:NAME]."),
+    analysis: str = typer.Option("auto", "--analysis", "-a", help="auto, pulse, front or driven."),
+    row: int = typer.Option(None, "--row", help="Row of a 2D lattice to analyse (default: middle)."),
+    threshold: float = typer.Option(0.25, "--threshold", help="Pulse detection level, fraction of the peak."),
+    jump: float = typer.Option(None, "--jump", help="Well-to-well jump of a front (default: measured)."),
+    json_out: str = typer.Option(None, "--json", help="Write a JSON summary to this file ('-': stdout)."),
+    csv_out: str = typer.Option(None, "--csv", help="Write the measured/predicted table as CSV ('-': stdout)."),
+    plot: bool = typer.Option(False, "--plot", help="Write PNG figures beside each run."),
+    plot_dir: str = typer.Option(None, "--plot-dir", help="Where figures over several runs go (default: their common parent)."),
+    save: bool = typer.Option(True, "--save/--no-save", help="Write analysis.nc beside each run."),
+) -> None:
+    """Measure pulses, fronts or driven response of runs and compare with theory."""
+    if analysis not in report.KINDS:
+        raise error(f"unknown analysis {analysis!r}; choose one of {', '.join(report.KINDS)}")
+    for r in runs:
+        try:
+            report.dataset_path(r)
+        except report.RunNotFound as exc:
+            raise error(str(exc)) from None
+    console = Console(stderr=json_out == "-" or csv_out == "-", highlight=False)
+    results, errors = [], []
+    for r in runs:
+        try:
+            res = report.analyze_run(r, field_spec=field, kind=analysis, row=row,
+                                     threshold_fraction=threshold, jump=jump)
+        except (report.RunNotFound, FieldError, ValueError) as exc:
+            raise error(f"{r}: {exc}") from None
+        except (report.PulseNotFound, report.FrontNotFound, report.NotDriven) as exc:
+            console.print(f"[bold red]{r}[/]: {exc}")
+            errors.append({"run": str(r), "error": str(exc)})
+            continue
+        results.append(res)
+        console.print(run_table(res))
+        line = energy_line(res)
+        if line:
+            console.print(line)
+        if save:
+            console.print(f"wrote {out_ds.write_dataset(res)}")
+        if plot:
+            for p in plots.run_figures(res):
+                console.print(f"wrote {p}")
+    if len(results) > 1:
+        for table in summary_tables(results):
+            console.print(table)
+    bands = report.sweep_bands(results)
+    if bands:
+        fmt = lambda bs: ", ".join(f"{lo:.4g}–{hi:.4g} Hz" for lo, hi in bs) or "none"  # noqa: E731
+        console.print(f"pass bands (transmission ≥ {bands['pass_level']:.0%} of max) over "
+                      f"{len(bands['frequencies_hz'])} drive frequencies: measured {fmt(bands['measured_hz'])}; "
+                      f"linear theory {fmt(bands['predicted_hz'])}")
+    if plot and results:
+        where = Path(plot_dir) if plot_dir else Path(os.path.commonpath([str(Path(r.path).resolve().parent) for r in results]))
+        for p in plots.set_figures(results, where):
+            console.print(f"wrote {p}")
+    if json_out:
+        _write_text(json_out, out_ds.to_json(results, errors, bands=bands))
+    if csv_out:
+        _write_text(csv_out, _csv_text(results))
+    if errors:
+        raise typer.Exit(EXIT_FAILED_RUN)
+
+
+__all__ = ["analyze", "EXIT_USER_ERROR"]

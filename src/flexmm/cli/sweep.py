@@ -1,0 +1,157 @@
+"""``flexmm sweep SPEC``: run a family of scenes, resumably, locally or on a Dask cluster."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from flexmm.cli.common import EXIT_FAILED_RUN, EXIT_USER_ERROR, OverrideOption, error, stderr_is_tty
+from flexmm.config import ConfigError
+
+EXIT_INTERRUPTED = 130
+
+
+def _config_error(exc: ConfigError) -> typer.Exit:
+    n = len(exc.issues)
+    typer.echo(f"error: {n} problem{'s' if n > 1 else ''} in the sweep:", err=True)
+    for issue in exc.issues:
+        typer.echo(f"  {issue}", err=True)
+    return typer.Exit(EXIT_USER_ERROR)
+
+
+def _load(path: str, vary: list[str], zip_axes: bool, overrides: list[str]):
+    from flexmm.config.loader import read_yaml
+    from flexmm.sweep.spec import load_sweep, spec_from_scene
+
+    data, _ = read_yaml(path)
+    if "vary" in data or "base" in data:
+        if vary:
+            raise error(f"{path} is a sweep file with its own `vary:`; --vary goes with a scene config")
+        return load_sweep(path, overrides=overrides)
+    if not vary:
+        raise error(f"{path} is a scene config: give the parameters to vary, e.g. "
+                    "--vary excitation.velocity_m_s=0.5:3:6")
+    return spec_from_scene(path, vary, zip_axes=zip_axes, overrides=overrides)
+
+
+class _Bar:
+    """Rich progress bar (finished / failed / remaining, ETA), or one line per point without a TTY."""
+
+    def __init__(self, total: int, enabled: bool, lines: bool):
+        self.total, self.finished, self.failed = total, 0, 0
+        self.lines = lines and not enabled
+        self.prog = None
+        if enabled and total:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.prog = Progress(
+                TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(),
+                TextColumn("[green]{task.fields[finished]} finished"), TextColumn("[red]{task.fields[failed]} failed"),
+                TextColumn("{task.fields[remaining]} remaining"), TextColumn("ETA"), TimeRemainingColumn(),
+                transient=True,
+            )
+            self.task = self.prog.add_task("sweep", total=total, finished=0, failed=0, remaining=total)
+            self.prog.start()
+
+    def __call__(self, outcome: dict) -> None:
+        status = outcome["status"]
+        if status == "interrupted":
+            return
+        self.finished += status == "finished"
+        self.failed += status != "finished"
+        done = self.finished + self.failed
+        if self.prog:
+            self.prog.update(self.task, completed=done, finished=self.finished, failed=self.failed,
+                             remaining=self.total - done)
+        elif self.lines:
+            params = ", ".join(f"{k}={v}" for k, v in outcome["params"].items())
+            extra = f": {outcome.get('reason')}" if status != "finished" else ""
+            typer.echo(f"[{done}/{self.total}] {status} {params} ({outcome.get('wall_s', 0):.1f} s){extra}", err=True)
+
+    def stop(self) -> None:
+        if self.prog:
+            self.prog.stop()
+
+
+def sweep(
+    spec: str = typer.Argument(..., help="Sweep YAML (base + vary), or a scene YAML together with --vary."),
+    vary: list[str] = typer.Option(
+        None, "--vary", help="PATH=start:stop:num, PATH=log:start:stop:num or PATH=a,b,c (repeatable: a grid)."),
+    zip_axes: bool = typer.Option(False, "--zip", help="Pair the --vary lists element-wise instead of a grid."),
+    overrides: list[str] = OverrideOption,
+    out: str = typer.Option(None, "--out", "-o", help="Sweep directory (default <output.directory>/sweeps/<name>)."),
+    workers: int = typer.Option(0, "--workers", "-j", min=0, help="Local worker processes (0: one per core)."),
+    batch_size: int = typer.Option(0, "--batch-size", min=0, help="Points per task (0: automatic)."),
+    scheduler: str = typer.Option(None, "--scheduler", help="Running Dask scheduler, e.g. tcp://host:8786."),
+    local_dask: bool = typer.Option(False, "--local-dask", help="Start a dask.distributed LocalCluster for the sweep."),
+    retry_failed: bool = typer.Option(False, "--retry-failed", help="Run points that failed before again."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the points with their state; run nothing."),
+    reanalyse: bool = typer.Option(False, "--reanalyse", help="Measure finished points again (no re-run)."),
+    plot: str = typer.Option(None, "--plot", help="Also plot the finished sweep to this PNG."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the sweep dataset path."),
+) -> None:
+    """Run every point of a sweep (skipping finished ones) and combine them into SWEEP_DIR/sweep.nc."""
+    from flexmm.sweep.combine import write_combined
+    from flexmm.sweep.execute import execute, prepare
+    from flexmm.sweep.execute import reanalyse as measure_again
+
+    if scheduler and local_dask:
+        raise error("give --scheduler or --local-dask, not both")
+    try:
+        sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
+        base = sw.base_scene()
+        sweep_dir = Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name
+        plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
+    except ConfigError as exc:
+        raise _config_error(exc) from None
+    say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
+    n_distinct = len(plan.states)
+    say(f"sweep {sw.name}: {sw.n_points} points ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
+        f"{plan.count('finished')} finished, {plan.count('failed')} failed before, {len(plan.tasks)} to run"
+        + (f" ({n_distinct} distinct configs)" if n_distinct != sw.n_points else "") + f" -> {sweep_dir}")
+    if dry_run:
+        for p in plan.points:
+            typer.echo(f"{p.hash[:12]}  {plan.states[p.hash]:8s}  {p.label}")
+        return
+    if reanalyse:
+        say(f"re-measured {measure_again(plan)} finished points")
+    bar = _Bar(len(plan.tasks), enabled=stderr_is_tty() and not quiet, lines=not quiet)
+    try:
+        report = execute(plan, workers=workers, batch_size=batch_size, scheduler=scheduler,
+                         local_dask=local_dask, on_outcome=bar)
+    except KeyboardInterrupt:
+        typer.echo("interrupted; rerun the same command to resume", err=True)
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    finally:
+        bar.stop()
+    for msg in report.errors:
+        typer.echo(f"error: {msg}", err=True)
+    say(f"{report.n_finished} finished ({report.n_run} run now, {report.n_cached} already done), "
+        f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}")
+    if report.interrupted:
+        typer.echo(f"interrupted: {report.n_finished} of {report.n_points} points finished; "
+                   "rerun the same command to resume", err=True)
+        raise typer.Exit(EXIT_INTERRUPTED)
+    if report.n_pending:
+        raise typer.Exit(EXIT_FAILED_RUN)
+    path = write_combined(plan)
+    typer.echo(f"sweep dataset: {path}")
+    if plot:
+        from flexmm.sweep.plot import plot_sweep
+
+        typer.echo(f"figure: {plot_sweep(sweep_dir, plot)}")
+    if report.n_failed:
+        _list_failed(plan)
+        raise typer.Exit(EXIT_FAILED_RUN)
+
+
+def _list_failed(plan) -> None:
+    shown = set()
+    for p in plan.points:
+        if p.hash in shown or plan.store.state(p.hash) != "failed":
+            continue
+        shown.add(p.hash)
+        reason = plan.store.read(p.hash, "error.json").get("reason", "")
+        typer.echo(f"failed: {p.label}: {reason} ({plan.store.point_dir(p.hash)}/error.json)", err=True)
+    typer.echo("rerun with --retry-failed to run failed points again", err=True)

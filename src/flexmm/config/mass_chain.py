@@ -1,0 +1,354 @@
+"""Lattice configs of chains of masses (PHYSICS.md §2): laws, variations, chain/network/grid.
+
+A site has one displacement x (m). Bonds (nearest and optional second neighbours) and on-site
+terms each follow one *law* (discriminated on ``law``); any numeric law field, the site mass,
+the initial displacement and the friction level can vary by element (``variation``).
+Each law's ``offset_m`` shifts its argument: the law is evaluated at (elongation − offset) for a
+bond and (displacement − offset) on site.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, model_validator
+
+from flexmm.config.base import Finite, NonNegative, Positive, Strict
+
+EndCondition = Literal["free", "fixed", "driven"]
+
+
+# ---------------------------------------------------------------- laws
+class _Law(Strict):
+    offset_m: Finite = Field(0.0, description="argument shift: law evaluated at z − offset_m")
+
+
+class Linear(_Law):
+    """E = ½ k z² (a linear spring; on site, a spring to the ground)."""
+
+    law: Literal["linear"]
+    k_n_per_m: Positive
+
+
+class Polynomial(_Law):
+    """Force T(z) = k1 z + k2 z² + k3 z³ (FPU α = k2, β = k3; k2 > 0 softens under compression)."""
+
+    law: Literal["polynomial"]
+    k1_n_per_m: Finite
+    k2_n_per_m2: Finite = 0.0
+    k3_n_per_m3: Finite = 0.0
+
+
+class PolynomialEnergy(_Law):
+    """E = Σ_{n=1..8} c_n z^n with ``coefficients`` = [c_1, …] in J/m^n."""
+
+    law: Literal["polynomial_energy"]
+    coefficients: list[Finite] = Field(min_length=1, max_length=8)
+
+
+class Raney2016(_Law):
+    """Measured bistable beam pair (Raney et al. PNAS 2016), energy polynomial for constraint d.
+
+    ψ(x) = Σ C_n x^n with x in mm, ψ in mJ, from the bundled copy of
+    ``raney2016_bistable_energy_coeffs.csv``; wells near x = 0 (low energy) and x ≈ 7 mm.
+    """
+
+    law: Literal["raney2016"]
+    d_mm: float = Field(ge=14.5, le=19.0, description="lateral constraint width d; coefficients interpolated between rows")
+
+
+class BistableCubic(_Law):
+    """On-site force V′(z) = α z (z − βL)(z − L): wells 0 and L, released energy αL⁴(1−2β)/12."""
+
+    law: Literal["bistable_cubic"]
+    alpha_n_per_m3: Positive
+    beta: float = Field(gt=0.0, lt=1.0, description="barrier at βL; β = ½ gives equal wells")
+    jump_m: Positive = Field(description="distance L between the wells")
+
+
+class Phi4(_Law):
+    """Symmetric double well V = h (1 − (z/L)²)² − h, wells ±L, barrier h."""
+
+    law: Literal["phi4"]
+    barrier_j: Positive
+    half_distance_m: Positive
+
+
+class ConstantForce(_Law):
+    """V = −F z: a constant force F (tilts a landscape, or holds a static load)."""
+
+    law: Literal["constant_force"]
+    force_n: Finite
+
+
+class Sine(_Law):
+    """V = A (1 − cos(2π z/λ)) (Frenkel–Kontorova substrate)."""
+
+    law: Literal["sine"]
+    amplitude_j: Positive
+    period_m: Positive
+
+
+class Hertz(_Law):
+    """Contact force A δ₊^p with overlap δ = precompression − z; no tension."""
+
+    law: Literal["hertz"]
+    stiffness_n_per_m_p: Positive = Field(description="A in F = A δ^p (N/m^p)")
+    exponent: float = Field(1.5, ge=1.0, le=3.0)
+    precompression_m: NonNegative = Field(0.0, description="overlap at rest δ0 (needs a static load)")
+
+
+class Toda(_Law):
+    """E = (A/B)(e^{−Bz} − 1) + A z (Toda lattice; stiffness A B at rest)."""
+
+    law: Literal["toda"]
+    a_n: Positive
+    b_per_m: Positive
+
+
+class Dipole(_Law):
+    """Repulsion of facing magnets at gap d + z: E = C (d + z)^{−p}.
+
+    Give C directly or the magnetic moment m of two side-by-side parallel dipoles,
+    C = μ0 m²/(4π) with p = 3.
+    """
+
+    law: Literal["dipole"]
+    distance_m: Positive = Field(description="gap d between the magnets at rest")
+    coefficient_j_m_p: Positive | None = None
+    moment_a_m2: Positive | None = None
+    exponent: float = Field(3.0, gt=0.0)
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.coefficient_j_m_p is None) == (self.moment_a_m2 is None):
+            raise ValueError("give exactly one of coefficient_j_m_p or moment_a_m2")
+        return self
+
+    @property
+    def coefficient(self) -> float:
+        if self.coefficient_j_m_p is not None:
+            return self.coefficient_j_m_p
+        return 1e-7 * self.moment_a_m2**2  # μ0/(4π) = 1e-7
+
+
+class Tabulated(_Law):
+    """Force–displacement curve (force = dE/dz) through a C² cubic spline, integrated exactly.
+
+    Either inline lists or a CSV with two numeric columns (displacement m, force N; a header
+    line and '#' comments are allowed). Relative paths are relative to the working directory.
+    """
+
+    law: Literal["table"]
+    csv: str | None = None
+    displacement_m: list[Finite] | None = None
+    force_n: list[Finite] | None = None
+
+    @model_validator(mode="after")
+    def _source(self):
+        inline = self.displacement_m is not None or self.force_n is not None
+        if (self.csv is None) == (not inline):
+            raise ValueError("give either csv or both displacement_m and force_n")
+        if inline and (self.displacement_m is None or self.force_n is None
+                       or len(self.displacement_m) != len(self.force_n) or len(self.force_n) < 4):
+            raise ValueError("displacement_m and force_n need the same length, at least 4")
+        if self.csv is not None and not Path(self.csv).is_file():
+            raise ValueError(f"csv file {self.csv!r} not found")
+        return self
+
+
+Law = Annotated[
+    Union[Linear, Polynomial, PolynomialEnergy, Raney2016, BistableCubic, Phi4, ConstantForce,
+          Sine, Hertz, Toda, Dipole, Tabulated],
+    Field(discriminator="law"),
+]
+
+
+# ---------------------------------------------------------------- variation
+class Gradient(Strict):
+    """Linear ramp of ``target`` over elements first..last (default all), from ``start`` to ``end``."""
+
+    kind: Literal["gradient"]
+    target: str
+    start: Finite
+    end: Finite
+    first: int | None = Field(None, ge=0)
+    last: int | None = Field(None, ge=0)
+
+
+class RandomVariation(Strict):
+    """Multiply ``target`` by 1 + ε, ε normal (std) or uniform (± std·√3), reproducible by seed."""
+
+    kind: Literal["random"]
+    target: str
+    relative_std: Positive
+    distribution: Literal["normal", "uniform"] = "normal"
+    seed: int = 0
+
+
+class Defects(Strict):
+    """Set ``target`` to ``value`` (or multiply it by ``factor``) on listed elements.
+
+    ``sites`` are element indices (bond indices for bond targets); on a grid, ``box`` =
+    [i0, i1, j0, j1] (inclusive) selects sites by column i and row j.
+    """
+
+    kind: Literal["defects"]
+    target: str
+    sites: list[Annotated[int, Field(ge=0)]] = Field(default_factory=list)
+    box: list[Annotated[int, Field(ge=0)]] | None = Field(None, min_length=4, max_length=4)
+    value: Finite | None = None
+    factor: Finite | None = None
+
+    @model_validator(mode="after")
+    def _what(self):
+        if (self.value is None) == (self.factor is None):
+            raise ValueError("give exactly one of value or factor")
+        if not self.sites and self.box is None:
+            raise ValueError("give sites or box")
+        return self
+
+
+Variation = Annotated[Union[Gradient, RandomVariation, Defects], Field(discriminator="kind")]
+
+
+class Friction(Strict):
+    """Regularised Coulomb friction with the ground, F = −F_c tanh(v/v_ε) on every site.
+
+    ``backward_force_n`` (default = ``force_n``) acts for v < 0: anisotropic friction. Explicit
+    in time: keep dt·F_c/(m v_ε) < 1 (the build checks it).
+    """
+
+    force_n: NonNegative
+    backward_force_n: NonNegative | None = None
+    regularisation_m_s: Positive = 1e-3
+
+
+# ---------------------------------------------------------------- lattices
+class _MassLattice(Strict):
+    spacing_m: Positive = Field(description="distance between neighbouring sites (length scale)")
+    mass_kg: Positive = Field(description="mass of a site")
+    bond: Law = Field(description="nearest-neighbour law")
+    bond2: Law | None = Field(None, description="optional second-neighbour law")
+    onsite: list[Law] = Field(default_factory=list, description="on-site terms, summed")
+    friction: Friction | None = None
+    initial_displacement_m: Finite = Field(0.0, description="start guess of every site")
+    relax: bool = Field(True, description="start from the energy minimum nearest the guess")
+    reference_stiffness_n_per_m: Positive | None = Field(
+        None, description="time scale sqrt(m/k); default from the bond law's rest stiffness"
+    )
+    variation: list[Variation] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _targets(self):
+        valid = self.variation_targets()
+        for v in self.variation:
+            if v.target not in valid:
+                raise ValueError(f"variation target {v.target!r} unknown; valid: {', '.join(valid)}")
+        return self
+
+    def variation_targets(self) -> list[str]:
+        """Names a variation may target: per-site and per-bond numeric fields."""
+        out = ["mass_kg", "initial_displacement_m"]
+        if self.friction is not None:
+            out.append("friction.force_n")
+        for prefix, law in [("bond", self.bond), ("bond2", self.bond2)] + [
+            (f"onsite.{k}", law) for k, law in enumerate(self.onsite)
+        ]:
+            if law is not None:
+                out += [f"{prefix}.{f}" for f in law_numeric_fields(law)]
+        return out
+
+
+def law_numeric_fields(law) -> list[str]:
+    """Numeric (scalar float) fields of a law config."""
+    return [k for k, v in law if isinstance(v, float) and not isinstance(v, bool)]
+
+
+class MassChain(_MassLattice):
+    """A chain of n masses, nearest-neighbour (and optional second-neighbour) bonds."""
+
+    kind: Literal["mass_chain"]
+    n_units: int = Field(ge=2, le=20_000_000)
+    left: EndCondition = "free"
+    right: EndCondition = "free"
+    static_load_n: Finite = Field(
+        0.0, description="compressive force on both free ends (holds a precompression)"
+    )
+
+
+class Branch(Strict):
+    """A chain segment of a network; its ends attach to junctions or are free."""
+
+    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$")
+    n_units: int = Field(ge=1)
+    start: str | None = Field(None, description="junction before the first site (None: free end)")
+    end: str | None = Field(None, description="junction after the last site (None: free end)")
+
+
+class Junction(Strict):
+    """A site shared by several branches; ``onsite`` replaces the default on-site terms there."""
+
+    name: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_]*$")
+    onsite: list[Law] | None = None
+    mass_kg: Positive | None = None
+
+
+class MassNetwork(_MassLattice):
+    """Branches of chains joined at junctions (diodes, logic gates).
+
+    Site numbering: branches in order, then junctions. Each branch's coordinate points from its
+    start to its end. ``left`` lists the branches whose free *start* forms the 'left' end
+    (excitations push it into the branch); ``right`` those whose free *end* forms the 'right' end.
+    """
+
+    kind: Literal["mass_network"]
+    branches: list[Branch] = Field(min_length=1)
+    junctions: list[Junction] = Field(default_factory=list)
+    left: list[str] = Field(default_factory=list)
+    right: list[str] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _graph(self):
+        names = [b.name for b in self.branches]
+        jn = [j.name for j in self.junctions]
+        if len(set(names)) != len(names) or len(set(jn)) != len(jn) or set(names) & set(jn):
+            raise ValueError("branch and junction names must be unique")
+        for b in self.branches:
+            for j in (b.start, b.end):
+                if j is not None and j not in jn:
+                    raise ValueError(f"branch {b.name!r} refers to unknown junction {j!r}")
+        by = {b.name: b for b in self.branches}
+        for side, attr in (("left", "start"), ("right", "end")):
+            for name in getattr(self, side):
+                if name not in by:
+                    raise ValueError(f"{side}: unknown branch {name!r}")
+                if getattr(by[name], attr) is not None:
+                    raise ValueError(f"{side}: branch {name!r} has no free {attr}")
+        return self
+
+    @property
+    def n_units(self) -> int:
+        return sum(b.n_units for b in self.branches) + len(self.junctions)
+
+
+class MassGrid(_MassLattice):
+    """nx × ny sites on a square grid (site = i + nx·j), horizontal and vertical bonds.
+
+    ``bond2`` (if given) joins diagonal neighbours. The 'left' end is column i = 0, 'right'
+    column nx − 1; ``left``/``right`` set their condition.
+    """
+
+    kind: Literal["mass_grid"]
+    nx: int = Field(ge=2)
+    ny: int = Field(ge=1)
+    left: EndCondition = "free"
+    right: EndCondition = "free"
+
+    @property
+    def n_units(self) -> int:
+        return self.nx * self.ny
+
+
+MASS_LATTICES = (MassChain, MassNetwork, MassGrid)

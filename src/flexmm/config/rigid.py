@@ -1,0 +1,263 @@
+"""Config blocks of the rigid-unit lattices (PHYSICS.md §1): sheet, linkage and their options.
+
+Options shared by the rotating-squares chain and sheet:
+
+- ``variation``: per-unit (θ0, mass, inertia) and per-hinge (k_l, k_s, k_θ) parameter fields —
+  gradient, interface between two lattices, random with a seed, list of defects;
+- ``predeform``: static equilibrium under an applied strain or load, used as the initial state;
+- ``magnets`` (sheet only): point dipoles fixed in the units (multistable rotating squares).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, model_validator
+
+from flexmm.config.base import Finite, NonNegative, Positive, Strict
+
+EdgeCondition = Literal["free", "fixed", "periodic", "driven"]
+Axis = Literal["x", "y"]
+
+#: parameters a variation may target, and where they live
+SITE_TARGETS = ("theta0_rad", "mass_kg", "inertia_kg_m2")
+HINGE_TARGETS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad")
+TARGETS = SITE_TARGETS + HINGE_TARGETS
+Target = Literal["theta0_rad", "mass_kg", "inertia_kg_m2", "k_long_n_per_m", "k_shear_n_per_m",
+                 "k_rot_n_m_per_rad"]
+
+
+# ---------------------------------------------------------------- variation
+class ParameterGradient(Strict):
+    """Linear ramp of ``target`` from ``start`` (at index ``first``) to ``end`` (at ``last``).
+
+    The index is the column (axis x) or row (axis y) of a unit; a hinge takes the mean of its
+    two units. Outside first..last the end values hold.
+    """
+
+    kind: Literal["gradient"]
+    target: Target
+    start: Finite
+    end: Finite
+    axis: Axis = "x"
+    first: int | None = Field(None, ge=0)
+    last: int | None = Field(None, ge=0)
+
+
+class ParameterInterface(Strict):
+    """Two lattices joined at ``position``: units with index ≥ position get ``value``.
+
+    A hinge across the interface takes the mean of its two units.
+    """
+
+    kind: Literal["interface"]
+    target: Target
+    position: int = Field(ge=1, description="first column (axis x) or row (axis y) of the second lattice")
+    value: Finite
+    axis: Axis = "x"
+
+
+class ParameterRandom(Strict):
+    """Independent noise on every unit or hinge, reproducible from ``seed``.
+
+    ``std`` adds a normal deviate (in the target's unit); ``relative_std`` multiplies by 1 + ε.
+    """
+
+    kind: Literal["random"]
+    target: Target
+    std: NonNegative | None = None
+    relative_std: NonNegative | None = None
+    seed: int = 0
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.std is None) == (self.relative_std is None):
+            raise ValueError("give exactly one of std or relative_std")
+        return self
+
+
+class ParameterDefects(Strict):
+    """Set ``target`` to ``value`` (or multiply it by ``factor``) on the listed units.
+
+    For hinge targets, every hinge touching a listed unit is changed.
+    """
+
+    kind: Literal["defects"]
+    target: Target
+    sites: list[Annotated[int, Field(ge=0)]] = Field(min_length=1)
+    value: Finite | None = None
+    factor: Finite | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.value is None) == (self.factor is None):
+            raise ValueError("give exactly one of value or factor")
+        return self
+
+
+ParameterVariation = Annotated[
+    Union[ParameterGradient, ParameterInterface, ParameterRandom, ParameterDefects],
+    Field(discriminator="kind"),
+]
+
+
+# ---------------------------------------------------------------- predeformation
+class EndLoad(Strict):
+    """A constant force on an end's units (split evenly), kept during the dynamics."""
+
+    end: Literal["left", "right", "top", "bottom"]
+    force_n: Finite = Field(description="total force, positive into the lattice (compression)")
+
+
+class Predeform(Strict):
+    """Static equilibrium before the dynamics (energy minimisation), used as the initial state.
+
+    ``strain_x`` (``strain_y``) holds the left/right (bottom/top) end units at displacements
+    ∓ε L/2 along the axis (L = distance between the ends) during relaxation and dynamics;
+    ``loads`` are constant end forces that stay on. With neither, the lattice just relaxes (e.g.
+    after a θ0 variation). ``theta_guess_rad`` starts the minimiser from a uniform staggered
+    rotation, which picks a branch past a buckling point.
+    """
+
+    strain_x: Finite | None = Field(None, gt=-0.5, lt=0.5, description="nominal strain along x")
+    strain_y: Finite | None = Field(None, gt=-0.5, lt=0.5, description="nominal strain along y")
+    loads: list[EndLoad] = Field(default_factory=list)
+    theta_guess_rad: Finite = 0.0
+    gradient_tolerance: Positive = Field(1e-10, description="on the nondimensional forces")
+
+
+# ---------------------------------------------------------------- magnets
+class Magnets(Strict):
+    """One point dipole at the middle of each face of every unit, fixed in the unit.
+
+    A unit's hinge points are its corners (PHYSICS.md §1.2), so its faces join neighbouring
+    corners; the dipole sits ``recess_m`` inside the face, along the face normal. ``attract``:
+    units with σ = +1 point their dipoles out, σ = −1 in, so facing magnets attract as the gap
+    closes (open, clockwise and counter-clockwise states: tristable units); ``repel``: all out.
+    Pair energy U = μ0/(4π r³)[m1·m2 − 3(m1·r̂)(m2·r̂)] between all magnets of neighbouring units
+    (hinged, and diagonal across a void). A stiff core keeps two magnets at least 2·recess apart:
+    the faces carrying them touch and the void they face is closed.
+    """
+
+    moment_a_m2: Positive = Field(description="dipole moment of each magnet (A m²)")
+    recess_m: Positive = Field(description="depth of the dipole below the face (m)")
+    polarity: Literal["attract", "repel"] = "attract"
+    contact_stiffness_n_per_m: Positive | None = Field(
+        None, description="stiffness of the core that keeps two magnets ≥ 2 recess_m apart (the faces "
+        "touch); default 10 k_l"
+    )
+
+
+class RigidOptions(Strict):
+    variation: list[ParameterVariation] = Field(default_factory=list)
+    predeform: Predeform | None = None
+
+
+# ---------------------------------------------------------------- lattices
+class RotatingSquaresSheet(RigidOptions):
+    """2D lattice of rigid squares joined at their corners (PHYSICS.md §1.2), u, v, θ per unit.
+
+    Site = row · n_cols + col; column 0 is the left edge, row 0 the bottom edge. Units are the
+    squares of the checkerboard σ = (−1)^(row+col). Hinges are zero-length springs (k_l along
+    the hinge axis, k_s across it, k_θ on the relative rotation); ``ligament_length_m`` > 0
+    separates the hinge points by a finite ligament along the axis (same three springs, strains
+    measured in the lattice frame). Mass and inertia are given, or follow from the areal density
+    of a solid square of diagonal a: m = ρ a²/2, J = m a²/12.
+    """
+
+    kind: Literal["rotating_squares_sheet"]
+    n_rows: int = Field(ge=1, le=100_000)
+    n_cols: int = Field(ge=2, le=100_000)
+    a_m: Positive = Field(description="hinge-to-hinge size (diagonal) of a unit (m)")
+    theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad)")
+    ligament_length_m: NonNegative = 0.0
+    k_long_n_per_m: Positive
+    k_shear_n_per_m: NonNegative
+    k_rot_n_m_per_rad: NonNegative
+    mass_kg: Positive | None = None
+    inertia_kg_m2: Positive | None = None
+    areal_density_kg_m2: Positive | None = None
+    left: EdgeCondition = "free"
+    right: EdgeCondition = "free"
+    bottom: EdgeCondition = "free"
+    top: EdgeCondition = "free"
+    magnets: Magnets | None = None
+
+    @model_validator(mode="after")
+    def _check(self):
+        if not abs(self.theta0_rad) < math.pi / 4:
+            raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
+        if (self.mass_kg is None) == (self.areal_density_kg_m2 is None):
+            raise ValueError("give exactly one of mass_kg or areal_density_kg_m2")
+        for a, b, n, what in (("left", "right", self.n_cols, "n_cols"), ("bottom", "top", self.n_rows, "n_rows")):
+            pa, pb = getattr(self, a) == "periodic", getattr(self, b) == "periodic"
+            if pa != pb:
+                raise ValueError(f"{a} and {b} must both be periodic or neither")
+            if pa and (n < 2 or n % 2):
+                raise ValueError(f"periodic {a}/{b} needs an even {what} ≥ 2 (checkerboard), got {n}")
+        check_variation(self.variation, self.n_cols, self.n_rows, self.n_units)
+        return self
+
+    @property
+    def n_units(self) -> int:
+        return self.n_rows * self.n_cols
+
+    @property
+    def unit_mass_kg(self) -> float:
+        return self.mass_kg if self.mass_kg is not None else self.areal_density_kg_m2 * self.a_m**2 / 2
+
+    @property
+    def unit_inertia_kg_m2(self) -> float:
+        return self.inertia_kg_m2 if self.inertia_kg_m2 is not None else self.unit_mass_kg * self.a_m**2 / 12
+
+
+class BistableLinkage(Strict):
+    """Deployable linkage: rigid crosses (two bars welded at their middles) pinned tip to tip.
+
+    Two rows of n_cols crosses (site = row · n_cols + col); unit k (u, v, θ) has its bars at ±σ_k(θ0 + θ_k) to the axes
+    (σ the checkerboard, PHYSICS.md §1.2), so the soft mode is the counter-rotation of the units
+    (scissor-like). Every pin carries a double well in the joint angle ψ = θ_a + θ_b,
+    V′(ψ) = k ψ (ψ − βψ*)(ψ − ψ*): wells at ψ = 0 (bars at θ0) and ψ* = 2(θ_deployed − θ0),
+    barrier at βψ*, released energy per joint ΔE = k ψ*⁴ (1 − 2β)/12 (0 < β < ½). Pins are stiff
+    isotropic springs k_pin. ``left``/``right``: both units of the end column.
+    """
+
+    kind: Literal["bistable_linkage"]
+    n_cols: int = Field(ge=2, le=1_000_000, description="units (crosses) per row; two rows")
+    bar_length_m: Positive
+    theta0_rad: float = Field(gt=0, lt=math.pi / 2, description="bar angle of the initial (folded) state")
+    theta_deployed_rad: float = Field(gt=0, lt=math.pi / 2, description="bar angle of the other well")
+    mass_kg: Positive = Field(description="mass of one cross")
+    inertia_kg_m2: Positive | None = Field(None, description="of one cross; default m L²/12 (two slender bars)")
+    k_pin_n_per_m: Positive
+    released_energy_j: Positive = Field(description="energy released per joint switching")
+    barrier_fraction: float = Field(0.3, gt=0, lt=0.5, description="β: barrier at βψ*")
+    left: Literal["free", "fixed", "driven"] = "free"
+    right: Literal["free", "fixed", "driven"] = "free"
+
+    @model_validator(mode="after")
+    def _check(self):
+        if abs(self.theta_deployed_rad - self.theta0_rad) < 1e-3:
+            raise ValueError("theta_deployed_rad must differ from theta0_rad")
+        return self
+
+    @property
+    def n_units(self) -> int:
+        return 2 * self.n_cols
+
+
+def check_variation(variation, n_cols: int, n_rows: int, n_units: int) -> None:
+    """Cross-field checks of a variation list against the lattice size."""
+    for v in variation:
+        size = n_rows if getattr(v, "axis", "x") == "y" else n_cols
+        if v.kind == "gradient":
+            first, last = v.first or 0, size - 1 if v.last is None else v.last
+            if not first < last < size:
+                raise ValueError(f"gradient of {v.target}: need first < last < {size}, got {first}, {last}")
+        elif v.kind == "interface" and v.position >= size:
+            raise ValueError(f"interface of {v.target}: position {v.position} outside 1..{size - 1}")
+        elif v.kind == "defects":
+            bad = [s for s in v.sites if s >= n_units]
+            if bad:
+                raise ValueError(f"defects of {v.target}: sites {bad} outside 0..{n_units - 1}")

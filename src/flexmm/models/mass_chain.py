@@ -1,0 +1,295 @@
+"""Chains (networks, grids) of point masses with nonlinear bonds and on-site potentials (PHYSICS.md §2).
+
+    m_i ẍ_i = Σ_bonds ± T(x_j − x_i + s_b) − Σ_terms V′(x_i + s_t)  [− friction − damping]
+
+One scalar displacement x per site (field ``u``). Bonds (nearest, optional second neighbours)
+and on-site terms are elements with a law code and a parameter row (``flexmm.models.laws``):
+the kernels below lift the scalar law over the index arrays; geometry (``mass_topology``),
+parameters (``mass_params``) and variation (``mass_variation``) only build those arrays.
+
+Nondimensional units: length = site spacing a, mass = site mass m, time = sqrt(m/k_ref) with
+k_ref the bond law's rest stiffness (or ``reference_stiffness_n_per_m``), so speeds are in
+units of c0 = a sqrt(k_ref/m). ``u`` is the displacement from the initial state: the initial
+(relaxed) positions are folded into the element shifts and kept in ``meta['initial_m']``.
+
+Ground friction is a velocity-dependent force; it is not part of the conservative kernels
+but listed in ``meta['friction']`` for the assembler (explicit term, see ``assemble``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flexmm._jit import jit
+from flexmm.models import laws as lw
+from flexmm.models.base import FieldSpec, System
+from flexmm.models.mass_params import law_rows, rest_stiffness
+from flexmm.models.mass_topology import Topology, build_topology
+from flexmm.models.mass_variation import apply_variation
+from flexmm.units import Scales
+
+FIELDS = (FieldSpec("u", "length", "displacement"),)
+
+
+@jit
+def mass_force(q, args, out):
+    """−∂E/∂q into ``out`` (ndof,). ``args`` = (bi (B,), bj (B,), bcode (B,), bprm (B, P),
+    si (S,), scode (S,), sprm (S, P), tab (T,)); DOFs beyond the sites get only what acts on them."""
+    bi, bj, bcode, bprm, si, scode, sprm, tab = args
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    for b in range(bi.shape[0]):
+        i = bi[b]
+        j = bj[b]
+        _, t = lw.law(bcode[b], q[j] - q[i], bprm[b], tab)
+        out[i] += t
+        out[j] -= t
+    for s in range(si.shape[0]):
+        i = si[s]
+        _, d = lw.law(scode[s], q[i], sprm[s], tab)
+        out[i] -= d
+
+
+@jit
+def mass_energy(q, args):
+    """Potential energy Σ_bonds E_b + Σ_terms V_t (same ``args`` as ``mass_force``)."""
+    bi, bj, bcode, bprm, si, scode, sprm, tab = args
+    total = 0.0
+    for b in range(bi.shape[0]):
+        e, _ = lw.law(bcode[b], q[bj[b]] - q[bi[b]], bprm[b], tab)
+        total += e
+    for s in range(si.shape[0]):
+        e, _ = lw.law(scode[s], q[si[s]], sprm[s], tab)
+        total += e
+    return total
+
+
+def mass_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
+    """Numpy oracle: each element through its law's numpy reference, forces by ``np.add.at``."""
+    bi, bj, bcode, bprm, si, scode, sprm, tab = args
+    f = np.zeros_like(q)
+    energy = 0.0
+    for code in np.unique(bcode):
+        for b in np.flatnonzero(bcode == code):
+            e, t = lw.reference(int(code), q[bj[b]] - q[bi[b]], bprm[b], tab)
+            energy += float(e)
+            np.add.at(f, [bi[b], bj[b]], [float(t), -float(t)])
+    for code in np.unique(scode):
+        for s in np.flatnonzero(scode == code):
+            e, d = lw.reference(int(code), q[si[s]], sprm[s], tab)
+            energy += float(e)
+            f[si[s]] -= float(d)
+    return energy, f
+
+
+# ---------------------------------------------------------------- building
+def _law_slots(cfg, topo: Topology) -> list[tuple[str, object, np.ndarray]]:
+    """(prefix, law, elements) for every law family: bonds, bonds2, on-site terms."""
+    slots = [("bond", cfg.bond, topo.bonds)]
+    if cfg.bond2 is not None:
+        slots.append(("bond2", cfg.bond2, topo.bonds2))
+    replaced = _junction_sites(cfg, topo)
+    sites = np.setdiff1d(np.arange(topo.n_sites), replaced)
+    for k, law in enumerate(cfg.onsite):
+        slots.append((f"onsite.{k}", law, sites))
+    return slots
+
+
+def _junction_sites(cfg, topo: Topology) -> np.ndarray:
+    js = [topo.groups[j.name][0] for j in getattr(cfg, "junctions", []) if j.onsite is not None]
+    return np.asarray(js, np.int64)
+
+
+def scales_of(cfg) -> Scales:
+    """Length = spacing, mass = site mass, time = sqrt(m / k_ref)."""
+    k_ref = cfg.reference_stiffness_n_per_m or rest_stiffness(cfg.bond, cfg.spacing_m)
+    return Scales(cfg.spacing_m, math.sqrt(cfg.mass_kg / k_ref), cfg.mass_kg)
+
+
+def element_values(cfg, topo: Topology) -> dict[str, np.ndarray]:
+    """Every variable quantity per element (SI), after the config's variations."""
+    n = topo.n_sites
+    vals = {"mass_kg": np.full(n, cfg.mass_kg),
+            "initial_displacement_m": np.full(n, cfg.initial_displacement_m)}
+    if cfg.friction is not None:
+        vals["friction.force_n"] = np.full(n, cfg.friction.force_n)
+    sizes = {"bond": len(topo.bonds), "bond2": len(topo.bonds2)}
+    for prefix, law in [("bond", cfg.bond), ("bond2", cfg.bond2)] + [
+        (f"onsite.{k}", law) for k, law in enumerate(cfg.onsite)
+    ]:
+        if law is None:
+            continue
+        for name, value in law:
+            if isinstance(value, float):
+                vals[f"{prefix}.{name}"] = np.full(sizes.get(prefix, n), value)
+    for var in cfg.variation:
+        apply_variation(vals, var, topo.grid_shape)
+    return vals
+
+
+def _tables(rows_list, tab_list) -> np.ndarray:
+    """Concatenate spline tables, pointing each TABLE row at its own block."""
+    parts, offset = [], 0
+    for (code, rows), tab in zip(rows_list, tab_list):
+        if tab is not None:
+            rows[:, 1] += offset
+            parts.append(tab)
+            offset += tab.size
+    return np.concatenate(parts) if parts else np.zeros(1)
+
+
+def element_arrays(cfg, topo: Topology, vals: dict, sc: Scales) -> tuple:
+    """The kernels' ``args``: bond and on-site index, code and parameter arrays, spline table."""
+    bonds, sites, made, tabs = [], [], [], []
+    for prefix, law, elems in _law_slots(cfg, topo):
+        sub = {name: vals[f"{prefix}.{name}"] for name, v in law if isinstance(v, float)}
+        if prefix.startswith("onsite"):
+            sub = {k: v[elems] for k, v in sub.items()}
+        code, rows, tab = law_rows(law, sub, sc, len(elems))
+        made.append((code, rows))
+        tabs.append(tab)
+        (sites if prefix.startswith("onsite") else bonds).append((elems, code, rows))
+    for j in getattr(cfg, "junctions", []):
+        for law in j.onsite or []:
+            site = np.array([topo.groups[j.name][0]])
+            sub = {name: np.array([v]) for name, v in law if isinstance(v, float)}
+            code, rows, tab = law_rows(law, sub, sc, 1)
+            made.append((code, rows))
+            tabs.append(tab)
+            sites.append((site, code, rows))
+    if getattr(cfg, "static_load_n", 0.0):
+        p = cfg.static_load_n / sc.force
+        for site, sign in ((0, 1.0), (topo.n_sites - 1, -1.0)):
+            sites.append((np.array([site]), lw.POLY, lw.poly_row([-sign * p])[None, :]))
+    tab = _tables(made, tabs)
+    return _pack_bonds(bonds) + _pack_sites(sites) + (tab,)
+
+
+def _pack_bonds(groups) -> tuple:
+    if not groups:
+        return (np.zeros(0, np.int64),) * 3 + (np.zeros((0, lw.N_LAW_PRM)),)
+    idx = np.concatenate([g[0] for g in groups]).reshape(-1, 2).astype(np.int64)
+    code = np.concatenate([np.full(len(g[0]), g[1], np.int64) for g in groups])
+    prm = np.ascontiguousarray(np.concatenate([g[2] for g in groups]))
+    return np.ascontiguousarray(idx[:, 0]), np.ascontiguousarray(idx[:, 1]), code, prm
+
+
+def _pack_sites(groups) -> tuple:
+    if not groups:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, lw.N_LAW_PRM))
+    idx = np.concatenate([g[0] for g in groups]).astype(np.int64)
+    code = np.concatenate([np.full(len(g[0]), g[1], np.int64) for g in groups])
+    return idx, code, np.ascontiguousarray(np.concatenate([g[2] for g in groups]))
+
+
+def relax(args: tuple, q: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, float]:
+    """Local energy minimum nearest ``q`` over the ``free`` DOFs; returns (q, max |F|).
+
+    A trust-region Newton–CG search (Hessian-vector products by central differences of the
+    compiled force) starting with a small radius, so it settles in the basin it starts in
+    rather than jumping over a barrier as a line-search method may.
+    """
+    from scipy.optimize import minimize
+
+    f = np.zeros_like(q)
+    fp, fm = np.zeros_like(q), np.zeros_like(q)
+    work = q.copy()
+
+    def energy(y):
+        work[free] = y
+        return mass_energy(work, args)
+
+    def grad(y):
+        work[free] = y
+        mass_force(work, args, f)
+        return -f[free]
+
+    def hessp(y, p):
+        scale = np.max(np.abs(p))
+        if scale == 0.0:
+            return np.zeros_like(p)
+        eps = 1e-6 / scale
+        base = q.copy()
+        base[free] = y
+        base[free] += eps * p
+        mass_force(base, args, fp)
+        base[free] -= 2 * eps * p
+        mass_force(base, args, fm)
+        return -(fp[free] - fm[free]) / (2 * eps)
+
+    if free.size:
+        res = minimize(energy, q[free], jac=grad, hessp=hessp, method="trust-ncg",
+                       options={"initial_trust_radius": 0.01, "max_trust_radius": 1.0,
+                                "gtol": 1e-11, "maxiter": 10000})
+        work[free] = res.x
+    mass_force(work, args, f)
+    return work, float(np.max(np.abs(f[free]), initial=0.0))
+
+
+def fold_initial_state(args: tuple, x0: np.ndarray) -> None:
+    """Shift every element so that q = 0 means the sites sit at ``x0`` (in place)."""
+    bi, bj, _, bprm, si, _, sprm, _ = args
+    bprm[:, 0] += x0[bj] - x0[bi]
+    sprm[:, 0] += x0[si]
+
+
+def _fixed_sites(cfg, topo: Topology, conditions=("fixed",)) -> list[int]:
+    """Sites of the ends whose condition (chain, grid) is one of ``conditions``."""
+    out = []
+    for end in ("left", "right"):
+        if getattr(cfg, end, None) in conditions:
+            out += topo.ends[end]
+    return out
+
+
+def friction_arrays(fr, force_n: np.ndarray, sc: Scales) -> dict:
+    """Nondimensional regularised-Coulomb levels per site (forward v > 0, backward v < 0)."""
+    ratio = 1.0 if fr.backward_force_n is None else (
+        fr.backward_force_n / fr.force_n if fr.force_n > 0 else math.inf)
+    back = force_n * ratio if math.isfinite(ratio) else np.full(force_n.size, fr.backward_force_n)
+    return {"sites": np.arange(force_n.size, dtype=np.int64), "forward": force_n / sc.force,
+            "backward": back / sc.force, "velocity": fr.regularisation_m_s / sc.velocity}
+
+
+def build(cfg) -> System:
+    """A MassChain, MassNetwork or MassGrid config as a System (state: u of every site)."""
+    topo = build_topology(cfg)
+    sc = scales_of(cfg)
+    vals = element_values(cfg, topo)
+    args = element_arrays(cfg, topo, vals, sc)
+    n = topo.n_sites
+    mass = vals["mass_kg"] / sc.mass_kg
+    for j in getattr(cfg, "junctions", []):
+        if j.mass_kg is not None:
+            mass[topo.groups[j.name][0]] = j.mass_kg / sc.mass_kg
+    inv_mass = 1.0 / mass
+    inv_mass[_fixed_sites(cfg, topo)] = 0.0
+    x0 = vals["initial_displacement_m"] / sc.length_m
+    residual = 0.0
+    if cfg.relax:  # fixed and driven ends are held where they start
+        held = np.zeros(n, bool)
+        held[_fixed_sites(cfg, topo, ("fixed", "driven"))] = True
+        x0, residual = relax(args, x0, np.flatnonzero((inv_mass > 0) & ~held))
+    fold_initial_state(args, x0)
+    meta = {
+        "omega_ref": 1.0,
+        "ends": topo.ends,
+        "longitudinal_field": "u",
+        "neighbour_pairs": topo.bonds,
+        "groups": topo.groups,
+        "initial_m": x0 * sc.length_m,
+        "relax_residual": residual,
+        "k_ref_n_per_m": sc.stiffness,
+        "c0_m_s": sc.velocity,
+    }
+    if topo.grid_shape is not None:
+        meta["grid_shape"] = topo.grid_shape
+    if cfg.friction is not None:
+        meta["friction"] = friction_arrays(cfg.friction, vals["friction.force_n"], sc)
+    return System(
+        model=cfg.kind, fields=FIELDS, n_sites=n, scales=sc, mass=mass, inv_mass=inv_mass,
+        force=mass_force, energy=mass_energy, args=args, q0=np.zeros(n), v0=np.zeros(n),
+        spacing_m=cfg.spacing_m, site_coords=topo.coords, reference=mass_reference, meta=meta,
+    )

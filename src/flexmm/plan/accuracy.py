@@ -1,0 +1,265 @@
+"""Pick the cheapest integrator and step that meet ``solver.accuracy``, and check it afterwards.
+
+Accuracy is the relative error of the final state,
+
+    err = max_f  max_i |q_f,i(T) − q*_f,i(T)| / max_{i,t} |q_f,i(t)|,
+
+over the lattice fields f (u, θ, ...) that move, q* the exact solution. For a method of order
+p and step h the error behaves like err ≈ C h^p g(T), g the growth of errors in time: linear for
+the phase error of travelling waves, exponential where the dynamics amplify perturbations
+(many interacting waves: an impact's wave field after several reflections is chaotic). A pilot
+over a short time T_p runs each candidate at h₁ = ½ h_stab and h₁/2; Richardson gives
+err(h₁, t) ≈ |q_{h₁} − q_{h₁/2}| 2^p/(2^p − 1) at t = T_p/2 and T_p, whose ratio fixes the growth
+(``extrapolate``), and
+
+    h = h₁ (S · accuracy / err(h₁, T))^{1/p},   S = SAFETY,
+
+between FLOOR and CAP × the stable step h_stab = stability_limit/ω_max. When that h is so small
+that a pilot over the whole duration costs at most LONG_PILOT_SHARE of the run, the pilot is
+repeated over all of T (late error growth — chaos setting in after several reflections — is
+then seen, not extrapolated). If even FLOOR·h_stab is predicted to miss, or the pilot's error is
+O(1) (no h^p regime), the plan says the accuracy is out of reach. The cost of a method is its
+force evaluations per step × T/h; the cheapest wins. After the run a companion run at 2h (or
+h/2 if 2h is not stable) gives the step-doubling estimate err(h) ≈ |q_h − q_{2h}|/(2^p − 1),
+recorded in the dataset attrs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.common import apply_prescribed
+
+SAFETY = 0.3
+CAP = 0.8  # largest step as a fraction of the linear stability limit
+FLOOR = 1e-3  # smallest step as a fraction of it (an accuracy out of reach is reported, not chased)
+GROWTH_POWER = 2.0  # pilot error growth t^β beyond this is taken as exponential (chaotic dynamics)
+LONG_PILOT_SHARE = 0.1  # a pilot over the whole duration is run when it costs at most this share of the run
+SATURATED = 0.1  # a pilot error this large is outside the h^p regime: the prediction is not trusted
+PILOT_FRACTION = 0.1
+PILOT_MIN_STEPS = 400
+#: force evaluations per step for methods whose registry entry does not say
+FORCE_EVALS = {"velocity_verlet": 1, "rk4": 4, "pefrl": 4, "forest_ruth": 3, "yoshida4": 3,
+               "suzuki5": 5, "omelyan_pefrl": 4}
+
+
+def force_evals(spec) -> int | None:
+    """Force evaluations per step of an integrator (registry metadata, else the table above)."""
+    for attr in ("force_evals", "n_force_evals", "stages", "evals_per_step"):
+        val = getattr(spec, attr, None)
+        if isinstance(val, (int, float)) and val > 0:
+            return int(val)
+    return FORCE_EVALS.get(spec.name)
+
+
+def candidates(problem, only: str | None = None) -> list:
+    """Registered explicit fixed-step methods usable for this problem (damping needs support)."""
+    damped = bool(np.any(problem.damp > 0) or problem.terms["dash_c"].size)
+    out = []
+    for name, spec in INTEGRATORS.items():
+        if only is not None and name != only:
+            continue
+        lim = getattr(spec, "stability_limit", None)
+        if lim is None or not math.isfinite(lim) or lim <= 0:
+            continue  # implicit or unconditionally stable: not costed here
+        if getattr(spec, "adaptive", False) or getattr(spec, "implicit", False):
+            continue
+        if damped and not getattr(spec, "velocity_dependent_forces", False):
+            continue
+        if force_evals(spec) is None:
+            continue
+        out.append(spec)
+    return out
+
+
+def integrate(problem, spec, h: float, t_end: float, n_samples: int = 32, checkpoints=()):
+    """Advance the problem's initial state to ``t_end`` with steps ≈ h (no output).
+
+    Returns (q, v, peaks, steps): final state, per-field max |q| over ``n_samples`` sample
+    times (n_fields,), and the number of steps. With ``checkpoints`` (fractions of ``t_end``),
+    returns (states, peaks, steps) instead: the states q at those times.
+    """
+    s = problem.system
+    q, v = s.q0.copy(), s.v0.copy()
+    f = np.zeros_like(q)
+    acc = np.zeros(2)
+    terms = problem.terms_tuple()
+    apply_prescribed(q, v, 0.0, *terms[4:])
+    spec.init(s.force, s.args, q, v, 0.0, f, terms)
+    n_steps = max(1, int(math.ceil(t_end / h - 1e-9)))
+    h = t_end / n_steps
+    peaks = _peaks(s, q)
+    marks = sorted({*np.linspace(0, n_steps, min(n_samples, n_steps) + 1).round().astype(int)[1:],
+                    *(int(round(c * n_steps)) for c in checkpoints)})
+    states, t, done = {}, 0.0, 0
+    for k in marks:
+        if k > done:
+            t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, int(k - done), acc)
+            done = k
+        peaks = np.maximum(peaks, _peaks(s, q))
+        states[k] = q.copy()
+    if checkpoints:
+        return [states[int(round(c * n_steps))] for c in checkpoints], peaks, n_steps
+    return q, v, peaks, n_steps
+
+
+def _peaks(system, q) -> np.ndarray:
+    n = system.n_sites
+    return np.array([np.max(np.abs(q[k * n : (k + 1) * n])) for k in range(len(system.fields))])
+
+
+def state_error(system, q: np.ndarray, q_ref: np.ndarray, peaks: np.ndarray) -> float:
+    """Relative error of a final state (module docstring); fields that never move are skipped."""
+    n = system.n_sites
+    top = float(np.max(peaks)) if peaks.size else 0.0
+    err = 0.0
+    for k in range(len(system.fields)):
+        if peaks[k] <= 1e-12 * top or not np.isfinite(peaks[k]):
+            continue
+        d = np.max(np.abs(q[k * n : (k + 1) * n] - q_ref[k * n : (k + 1) * n]))
+        err = max(err, float(d / peaks[k]))
+    return err if np.all(np.isfinite(q)) else math.inf
+
+
+@dataclass
+class Choice:
+    """The integrator and step chosen for a requested accuracy, with the pilot's evidence."""
+
+    integrator: str
+    dt: float  # nondimensional
+    predicted_error: float
+    cost: float  # force evaluations for the whole run
+    pilot_time: float  # nondimensional duration of the pilot
+    table: list[dict] = field(default_factory=list)  # one row per candidate
+    reachable: bool = True  # False: even the smallest step allowed is predicted to miss
+
+
+def _drive_end(problem) -> float:
+    """Time after which prescribed/applied drives are smooth (end of pulses, ramps)."""
+    prm, shape = problem.terms["drv_prm"], problem.terms["drv_shape"]
+    end = 0.0
+    for row, sh in zip(prm, shape):
+        if sh in (0, 1):
+            end = max(end, row[1])
+        elif sh == 2:
+            end = max(end, row[2] + 4 * row[1])
+        elif sh == 3:
+            end = max(end, row[2])
+    return end
+
+
+def stable_step(problem, spec) -> float:
+    """Largest stable step of ``spec`` for the problem: its limit / ω_max, and any other bound
+    the build put on the step (explicit friction), rescaled from the problem's own method."""
+    own = INTEGRATORS[problem.scene.solver.integrator].stability_limit
+    h = spec.stability_limit / problem.omega_max if problem.omega_max > 0 else math.inf
+    return min(h, problem.stable_dt * spec.stability_limit / own)
+
+
+def extrapolate(errors: tuple[float, float], t_p: float, T: float) -> tuple[float, float]:
+    """Error at T from the pilot's errors at t_p/2 and t_p: (error, growth exponent β).
+
+    β = log2(e(t_p)/e(t_p/2)); up to GROWTH_POWER the error is taken to grow like t^max(β, 1),
+    beyond it (errors amplified by the dynamics) exponentially, e(t_p) exp(λ (T − t_p)),
+    λ = ln(e(t_p)/e(t_p/2)) / (t_p/2).
+    """
+    e_half, e_full = errors
+    if e_full <= 0:
+        return 0.0, 1.0
+    beta = math.log2(e_full / e_half) if e_half > 0 else 1.0
+    if T <= t_p:
+        return e_full, beta
+    if beta <= GROWTH_POWER:
+        return e_full * (T / t_p) ** max(beta, 1.0), beta
+    lam = math.log(e_full / e_half) / (0.5 * t_p)
+    return e_full * math.exp(min(lam * (T - t_p), 700.0)), beta
+
+
+def _pilot_errors(problem, spec, h1: float, t_p: float) -> tuple[tuple[float, float], int]:
+    """Richardson errors of steps h1 at t_p/2 and t_p (from runs at h1 and h1/2), and steps taken."""
+    (qa2, qa), peaks, na = integrate(problem, spec, h1, t_p, checkpoints=(0.5, 1.0))
+    (qb2, qb), peaks_b, nb = integrate(problem, spec, h1 / 2, t_p, checkpoints=(0.5, 1.0))
+    pk = np.maximum(peaks, peaks_b)
+    rich = 2**spec.order / (2**spec.order - 1)
+    s = problem.system
+    return (state_error(s, qa2, qb2, pk) * rich, state_error(s, qa, qb, pk) * rich), na + nb
+
+
+def _step_for(accuracy: float, err1: float, h1: float, p: int, h_stab: float, T: float) -> float:
+    h = h1 * (SAFETY * accuracy / err1) ** (1.0 / p) if err1 > 0 else CAP * h_stab
+    return min(max(h, FLOOR * h_stab), CAP * h_stab, T)
+
+
+def choose(problem, accuracy: float, only: str | None = None) -> Choice:
+    """Cheapest (integrator, dt) expected to meet ``accuracy`` (see module docstring)."""
+    if problem.omega_max <= 0:
+        raise ValueError("cannot choose a step: the system has no linear frequency (ω_max = 0)")
+    T = problem.duration
+    rows, best = [], None
+    for spec in candidates(problem, only):
+        p = spec.order
+        h_stab = stable_step(problem, spec)
+        h1 = min(0.5 * h_stab, T / 8)
+        t_p = min(T, max(PILOT_FRACTION * T, PILOT_MIN_STEPS * h1, 1.5 * _drive_end(problem)))
+        errs, n_pilot = _pilot_errors(problem, spec, h1, t_p)
+        err1, beta = extrapolate(errs, t_p, T)
+        h = _step_for(accuracy, err1, h1, p, h_stab, T)
+        h_long = 3 * h / LONG_PILOT_SHARE
+        if t_p < T and h_long <= h1:  # a pilot over all of T costs ≤ LONG_PILOT_SHARE of the run
+            t_p, h1 = T, h_long
+            errs, n_long = _pilot_errors(problem, spec, h1, T)
+            n_pilot += n_long
+            err1, beta = errs[1], math.log2(errs[1] / errs[0]) if errs[0] > 0 else 1.0
+            h = _step_for(accuracy, err1, h1, p, h_stab, T)
+        predicted = err1 * (h / h1) ** p
+        why = ("" if predicted <= accuracy and err1 < SATURATED else
+               f"pilot error {err1:.2g} at {h1 / h:.0f}x the chosen step is outside the h^{p} regime" if err1 >= SATURATED else
+               f"even {FLOOR:g} x the stable step is predicted to give {predicted:.2g}")
+        cost = force_evals(spec) * math.ceil(T / h)
+        rows.append(dict(integrator=spec.name, order=p, dt=h, stable_dt=h_stab, pilot_error=errs[1],
+                         growth=beta, predicted_error=predicted, cost=cost,
+                         pilot_cost=force_evals(spec) * n_pilot,
+                         reachable=not why, why=why))
+        better = best is None or (rows[-1]["reachable"], -cost) > (best_row["reachable"], -best.cost)
+        if better:
+            best, best_row = Choice(spec.name, h, rows[-1]["predicted_error"], cost, t_p), rows[-1]
+    if best is None:
+        raise ValueError("no registered integrator can be costed for this scene")
+    best.table = rows
+    best.reachable = best_row["reachable"]
+    return best
+
+
+@dataclass
+class Check:
+    """Step-doubling (or halving) estimate of the error of a finished run."""
+
+    estimate: float
+    companion_dt: float
+    method: str
+    wall_s: float
+
+
+def check(problem, integrator: str, h: float, t_end: float, q: np.ndarray) -> Check:
+    """Error estimate of the final state ``q`` of a run with steps h, from a companion run."""
+    import time
+
+    spec = INTEGRATORS[integrator]
+    p = spec.order
+    h_stab = stable_step(problem, spec)
+    t0 = time.perf_counter()
+    if 2 * h <= CAP * h_stab:
+        n2 = max(1, round(t_end / (2 * h)))
+        h2, how = t_end / n2, "step doubling"
+    else:
+        n2 = max(1, round(t_end / (h / 2)))
+        h2, how = t_end / n2, "step halving"
+    q2, _, peaks, _ = integrate(problem, spec, h2, t_end)
+    ratio = (h2 / h) ** p
+    diff = state_error(problem.system, q, q2, peaks)
+    est = diff / abs(ratio - 1.0)  # |q_h − q_h2| ≈ |ratio − 1| err(h)
+    return Check(est, h2, how, time.perf_counter() - t0)

@@ -1,0 +1,112 @@
+"""Save only what the requested analysis needs: its field, at the cadence it needs.
+
+An analysis request is a spec string: ``pulse[:FIELD]`` (a travelling pulse of FIELD, default
+θ or the strain of u), ``front[:FIELD]`` (a transition front of a displacement), ``energy``
+(energies only: one field, every few sites), or ``none``. The pulse analysis locates the peak of
+each site's trace with a parabola through its top samples, so the pulse's passage at a site —
+FWHM / speed — should span ``FRAMES_PER_PASSAGE`` frames; its width needs ``SITES_PER_WIDTH``
+saved sites per FWHM. Choices the user made in ``output`` (keys they set) are never changed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+FRAMES_PER_PASSAGE = 10
+SITES_PER_WIDTH = 8
+MIN_FRAMES, MAX_FRAMES = 21, 20_001
+KINDS = ("pulse", "front", "energy", "none")
+
+
+@dataclass(frozen=True)
+class AnalysisRequest:
+    kind: str
+    field: str | None = None
+
+    def __str__(self) -> str:
+        return self.kind + (f":{self.field}" if self.field else "")
+
+
+def parse_analysis(spec: str | None) -> AnalysisRequest | None:
+    """``pulse``, ``pulse:theta``, ``front:u``, ``energy``, ``none`` (or None) -> request."""
+    if spec is None:
+        return None
+    kind, _, fld = spec.strip().partition(":")
+    if kind not in KINDS:
+        raise ValueError(f"unknown analysis {kind!r}; valid: {', '.join(KINDS)}")
+    return None if kind == "none" else AnalysisRequest(kind, fld or None)
+
+
+def default_field(request: AnalysisRequest, model_fields: tuple[str, ...]) -> str:
+    """The dataset field an analysis reads: its own, else θ for pulses, else strain of u."""
+    if request.field:
+        return request.field
+    if request.kind == "pulse" and "theta" in model_fields:
+        return "theta"
+    return "strain" if request.kind == "pulse" else model_fields[0]
+
+
+def _stored(field: str, model_fields: tuple[str, ...]) -> tuple[list[str], bool]:
+    """(coordinates to save, velocities needed) for a field spec of the analysis module."""
+    base, _, arg = field.partition(":")
+    if base == "strain":
+        return [arg or model_fields[0]], False
+    if base == "velocity":
+        return [arg or model_fields[0]], True
+    if base.endswith("_dot"):
+        return [base[:-4]], True
+    return [base], False
+
+
+def output_plan(scene, request: AnalysisRequest | None, model_fields: tuple[str, ...],
+                passage_s: float | None = None, width_sites: float | None = None,
+                user: set[str] | None = None) -> tuple[dict, list[str]]:
+    """Updates to ``scene.output`` for ``request`` and the notes explaining them.
+
+    ``passage_s`` (pulse FWHM / speed) and ``width_sites`` come from a prediction; without them
+    the cadence and site stride stay as declared. ``user``: the output keys the user set
+    (default: those set in ``scene.output``); they are never changed.
+    """
+    if request is None:
+        return {}, ["no analysis requested: output as declared (--analysis pulse saves only what it needs)"]
+    out = scene.output
+    user = scene.output.model_fields_set if user is None else user
+    upd, notes = {}, []
+    fld = default_field(request, model_fields)
+    fields, rates = _stored(fld, model_fields)
+    if request.kind == "energy":
+        fields, rates = [model_fields[0]], False
+    if "fields" not in user and set(fields) != set(out.fields or model_fields):
+        upd["fields"] = fields
+    if "velocities" not in user and out.velocities != rates:
+        upd["velocities"] = rates
+    if request.kind == "energy" and "site_stride" not in user:
+        upd["site_stride"] = max(1, out.site_stride, 10)
+    if passage_s and not ({"n_frames", "every_s"} & user) and request.kind in ("pulse", "front"):
+        n = math.ceil(scene.solver.duration_s / (passage_s / FRAMES_PER_PASSAGE)) + 1
+        n = min(max(n, MIN_FRAMES), MAX_FRAMES)
+        if n != out.n_frames:
+            upd["n_frames"] = n
+    if width_sites and "site_stride" not in user and request.kind == "pulse":
+        stride = max(1, int(width_sites // SITES_PER_WIDTH))
+        if stride != out.site_stride:
+            upd["site_stride"] = stride
+    if upd:
+        notes.append(f"analysis {request} (field {fld}) needs only: "
+                     + ", ".join(f"output.{k} = {v}" for k, v in upd.items()))
+    else:
+        notes.append(f"analysis {request}: output as declared already fits")
+    if not passage_s and request.kind in ("pulse", "front"):
+        notes.append("pulse duration unknown before the run: output cadence kept")
+    return upd, notes
+
+
+def saved_fraction(scene, upd: dict, model_fields: tuple[str, ...]) -> float:
+    """Bytes saved after/before the updates (site variables only)."""
+    def size(o: dict) -> float:
+        n_f = len(o.get("fields") or model_fields) * (2 if o.get("velocities", True) else 1)
+        return n_f * o.get("n_frames", 201) / o.get("site_stride", 1)
+
+    before = scene.output.model_dump()
+    return size({**before, **upd}) / size(before)

@@ -1,0 +1,158 @@
+"""Combine the points of a sweep into one dataset whose coordinates are the varied parameters.
+
+Grid sweeps give one dimension per varied parameter (an N-D array of points); zipped sweeps a
+``point`` dimension with the parameters as coordinates. Per point: the observables of
+``flexmm.sweep.observe`` (``speed``, ``speed_stderr``, ``amplitude``, ``width``,
+``n_sites_fitted``, ``speed_theory``, ``transmission``; NaN where not measured), ``status``
+(finished / failed / pending), ``note`` (why a value is missing) and ``run`` (the point's run
+directory, relative to the sweep directory). Attributes: the spec, the base config, what was
+measured on which field, and theory reference values (``theory_*``). Written to
+SWEEP_DIR/sweep.nc atomically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from flexmm.sweep.observe import OBSERVABLES
+from flexmm.sweep.spec import SweepSpec, spec_summary
+from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
+
+UNIT_SUFFIXES = (
+    ("_n_m_per_rad", "N m/rad"), ("_n_per_m", "N/m"), ("_n_s_per_m", "N s/m"), ("_n_m_s", "N m s"),
+    ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_kg_m2", "kg m2"), ("_kg", "kg"), ("_hz", "Hz"),
+    ("_rad", "rad"), ("_m", "m"), ("_s", "s"), ("_n", "N"),
+)
+
+
+def parameter_units(path: str) -> str:
+    """Units of a config field from its unit-suffixed name ('' if it has none)."""
+    name = path.rsplit(".", 1)[-1]
+    return next((u for suffix, u in UNIT_SUFFIXES if name.endswith(suffix)), "")
+
+
+def dim_names(spec: SweepSpec) -> list[str]:
+    """Short names for the varied parameters: the last key, or the full path if ambiguous."""
+    last = [a.path.rsplit(".", 1)[-1] for a in spec.axes]
+    return [s if last.count(s) == 1 else a.path.replace(".", "_") for s, a in zip(last, spec.axes)]
+
+
+def _records(plan) -> dict[str, dict]:
+    """Per distinct point: state, observables (finished) or reason (failed)."""
+    store: SweepStore = plan.store
+    out = {}
+    for p in plan.points:
+        if p.hash in out:
+            continue
+        state = store.state(p.hash)
+        rec = {"status": state, "obs": {}, "note": ""}
+        if state == FINISHED:
+            info = store.read(p.hash, DONE)
+            rec["obs"] = info.get("observables", {})
+            rec["note"] = rec["obs"].get("note", "")
+        elif state == FAILED:
+            rec["note"] = store.read(p.hash, ERROR).get("reason", "failed")
+        out[p.hash] = rec
+    return out
+
+
+def fingerprint(plan, records: dict) -> str:
+    """Hash of everything the combined dataset is made from."""
+    payload = json.dumps([spec_summary(plan.spec), [(p.hash, p.index) for p in plan.points], records],
+                         sort_keys=True, default=str)
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+def combine(plan):
+    """The sweep dataset (xarray) of a plan, from what is on disk now."""
+    import xarray as xr
+
+    from flexmm.io.provenance import config_text, git_commit, resolved_config
+    from flexmm.sweep.theory import reference_lines
+
+    import flexmm
+
+    spec = plan.spec
+    shape = spec.shape
+    records = _records(plan)
+    values = {k: np.full(shape, np.nan) for k in OBSERVABLES}
+    status = np.full(shape, "pending", dtype=object)
+    note = np.full(shape, "", dtype=object)
+    run = np.full(shape, "", dtype=object)
+    units = {}
+    for p in plan.points:
+        rec = records[p.hash]
+        status[p.index], note[p.index] = rec["status"], rec["note"]
+        run[p.index] = f"points/{p.hash}"
+        for k in OBSERVABLES:
+            values[k][p.index] = float(rec["obs"].get(k, np.nan))
+        for key in ("amplitude_units", "field", "kind"):
+            if rec["obs"].get(key):
+                units[key] = rec["obs"][key]
+    names = dim_names(spec)
+    dims = names if spec.mode == "grid" else ["point"]
+    coords = {}
+    for name, axis in zip(names, spec.axes):
+        attrs = {"parameter": axis.path, "units": parameter_units(axis.path), "long_name": axis.path,
+                 "scale": axis.scale}
+        coords[name] = ((name if spec.mode == "grid" else "point"), list(axis.values), attrs)
+    if spec.mode == "zip":
+        coords["point"] = ("point", np.arange(shape[0]), {"long_name": "point index"})
+    data = {}
+    for k, (u, long_name) in OBSERVABLES.items():
+        if k != "transmission" or np.isfinite(values[k]).any():
+            data[k] = (dims, values[k], {"units": u if u is not None else units.get("amplitude_units", ""),
+                                         "long_name": long_name})
+    data["status"] = (dims, status.astype(str), {"long_name": "point status (finished, failed, pending)"})
+    data["note"] = (dims, note.astype(str), {"long_name": "why a value is missing"})
+    data["run"] = (dims, run.astype(str), {"long_name": "run directory relative to the sweep directory"})
+    base_scene = spec.base_scene()
+    counts = {s: int(np.sum(status == s)) for s in ("finished", "failed", "pending")}
+    attrs = {
+        "title": spec.name,
+        "description": spec.description,
+        "sweep_mode": spec.mode,
+        "sweep_spec": json.dumps(spec_summary(spec), default=str),
+        "base_config": config_text(base_scene),
+        "lattice_kind": base_scene.lattice.kind,
+        "field": units.get("field", ""),
+        "measured": units.get("kind", ""),
+        "flexmm_version": flexmm.__version__,
+        "git_commit": git_commit(),
+        "n_points": int(np.prod(shape)),
+        "n_finished": counts["finished"],
+        "n_failed": counts["failed"],
+        "n_pending": counts["pending"],
+        "fingerprint": fingerprint(plan, records),
+        **reference_lines(resolved_config(base_scene)),
+    }
+    ds = xr.Dataset({k: xr.Variable(*v) for k, v in data.items()},
+                    coords={k: xr.Variable(*v) for k, v in coords.items()}, attrs=attrs)
+    return ds
+
+
+def write_combined(plan) -> Path:
+    """Write SWEEP_DIR/sweep.nc unless an identical one is there (then only touch it)."""
+    import xarray as xr
+
+    path = plan.store.result_path
+    fp = fingerprint(plan, _records(plan))
+    if path.exists():
+        try:
+            with xr.open_dataset(path, engine="h5netcdf") as old:
+                same = old.attrs.get("fingerprint") == fp
+        except (OSError, ValueError):
+            same = False
+        if same:
+            os.utime(path)
+            return path
+    ds = combine(plan)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    ds.to_netcdf(tmp, engine="h5netcdf")
+    os.replace(tmp, path)
+    return path

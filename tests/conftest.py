@@ -1,0 +1,188 @@
+"""Shared fixtures: scenes from dicts, the LEGO chain config, example lattices per model kind.
+
+Tests that take an ``example_lattice`` argument run once per entry of ``EXAMPLE_LATTICES`` for
+every kind in ``flexmm.models.MODELS``; a kind without an example is reported as skipped, so
+a new model is noticed. Add a small representative config for it below.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+
+from flexmm.config import scene_from_dict
+from flexmm.models import MODELS
+
+# configs/lego_vector_soliton.yaml, as a dict (LEGO parameters of PHYSICS.md §1.1).
+LEGO_LATTICE = {
+    "kind": "rotating_squares_chain",
+    "n_units": 200,
+    "a_m": 0.016,
+    "theta0_rad": 0.0,
+    "k_long_n_per_m": 71690.0,
+    "k_shear_n_per_m": 1326.98,
+    "k_rot_n_m_per_rad": 7.038e-4,
+    "mass_kg": 4.52e-3,
+    "inertia_kg_m2": 8.7814e-8,
+    "n_lateral": 1,
+    "left": "driven",
+    "right": "free",
+}
+LEGO_SCENE = {
+    "name": "lego_vector_soliton",
+    "description": "LEGO rotating-squares chain struck at its left end; an elastic vector soliton forms.",
+    "lattice": LEGO_LATTICE,
+    "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 3.0, "angular_velocity_rad_s": 300.0},
+    "damping": {},
+    "solver": {"integrator": "velocity_verlet", "duration_s": 0.8},
+    "output": {"n_frames": 801},
+}
+
+
+def _chain(**changes) -> dict:
+    """A small rotating-squares chain (LEGO stiffnesses unless changed)."""
+    lat = dict(LEGO_LATTICE, n_units=9, left="free", right="free")
+    lat.update(changes)
+    return lat
+
+
+_SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
+          "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
+_MASS = {"spacing_m": 0.01, "mass_kg": 0.01,
+         "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
+
+
+#: kind -> {example id -> {"lattice": lattice dict, "translation_invariant": bool,
+#: optional "not_at_rest": why q = 0 is not a stress-free equilibrium (the rest test xfails)}}.
+#: Keep them small (a few dozen DOFs): the kernel tests take finite differences over every DOF.
+EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
+    "rotating_squares_chain": {
+        "lego-theta0-nv1": {"lattice": _chain(theta0_rad=0.15, n_lateral=1), "translation_invariant": True},
+        "sheet-wave-nv2-sv": {
+            "lattice": _chain(theta0_rad=-0.2, n_lateral=2, lateral_stretch=True),
+            "translation_invariant": True,
+        },
+        "single-row-stiff": {
+            "lattice": _chain(n_units=8, theta0_rad=0.3, n_lateral=0, k_shear_n_per_m=0.5 * 71690.0,
+                              k_rot_n_m_per_rad=0.02 * 71690.0 * 0.016**2),
+            "translation_invariant": True,
+        },
+        "graded-theta0": {
+            "lattice": _chain(theta0_rad=0.1, n_lateral=1, lateral_stretch=True, variation=[
+                {"kind": "gradient", "target": "theta0_rad", "start": 0.05, "end": 0.3},
+                {"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 5e-4, "end": 2e-3},
+            ]),
+            "translation_invariant": True,
+            # PHYSICS.md §1.1 has no rest offset in the shear spring: with θ0 varying along a
+            # chain whose centres stay on the axis (v suppressed), Δy ≠ 0 at q = 0.
+            "not_at_rest": "a θ0 gradient leaves the hinge shear springs pre-stressed at q = 0",
+        },
+    },
+    "rotating_squares_sheet": {
+        "theta0-3x4": {
+            "lattice": dict(_SHEET, n_rows=3, n_cols=4, theta0_rad=0.15),
+            "translation_invariant": True,
+        },
+        "pla-ligament-2x3": {  # Bordiga et al. 2024 PLA squares (PHYSICS.md §1.1), with a ligament
+            "lattice": dict(_SHEET, n_rows=2, n_cols=3, a_m=0.015, theta0_rad=-0.2, ligament_length_m=0.002,
+                            k_long_n_per_m=1.2e5, k_shear_n_per_m=1190.0, k_rot_n_m_per_rad=1.5e-3,
+                            mass_kg=None, inertia_kg_m2=None, areal_density_kg_m2=6.18),
+            "translation_invariant": True,
+        },
+    },
+    "bistable_linkage": {
+        "six-bars": {
+            "lattice": {"kind": "bistable_linkage", "n_units": 6, "bar_length_m": 0.01, "theta0_rad": 0.3,
+                        "theta_deployed_rad": 0.7, "mass_kg": 1e-3, "k_pin_n_per_m": 1e4,
+                        "released_energy_j": 1e-4},
+            "translation_invariant": True,
+        },
+    },
+    "mass_chain": {
+        "fpu-toda": {
+            "lattice": dict(_MASS, kind="mass_chain", n_units=8, bond2={"law": "toda", "a_n": 1.0, "b_per_m": 50.0}),
+            "translation_invariant": True,
+        },
+    },
+    "mass_grid": {
+        "fpu-3x3": {"lattice": dict(_MASS, kind="mass_grid", nx=3, ny=3), "translation_invariant": True},
+    },
+    "mass_network": {
+        "y-junction": {
+            "lattice": dict(_MASS, kind="mass_network", junctions=[{"name": "j"}], branches=[
+                {"name": "a", "n_units": 3, "end": "j"}, {"name": "b", "n_units": 3, "start": "j"},
+                {"name": "c", "n_units": 2, "start": "j"}]),
+            "translation_invariant": True,
+        },
+    },
+}
+
+
+def set_path(data: dict, dotted: str, value) -> None:
+    """Set ``data['a']['b'] = value`` for ``dotted = 'a.b'``, creating mappings on the way."""
+    *head, last = dotted.split(".")
+    for key in head:
+        data = data.setdefault(key, {})
+    data[last] = value
+
+
+@pytest.fixture
+def lego_config() -> dict:
+    """A fresh (deep) copy of the LEGO scene dict of configs/lego_vector_soliton.yaml."""
+    return copy.deepcopy(LEGO_SCENE)
+
+
+@pytest.fixture
+def example_lattices() -> dict:
+    """A deep copy of EXAMPLE_LATTICES (kind -> id -> example)."""
+    return copy.deepcopy(EXAMPLE_LATTICES)
+
+
+@pytest.fixture
+def make_scene():
+    """``make_scene(data, {"solver.dt_s": 1e-6, ...})`` -> validated Scene (data is not modified)."""
+
+    def make(data: dict, overrides: dict | None = None):
+        d = copy.deepcopy(data)
+        for key, value in (overrides or {}).items():
+            set_path(d, key, value)
+        return scene_from_dict(d)
+
+    return make
+
+
+@pytest.fixture
+def scene_dict():
+    """``scene_dict(lattice, **sections)`` -> minimal scene dict (no excitation, 1 s) around a lattice."""
+
+    def make(lattice: dict, **sections) -> dict:
+        out = {"name": "test", "lattice": copy.deepcopy(lattice), "solver": {"duration_s": 1.0}}
+        out.update(copy.deepcopy(sections))
+        return out
+
+    return make
+
+
+@pytest.fixture
+def run_dir(tmp_path):
+    """An empty directory for one run's outputs."""
+    d = tmp_path / "run"
+    d.mkdir()
+    return d
+
+
+def pytest_generate_tests(metafunc):
+    """Parametrise ``example_lattice`` = (kind, example) over every registered model kind."""
+    if "example_lattice" not in metafunc.fixturenames:
+        return
+    params = []
+    for kind in sorted(MODELS):
+        examples = EXAMPLE_LATTICES.get(kind)
+        if not examples:
+            reason = f"no example lattice for model kind {kind!r}: add one to EXAMPLE_LATTICES in tests/conftest.py"
+            params.append(pytest.param((kind, None), id=kind, marks=pytest.mark.skip(reason=reason)))
+            continue
+        for name, example in examples.items():
+            params.append(pytest.param((kind, example), id=f"{kind}-{name}"))
+    metafunc.parametrize("example_lattice", params)

@@ -1,0 +1,63 @@
+"""solver.accuracy: integrator and dt from a pilot, checked by step doubling (flexmm.plan.accuracy)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexmm.api import run_scene
+from flexmm.config import scene_from_dict
+from flexmm.integrators import INTEGRATORS
+from flexmm.io.dataset import open_run
+from flexmm.plan import PlanError, make_plan
+from flexmm.plan.accuracy import extrapolate, integrate, state_error
+
+LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
+            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
+
+
+def soliton_scene(accuracy=1e-4, **solver):
+    return scene_from_dict({"name": "acc", "lattice": {**LEGO, "n_units": 120},
+                            "excitation": {"kind": "soliton", "amplitude_rad": 0.4, "center_site": 30},
+                            "solver": {"duration_s": 0.06, "accuracy": accuracy, **solver},
+                            "output": {"n_frames": 11}})
+
+
+def test_state_error_relative_to_each_fields_peak():
+    class S:
+        n_sites = 3
+        fields = (1, 2)
+
+    q = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    r = np.array([1.0, 0.1, 0.0, 0.0, 0.0, 0.0])
+    assert state_error(S, q, r, np.array([2.0, 0.0])) == pytest.approx(0.05)
+
+
+def test_extrapolation_linear_and_exponential():
+    e, beta = extrapolate((1e-6, 2e-6), 1.0, 10.0)
+    assert beta == pytest.approx(1.0) and e == pytest.approx(2e-5)
+    e, beta = extrapolate((1e-6, 1e-4), 1.0, 2.0)  # ×100 over half the pilot: exponential growth
+    assert beta > 2 and e == pytest.approx(1e-4 * 100**2)
+
+
+def test_accuracy_run_meets_its_target(tmp_path):
+    sc = soliton_scene(1e-4)
+    plan = make_plan(sc, "full")
+    assert plan.scene.solver.accuracy is None and plan.scene.solver.dt_s is not None
+    res = run_scene(sc, run_dir=tmp_path)
+    ds = open_run(res.path)
+    assert ds.attrs["accuracy_requested"] == 1e-4
+    assert ds.attrs["accuracy_estimate"] < 1e-4 and ds.attrs["accuracy_met"] == 1
+    # against a tight reference
+    prob = plan.problem
+    spec = INTEGRATORS[plan.choice.integrator]
+    q, _, pk, _ = integrate(prob, spec, plan.choice.dt, prob.duration)
+    qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 16, prob.duration)
+    err = state_error(prob.system, q, qr, np.maximum(pk, pkr))
+    assert err < 1e-4
+    assert ds.attrs["accuracy_estimate"] == pytest.approx(err, rel=0.5)
+
+
+def test_accuracy_and_dt_conflict():
+    with pytest.raises(PlanError, match="remove solver.dt_s"):
+        make_plan(soliton_scene(1e-4, dt_s=1e-6))

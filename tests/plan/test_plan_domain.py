@@ -1,0 +1,94 @@
+"""Group speeds from the Hessian, wave reach and trimming, absorbing layers (flexmm.plan.domain)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from flexmm.assemble import build_problem
+from flexmm.config import scene_from_dict
+from flexmm.integrators import INTEGRATORS
+from flexmm.plan.accuracy import integrate
+from flexmm.plan.domain import absorbing_damping, bloch_dispersion, trim_scene, wave_reach
+from flexmm.theory.rotating import RotatingChainND, dispersion_chain
+
+LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
+            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8)
+
+
+def chain_scene(n=60, duration=0.01, excitation=None, **lattice):
+    lat = {**LEGO, "n_units": n, **lattice}
+    exc = excitation or {"kind": "impact", "end": "left", "velocity_m_s": 1.0, "angular_velocity_rad_s": 100.0}
+    return scene_from_dict({"name": "t", "lattice": lat, "excitation": exc,
+                            "solver": {"duration_s": duration}})
+
+
+@pytest.mark.parametrize("theta0,n_v,s_v", [(0.0, 1, 0), (0.3, 2, 1)])
+def test_bloch_dispersion_matches_chain_theory(theta0, n_v, s_v):
+    sc = chain_scene(40, theta0_rad=theta0, n_lateral=n_v, lateral_stretch=bool(s_v))
+    p = build_problem(sc)
+    d = bloch_dispersion(p.system, p.terms)
+    m = p.system.meta
+    par = RotatingChainND(theta0, m["Ks"], m["Ktheta"], m["alpha2"], n_v, s_v)
+    lo, hi = dispersion_chain(par, d.k)
+    lo2, hi2 = dispersion_chain(par, d.k + np.pi)  # the 2-site probe cell folds the zone
+    ref = np.sort(np.stack([lo, hi, lo2, hi2], 1), 1)
+    assert np.allclose(d.omega, ref, atol=1e-6)
+    assert d.stable
+    # fastest signal: the longitudinal branch at k -> 0, cos(theta0)-ish in sites per unit time
+    assert 0.6 < d.max_group_speed <= 1.0 + 1e-6
+
+
+def test_reach_trims_and_trimming_is_exact():
+    """A lattice far longer than the waves reach is trimmed; kept sites move exactly alike."""
+    sc = chain_scene(600, duration=0.012)
+    p = build_problem(sc)
+    reach = wave_reach(sc, p.system, p.terms, p.duration)
+    assert reach.keep[0] == 0 and reach.keep[1] < 600
+    assert reach.sites_reached == pytest.approx(reach.speed_sites * p.duration)
+    small = trim_scene(sc, reach.keep)
+    ps = build_problem(small)
+    spec = INTEGRATORS["velocity_verlet"]
+    h = 0.2 / p.omega_max
+    q, *_ = integrate(p, spec, h, p.duration)
+    qs, *_ = integrate(ps, spec, h, p.duration)
+    n, m = 600, small.lattice.n_units
+    assert np.max(np.abs(q[:m] - qs[:m])) < 1e-12 * np.max(np.abs(q[:m])) + 1e-15
+    assert np.max(np.abs(q[n : n + m] - qs[m : 2 * m])) < 1e-12
+
+
+def test_trim_shifts_sites_and_drops_unreached_layer():
+    sc = chain_scene(500, excitation={"kind": "soliton", "amplitude_rad": 0.4, "center_site": 300})
+    data = sc.model_dump(mode="json")
+    data["imperfection"] = {"kind": "rotation_seed", "theta_rad": 1e-3, "sites": [250, 10]}
+    data["damping"] = {"absorbing": {"end": "both", "n_units": 30}}
+    t = trim_scene(scene_from_dict(data), (200, 499))
+    assert t.lattice.n_units == 300
+    assert t.excitation.center_site == 100
+    assert t.imperfection.sites == [50]
+    assert t.damping.absorbing.end == "right"
+
+
+def test_random_imperfection_is_a_source_everywhere():
+    data = chain_scene(400).model_dump(mode="json")
+    data["imperfection"] = {"kind": "random_rotation", "std_rad": 1e-4}
+    sc = scene_from_dict(data)
+    p = build_problem(sc)
+    assert wave_reach(sc, p.system, p.terms, p.duration).keep is None
+
+
+def test_absorbing_profile():
+    data = chain_scene(200).model_dump(mode="json")
+    data["damping"] = {"absorbing": {"end": "right", "n_units": 50, "max_ratio": 0.1, "power": 2}}
+    sc = scene_from_dict(data)
+    p = build_problem(sc)
+    n = 200
+    extra = absorbing_damping(p.system, sc.damping.absorbing)
+    zeta_u = extra[:n] / (2 * p.system.mass[:n])
+    assert np.all(zeta_u[:150] == 0)
+    assert zeta_u[-1] == pytest.approx(0.1)
+    assert np.all(np.diff(zeta_u[150:]) > 0)
+    assert zeta_u[150] == pytest.approx(0.1 * (1 / 50) ** 2)
+    assert np.allclose(p.damp, extra)  # assembled into the problem's damping
+    with pytest.raises(Exception):
+        scene_from_dict({**data, "damping": {"absorbing": {"n_units": 1}}})

@@ -1,0 +1,152 @@
+"""Running sweeps: idempotent reruns, a real Dask LocalCluster, failed points, the sweep dataset."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from flexmm.io.dataset import open_run
+from flexmm.sweep import load_sweep, plot_sweep, run_sweep
+from flexmm.sweep.store import SweepStore, dataset_status
+
+REPO = Path(__file__).resolve().parents[2]
+LEGO = REPO / "configs" / "lego_vector_soliton.yaml"
+
+# A tiny, shortened LEGO chain: 60 units, launched solitons, 480 steps per point.
+TINY = f"""\
+    name: tiny_lego
+    base: {LEGO}
+    set:
+      lattice.n_units: 60
+      lattice.left: free
+      excitation: {{kind: soliton, amplitude_rad: 0.4, center_site: 8}}
+      solver.duration_s: 0.06
+      solver.dt_fraction: 0.5
+      output.n_frames: 61
+    vary:
+      grid:
+        excitation.amplitude_rad: [0.3, 0.45, 0.6]
+    """
+
+
+def tiny_spec(tmp_path: Path, text: str = TINY):
+    p = tmp_path / "tiny.yaml"
+    p.write_text(textwrap.dedent(text))
+    return load_sweep(p)
+
+
+def snapshot(sweep_dir: Path) -> dict[str, float]:
+    """mtime of every file under points/ (what a recomputation would touch)."""
+    return {str(p.relative_to(sweep_dir)): p.stat().st_mtime_ns
+            for p in (sweep_dir / "points").rglob("*") if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def local_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("local")
+    spec = tiny_spec(tmp)
+    report = run_sweep(spec, tmp / "sweep", workers=1)
+    return spec, tmp / "sweep", report
+
+
+def test_local_sweep_runs_every_point_and_combines(local_run):
+    spec, d, report = local_run
+    assert report.ok and report.n_run == 3 and report.n_cached == 0
+    ds = xr.load_dataset(d / "sweep.nc", engine="h5netcdf")
+    assert ds["speed"].dims == ("amplitude_rad",)
+    assert list(ds["amplitude_rad"].values) == [0.3, 0.45, 0.6]
+    assert ds["amplitude_rad"].attrs["parameter"] == "excitation.amplitude_rad"
+    assert ds["amplitude_rad"].attrs["units"] == "rad"
+    assert (ds["status"].values == "finished").all()
+    assert np.isfinite(ds["speed"]).all() and np.isfinite(ds["width"]).all()
+    # larger solitons are slower; this 60-unit, 480-step chain only roughly follows the speed law
+    assert np.all(np.diff(ds["speed"].values) < 0)
+    np.testing.assert_allclose(ds["speed"], ds["speed_theory"], rtol=0.25)
+    np.testing.assert_allclose(ds["amplitude"], ds["amplitude_rad"], rtol=0.05)
+    store = SweepStore(d)
+    for p in spec.points():
+        pd = store.point_dir(p.hash)
+        assert pd.name == p.hash
+        assert dataset_status(pd / "dataset.nc") == "finished"
+        done = json.loads((pd / "done.json").read_text())
+        assert done["config_sha256"] == p.hash and done["numba_threads"] == 1
+        assert open_run(pd).attrs["config_sha256"] == p.hash
+
+
+def test_second_run_does_no_work(local_run):
+    spec, d, _ = local_run
+    before = snapshot(d)
+    report = run_sweep(spec, d, workers=1)
+    assert report.ok and report.n_run == 0 and report.n_cached == 3
+    assert snapshot(d) == before
+
+
+def test_same_sweep_on_a_dask_local_cluster_gives_identical_results(local_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    spec, d_local, _ = local_run
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster:
+        report = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address)
+    assert report.ok and report.n_run == 3 and report.backend.startswith("dask")
+    a = xr.load_dataset(d_local / "sweep.nc", engine="h5netcdf")
+    b = xr.load_dataset(tmp_path / "dask" / "sweep.nc", engine="h5netcdf")
+    names = ["speed", "speed_stderr", "amplitude", "width", "status", "run"]
+    xr.testing.assert_identical(a[names], b[names])
+    for p in spec.points():
+        ra, rb = open_run(d_local / "points" / p.hash), open_run(tmp_path / "dask" / "points" / p.hash)
+        np.testing.assert_array_equal(ra["theta"].values, rb["theta"].values)
+
+
+@pytest.fixture
+def in_process_scheduler():
+    """A real Dask LocalCluster in this process (threads): no worker start-up or recompilation."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        yield cluster.scheduler_address
+
+
+def test_failed_points_are_recorded_and_retried_only_on_request(tmp_path, in_process_scheduler):
+    spec = tiny_spec(tmp_path, TINY.replace("excitation.amplitude_rad: [0.3, 0.45, 0.6]",
+                                            "solver.dt_s: [1e-4, 1e-3]"))
+    d = tmp_path / "sweep"
+    opts = {"scheduler": in_process_scheduler}
+    report = run_sweep(spec, d, **opts)
+    assert not report.ok and report.n_finished == 1 and report.n_failed == 1
+    bad = [p for p in spec.points() if p.params["solver.dt_s"] == 1e-3][0]
+    err = json.loads((d / "points" / bad.hash / "error.json").read_text())
+    assert "UnstableStepError" in err["reason"] and "stable limit" in err["reason"]
+    ds = xr.load_dataset(d / "sweep.nc", engine="h5netcdf")
+    assert list(ds["status"].values) == ["finished", "failed"]
+    assert "UnstableStepError" in str(ds["note"].values[1])
+    before = snapshot(d)
+    again = run_sweep(spec, d, **opts)
+    assert again.n_run == 0 and again.n_skipped_failed == 1 and snapshot(d) == before
+    retried = run_sweep(spec, d, retry_failed=True, **opts)
+    assert retried.n_run == 1 and retried.n_failed == 1
+    after = snapshot(d)
+    good = [k for k in before if not k.startswith(f"points/{bad.hash}")]
+    assert all(after[k] == before[k] for k in good)
+
+
+def test_plot_sweep_writes_a_png(local_run, tmp_path):
+    _, d, _ = local_run
+    out = plot_sweep(d, tmp_path / "fig" / "tiny.png")
+    assert out.is_file() and out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_zip_sweep_has_a_point_dimension(tmp_path, in_process_scheduler):
+    text = TINY.replace("grid:\n        excitation.amplitude_rad: [0.3, 0.45, 0.6]",
+                        "zip:\n        excitation.amplitude_rad: [0.3, 0.6]\n"
+                        "        excitation.center_site: [8, 10]")
+    spec = tiny_spec(tmp_path, text)
+    report = run_sweep(spec, tmp_path / "zip", scheduler=in_process_scheduler)
+    assert report.ok
+    ds = xr.load_dataset(tmp_path / "zip" / "sweep.nc", engine="h5netcdf")
+    assert ds["speed"].dims == ("point",)
+    assert list(ds["center_site"].values) == [8, 10] and list(ds["amplitude_rad"].values) == [0.3, 0.6]
