@@ -15,7 +15,7 @@ from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, MODE_FRICTION, SHAPES, empty_terms
 from flexmm.models import MODELS, System
 from flexmm.models.predeform import INWARD
-from flexmm.stability import omega_max
+from flexmm.stability import UnstableStepError, omega_max, resolve_dt
 
 
 @dataclass
@@ -36,10 +36,6 @@ class Problem:
         t = self.terms
         return (t["con_ij"], t["con_prm"], t["dash_ij"], t["dash_c"],
                 t["drv_dof"], t["drv_mode"], t["drv_shape"], t["drv_prm"])
-
-
-class UnstableStepError(Exception):
-    """dt is above the integrator's stable limit (a user error unless forced)."""
 
 
 class SceneError(ValueError):
@@ -249,6 +245,20 @@ def build_problem(scene: Scene) -> Problem:
                          f"({type(err).__name__}: {err})") from None
 
 
+def check_velocity_forces(spec, damp: np.ndarray, terms: dict, friction_rate: float) -> None:
+    """Refuse velocity-dependent forces for a method that assumes forces depend on q only."""
+    if spec.velocity_dependent_forces:
+        return
+    found = [name for name, present in (("viscous damping", bool(np.any(damp > 0))),
+                                        ("dashpots", terms["dash_c"].size > 0),
+                                        ("ground friction", friction_rate > 0)) if present]
+    if found:
+        ok = ", ".join(k for k, v in INTEGRATORS.items() if v.velocity_dependent_forces)
+        raise SceneError(f"{spec.name} assumes forces that depend on positions only (a Runge-Kutta-"
+                         f"Nystrom-type scheme: its order conditions fail otherwise), but this scene has "
+                         f"{' and '.join(found)}, which depend on velocity; use one of: {ok}")
+
+
 def _build_problem(scene: Scene) -> Problem:
     system = MODELS[scene.lattice.kind].build(scene.lattice)
     terms = empty_terms()
@@ -257,34 +267,17 @@ def _build_problem(scene: Scene) -> Problem:
     friction_rate = apply_friction(system, terms)
     damp = damping_arrays(system, scene, terms)
     spec = INTEGRATORS[scene.solver.integrator]
-    if friction_rate > 0 and not spec.velocity_dependent_forces:
-        raise SceneError(f"ground friction is velocity dependent; {spec.name} does not accept that")
+    check_velocity_forces(spec, damp, terms, friction_rate)
     rest = system.meta.get("rest_state")  # predeformed equilibrium: linearise about it
     q_ref = None if rest is None else np.concatenate([rest, system.q0[rest.size:]])
     w_max = omega_max(system, terms, q_ref)
     if not math.isfinite(w_max):
         raise SceneError(f"ω_max = {w_max} is not finite: lattice parameters out of floating-point range")
-    stable = spec.stability_limit / w_max if w_max > 0 else math.inf
-    if friction_rate > 0:  # explicit regularised friction: keep h F/(m v_ε) <= 1
-        stable = min(stable, 1.0 / friction_rate)
     sc = system.scales
-    notes = []
-    if scene.solver.dt_s is None and not math.isfinite(stable):
+    if scene.solver.dt_s is None and not w_max > 0 and not spec.adaptive:
         raise SceneError("cannot pick dt: no stiffness at rest (ω_max = 0, e.g. an uncompressed "
                          "Hertz chain); set solver.dt_s")
-    if scene.solver.dt_s is None:
-        dt = scene.solver.dt_fraction * stable
-        notes.append(f"dt chosen as {scene.solver.dt_fraction} x stable limit = {dt * sc.time_s:.4g} s")
-    else:
-        dt = scene.solver.dt_s / sc.time_s
-        if dt > stable:
-            msg = (
-                f"solver.dt_s = {scene.solver.dt_s:.4g} s exceeds the stable limit of {spec.name} "
-                f"({spec.stability_limit:g}/ω_max = {stable * sc.time_s:.4g} s, "
-                f"ω_max = {w_max / sc.time_s:.4g} rad/s)"
-            )
-            if not scene.solver.allow_unstable:
-                raise UnstableStepError(msg + "; lower dt or set solver.allow_unstable: true")
-            notes.append("WARNING: " + msg)
+    # explicit regularised friction: keep h F/(m v_ε) <= 1
+    dt, stable, notes = resolve_dt(spec, w_max, scene.solver, sc.time_s, friction_rate)
     duration = scene.solver.duration_s / sc.time_s
     return Problem(scene, system, terms, damp, dt, duration, w_max, stable, notes)

@@ -1,20 +1,31 @@
-"""Largest linear frequency ω_max of a built system, for step-size limits (PHYSICS.md §3).
+"""Largest linear frequency ω_max of a built system and the step-size limits it sets (PHYSICS.md §3).
 
 ω_max² is the largest eigenvalue of M^{-1/2} K M^{-1/2} over the free DOFs, with K the
-Hessian of the energy at the reference state (q = 0), obtained from central differences of
-the compiled force: K x ≈ −(F(q + εx) − F(q − εx)) / 2ε. One-sided contacts (a striker)
-enter with their stiffness at the expected peak overlap, p k δ^(p−1), since a Hertz contact
-stiffens with overlap.
+Hessian of the energy at a reference state (rest by default), obtained from central
+differences of the compiled force: K x ≈ −(F(q + εx) − F(q − εx)) / 2ε. One-sided contacts (a
+striker) enter with their stiffness at the expected peak overlap, p k δ^(p−1), since a Hertz
+contact stiffens with overlap. Small systems are diagonalised densely; larger ones by Lanczos
+(the top Ritz value, a lower bound converging like 1/m² in the m iterations at a band edge).
+
+A fixed-step explicit method is linearly stable while h ω_max ≤ its ``stability_limit``
+(harmonic oscillator; ``harmonic_limit`` recomputes it from the compiled method).
+Softening or contact laws change ω_max along the motion, so ``trajectory_omega_max`` also
+samples ω_max along a short pilot run (used by ``flexmm stability``).
 """
 
 from __future__ import annotations
 
-import numpy as np
-from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
+import math
 
+import numpy as np
+from scipy.linalg import eigvalsh_tridiagonal
+
+from flexmm._jit import jit
 from flexmm.models.base import System
 
 DENSE_LIMIT = 400
+LANCZOS_MAX_ITER = 600
+LANCZOS_RTOL = 1e-7
 
 
 def _contact_stiffness(system: System, terms: dict) -> list[tuple[int, int, float]]:
@@ -54,28 +65,219 @@ def hessian_operator(system: System, terms: dict, q_ref: np.ndarray | None = Non
     return matvec
 
 
+def lanczos_max(op, n: int, *, max_iter: int = LANCZOS_MAX_ITER, rtol: float = LANCZOS_RTOL,
+                seed: int = 0) -> float:
+    """Largest eigenvalue of the symmetric operator ``op`` (n × n), by plain Lanczos.
+
+    No reorthogonalisation: the top Ritz value still converges to λ_max (lost orthogonality
+    only adds copies). Stops when it changes by less than ``rtol`` (relative) over 10
+    iterations, or after ``max_iter`` iterations. ``op`` is either a Python callable or a
+    tuple ``(step, state)`` for the compiled form used by ``omega_max``.
+    """
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal(n)
+    x /= math.sqrt(np.sum(x * x))
+    x_prev = np.zeros(n)
+    alpha, beta = np.zeros(max_iter), np.zeros(max_iter)
+    b, history, it = 0.0, [], 0
+    while it < min(max_iter, n):
+        k1 = min(it + 10, max_iter, n)
+        if callable(op):
+            for k in range(it, k1):
+                w = op(x) - b * x_prev
+                alpha[k] = float(np.sum(w * x))  # np.sum, not BLAS: a threaded dot spin-waits
+                w -= alpha[k] * x
+                b = beta[k] = math.sqrt(float(np.sum(w * w)))
+                if b == 0.0:
+                    k1 = k + 1
+                    break
+                x_prev, x = x, w / b
+        else:
+            step, state = op
+            b, k1 = step(*state, x, x_prev, b, alpha, beta, it, k1)
+        it = k1
+        top = float(eigvalsh_tridiagonal(alpha[:it], beta[: it - 1], select="i",
+                                         select_range=(it - 1, it - 1))[0])
+        history.append(top)
+        if b <= 1e-14 * abs(top) or (len(history) > 1 and abs(top - history[-2]) <= rtol * abs(top)):
+            break
+    return history[-1]
+
+
+@jit
+def _lanczos_steps(force, args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_prev, b, alpha, beta, k0, k1):
+    """Lanczos iterations k0..k1−1 on W K W (W = M^{-1/2}, K by central differences of force)."""
+    n = x.shape[0]
+    for it in range(k0, k1):
+        scale = 0.0
+        for k in range(n):
+            r[k] = w[k] * x[k]
+            scale = max(scale, abs(r[k]))
+        eps = 1e-6 / scale if scale > 0.0 else 1.0
+        for k in range(n):
+            qt[k] = q_ref[k] + eps * r[k]
+        force(qt, args, fp)
+        for k in range(n):
+            qt[k] = q_ref[k] - eps * r[k]
+        force(qt, args, fm)
+        for c in range(con_ij.shape[0]):
+            i, j = con_ij[c, 0], con_ij[c, 1]
+            d = con_k[c] * (r[i] - r[j]) * 2.0 * eps
+            fp[i] -= d
+            fp[j] += d
+        a = 0.0
+        for k in range(n):
+            r[k] = -w[k] * (fp[k] - fm[k]) / (2.0 * eps) - b * x_prev[k]
+            a += r[k] * x[k]
+        bb = 0.0
+        for k in range(n):
+            r[k] -= a * x[k]
+            bb += r[k] * r[k]
+        alpha[it] = a
+        b = np.sqrt(bb)
+        beta[it] = b
+        if b == 0.0:
+            return b, it + 1
+        for k in range(n):
+            x_prev[k] = x[k]
+            x[k] = r[k] / b
+    return b, k1
+
+
 def omega_max(system: System, terms: dict, q_ref: np.ndarray | None = None) -> float:
-    """Largest angular frequency of small oscillations (nondimensional)."""
+    """Largest angular frequency of small oscillations about ``q_ref`` (nondimensional)."""
     free = np.flatnonzero(system.inv_mass > 0)
     if free.size == 0:
         return 0.0
-    w = np.sqrt(system.inv_mass[free])
-    kx = hessian_operator(system, terms, q_ref)
-    full = np.zeros(system.ndof)
-
-    def op(y):
-        full[:] = 0.0
-        full[free] = w * np.asarray(y).ravel()
-        return w * kx(full)[free]
-
     n = free.size
     if n <= DENSE_LIMIT:
-        a = np.column_stack([op(e) for e in np.eye(n)])
+        w = np.sqrt(system.inv_mass[free])
+        kx = hessian_operator(system, terms, q_ref)
+        full = np.zeros(system.ndof)
+
+        def column(y):
+            full[:] = 0.0
+            full[free] = w * y
+            return w * kx(full)[free]
+
+        a = np.column_stack([column(e) for e in np.eye(n)])
         lam = np.linalg.eigvalsh(0.5 * (a + a.T))[-1]
     else:
-        lin = LinearOperator((n, n), matvec=op, dtype=float)
-        try:
-            lam = eigsh(lin, k=1, which="LA", tol=1e-6, return_eigenvectors=False, maxiter=20 * n)[0]
-        except ArpackNoConvergence as exc:
-            lam = max(exc.eigenvalues) if len(exc.eigenvalues) else np.nan
+        # full-size operator W K W with W = M^{-1/2} (0 on held DOFs): same top eigenvalue,
+        # no gathers (held DOFs only add zero eigenvalues)
+        w = np.sqrt(np.maximum(system.inv_mass, 0.0))
+        contacts = _contact_stiffness(system, terms)
+        con_ij = np.array([[i, j] for i, j, _ in contacts], np.int64).reshape(-1, 2)
+        con_k = np.array([k for _, _, k in contacts], float)
+        q0 = np.zeros(system.ndof) if q_ref is None else np.asarray(q_ref, float)
+        scratch = [np.zeros(system.ndof) for _ in range(4)]
+        state = (system.force, system.args, q0, w, con_ij, con_k, *scratch)
+        lam = lanczos_max((_lanczos_steps, state), system.ndof)
     return float(np.sqrt(max(lam, 0.0)))
+
+
+def trajectory_omega_max(problem, n_samples: int = 8, duration_fraction: float = 1.0) -> tuple[float, float]:
+    """Max of ω_max over ``n_samples`` states of a pilot run (velocity Verlet at a safe step).
+
+    The pilot covers ``duration_fraction`` of the scene; returns (max ω_max, time of the max).
+    Covers softening or stiffening laws and contacts whose stiffness at rest says little.
+    """
+    from flexmm.integrators.runner import run_fixed
+
+    t_end = problem.duration * duration_fraction
+    w0 = problem.omega_max
+    h = 0.2 * 2.0 / w0 if w0 > 0 else problem.dt
+    traj = run_fixed(problem, "velocity_verlet", h, t_end, n_frames=n_samples + 1)
+    best, when = w0, 0.0
+    for t, q in zip(traj.t[1:], traj.q[1:]):
+        if not np.all(np.isfinite(q)):
+            break
+        w = omega_max(problem.system, problem.terms, q)
+        if w > best:
+            best, when = w, float(t)
+    return best, when
+
+
+@jit
+def _harmonic_force(q, args, out):
+    out[0] = -args[0] * q[0]
+
+
+def harmonic_limit(spec, *, hi: float = 6.0, steps: int = 1, tol: float = 1e-6) -> float:
+    """Largest h ω for which ``spec``'s one-step map of x'' = −ω² x has spectral radius ≤ 1.
+
+    The map is measured by running the compiled ``advance`` from (1, 0) and (0, 1) (ω = 1);
+    the first h (scanning, then bisecting) with radius > 1 + 1e-12 is returned. This is the
+    registry's ``stability_limit`` computed from the method itself.
+    """
+    from flexmm.integrators.common import empty_terms
+
+    terms = tuple(empty_terms()[k] for k in ("con_ij", "con_prm", "dash_ij", "dash_c",
+                                            "drv_dof", "drv_mode", "drv_shape", "drv_prm"))
+    args = (1.0,)
+    minv, damp = np.ones(1), np.zeros(1)
+
+    def radius(h: float) -> float:
+        cols = []
+        for q0, v0 in ((1.0, 0.0), (0.0, 1.0)):
+            q, v, f = np.array([q0]), np.array([v0]), np.zeros(1)
+            spec.init(_harmonic_force, args, q, v, 0.0, f, terms)
+            spec.advance(_harmonic_force, args, q, v, f, minv, damp, terms, 0.0, h, steps, np.zeros(2))
+            cols.append([q[0], v[0]])
+        return float(np.max(np.abs(np.linalg.eigvals(np.array(cols).T))))
+
+    grid = np.linspace(0.01, hi, 600)
+    unstable = [h for h in grid if radius(h) > 1.0 + 1e-12]
+    if not unstable:
+        return math.inf
+    b = unstable[0]
+    a = b - (grid[1] - grid[0])
+    while b - a > tol:
+        m = 0.5 * (a + b)
+        a, b = (a, m) if radius(m) > 1.0 + 1e-12 else (m, b)
+    return 0.5 * (a + b)
+
+
+class UnstableStepError(Exception):
+    """dt is above the integrator's stable limit (a user error unless forced)."""
+
+
+def resolve_dt(spec, w_max: float, solver, time_s: float, rate_limit: float = 0.0) -> tuple[float, float, list[str]]:
+    """(dt, stable dt, notes) for a scene's solver block (nondimensional times).
+
+    Fixed-step explicit methods: stable = limit/ω_max (and ≤ 1/rate_limit for explicit
+    friction); dt = ``dt_fraction`` × stable unless ``dt_s`` is given, which must not exceed it
+    (``UnstableStepError`` with both numbers, unless ``allow_unstable``). A-stable methods have
+    no limit; their automatic dt is ``dt_fraction`` × 2/ω_max (the accuracy scale of the fastest
+    mode). Adaptive methods: dt is only the largest step (``dt_s``) or, if absent, the linear
+    limit, reported for information.
+    """
+    notes: list[str] = []
+    stable = spec.stability_limit / w_max if w_max > 0 else math.inf
+    if rate_limit > 0:
+        stable = min(stable, 1.0 / rate_limit)
+    if spec.adaptive:
+        dt = solver.dt_s / time_s if solver.dt_s is not None else stable
+        what = "largest step" if solver.dt_s is not None else "no step limit (error control)"
+        notes.append(f"{spec.name}: adaptive (rtol {solver.rtol or 1e-6:g}); {what}")
+        return dt, stable, notes
+    if solver.dt_s is not None:
+        dt = solver.dt_s / time_s
+        if dt > stable:
+            msg = (
+                f"solver.dt_s = {solver.dt_s:.4g} s exceeds the stable limit of {spec.name} "
+                f"({spec.stability_limit:g}/ω_max = {stable * time_s:.4g} s, "
+                f"ω_max = {w_max / time_s:.4g} rad/s)"
+            )
+            if not solver.allow_unstable:
+                raise UnstableStepError(msg + "; lower dt or set solver.allow_unstable: true")
+            notes.append("WARNING: " + msg)
+        return dt, stable, notes
+    scale = stable if math.isfinite(stable) else (2.0 / w_max if w_max > 0 else math.inf)
+    if not math.isfinite(scale):
+        raise UnstableStepError("cannot pick dt: no stiffness at rest (ω_max = 0, e.g. an uncompressed "
+                                "Hertz chain); set solver.dt_s")
+    dt = solver.dt_fraction * scale
+    basis = "stable limit" if math.isfinite(stable) else f"2/ω_max ({spec.name} has no stability limit)"
+    notes.append(f"dt chosen as {solver.dt_fraction} x {basis} = {dt * time_s:.4g} s")
+    return dt, stable, notes

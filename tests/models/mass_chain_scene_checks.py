@@ -52,11 +52,6 @@ def softening_pulse(name: str, tmp: Path, bonds=slice(40, 160), tension=None) ->
             "amp_first": float(peaks[:10].mean()), "amp_last": float(peaks[-10:].mean()), "scene": scene}
 
 
-def switched(u: np.ndarray, jump: float, initial: np.ndarray | None = None) -> np.ndarray:
-    """Sites whose final displacement is past half the jump (jump signed)."""
-    return (u[-1] / jump) > 0.5
-
-
 def origami_overtaking(tmp: Path) -> dict:
     """Wall force history and the speeds of the compressive and tensile peaks (d)."""
     scene, ds = run("d_origami_rarefaction_overtakes", tmp)
@@ -98,14 +93,6 @@ def slinky_steps(tmp: Path) -> dict:
         "c0": a * np.sqrt(lat.bond.k1_n_per_m / m),
         "kick_speed": -scene.excitation.velocity_m_s,
     }
-
-
-def absolute_final(scene, ds) -> np.ndarray:
-    """Final absolute displacement of every site (m): the dataset's u plus the relaxed start."""
-    from flexmm.models import MODELS
-
-    system = MODELS[scene.lattice.kind].build(scene.lattice)
-    return ds.u.values[-1] + system.meta["initial_m"]
 
 
 def switched_mask(name: str, tmp: Path, overrides=None, tag: str = "", *, towards: float) -> tuple:

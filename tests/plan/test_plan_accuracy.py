@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from flexmm.api import run_scene
+from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
 from flexmm.io.dataset import open_run
@@ -41,7 +42,7 @@ def test_extrapolation_linear_and_exponential():
 
 
 def test_accuracy_run_meets_its_target(tmp_path):
-    sc = soliton_scene(1e-4)
+    sc = soliton_scene(1e-4, integrator="velocity_verlet")  # one method: keeps the test quick
     plan = make_plan(sc, "full")
     assert plan.scene.solver.accuracy is None and plan.scene.solver.dt_s is not None
     res = run_scene(sc, run_dir=tmp_path)
@@ -49,13 +50,28 @@ def test_accuracy_run_meets_its_target(tmp_path):
     assert ds.attrs["accuracy_requested"] == 1e-4
     assert ds.attrs["accuracy_estimate"] < 1e-4 and ds.attrs["accuracy_met"] == 1
     # against a tight reference
-    prob = plan.problem
+    prob = plan.problem or build_problem(plan.scene)
     spec = INTEGRATORS[plan.choice.integrator]
     q, _, pk, _ = integrate(prob, spec, plan.choice.dt, prob.duration)
     qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 16, prob.duration)
     err = state_error(prob.system, q, qr, np.maximum(pk, pkr))
     assert err < 1e-4
     assert ds.attrs["accuracy_estimate"] == pytest.approx(err, rel=0.5)
+
+
+@pytest.mark.slow
+def test_accuracy_picks_the_cheapest_method():
+    """At 1e-7 a fourth-order method beats Verlet; the choice still meets the target."""
+    plan = make_plan(soliton_scene(1e-7), "full")
+    table = {r["integrator"]: r for r in plan.choice.table}
+    assert "velocity_verlet" in table and len(table) >= 2
+    assert plan.choice.integrator != "velocity_verlet"
+    assert plan.choice.cost == min(r["cost"] for r in table.values())
+    prob = plan.problem or build_problem(plan.scene)
+    spec = INTEGRATORS[plan.choice.integrator]
+    q, _, pk, _ = integrate(prob, spec, plan.choice.dt, prob.duration)
+    qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 8, prob.duration)
+    assert state_error(prob.system, q, qr, np.maximum(pk, pkr)) < 1e-7
 
 
 def test_accuracy_and_dt_conflict():

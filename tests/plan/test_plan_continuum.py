@@ -60,7 +60,7 @@ def test_continuum_fidelity_writes_the_travelling_wave(tmp_path):
     p = leading_pulse(ds, "theta")
     pred = predict(sc)
     assert p.speed_m_s == pytest.approx(pred.speed_m_s, rel=5e-3)
-    assert p.amplitude == pytest.approx(0.4, rel=1e-3)
+    assert p.amplitude == pytest.approx(0.4, rel=3e-3)  # peaks sampled on the sites
 
 
 def test_front_shooting_matches_the_cubic_closed_form():

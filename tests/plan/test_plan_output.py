@@ -29,9 +29,9 @@ def test_parse():
 
 
 def test_pulse_keeps_its_field_and_cadence():
-    upd, notes = output_plan(scene(), AnalysisRequest("pulse"), FIELDS, passage_s=0.05, width_sites=20)
+    upd, notes = output_plan(scene(), AnalysisRequest("pulse"), FIELDS, passage_s=0.02, width_sites=20)
     assert upd["fields"] == ["theta"] and upd["velocities"] is False
-    assert upd["n_frames"] == 201  # 10 frames per 0.05 s passage over 1 s
+    assert upd["n_frames"] == 501  # 10 frames per 0.02 s passage over 1 s
     assert upd["site_stride"] == 2
     assert "needs only" in notes[0]
 

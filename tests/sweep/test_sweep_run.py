@@ -134,6 +134,18 @@ def test_failed_points_are_recorded_and_retried_only_on_request(tmp_path, in_pro
     assert all(after[k] == before[k] for k in good)
 
 
+def test_reanalyse_measures_again_without_rerunning(local_run):
+    from flexmm.sweep.execute import prepare, reanalyse
+
+    spec, d, _ = local_run
+    datasets = {k: v for k, v in snapshot(d).items() if k.endswith("dataset.nc")}
+    before = {p.hash: json.loads((d / "points" / p.hash / "done.json").read_text()) for p in spec.points()}
+    assert reanalyse(prepare(spec, d)) == 3
+    after = {p.hash: json.loads((d / "points" / p.hash / "done.json").read_text()) for p in spec.points()}
+    assert {k: v for k, v in snapshot(d).items() if k.endswith("dataset.nc")} == datasets
+    assert all(after[h]["observables"] == before[h]["observables"] for h in before)
+
+
 def test_plot_sweep_writes_a_png(local_run, tmp_path):
     _, d, _ = local_run
     out = plot_sweep(d, tmp_path / "fig" / "tiny.png")

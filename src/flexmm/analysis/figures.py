@@ -30,6 +30,12 @@ def _save(fig, path) -> Path:
     return path
 
 
+def _cycle():
+    """Overlay colours that stay visible on the diverging colour map, repeated as needed."""
+    while True:
+        yield from ("k", "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e")
+
+
 def _label(view) -> str:
     return f"{view.spec} ({view.units})" if view.units else view.spec
 
@@ -45,12 +51,12 @@ def space_time(view, path, *, pulses=(), fronts=(), title: str = "", max_frames:
                    extent=(view.site[0] - 0.5, view.site[-1] + 0.5, t[0] * 1e3, t[-1] * 1e3),
                    interpolation="nearest")
     fig.colorbar(im, ax=ax, label=_label(view))
-    for p in pulses:
-        ax.plot(p.sites, p.arrival_time_s * 1e3, "k.", ms=1.5)
-        ax.plot([], [], "k.", label=f"pulse {p.index}: {p.speed_m_s:.4g} m/s")
-    for f in fronts:
-        ax.plot(f.track_pos_m / h + view.site[0] - view.x[0] / h, f.track_time_s * 1e3, "k-", lw=1)
-        ax.plot([], [], "k-", label=f"front {f.index}: {f.speed_m_s:.4g} m/s")
+    for p, color in zip(pulses, _cycle()):
+        ax.plot(p.sites, p.arrival_time_s * 1e3, ".", color=color, ms=2.5, mec="none")
+        ax.plot([], [], ".", color=color, label=f"pulse {p.index}: {p.speed_m_s:.4g} m/s")
+    for f, color in zip(fronts, _cycle()):
+        ax.plot(f.track_pos_m / h + view.site[0] - view.x[0] / h, f.track_time_s * 1e3, "-", color=color, lw=1)
+        ax.plot([], [], "-", color=color, label=f"front {f.index}: {f.speed_m_s:.4g} m/s")
     if pulses or fronts:
         ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
     ax.set(xlabel="site", ylabel="time (ms)", title=title)
@@ -175,7 +181,7 @@ def run_figures(res, directory=None) -> list[Path]:
     return made
 
 
-def main_pulses(res, fraction: float = 0.5) -> list:
+def main_pulses(res, fraction: float = 0.7) -> list:
     """The pulses of a run whose |amplitude| is at least ``fraction`` of its largest one."""
     top = max((abs(p.amplitude) for p in res.pulses), default=0.0)
     return [p for p in res.pulses if abs(p.amplitude) >= fraction * top]

@@ -96,7 +96,9 @@ class Hertz(_Law):
     law: Literal["hertz"]
     stiffness_n_per_m_p: Positive = Field(description="A in F = A δ^p (N/m^p)")
     exponent: float = Field(1.5, ge=1.0, le=3.0)
-    precompression_m: NonNegative = Field(0.0, description="overlap at rest δ0 (needs a static load)")
+    precompression_m: NonNegative = Field(
+        0.0, description="overlap δ0 at zero elongation; the chain keeps it only if held (fixed "
+        "ends, or static_load_n with relax, which sets the overlap to (F/A)^(1/p))")
 
 
 class Toda(_Law):

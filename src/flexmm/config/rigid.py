@@ -125,6 +125,7 @@ class Predeform(Strict):
     loads: list[EndLoad] = Field(default_factory=list)
     theta_guess_rad: Finite = 0.0
     gradient_tolerance: Positive = Field(1e-10, description="on the nondimensional forces")
+    max_steps: int = Field(2_000_000, ge=1, description="of the FIRE minimiser")
 
 
 # ---------------------------------------------------------------- magnets

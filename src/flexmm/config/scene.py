@@ -61,14 +61,34 @@ class RandomRotation(Strict):
 ImperfectionConfig = Annotated[Union[RotationSeed, RandomRotation], Field(discriminator="kind")]
 
 
-class Solver(Strict):
-    """Time integration: method, step and duration."""
+#: integrators with error control (``IntegratorSpec.adaptive``); they take rtol/atol
+ADAPTIVE_INTEGRATORS = frozenset({"dopri5"})
 
-    integrator: Literal["velocity_verlet"] = "velocity_verlet"
+
+class Solver(Strict):
+    """Time integration: method, step and duration.
+
+    ``integrator`` names an entry of ``flexmm.integrators.INTEGRATORS`` (tests check the two
+    agree). The adaptive ``dopri5`` takes ``rtol``/``atol`` and reads ``dt_s`` as its largest
+    step; the fixed-step methods take ``dt_s`` (or ``dt_fraction`` of their stable limit).
+    """
+
+    integrator: Literal["velocity_verlet", "pefrl", "rk4", "dopri5", "implicit_midpoint"] = Field(
+        "velocity_verlet",
+        description="velocity_verlet (default, 2nd order symplectic), pefrl (4th order symplectic), "
+        "rk4, dopri5 (adaptive 5(4), error control), implicit_midpoint (A-stable, stiff scenes)",
+    )
     dt_s: Positive | None = Field(
         None,
         validation_alias=AliasChoices("dt_s", "dt"),
         description="time step (s); omitted: a fraction `dt_fraction` of the stable limit",
+    )
+    rtol: Positive | None = Field(None, lt=1, description="relative tolerance of dopri5 (default 1e-6)")
+    atol: Positive | None = Field(
+        None, description="absolute tolerance of dopri5, nondimensional (default 1e-3 × rtol)"
+    )
+    threads: int | None = Field(
+        None, ge=1, le=1024, description="threads for parallel kernels (default: all cores for ≥ 1e5 units, else 1)"
     )
     dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit")
     duration_s: Positive
@@ -76,6 +96,19 @@ class Solver(Strict):
     accuracy: Positive | None = Field(
         None, lt=1, description="target relative error of the final state: picks integrator and dt (flexmm.plan)"
     )
+
+    @model_validator(mode="after")
+    def _tolerances_need_adaptive(self):
+        if self.integrator not in ADAPTIVE_INTEGRATORS:
+            given = [k for k in ("rtol", "atol") if getattr(self, k) is not None]
+            if given:
+                verb = "apply" if len(given) > 1 else "applies"
+                raise ValueError(
+                    f"solver.{' and solver.'.join(given)} {verb} only to an adaptive integrator "
+                    f"({', '.join(sorted(ADAPTIVE_INTEGRATORS))}); {self.integrator} takes fixed steps "
+                    "(set solver.dt_s or solver.dt_fraction)"
+                )
+        return self
 
 
 class Output(Strict):

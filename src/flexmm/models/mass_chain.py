@@ -188,8 +188,9 @@ def relax(args: tuple, q: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, flo
     """Local energy minimum nearest ``q`` over the ``free`` DOFs; returns (q, max |F|).
 
     A trust-region Newton–CG search (Hessian-vector products by central differences of the
-    compiled force) starting with a small radius, so it settles in the basin it starts in
-    rather than jumping over a barrier as a line-search method may.
+    compiled force) whose first steps are short (radius 0.01 spacing), so a guess inside a well
+    relaxes within it. A state that is not a local minimum (e.g. free end magnets pushing a
+    metastable chain over) relaxes to wherever the energy leads: hold such ends fixed.
     """
     from scipy.optimize import minimize
 

@@ -2,20 +2,19 @@
 
 Constant loads are a linear potential E_load = −Σ_k f_k q_k (so they stay on during the dynamics
 and the energy stays conserved); applied strain holds the end units at ∓ε L/2 along the axis.
-``relax`` minimises the compiled energy with its exact gradient (scipy L-BFGS-B over the free
-DOFs) and stores the equilibrium as the initial state ``q0`` and as ``meta['rest_state']``.
+``relax`` minimises the energy with the compiled force (FIRE, a damped-dynamics minimiser that
+moves continuously, so it cannot jump across a unit) and stores the equilibrium as the initial
+state ``q0`` and as ``meta['rest_state']``.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import optimize
 
 from flexmm._jit import jit
 from flexmm.models.base import System
 from flexmm.models.hinge import chain_energy, chain_force, chain_reference
 
-MAX_TURN = np.pi / 4  # largest change of a rotation from its initial guess during relaxation (rad)
 #: sign of the inward normal of an end, along its axis
 INWARD = {"left": 1.0, "bottom": 1.0, "right": -1.0, "top": -1.0}
 
@@ -98,10 +97,64 @@ def _strained(system: System, cfg, guess: np.ndarray) -> dict[int, float]:
     return held
 
 
-def _residual(system: System, q: np.ndarray, idx: np.ndarray, f: np.ndarray) -> float:
-    """Largest generalised force on the free DOFs."""
-    system.force(q, system.args, f)
-    return float(np.max(np.abs(f[idx]))) if idx.size else 0.0
+@jit
+def fire_relax(force, args, q, free, dt0, dt_max, tol, max_steps):
+    """FIRE minimisation (Bitzek et al., PRL 97, 170201, 2006) of the energy behind ``force``.
+
+    Moves only DOFs with ``free[k] > 0`` (unit masses); stops when max |F| over them < ``tol``.
+    Returns (steps taken, final max |F|). ``q`` is updated in place.
+    """
+    n = q.shape[0]
+    v = np.zeros(n)
+    f = np.zeros(n)
+    dt, alpha, n_pos = dt0, 0.1, 0
+    resid = np.inf
+    for step in range(max_steps):
+        force(q, args, f)
+        power, vv, ff, resid = 0.0, 0.0, 0.0, 0.0
+        for k in range(n):
+            if free[k] > 0.0:
+                power += f[k] * v[k]
+                vv += v[k] * v[k]
+                ff += f[k] * f[k]
+                resid = max(resid, abs(f[k]))
+        if resid < tol:
+            return step, resid
+        if power > 0.0:
+            mix = alpha * np.sqrt(vv / ff) if ff > 0.0 else 0.0
+            for k in range(n):
+                v[k] = ((1.0 - alpha) * v[k] + mix * f[k]) * free[k]
+            n_pos += 1
+            if n_pos > 5:
+                dt = min(1.1 * dt, dt_max)
+                alpha *= 0.99
+        else:
+            for k in range(n):
+                v[k] = 0.0
+            dt *= 0.5
+            alpha, n_pos = 0.1, 0
+        for k in range(n):
+            if free[k] > 0.0:
+                v[k] += dt * f[k]
+                q[k] += dt * v[k]
+    return max_steps, resid
+
+
+def _stiffest(system: System, q: np.ndarray, free: np.ndarray, iters: int = 30) -> float:
+    """Largest Hessian eigenvalue over the free DOFs at q (power iteration, force differences)."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=q.size) * free
+    fp, fm = np.zeros(q.size), np.zeros(q.size)
+    lam = 1.0
+    for _ in range(iters):
+        x /= np.linalg.norm(x)
+        eps = 1e-6
+        system.force(q + eps * x, system.args, fp)
+        system.force(q - eps * x, system.args, fm)
+        y = -(fp - fm) / (2 * eps) * free
+        lam = float(np.dot(x, y))
+        x = y
+    return abs(lam)
 
 
 def relax(system: System, cfg) -> dict:
@@ -113,7 +166,7 @@ def relax(system: System, cfg) -> dict:
     n, meta = system.n_sites, system.meta
     q = system.q0.copy()
     rot = system.field_index(meta["rotation_field"]) * n
-    q[rot : rot + n] += cfg.theta_guess_rad
+    q[rot : rot + n] += np.where(system.inv_mass[rot : rot + n] > 0, cfg.theta_guess_rad, 0.0)
     held = _strained(system, cfg, q)
     dof, val = [], []
     for load in cfg.loads:
@@ -129,43 +182,17 @@ def relax(system: System, cfg) -> dict:
         q[k] = x
     free = system.inv_mass > 0
     free[list(held)] = False
-    idx = np.flatnonzero(free)
-    f = np.zeros(system.ndof)
-
-    def fun(x):
-        q[idx] = x
-        system.force(q, system.args, f)
-        return float(system.energy(q, system.args)), -f[idx]
-
-    # rotations stay within ±π/4 of the guess: the line search cannot flip a unit over
-    x0 = q[idx].copy()
-    angle = np.array([system.dof_kind(k) == "angle" for k in idx])
-    lim = np.where(angle, MAX_TURN, np.inf)
-    res = optimize.minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=list(zip(x0 - lim, x0 + lim)),
-                            options={"gtol": cfg.gradient_tolerance, "ftol": 1e-16, "maxiter": 50_000,
-                                     "maxcor": 30})
-    q[idx] = res.x
-    if np.any(np.abs(res.x - x0)[angle] > 0.999 * MAX_TURN):
-        raise ValueError(f"predeformation turned a unit by more than {MAX_TURN:.3f} rad from the initial "
-                         "guess; give a closer guess (theta_guess_rad)")
-    resid = _residual(system, q, idx, f)
-    if resid > cfg.gradient_tolerance and idx.size:  # L-BFGS stalls on energy round-off: Newton polish
-        def grad(x):
-            q[idx] = x
-            system.force(q, system.args, f)
-            return -f[idx]
-        try:
-            q[idx] = optimize.newton_krylov(grad, q[idx].copy(), f_tol=cfg.gradient_tolerance, maxiter=50)
-        except optimize.NoConvergence as exc:
-            q[idx] = exc.args[0]
-        resid = _residual(system, q, idx, f)
-    if not resid <= 10 * cfg.gradient_tolerance:
+    mask = free.astype(float)
+    lam = max(_stiffest(system, q, mask), 1e-12)
+    steps, resid = fire_relax(system.force, system.args, q, mask, 0.1 / np.sqrt(lam), 0.5 / np.sqrt(lam),
+                              cfg.gradient_tolerance, cfg.max_steps)
+    if not resid <= cfg.gradient_tolerance:
         raise ValueError(f"predeformation did not converge: max residual force {resid:.3g} "
-                         f"(nondimensional) after {res.nit} iterations ({res.message}); "
-                         "is every load balanced by a fixed or strained end?")
+                         f"(nondimensional) after {steps} steps; is every load balanced by a fixed or "
+                         "strained end?")
     system.q0 = q
     system.inv_mass[list(held)] = 0.0
-    info = {"residual": resid, "iterations": int(res.nit), "energy": float(system.energy(q, system.args))}
+    info = {"residual": float(resid), "steps": int(steps), "energy": float(system.energy(q, system.args))}
     meta["rest_state"] = q.copy()
     meta["predeform"] = info
     return info

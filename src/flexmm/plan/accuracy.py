@@ -8,7 +8,8 @@ over the lattice fields f (u, θ, ...) that move, q* the exact solution. For a m
 p and step h the error behaves like err ≈ C h^p g(T), g the growth of errors in time: linear for
 the phase error of travelling waves, exponential where the dynamics amplify perturbations
 (many interacting waves: an impact's wave field after several reflections is chaotic). A pilot
-over a short time T_p runs each candidate at h₁ = ½ h_stab and h₁/2; Richardson gives
+over a short time T_p runs each candidate at h₁ = ½ h_stab, h₁/2 and h₁/4; the observed order
+p (≤ the method's: a kink in a drive reduces it) and Richardson give
 err(h₁, t) ≈ |q_{h₁} − q_{h₁/2}| 2^p/(2^p − 1) at t = T_p/2 and T_p, whose ratio fixes the growth
 (``extrapolate``), and
 
@@ -17,8 +18,9 @@ err(h₁, t) ≈ |q_{h₁} − q_{h₁/2}| 2^p/(2^p − 1) at t = T_p/2 and T_p,
 between FLOOR and CAP × the stable step h_stab = stability_limit/ω_max. When that h is so small
 that a pilot over the whole duration costs at most LONG_PILOT_SHARE of the run, the pilot is
 repeated over all of T (late error growth — chaos setting in after several reflections — is
-then seen, not extrapolated). If even FLOOR·h_stab is predicted to miss, or the pilot's error is
-O(1) (no h^p regime), the plan says the accuracy is out of reach. The cost of a method is its
+then seen, not extrapolated). If even FLOOR·h_stab is predicted to miss, the plan says the
+accuracy is out of reach; if the pilot's error is O(1) (no h^p regime) it says the prediction
+is uncertain. Either way the check after the run reports the error reached. The cost of a method is its
 force evaluations per step × T/h; the cheapest wins. After the run a companion run at 2h (or
 h/2 if 2h is not stable) gives the step-doubling estimate err(h) ≈ |q_h − q_{2h}|/(2^p − 1),
 recorded in the dataset attrs.
@@ -39,7 +41,7 @@ CAP = 0.8  # largest step as a fraction of the linear stability limit
 FLOOR = 1e-3  # smallest step as a fraction of it (an accuracy out of reach is reported, not chased)
 GROWTH_POWER = 2.0  # pilot error growth t^β beyond this is taken as exponential (chaotic dynamics)
 LONG_PILOT_SHARE = 0.1  # a pilot over the whole duration is run when it costs at most this share of the run
-SATURATED = 0.1  # a pilot error this large is outside the h^p regime: the prediction is not trusted
+SATURATED = 0.1  # a pilot error this large is outside the h^p regime: the prediction is uncertain
 PILOT_FRACTION = 0.1
 PILOT_MIN_STEPS = 400
 #: force evaluations per step for methods whose registry entry does not say
@@ -47,21 +49,37 @@ FORCE_EVALS = {"velocity_verlet": 1, "rk4": 4, "pefrl": 4, "forest_ruth": 3, "yo
                "suzuki5": 5, "omelyan_pefrl": 4}
 
 
-def force_evals(spec) -> int | None:
+def force_evals(spec) -> float | None:
     """Force evaluations per step of an integrator (registry metadata, else the table above)."""
-    for attr in ("force_evals", "n_force_evals", "stages", "evals_per_step"):
-        val = getattr(spec, attr, None)
-        if isinstance(val, (int, float)) and val > 0:
-            return int(val)
+    val = getattr(spec, "force_evals", None)
+    if isinstance(val, (int, float)) and math.isfinite(val) and val > 0:
+        return float(val)
     return FORCE_EVALS.get(spec.name)
+
+
+def new_acc(spec, ndof: int) -> np.ndarray:
+    """The accumulator the integrator's kernel writes (energy budget and counters)."""
+    make = getattr(spec, "new_acc", None)
+    return make(ndof) if make is not None else np.zeros(2)
+
+
+def allowed_integrators() -> tuple[str, ...] | None:
+    """Integrator names the scene schema accepts (None: any registered name)."""
+    from typing import get_args
+
+    from flexmm.config.scene import Solver
+
+    names = tuple(a for a in get_args(Solver.model_fields["integrator"].annotation) if isinstance(a, str))
+    return names or None
 
 
 def candidates(problem, only: str | None = None) -> list:
     """Registered explicit fixed-step methods usable for this problem (damping needs support)."""
     damped = bool(np.any(problem.damp > 0) or problem.terms["dash_c"].size)
+    allowed = allowed_integrators()
     out = []
     for name, spec in INTEGRATORS.items():
-        if only is not None and name != only:
+        if only is not None and name != only or allowed is not None and name not in allowed:
             continue
         lim = getattr(spec, "stability_limit", None)
         if lim is None or not math.isfinite(lim) or lim <= 0:
@@ -86,7 +104,7 @@ def integrate(problem, spec, h: float, t_end: float, n_samples: int = 32, checkp
     s = problem.system
     q, v = s.q0.copy(), s.v0.copy()
     f = np.zeros_like(q)
-    acc = np.zeros(2)
+    acc = new_acc(spec, q.size)
     terms = problem.terms_tuple()
     apply_prescribed(q, v, 0.0, *terms[4:])
     spec.init(s.force, s.args, q, v, 0.0, f, terms)
@@ -136,6 +154,7 @@ class Choice:
     pilot_time: float  # nondimensional duration of the pilot
     table: list[dict] = field(default_factory=list)  # one row per candidate
     reachable: bool = True  # False: even the smallest step allowed is predicted to miss
+    order: float = 2.0  # order observed in the pilot (≤ the method's; used by the check)
 
 
 def _drive_end(problem) -> float:
@@ -179,14 +198,22 @@ def extrapolate(errors: tuple[float, float], t_p: float, T: float) -> tuple[floa
     return e_full * math.exp(min(lam * (T - t_p), 700.0)), beta
 
 
-def _pilot_errors(problem, spec, h1: float, t_p: float) -> tuple[tuple[float, float], int]:
-    """Richardson errors of steps h1 at t_p/2 and t_p (from runs at h1 and h1/2), and steps taken."""
-    (qa2, qa), peaks, na = integrate(problem, spec, h1, t_p, checkpoints=(0.5, 1.0))
-    (qb2, qb), peaks_b, nb = integrate(problem, spec, h1 / 2, t_p, checkpoints=(0.5, 1.0))
-    pk = np.maximum(peaks, peaks_b)
-    rich = 2**spec.order / (2**spec.order - 1)
+def _pilot_errors(problem, spec, h1: float, t_p: float) -> tuple[tuple[float, float], float, int]:
+    """Errors of steps h1 at t_p/2 and t_p, the observed order, and the steps taken.
+
+    Runs at h1, h1/2 and h1/4: the observed order p_obs = log2(|q₁ − q₂| / |q₂ − q₄|) (clipped to
+    [1, p]) catches order reduction — a kink in a prescribed drive, a contact opening — and the
+    Richardson error is |q₁ − q₂| 2^p_obs/(2^p_obs − 1).
+    """
+    runs = [integrate(problem, spec, h1 / 2**k, t_p, checkpoints=(0.5, 1.0)) for k in range(3)]
+    pk = np.maximum.reduce([r[1] for r in runs])
     s = problem.system
-    return (state_error(s, qa2, qb2, pk) * rich, state_error(s, qa, qb, pk) * rich), na + nb
+    d = [[state_error(s, runs[k][0][j], runs[k + 1][0][j], pk) for j in (0, 1)] for k in (0, 1)]
+    p = spec.order
+    p_obs = math.log2(d[0][1] / d[1][1]) if d[1][1] > 0 and d[0][1] > 0 else p
+    p_obs = min(max(p_obs, 1.0), p)
+    rich = 2**p_obs / (2**p_obs - 1)
+    return (d[0][0] * rich, d[0][1] * rich), p_obs, sum(r[2] for r in runs)
 
 
 def _step_for(accuracy: float, err1: float, h1: float, p: int, h_stab: float, T: float) -> float:
@@ -205,28 +232,31 @@ def choose(problem, accuracy: float, only: str | None = None) -> Choice:
         h_stab = stable_step(problem, spec)
         h1 = min(0.5 * h_stab, T / 8)
         t_p = min(T, max(PILOT_FRACTION * T, PILOT_MIN_STEPS * h1, 1.5 * _drive_end(problem)))
-        errs, n_pilot = _pilot_errors(problem, spec, h1, t_p)
+        errs, p, n_pilot = _pilot_errors(problem, spec, h1, t_p)
         err1, beta = extrapolate(errs, t_p, T)
         h = _step_for(accuracy, err1, h1, p, h_stab, T)
-        h_long = 3 * h / LONG_PILOT_SHARE
+        h_long = 7 * h / LONG_PILOT_SHARE
         if t_p < T and h_long <= h1:  # a pilot over all of T costs ≤ LONG_PILOT_SHARE of the run
             t_p, h1 = T, h_long
-            errs, n_long = _pilot_errors(problem, spec, h1, T)
+            errs, p, n_long = _pilot_errors(problem, spec, h1, T)
             n_pilot += n_long
             err1, beta = errs[1], math.log2(errs[1] / errs[0]) if errs[0] > 0 else 1.0
             h = _step_for(accuracy, err1, h1, p, h_stab, T)
         predicted = err1 * (h / h1) ** p
-        why = ("" if predicted <= accuracy and err1 < SATURATED else
-               f"pilot error {err1:.2g} at {h1 / h:.0f}x the chosen step is outside the h^{p} regime" if err1 >= SATURATED else
-               f"even {FLOOR:g} x the stable step is predicted to give {predicted:.2g}")
+        why = "" if predicted <= accuracy else f"even {FLOOR:g} x the stable step is predicted to give {predicted:.2g}"
+        if err1 >= SATURATED:
+            why = why or ""
+            uncertain = f"pilot error {err1:.2g} at {h1 / h:.0f}x the chosen step is outside the h^{p} regime"
+        else:
+            uncertain = ""
         cost = force_evals(spec) * math.ceil(T / h)
-        rows.append(dict(integrator=spec.name, order=p, dt=h, stable_dt=h_stab, pilot_error=errs[1],
+        rows.append(dict(integrator=spec.name, order=spec.order, observed_order=p, dt=h, stable_dt=h_stab, pilot_error=errs[1],
                          growth=beta, predicted_error=predicted, cost=cost,
                          pilot_cost=force_evals(spec) * n_pilot,
-                         reachable=not why, why=why))
+                         reachable=not why, why=why, uncertain=uncertain))
         better = best is None or (rows[-1]["reachable"], -cost) > (best_row["reachable"], -best.cost)
         if better:
-            best, best_row = Choice(spec.name, h, rows[-1]["predicted_error"], cost, t_p), rows[-1]
+            best, best_row = Choice(spec.name, h, rows[-1]["predicted_error"], cost, t_p, order=p), rows[-1]
     if best is None:
         raise ValueError("no registered integrator can be costed for this scene")
     best.table = rows
@@ -244,12 +274,15 @@ class Check:
     wall_s: float
 
 
-def check(problem, integrator: str, h: float, t_end: float, q: np.ndarray) -> Check:
-    """Error estimate of the final state ``q`` of a run with steps h, from a companion run."""
+def check(problem, integrator: str, h: float, t_end: float, q: np.ndarray, order: float | None = None) -> Check:
+    """Error estimate of the final state ``q`` of a run with steps h, from a companion run.
+
+    ``order``: the order observed in the pilot (default: the method's).
+    """
     import time
 
     spec = INTEGRATORS[integrator]
-    p = spec.order
+    p = spec.order if order is None else order
     h_stab = stable_step(problem, spec)
     t0 = time.perf_counter()
     if 2 * h <= CAP * h_stab:

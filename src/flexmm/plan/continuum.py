@@ -234,7 +234,9 @@ def formation_pilot(scene, log=None):
     s, spec = problem.system, INTEGRATORS[scene.solver.integrator]
     n, k = s.n_sites, s.field_index("theta") * s.n_sites
     q, v = s.q0.copy(), s.v0.copy()
-    f, acc = np.zeros_like(q), np.zeros(2)
+    from flexmm.plan.accuracy import new_acc
+
+    f, acc = np.zeros_like(q), new_acc(spec, q.size)
     terms = problem.terms_tuple()
     apply_prescribed(q, v, 0.0, *terms[4:])
     spec.init(s.force, s.args, q, v, 0.0, f, terms)

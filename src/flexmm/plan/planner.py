@@ -89,7 +89,7 @@ class Plan:
             return None
 
         def on_finish(q, v, h, say) -> dict:
-            chk = acc_mod.check(problem, self.choice.integrator, h, problem.duration, q)
+            chk = acc_mod.check(problem, self.choice.integrator, h, problem.duration, q, self.choice.order)
             ok = chk.estimate <= self.accuracy
             say(f"accuracy check ({chk.method}, dt {chk.companion_dt * problem.system.scales.time_s:.4g} s): "
                 f"estimated error {chk.estimate:.3g} {'meets' if ok else 'MISSES'} the requested {self.accuracy:g}")
@@ -221,11 +221,13 @@ def _accuracy(scene, integrator_set: bool):
     note = (f"accuracy {target:g}: {choice.integrator} with dt = {choice.dt * ts:.4g} s "
             f"(predicted error {choice.predicted_error:.2g}, pilot over {choice.pilot_time * ts:.3g} s) — {rows}")
     notes = [note]
+    row = next(r for r in choice.table if r["integrator"] == choice.integrator)
     if not choice.reachable:
-        row = next(r for r in choice.table if r["integrator"] == choice.integrator)
         notes.append(f"WARNING: accuracy {target:g} looks out of reach ({row['why']}; pilot errors grow "
                      f"like t^{row['growth']:.1f}: the dynamics amplify perturbations); the run uses the "
                      "step above and the check after it reports the error reached")
+    elif row["uncertain"]:
+        notes.append(f"prediction uncertain: {row['uncertain']}; the check after the run reports the error reached")
     attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
              "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable)}
     if choice.integrator == scene.solver.integrator:  # same method: the built problem only changes dt

@@ -25,6 +25,8 @@ _EXPORTS = {
     "SweepStore": "store",
     "write_combined": "combine",
     "plot_sweep": "plot",
+    "is_sweep": "plot",
+    "open_sweep": "plot",
 }
 
 __all__ = sorted(_EXPORTS)

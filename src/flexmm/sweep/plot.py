@@ -18,6 +18,12 @@ import numpy as np
 from flexmm.sweep.store import RESULT
 
 
+def is_sweep(path: str | Path) -> bool:
+    """True for a sweep directory (one holding sweep.nc or points/) or a combined sweep.nc file."""
+    p = Path(path)
+    return (p.is_dir() and ((p / RESULT).is_file() or (p / "points").is_dir())) or (p.is_file() and p.name == RESULT)
+
+
 def open_sweep(path: str | Path):
     """The combined sweep dataset of a sweep directory (or its sweep.nc)."""
     import xarray as xr

@@ -36,7 +36,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
 from flexmm.config.loader import (
     ConfigError,
@@ -48,10 +47,10 @@ from flexmm.config.loader import (
 )
 from flexmm.config.scene import Scene
 from flexmm.io.provenance import config_hash
+from flexmm.sweep.values import parse_values, values_of
 
 SPEC_KEYS = ("name", "description", "base", "set", "vary", "analysis")
 MODES = ("grid", "zip")
-RANGE_KEYS = ("start", "stop", "num", "scale", "values")
 ANALYSIS_KEYS = ("kind", "field", "threshold_fraction", "trim_fraction")
 ANALYSIS_KINDS = ("auto", "pulse", "front", "driven")
 
@@ -161,60 +160,6 @@ def _grouped_issue(key: tuple, labels: list[str], n_total: int) -> ConfigIssue:
     else:
         where = f"at {len(labels)} of {n_total} points, e.g. {labels[0]}"
     return ConfigIssue(source, line, path, f"{message} [{where}]")
-
-
-# ---------------------------------------------------------------- values: ranges and lists
-
-
-def _round(x: float) -> float:
-    return float(f"{x:.12g}")
-
-
-def _yaml_scalar(text: str) -> Any:
-    """A value read exactly as ``--set`` reads it (YAML scalar; 1e-3 is a float)."""
-    return parse_overrides([f"_={text.strip()}"])[0][1]
-
-
-def _range(start: Any, stop: Any, num: Any, scale: str) -> tuple[tuple, str | None]:
-    """Values of a linear or log range, or (None, reason) if the bounds are unusable."""
-    bad = [n for n, v in (("start", start), ("stop", stop)) if isinstance(v, bool) or not isinstance(v, (int, float))]
-    if bad:
-        return (), f"range {' and '.join(bad)} must be numbers"
-    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
-        return (), f"range num must be an integer >= 1 (got {num!r})"
-    if not (math.isfinite(start) and math.isfinite(stop)):
-        return (), "range bounds must be finite"
-    if scale == "log":
-        if start <= 0 or stop <= 0:
-            return (), f"a log range needs start > 0 and stop > 0 (got {start}, {stop})"
-        vals = np.geomspace(start, stop, num)
-    elif scale == "linear":
-        vals = np.linspace(start, stop, num)
-    else:
-        return (), f"range scale must be 'linear' or 'log' (got {scale!r})"
-    as_int = all(isinstance(v, int) for v in (start, stop)) and scale == "linear" and np.allclose(vals, np.round(vals))
-    return tuple(int(round(v)) if as_int else _round(v) for v in vals), None
-
-
-def parse_values(text: str) -> tuple[tuple, str, str | None]:
-    """Parse ``start:stop:num``, ``log:start:stop:num`` or ``a,b,c`` -> (values, scale, error)."""
-    text = str(text).strip()
-    parts = text.split(":")
-    if parts[0].strip().lower() in ("log", "lin", "linear") and len(parts) == 4:
-        scale = "log" if parts[0].strip().lower() == "log" else "linear"
-        parts = parts[1:]
-    elif len(parts) == 3:
-        scale = "linear"
-    elif len(parts) == 1:
-        vals = tuple(_yaml_scalar(p) for p in text.split(","))
-        if any(v is None for v in vals):
-            return (), "linear", "empty value in the list"
-        return vals, "linear", None
-    else:
-        return (), "linear", "expected start:stop:num, log:start:stop:num or a,b,c"
-    start, stop, num = (_yaml_scalar(p) for p in parts)
-    vals, err = _range(start, stop, num, scale)
-    return vals, scale, err
 
 
 def parse_vary(raw: str) -> Axis:
@@ -367,7 +312,7 @@ def _axes(vary: Any, lines: dict, src: str, bad) -> tuple[str, tuple[Axis, ...]]
     for key, spec in section.items():
         keys = ("vary", mode, key)
         origin = f"{src}:{_line(lines, keys)}"
-        vals, scale, err = _values(spec)
+        vals, scale, err = values_of(spec)
         if err:
             bad(keys, err)
         elif not vals:
@@ -375,31 +320,6 @@ def _axes(vary: Any, lines: dict, src: str, bad) -> tuple[str, tuple[Axis, ...]]
         else:
             axes.append(Axis(str(key), vals, origin, scale))
     return mode, tuple(axes)
-
-
-def _values(spec: Any) -> tuple[tuple, str, str | None]:
-    if isinstance(spec, list):
-        return tuple(spec), "linear", None
-    if isinstance(spec, dict):
-        unknown = [k for k in spec if k not in RANGE_KEYS]
-        if unknown:
-            return (), "linear", f"unknown range key {unknown[0]!r}; expected {', '.join(RANGE_KEYS)}"
-        if "values" in spec:
-            scale = spec.get("scale", "linear")
-            if set(spec) - {"values", "scale"} or not isinstance(spec["values"], list):
-                return (), "linear", "give either `values: [...]` (and optionally `scale`) or start/stop/num"
-            if scale not in ("linear", "log"):
-                return (), "linear", f"scale must be 'linear' or 'log' (got {scale!r})"
-            return tuple(spec["values"]), scale, None
-        missing = [k for k in ("start", "stop", "num") if k not in spec]
-        if missing:
-            return (), "linear", f"range needs {', '.join(missing)}"
-        scale = spec.get("scale", "linear")
-        vals, err = _range(spec["start"], spec["stop"], spec["num"], scale)
-        return vals, scale, err
-    if isinstance(spec, str):
-        return parse_values(spec)
-    return (spec,), "linear", None
 
 
 def spec_summary(spec: SweepSpec) -> dict:

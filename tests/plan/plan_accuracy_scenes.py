@@ -1,4 +1,4 @@
-"""Ten scenes for the ``solver.accuracy`` acceptance check (tests/plan/test_plan_acceptance.py).
+"""Ten scenes for the ``solver.accuracy`` acceptance check (tests/plan/test_plan_acceptance.py; not a test module itself).
 
 Each is (name, scene dict, requested accuracy); paths are relative to the repository root.
 """

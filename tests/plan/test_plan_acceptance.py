@@ -1,0 +1,119 @@
+"""Acceptance of issue 6 (slow): reduced models, absorbing layer, solver.accuracy.
+
+Numbers measured with these checks are in docs/fidelity.md.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexmm.assemble import build_problem
+from flexmm.config import load_scene, scene_from_dict
+from flexmm.integrators import INTEGRATORS
+from flexmm.models import MODELS
+from flexmm.plan import make_plan
+from flexmm.plan.accuracy import integrate, new_acc, state_error
+from flexmm.plan.compare import compare_fidelities
+from flexmm.plan.output import AnalysisRequest
+
+ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.slow
+
+
+# ---------------------------------------------------------------- reduced models
+@pytest.mark.parametrize("config,overrides,fidelities,kind,min_work_ratio", [
+    ("planar_sheet_impact.yaml", ["lattice.n_rows=20", "lattice.n_cols=240", "solver.duration_s=0.05"],
+     ("full", "auto"), "pulse", 10.0),
+    ("lego_vector_soliton.yaml", [], ("full", "continuum"), "pulse", 1.5),
+    ("h_raney_transition_wave.yaml", [], ("full", "continuum"), "front", 100.0),
+])
+def test_reduced_model_reproduces_speed_and_amplitude(tmp_path, config, overrides, fidelities, kind,
+                                                      min_work_ratio):
+    sc = load_scene(ROOT / "configs" / config, overrides)
+    cmp = compare_fidelities(sc, fidelities, tmp_path, AnalysisRequest(kind))
+    assert all(r.status == "finished" for r in cmp.runs)
+    assert abs(cmp.relative("speed_m_s")) < 0.01
+    assert abs(cmp.relative("amplitude")) < 0.01
+    assert cmp.work_ratio >= min_work_ratio
+
+
+# ---------------------------------------------------------------- absorbing layer
+LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
+            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
+
+
+def _states(problem, times):
+    """States (q, v) of the problem at the given (increasing, nondimensional) times."""
+    s = problem.system
+    spec = INTEGRATORS[problem.scene.solver.integrator]
+    q, v = s.q0.copy(), s.v0.copy()
+    f, acc = np.zeros_like(q), new_acc(spec, q.size)
+    terms = problem.terms_tuple()
+    spec.init(s.force, s.args, q, v, 0.0, f, terms)
+    h = problem.dt
+    t, out = 0.0, []
+    for tm in times:
+        k = max(1, int(round((tm - t) / h)))
+        t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, (tm - t) / k, k, acc)
+        out.append((q.copy(), v.copy()))
+    return out
+
+
+def _first_half_energy(scene, problem, state, m):
+    """Kinetic + potential energy of units 0..m−1 (hinges among them), nondimensional."""
+    q, v = state
+    n = problem.system.n_sites
+    sub = MODELS[scene.lattice.kind].build(scene.lattice.model_copy(update={"n_units": m}))
+    qs, vs = np.concatenate([q[:m], q[n : n + m]]), np.concatenate([v[:m], v[n : n + m]])
+    return sub.energy(qs, sub.args) + 0.5 * float(np.sum(sub.mass * vs * vs))
+
+
+def reflected_energy(excitation, n, layer, window, n_t=40):
+    """Largest energy excess in the first half of an n-unit chain over a 3n-unit reference
+    (which nothing reaches back from) during ``window`` (nondimensional times)."""
+    def scene(units, absorbing):
+        lat = {**LEGO, "n_units": units, "left": "driven" if excitation["kind"] == "impact" else "free"}
+        data = {"name": "abs", "lattice": lat, "excitation": excitation,
+                "solver": {"duration_s": 1.0, "dt_fraction": 0.25}}
+        if absorbing:
+            data["damping"] = {"absorbing": absorbing}
+        return scene_from_dict(data)
+
+    times = np.linspace(*window, n_t)
+    sc, ref = scene(n, layer), scene(3 * n, None)
+    p, pr = build_problem(sc), build_problem(ref)
+    e = [_first_half_energy(sc, p, s, n // 2) for s in _states(p, times)]
+    er = [_first_half_energy(ref, pr, s, n // 2) for s in _states(pr, times)]
+    return float(np.max(np.array(e) - np.array(er)))
+
+
+@pytest.mark.parametrize("excitation,window", [
+    ({"kind": "soliton", "amplitude_rad": 0.4, "center_site": 150}, ((450 + 300) / 0.074, (450 + 600) / 0.074 - 500)),
+    ({"kind": "impact", "velocity_m_s": 3.0, "angular_velocity_rad_s": 300.0}, (900, 1200 / 0.074)),
+])
+def test_absorbing_layer_cuts_the_reflected_energy_100x(excitation, window):
+    """Energy coming back into the first half of a 600-unit LEGO chain after the waves met the
+    far end: free end versus the default absorbing layer (120 units, ζ_max = 0.03, quadratic)."""
+    free = reflected_energy(excitation, 600, None, window)
+    absorbed = reflected_energy(excitation, 600, {"end": "right"}, window)
+    assert free > 0
+    assert free / max(absorbed, 1e-300) >= 100
+
+
+# ---------------------------------------------------------------- solver.accuracy
+def test_accuracy_met_in_nine_of_ten_scenes():
+    from plan_accuracy_scenes import scenes
+
+    met = []
+    for name, data, acc in scenes():
+        sc = scene_from_dict({**data, "solver": {**data["solver"], "accuracy": acc}})
+        plan = make_plan(sc, "full")
+        prob = plan.problem or build_problem(plan.scene)
+        spec = INTEGRATORS[plan.choice.integrator]
+        q, _, pk, n = integrate(prob, spec, plan.choice.dt, prob.duration)
+        qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 16, prob.duration)
+        met.append(state_error(prob.system, q, qr, np.maximum(pk, pkr)) <= acc)
+    assert sum(met) >= 9, met
