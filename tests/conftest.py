@@ -68,6 +68,12 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
                               k_rot_n_m_per_rad=0.02 * 71690.0 * 0.016**2),
             "translation_invariant": True,
         },
+        "precompressed-loads": {  # constant end loads (predeform): an extra linear energy term
+            "lattice": _chain(theta0_rad=0.05, predeform={"loads": [{"end": "left", "force_n": 0.2},
+                                                                   {"end": "right", "force_n": 0.2}]}),
+            "translation_invariant": True,  # the two loads balance
+            "not_at_rest": "the end loads act at q = 0 (the relaxed state is q0)",
+        },
         "graded-theta0": {
             "lattice": _chain(theta0_rad=0.1, n_lateral=1, lateral_stretch=True, variation=[
                 {"kind": "gradient", "target": "theta0_rad", "start": 0.05, "end": 0.3},
@@ -90,10 +96,26 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
                             mass_kg=None, inertia_kg_m2=None, areal_density_kg_m2=6.18),
             "translation_invariant": True,
         },
+        "periodic-graded-4x4": {  # wrap hinges on both axes; per-hinge and per-unit variation
+            "lattice": dict(_SHEET, n_rows=4, n_cols=4, theta0_rad=0.1, left="periodic", right="periodic",
+                            bottom="periodic", top="periodic", variation=[
+                                {"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 5e-4, "end": 2e-3},
+                                {"kind": "random", "target": "mass_kg", "relative_std": 0.1, "seed": 1},
+                                {"kind": "interface", "target": "k_shear_n_per_m", "position": 2, "value": 3e3,
+                                 "axis": "y"}]),
+            "translation_invariant": True,
+        },
+        "magnets-2x3": {  # face dipoles of hinged and diagonal neighbours, with their contact core
+            "lattice": dict(_SHEET, n_rows=2, n_cols=3, a_m=0.02, k_long_n_per_m=5e4, k_shear_n_per_m=5e4,
+                            k_rot_n_m_per_rad=0.01, mass_kg=0.005, inertia_kg_m2=None,
+                            magnets={"moment_a_m2": 0.253, "recess_m": 0.003}),
+            "translation_invariant": True,
+            "not_at_rest": "facing magnets pull on each other at q = 0",
+        },
     },
     "bistable_linkage": {
         "six-bars": {
-            "lattice": {"kind": "bistable_linkage", "n_units": 6, "bar_length_m": 0.01, "theta0_rad": 0.3,
+            "lattice": {"kind": "bistable_linkage", "n_cols": 3, "bar_length_m": 0.01, "theta0_rad": 0.3,
                         "theta_deployed_rad": 0.7, "mass_kg": 1e-3, "k_pin_n_per_m": 1e4,
                         "released_energy_j": 1e-4},
             "translation_invariant": True,

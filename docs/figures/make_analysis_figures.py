@@ -36,7 +36,8 @@ def soliton_scene(A: float, n: int, travel: float, name: str):
     lat.update(n_units=n, left="free")
     d.update(name=name, excitation={"kind": "soliton", "amplitude_rad": A, "center_site": n // 10})
     p = rt.lego_parameters()
-    d["solver"]["duration_s"] = travel * n / float(rt.soliton_speed(p, A)) * math.sqrt(lat["mass_kg"] / lat["k_long_n_per_m"])
+    time_unit = math.sqrt(lat["mass_kg"] / lat["k_long_n_per_m"])
+    d["solver"]["duration_s"] = travel * n / float(rt.soliton_speed(p, A)) * time_unit
     d["output"]["n_frames"] = 1001
     return scene_from_dict(d)
 

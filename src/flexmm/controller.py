@@ -17,12 +17,17 @@ import numpy as np
 
 from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
-from flexmm.integrators.common import apply_prescribed, contact_energy
+from flexmm.integrators.common import ACC_STEPS, apply_prescribed, contact_energy
+from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
+from flexmm.integrators.parallel import choose_threads
+from flexmm.integrators.parallel import kernels as parallel_kernels
 from flexmm.io.dataset import DatasetWriter, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
 RUNAWAY_FACTOR = 1e4
+#: relative tolerance of adaptive integrators when solver.rtol is not given
+DEFAULT_RTOL = 1e-6
 #: frames count towards the runaway reference only once this many steps old, so an unstable
 #: mode (energy × ≥ 1.5 per step) cannot raise its own threshold when frames are frequent
 RUNAWAY_LAG_STEPS = 100
@@ -168,24 +173,34 @@ def run_problem(
 
     for note in problem.notes:
         say(note)
-    h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, 
-                         scene.output.every_s / sc.time_s if scene.output.every_s else None)
+    every = scene.output.every_s / sc.time_s if scene.output.every_s else None
+    if spec.adaptive:  # one call per frame; the method picks its own steps in between
+        frame_dt = every if every is not None else problem.duration / (scene.output.n_frames - 1)
+        h, chunks = schedule(problem.duration, frame_dt, scene.output.n_frames, every)
+    else:
+        h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, every)
+    threads = choose_threads(s.n_sites, scene.solver.threads)
+    advance, force, threads = parallel_kernels(spec, s.force, threads)
     obs = _Observer(problem, run_dir / "dataset.nc")
     n_frames = len(chunks) + 1
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
-    say(f"{s.model}: {s.n_sites} units, {s.ndof} DOFs, {sum(chunks)} steps of {h * sc.time_s:.4g} s "
-        f"(stable limit {problem.stable_dt * sc.time_s:.4g} s), {n_frames} frames, ~{size / 2**20:.1f} MiB")
+    steps = (f"adaptive steps (rtol {scene.solver.rtol or DEFAULT_RTOL:g})" if spec.adaptive
+             else f"{sum(chunks)} steps of {h * sc.time_s:.4g} s")
+    say(f"{s.model}: {s.n_sites} units, {s.ndof} DOFs, {spec.name}, {steps} "
+        f"(stable limit {problem.stable_dt * sc.time_s:.4g} s), {n_frames} frames, ~{size / 2**20:.1f} MiB"
+        + (f", {threads} threads" if threads > 1 else ""))
 
     q, v = s.q0.copy(), s.v0.copy()
     f = np.zeros_like(q)
-    acc = np.zeros(2)
+    acc = spec.new_acc(s.ndof, rtol=scene.solver.rtol or DEFAULT_RTOL, atol=scene.solver.atol,
+                       max_step=scene.solver.dt_s / sc.time_s if scene.solver.dt_s else None)
     terms = problem.terms_tuple()
     t = 0.0
     drv = terms[4:]
     apply_prescribed(q, v, t, *drv)
     tc = _time.perf_counter()
-    spec.init(s.force, s.args, q, v, t, f, terms)
-    spec.advance(s.force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, t, h, 0, acc.copy())
+    spec.init(force, s.args, q, v, t, f, terms)
+    advance(force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, t, h, 0, acc.copy())
     compile_s = _time.perf_counter() - tc
     e_max = abs(obs.frame(problem, t, q, v, acc))
     recent: deque[tuple[int, float]] = deque()  # (step, |E|) of frames not yet RUNAWAY_LAG_STEPS old
@@ -195,9 +210,9 @@ def run_problem(
     t_wall = _time.perf_counter()
     try:
         for k, nsteps in enumerate(chunks):
-            t_prev, q_prev = t, q.copy()
-            t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, nsteps, acc)
-            n_steps += nsteps
+            t_prev = t
+            t = advance(force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, nsteps, acc)
+            n_steps = int(acc[ACC_STEPS]) if spec.adaptive else n_steps + nsteps
             bad = not (np.isfinite(q).all() and np.isfinite(v).all())
             if not bad:
                 kin, pot = obs.energies(problem, q, v, acc)
@@ -208,7 +223,6 @@ def run_problem(
                           f"(non-finite state or runaway energy) with dt = {h * sc.time_s:.4g} s; "
                           f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
                           f"last good time {t_prev * sc.time_s:.6g} s kept")
-                del q_prev
                 break
             recent.append((n_steps, abs(obs.frame(problem, t, q, v, acc))))
             while recent and recent[0][0] <= n_steps - RUNAWAY_LAG_STEPS:
@@ -227,6 +241,13 @@ def run_problem(
         say(reason)
     if on_finish is not None and status == "finished":
         extra_attrs = {**(extra_attrs or {}), **on_finish(q, v, h, say)}
+    counters = spec.counters(acc)
+    solver_attrs = {"threads": threads, "force_evaluations": counters["force_evaluations"]}
+    if spec.adaptive:
+        h = t / n_steps if n_steps else h  # mean accepted step (frames are dense output)
+        solver_attrs.update(rtol=float(acc[S_RTOL]), atol=float(acc[S_ATOL]), rejected_steps=counters["rejected_or_newton"])
+    if spec.implicit:
+        solver_attrs.update(newton_iterations=counters["rejected_or_newton"], krylov_iterations=counters["krylov"])
     attrs = {
         **provenance_attrs(scene),
         "title": scene.name,
@@ -237,6 +258,7 @@ def run_problem(
         "stable_dt_s": problem.stable_dt * sc.time_s,
         "omega_max_rad_s": problem.omega_max / sc.time_s,
         "n_steps": n_steps,
+        **solver_attrs,
         "compile_time_s": compile_s,
         "wall_time_s": wall,
         "status": status,

@@ -25,7 +25,7 @@ from flexmm.models.base import System
 
 DENSE_LIMIT = 400
 LANCZOS_MAX_ITER = 600
-LANCZOS_RTOL = 1e-7
+LANCZOS_RTOL = 1e-6
 
 
 def _contact_stiffness(system: System, terms: dict) -> list[tuple[int, int, float]]:
@@ -104,7 +104,7 @@ def lanczos_max(op, n: int, *, max_iter: int = LANCZOS_MAX_ITER, rtol: float = L
     return history[-1]
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def _lanczos_steps(force, args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_prev, b, alpha, beta, k0, k1):
     """Lanczos iterations k0..k1−1 on W K W (W = M^{-1/2}, K by central differences of force)."""
     n = x.shape[0]

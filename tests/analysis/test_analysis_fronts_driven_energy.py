@@ -23,7 +23,7 @@ def test_front_speed_width_and_switched_sites():
     # tanh profile: 10-90 % width = w ln 9 (the 1-site sampling costs ~1.5 %)
     assert f.width_10_90_m == pytest.approx(3.0 * math.log(9.0), rel=0.03)
     assert f.jump == pytest.approx(1.0, rel=0.01)
-    assert f.n_switched > 140
+    assert f.n_switched > 130  # the front enters at x = −10 and stops at 140 m
 
 
 def test_front_arrest_distance():

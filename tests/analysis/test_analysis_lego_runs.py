@@ -107,13 +107,15 @@ def test_shaker_sweep_finds_the_longitudinal_cutoff(tmp_path, lego_config):
         cfg = copy.deepcopy(lego_config)
         cfg["name"] = f"shaker_{f:g}"
         cfg["lattice"].update(n_units=60)
-        cfg["excitation"] = {"kind": "shaker", "end": "left", "frequency_hz": f, "amplitude_m": 1e-5, "ramp_cycles": 5}
+        cfg["excitation"] = {"kind": "shaker", "end": "left", "frequency_hz": f, "amplitude_m": 1e-5,
+                             "ramp_cycles": 5}
         cfg["damping"] = {"viscous": {"damping_ratio": 0.01}}
         cfg["solver"]["duration_s"] = 0.1
         cfg["output"]["n_frames"] = 2001
         run_scene(scene_from_dict(cfg), run_dir=tmp_path / cfg["name"])
         runs.append(str(tmp_path / cfg["name"]))
-    res = CliRunner().invoke(app, ["analyze", *runs, "--plot", "--plot-dir", str(tmp_path), "--json", str(tmp_path / "s.json")])
+    res = CliRunner().invoke(app, ["analyze", *runs, "--plot", "--plot-dir", str(tmp_path),
+                                   "--json", str(tmp_path / "s.json")])
     assert res.exit_code == 0, res.output
     import json
 
@@ -123,3 +125,28 @@ def test_shaker_sweep_finds_the_longitudinal_cutoff(tmp_path, lego_config):
     assert data["bands"]["measured_hz"] == [[400.0, 1000.0]]
     assert data["bands"]["predicted_hz"][-1][1] == pytest.approx(1267.7, rel=1e-3)
     assert (tmp_path / "transmission.png").is_file()
+
+
+def test_damped_bistable_front_against_theory(tmp_path):
+    """Mass chain, cubic bistable on-site force (β = 0.3), front 15 sites wide at v = c0/2."""
+    cfg = {
+        "name": "bistable_front",
+        "lattice": {"kind": "mass_chain", "n_units": 300, "spacing_m": 0.01, "mass_kg": 0.01,
+                    "bond": {"law": "linear", "k_n_per_m": 100.0},
+                    "onsite": [{"law": "bistable_cubic", "alpha_n_per_m3": 26667.0, "beta": 0.3, "jump_m": 0.01}],
+                    "left": "driven"},
+        "excitation": {"kind": "boundary_displacement", "end": "left", "shape": "smooth_step",
+                       "amplitude_m": 0.01, "duration_s": 0.05},
+        "damping": {"viscous": {"coefficient_n_s_per_m": 0.08}},
+        "solver": {"duration_s": 5.0},
+        "output": {"n_frames": 601},
+    }
+    run_scene(scene_from_dict(cfg), run_dir=tmp_path)
+    res = analyze_run(tmp_path)
+    assert res.kind == "front" and len(res.fronts) == 1
+    rows = {c.quantity: c for c in res.comparisons}
+    print({q: f"{100 * rows[q].rel_diff:+.2f} %" for q in ("speed", "width 10–90 %", "kinetic energy")})
+    assert abs(rows["speed"].rel_diff) < 0.01
+    assert abs(rows["width 10–90 %"].rel_diff) < 0.02
+    assert abs(rows["kinetic energy"].rel_diff) < 0.02
+    assert res.fronts[0].n_switched > 250 and not res.fronts[0].arrested

@@ -92,3 +92,13 @@ def test_absorbing_profile():
     assert np.allclose(p.damp, extra)  # assembled into the problem's damping
     with pytest.raises(Exception):
         scene_from_dict({**data, "damping": {"absorbing": {"n_units": 1}}})
+
+
+def test_right_end_excitation_trims_the_left():
+    sc = chain_scene(800, duration=0.01, right="driven",
+                     excitation={"kind": "impact", "end": "right", "velocity_m_s": 1.0})
+    p = build_problem(sc)
+    reach = wave_reach(sc, p.system, p.terms, p.duration)
+    assert reach.keep[0] > 0 and reach.keep[1] == 799
+    t = trim_scene(sc, reach.keep)
+    assert t.lattice.n_units == 800 - reach.keep[0] and t.excitation.end == "right"

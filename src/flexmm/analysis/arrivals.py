@@ -2,8 +2,9 @@
 
 Arrival time at a site = peak of the site's time trace inside a window around the time the
 track predicts, refined by a least-squares parabola through the top samples (peak height by the
-three-point parabola). Sites where another pulse is within 3 FWHM are *overlapped*: left out,
-and they split the path into segments. A collision delays or advances a pulse without changing
+three-point parabola). Sites where another pulse moving relative to this one (a collision, not a
+lobe of the same packet) is within 3 FWHM are *overlapped*: left out, and they split the path
+into segments. A collision delays or advances a pulse without changing
 its speed, so the fit t = s·x + b_k keeps one slowness s and gives each segment k its own
 intercept; consecutive segments whose own speeds differ by more than ``SPEED_CHANGE`` are
 different pulses (e.g. a pulse re-emitted after a repulsive collision) and are measured apart.
@@ -67,12 +68,26 @@ def arrivals(view, tr_t, tr_pos, polarity, fwhm, others):
         if k == 0 or k == win.size - 1 or not y[k] > 0:
             continue
         t_i, h_i = peak_time(view.time[win], y, k)
-        if any(abs(np.interp(t_i, ot, op, left=np.inf, right=np.inf) - view.x[i]) < OVERLAP_FWHM * fwhm
-               for ot, op in others):
+        if _colliding(t_i, view.x[i], direction * v, others, OVERLAP_FWHM * fwhm):
             overlap[n] = True
             continue
         times[n], peaks[n] = t_i, polarity * h_i
     return sites, times, peaks, overlap, direction
+
+
+def _colliding(t: float, x: float, v: float, others, distance: float) -> bool:
+    """True if another track is within ``distance`` of (t, x) and moving relative to this one
+    (|v_other − v| > 25 % of |v|): a collision, not a lobe travelling along in the same packet."""
+    for ot, op in others:
+        if ot.size < 2 or not ot[0] <= t <= ot[-1]:
+            continue
+        if abs(np.interp(t, ot, op) - x) < distance:
+            k = int(np.searchsorted(ot, t))
+            k0, k1 = max(k - 3, 0), min(k + 3, ot.size - 1)
+            vo = (op[k1] - op[k0]) / (ot[k1] - ot[k0]) if ot[k1] > ot[k0] else 0.0
+            if abs(vo - v) > 0.25 * abs(v):
+                return True
+    return False
 
 
 def segments(overlap_in_travel_order: np.ndarray) -> np.ndarray:

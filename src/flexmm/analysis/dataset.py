@@ -75,25 +75,31 @@ def to_dataset(res) -> xr.Dataset:
               "site": ("position", v.site, {"long_name": "site index (k + 0.5: bond)"}),
               "time": ("time", v.time, {"units": "s"})}
     data = {}
+
+    def var(dims, values, units, long_name):
+        return (dims, values, {"units": units, "long_name": long_name})
+
     if res.pulses:
-        data.update(_scalar_vars("pulse", "pulse", [p.scalars() for p in res.pulses]))
-        data["arrival_time"] = (("pulse", "position"), _on_positions(v, [(p.sites, p.arrival_time_s) for p in res.pulses]),
-                                {"units": "s", "long_name": "pulse arrival time"})
-        data["peak"] = (("pulse", "position"), _on_positions(v, [(p.sites, p.peak) for p in res.pulses]),
-                        {"units": v.units, "long_name": f"pulse peak of {v.spec}"})
-        data["track_position"] = (("pulse", "time"), _on_time(v, [(p.track_time_s, p.track_pos_m) for p in res.pulses]),
-                                  {"units": "m", "long_name": "tracked peak position"})
+        ps = res.pulses
+        data.update(_scalar_vars("pulse", "pulse", [p.scalars() for p in ps]))
+        data["arrival_time"] = var(("pulse", "position"), _on_positions(v, [(p.sites, p.arrival_time_s) for p in ps]),
+                                   "s", "pulse arrival time")
+        data["peak"] = var(("pulse", "position"), _on_positions(v, [(p.sites, p.peak) for p in ps]),
+                           v.units, f"pulse peak of {v.spec}")
+        data["track_position"] = var(("pulse", "time"), _on_time(v, [(p.track_time_s, p.track_pos_m) for p in ps]),
+                                     "m", "tracked peak position")
     if res.fronts:
-        data.update(_scalar_vars("front", "front", [f.scalars() for f in res.fronts]))
-        data["switch_time"] = (("front", "position"), _on_positions(v, [(f.sites, f.switch_time_s) for f in res.fronts]),
-                               {"units": "s", "long_name": "time of the 50 % crossing"})
-        data["front_position"] = (("front", "time"), _on_time(v, [(f.track_time_s, f.track_pos_m) for f in res.fronts]),
-                                  {"units": "m", "long_name": "50 % crossing position"})
+        fs = res.fronts
+        data.update(_scalar_vars("front", "front", [f.scalars() for f in fs]))
+        data["switch_time"] = var(("front", "position"), _on_positions(v, [(f.sites, f.switch_time_s) for f in fs]),
+                                  "s", "time of the 50 % crossing")
+        data["front_position"] = var(("front", "time"), _on_time(v, [(f.track_time_s, f.track_pos_m) for f in fs]),
+                                     "m", "50 % crossing position")
     d = res.driven
     if d is not None:
-        data["steady_amplitude"] = (("position",), d.amplitude, {"units": v.units, "long_name": "steady amplitude at the drive frequency"})
-        data["harmonic_amplitude"] = (("harmonic",), d.harmonics, {"units": v.units, "long_name": "far-end amplitude of n f"})
-        data["far_spectrum"] = (("frequency",), d.spectrum, {"units": v.units, "long_name": "far-end amplitude spectrum"})
+        data["steady_amplitude"] = var(("position",), d.amplitude, v.units, "steady amplitude at the drive frequency")
+        data["harmonic_amplitude"] = var(("harmonic",), d.harmonics, v.units, "far-end amplitude of n f")
+        data["far_spectrum"] = var(("frequency",), d.spectrum, v.units, "far-end amplitude spectrum")
         coords["harmonic"] = ("harmonic", np.arange(1, d.harmonics.size + 1))
         coords["frequency"] = ("frequency", d.spectrum_hz, {"units": "Hz"})
         for k, val in d.scalars().items():
@@ -107,7 +113,8 @@ def to_dataset(res) -> xr.Dataset:
         for key in ("item", "quantity", "units", "note"):
             data[f"comparison_{key}"] = (("comparison",), np.array([r[key] for r in rows], dtype=str))
         for key in ("measured", "predicted", "rel_diff"):
-            data[f"comparison_{key}"] = (("comparison",), np.array([np.nan if r[key] is None else r[key] for r in rows], float))
+            vals = [np.nan if r[key] is None else r[key] for r in rows]
+            data[f"comparison_{key}"] = (("comparison",), np.array(vals, float))
     ds = xr.Dataset(data, coords=coords)
     src = res.ctx.ds.attrs
     ds.attrs.update(source=str(res.path), source_config_sha256=str(src.get("config_sha256", "")),

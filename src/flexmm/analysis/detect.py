@@ -64,14 +64,17 @@ def refine_peak(y: np.ndarray, k: int) -> tuple[float, float]:
     return off, float(b - 0.25 * (a - c) * off)
 
 
-def frame_peaks(profile: np.ndarray, x: np.ndarray, height: float,
-                prominence: float | None = None) -> list[tuple[float, float, int]]:
-    """Peaks of +profile and −profile above ``height``: (position, signed height, index)."""
+def frame_peaks(profile: np.ndarray, x: np.ndarray, height: float | tuple[float, float]
+                ) -> list[tuple[float, float, int]]:
+    """Peaks of +profile and −profile above ``height`` (one level, or (positive, negative)) and
+    with a prominence of at least half of it: (position, signed height, index)."""
     out = []
-    prom = 0.5 * height if prominence is None else prominence
-    for sign in (1, -1):
+    levels = (height, height) if np.isscalar(height) else height
+    for sign, level in zip((1, -1), levels):
+        if not np.isfinite(level):
+            continue
         y = sign * profile
-        idx, _ = find_peaks(y, height=height, prominence=prom)
+        idx, _ = find_peaks(y, height=level, prominence=0.5 * level)
         for k in idx:
             off, h = refine_peak(y, int(k))
             out.append((float(np.interp(k + off, np.arange(x.size), x)), sign * h, int(k)))
@@ -158,9 +161,10 @@ def auto_gate(values: np.ndarray, x: np.ndarray, min_sites: float = 4.0) -> floa
     return h * max(min_sites, min(2.0 * typical, x.size / 4))
 
 
-def track_peaks(values: np.ndarray, time: np.ndarray, x: np.ndarray, *, threshold: float,
+def track_peaks(values: np.ndarray, time: np.ndarray, x: np.ndarray, *, threshold: float | tuple[float, float],
                 gate: float | None = None, max_gap: int = 5) -> list[Track]:
-    """Peaks of every frame of ``values`` (n_time, n_pos) above ``threshold``, linked into tracks."""
+    """Peaks of every frame of ``values`` (n_time, n_pos) above ``threshold`` (one level, or one
+    per polarity), linked into tracks."""
     gate = auto_gate(values, x) if gate is None else gate
     dets = [[(p, h) for p, h, _ in frame_peaks(values[j], x, threshold)] for j in range(values.shape[0])]
     return merge_tracks(link(time, dets, gate, max_gap), gate)

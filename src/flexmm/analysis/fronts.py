@@ -3,10 +3,15 @@
 Each site's progress is s_i(t) = (u_i(t) − u_i(0))/L, with L the well-to-well jump (given, or
 the median final jump of the sites that switched). Front position = where s crosses ½ between
 neighbouring sites (linear interpolation), followed through time with the pulse tracker, so two
-fronts leaving a trigger in opposite directions are measured separately. Per front: the time each
-site first crosses ½ (its switching time), speed from the line through (x, switching time) with
-its standard error, 10–90 % width (sites between the 10 % and 90 % crossings next to the front,
-median over frames), distance travelled, and whether it stopped before reaching the end (arrest).
+fronts leaving a trigger in opposite directions are measured separately; crossings between runs
+shorter than three sites (ringing behind a front) are ignored. Per front:
+
+- switching time of each site (its first crossing of ½);
+- speed from the line through (x, switching time), with its standard error, over the middle
+  60 % of the path (the steady part; the whole-path value is kept too);
+- 10–90 % width: distance between the 10 % and 90 % crossings next to the front, median over
+  the frames before the front has covered 90 % of its path;
+- distance travelled, switched sites, and arrest (stopped before reaching the end).
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from flexmm.analysis.detect import link, merge_tracks
 
@@ -32,6 +38,7 @@ class FrontMeasurement:
     jump: float
     speed_m_s: float
     speed_stderr_m_s: float
+    speed_whole_path_m_s: float
     width_10_90_m: float
     width_10_90_sites: float
     distance_m: float
@@ -56,6 +63,25 @@ def _crossings(x: np.ndarray, s: np.ndarray, level: float) -> np.ndarray:
     return x[k] + (x[k + 1] - x[k]) * d[k] / (d[k] - d[k + 1])
 
 
+def _front_crossings(x: np.ndarray, s: np.ndarray, min_run: int = 3) -> np.ndarray:
+    """50 % crossings between runs of at least ``min_run`` sites on either side.
+
+    Oscillations behind a front (overshoot past ½ and back) make short runs; removing them by
+    a morphological opening and closing (scipy.ndimage) keeps one crossing per front.
+    """
+    b = s >= 0.5
+    st = np.ones(min_run, bool)
+    b = ndimage.binary_closing(ndimage.binary_opening(b, st), st)
+    edges = np.flatnonzero(b[1:] != b[:-1])
+    out = []
+    for k in edges:
+        lo, hi = max(k - min_run, 0), min(k + min_run + 1, x.size - 1)
+        c = _crossings(x[lo : hi + 1], s[lo : hi + 1], 0.5)
+        if c.size:
+            out.append(c[np.argmin(np.abs(c - 0.5 * (x[k] + x[k + 1])))])
+    return np.asarray(out)
+
+
 def switched_sites(u: np.ndarray, jump: float | None = None, tail: int = 5) -> tuple[np.ndarray, float]:
     """Mask of sites whose last ``tail`` frames sit more than half a jump from their start, and L."""
     final = np.median(u[-tail:], axis=0) - u[0]
@@ -66,6 +92,25 @@ def switched_sites(u: np.ndarray, jump: float | None = None, tail: int = 5) -> t
             return np.zeros(u.shape[1], bool), 0.0
         jump = float(np.median(final[big]))
     return (final / jump) > 0.5, jump
+
+
+STEADY_TRIM = 0.2  # fraction of the path left out at each end of the steady-speed fit
+
+
+def _speed(x: np.ndarray, t: np.ndarray, trim: float) -> tuple[float, float]:
+    """Speed and its standard error from the line t(x), leaving out ``trim`` of the path at
+    each end (launch and arrival transients) when at least five sites remain."""
+    if x.size >= 5 and trim > 0:
+        lo, hi = x.min() + trim * np.ptp(x), x.max() - trim * np.ptp(x)
+        keep = (x >= lo) & (x <= hi)
+        if keep.sum() >= 5:
+            x, t = x[keep], t[keep]
+    if x.size < 3:
+        return np.nan, np.nan
+    if x.size == 3:
+        return 1.0 / abs(np.polyfit(x, t, 1)[0]), np.nan
+    coef, cov = np.polyfit(x, t, 1, cov=True)
+    return 1.0 / abs(coef[0]), float(np.sqrt(cov[0, 0])) / coef[0] ** 2
 
 
 def _width(x, s, pos, spacing):
@@ -84,8 +129,8 @@ def measure_fronts(view, *, jump: float | None = None, min_travel_sites: float =
         raise FrontNotFound(f"no site of {view.spec!r} switched state (no persistent jump)")
     s = (u - u[0]) / L
     h = view.spacing_m
-    dets = [[(float(p), 1.0) for p in _crossings(view.x, s[j], 0.5)] for j in range(view.n_time)]
-    tracks = merge_tracks(link(view.time, dets, gate=4 * h, max_gap=10), 4 * h)
+    dets = [[(float(p), 1.0) for p in _front_crossings(view.x, s[j])] for j in range(view.n_time)]
+    tracks = merge_tracks(link(view.time, dets, gate=4 * h, max_gap=10), 4 * h, rel_speed=0.9)
     tracks = [tr for tr in tracks if tr.travel >= min_travel_sites * h and len(tr.frames) >= 3]
     if not tracks:
         raise FrontNotFound(f"{int(mask.sum())} sites of {view.spec!r} switched but no moving front was found")
@@ -106,13 +151,11 @@ def _measure(view, tr, index, first, mask, s, L, h) -> FrontMeasurement:
     direction = 1 if pos[-1] >= pos[0] else -1
     lo, hi = min(pos[0], pos[-1]), max(pos[0], pos[-1])
     sel = np.flatnonzero(mask & np.isfinite(first) & (view.x >= lo - h) & (view.x <= hi + h))
-    speed = err = np.nan
-    if sel.size >= 3:
-        coef, cov = np.polyfit(view.x[sel], first[sel], 1, cov=True) if sel.size > 3 else (
-            np.polyfit(view.x[sel], first[sel], 1), np.full((2, 2), np.nan))
-        speed, err = 1.0 / abs(coef[0]), float(np.sqrt(cov[0, 0])) / coef[0] ** 2
-    widths = [_width(view.x, s[j], p, h) for j, p in zip(frames, pos)
-              if view.x.min() + 3 * h < p < view.x.max() - 3 * h]
+    speed, err = _speed(view.x[sel], first[sel], STEADY_TRIM)
+    speed_all, _ = _speed(view.x[sel], first[sel], 0.0)
+    moving = np.abs(pos - pos[0]) <= 0.9 * np.abs(pos[-1] - pos[0])  # not yet arrested
+    widths = [_width(view.x, s[j], p, h) for j, p, m in zip(frames, pos, moving)
+              if m and view.x.min() + 3 * h < p < view.x.max() - 3 * h]
     w = float(np.nanmedian(widths)) if widths and np.isfinite(widths).any() else np.nan
     end_x = view.x.max() if direction > 0 else view.x.min()
     late = t >= t[0] + 0.9 * (view.time[-1] - t[0])
@@ -120,7 +163,7 @@ def _measure(view, tr, index, first, mask, s, L, h) -> FrontMeasurement:
     arrested = bool(still and abs(pos[-1] - end_x) > 3 * h)
     return FrontMeasurement(
         index=index, field=view.spec, direction=direction, jump=float(L), speed_m_s=float(speed),
-        speed_stderr_m_s=float(err), width_10_90_m=w, width_10_90_sites=w / h,
+        speed_stderr_m_s=float(err), speed_whole_path_m_s=float(speed_all), width_10_90_m=w, width_10_90_sites=w / h,
         distance_m=float(abs(pos[-1] - pos[0])), start_m=float(pos[0]), stop_m=float(pos[-1]),
         arrested=arrested, n_switched=int(sel.size), sites=view.site[sel], x_m=view.x[sel],
         switch_time_s=first[sel], track_time_s=t, track_pos_m=pos,

@@ -1,9 +1,11 @@
-"""Ready-made comparisons for chains of masses (PHYSICS.md §2), to wire into ``compare.THEORY``.
+"""Predictions for chains of masses (PHYSICS.md §2), registered for ``mass_chain`` in ``compare``.
 
-Each function takes a measurement plus the chain's SI parameters and returns Comparison rows;
-a chain model's ``ModelTheory.pulse``/``front`` reads its parameters from ``ctx.scene()`` and
-calls the matching function. Strains in the dataset are bond elongations per spacing, so the
-bond elongation is D = strain · a.
+The relation functions take a measurement plus SI parameters and return Comparison rows; the
+``pulse``/``front``/``analysis`` entry points read the parameters from the run's MassChain config
+and apply a relation only where its assumptions hold: a uniform chain (no variation), no
+on-site terms for solitary waves, zero law offsets, one bistable cubic on-site term with linear
+coupling and a viscous damping coefficient for fronts. Strains in the dataset are bond
+elongations per spacing, so the bond elongation is D = strain · a.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import math
 
 import numpy as np
 
-from flexmm.analysis.compare import Comparison
+from flexmm.analysis.context import Comparison
 from flexmm.theory import chains as th
 
 
@@ -63,3 +65,73 @@ def linear_chain_bands_hz(k: float, m: float, k_onsite: float = 0.0) -> list[tup
     """Pass band of the linear chain (Hz)."""
     lo, hi = th.linear_chain_band(k, m, k_onsite)
     return [(lo / (2 * math.pi), hi / (2 * math.pi))]
+
+
+def toda_pulse(p_meas, a_n: float, b_per_m: float, m: float, spacing: float) -> list[Comparison]:
+    """Toda soliton speed at the measured bond stretch peak r_m = strain · a (< 0, compressive).
+
+    e^(−b r_m) − 1 = sinh²κ gives κ; speed = sqrt(ab/m) sinh κ/κ sites per unit time (§2).
+    """
+    r_m = p_meas.amplitude * spacing
+    if not r_m < 0:
+        raise ValueError("a Toda soliton compresses the bonds (b > 0)")
+    kappa = math.asinh(math.sqrt(math.expm1(-b_per_m * r_m)))
+    return [Comparison("", "speed", p_meas.speed_m_s, th.toda_speed(a_n, b_per_m, m, kappa) * spacing, "m/s",
+                       f"Toda soliton, κ = {kappa:.4g}")]
+
+
+# ---------------------------------------------------------------- mass_chain entry points
+MULTISTABLE = ("bistable_cubic", "phi4", "raney2016", "sine")
+
+
+def _chain(ctx):
+    lat = ctx.scene().lattice
+    if lat.kind != "mass_chain" or lat.variation or lat.bond2 is not None:
+        raise ValueError("relations of PHYSICS.md §2 need a uniform nearest-neighbour chain")
+    return lat
+
+
+def analysis(ctx) -> str:
+    """'front' for chains with a multistable on-site term, else 'pulse'."""
+    lat = ctx.scene().lattice
+    return "front" if any(law.law in MULTISTABLE for law in getattr(lat, "onsite", [])) else "pulse"
+
+
+def pulse(ctx, p_meas) -> list[Comparison]:
+    """Solitary-wave speed (and width) of the chain's bond law at the measured strain peak."""
+    lat = _chain(ctx)
+    bond, a, m = lat.bond, lat.spacing_m, lat.mass_kg
+    if lat.onsite or bond.offset_m != 0 or p_meas.units != "1":
+        raise ValueError("no solitary-wave relation for this chain or field")
+    if bond.law == "polynomial" and bond.k3_n_per_m3 == 0 and bond.k2_n_per_m2 != 0:
+        return softening_pulse(p_meas, bond.k1_n_per_m, bond.k2_n_per_m2, m, a)
+    if bond.law == "hertz" and bond.exponent == 1.5 and bond.precompression_m == 0:
+        return hertz_pulse(p_meas, bond.stiffness_n_per_m_p, m, a)
+    if bond.law == "toda":
+        return toda_pulse(p_meas, bond.a_n, bond.b_per_m, m, a)
+    if bond.law == "linear":
+        return [Comparison("", "speed", p_meas.speed_m_s, a * math.sqrt(bond.k_n_per_m / m), "m/s",
+                           "linear long-wave speed c0 = a sqrt(k/m)")]
+    raise ValueError(f"no solitary-wave relation for a {bond.law} bond")
+
+
+def _viscous_eta(ctx, lat) -> float:
+    vis = ctx.scene().damping.viscous
+    if vis is None or vis.coefficient_n_s_per_m is None:
+        raise ValueError("the front relation needs damping.viscous.coefficient_n_s_per_m")
+    return vis.coefficient_n_s_per_m
+
+
+def front(ctx, f_meas) -> list[Comparison]:
+    """Damped bistable front (one bistable_cubic on-site term, linear coupling): v, width, K."""
+    lat = _chain(ctx)
+    (law,) = lat.onsite
+    if law.law != "bistable_cubic" or law.offset_m != 0 or lat.bond.law != "linear" or lat.bond.offset_m != 0:
+        raise ValueError("no front relation for this chain")
+    eta = _viscous_eta(ctx, lat)
+    args = (law.alpha_n_per_m3, law.beta, law.jump_m, lat.bond.k_n_per_m, lat.mass_kg, lat.spacing_m, eta)
+    rows = bistable_front(f_meas, *args)
+    if ctx.ds is not None and "kinetic_energy" in ctx.ds:
+        dphi = law.alpha_n_per_m3 * law.jump_m**4 * (1 - 2 * law.beta) / 12
+        rows += front_kinetic_energy(ctx.ds, f_meas, lat.mass_kg, dphi, eta, lat.spacing_m)
+    return rows

@@ -15,25 +15,34 @@ import math
 
 import numpy as np
 
+from flexmm.analysis.context import Comparison
 from flexmm.theory import rotating as rt
 
 
 def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
-    """(nondimensional parameters, length unit a [m], time unit sqrt(m/k_l) [s]) of the run."""
-    if "rot" not in ctx.cache:
-        from flexmm.models.rotating_chain import nondimensional
+    """(nondimensional parameters, length unit a [m], time unit sqrt(m/k_l) [s]) of the run.
 
+    A chain gives its own n_v, s_v. A sheet periodic across the rows carries planar waves, which
+    are the chain with n_v = 2, s_v = 1 (PHYSICS.md §1.2); other sheets: ValueError.
+    """
+    if "rot" not in ctx.cache:
         lat = ctx.scene().lattice
-        nd = nondimensional(lat)
-        p = rt.RotatingChainND(lat.theta0_rad, nd["Ks"], nd["Ktheta"], nd["alpha2"],
-                               lat.n_lateral, int(lat.lateral_stretch))
-        ctx.cache["rot"] = (p, lat.a_m, math.sqrt(lat.mass_kg / lat.k_long_n_per_m))
+        if lat.kind == "rotating_squares_chain":
+            m, J, n_v, s_v = lat.mass_kg, lat.inertia_kg_m2, lat.n_lateral, int(lat.lateral_stretch)
+        elif lat.kind == "rotating_squares_sheet":
+            plain = lat.ligament_length_m == 0 and lat.magnets is None and not lat.variation
+            if not (plain and lat.top == lat.bottom == "periodic"):
+                raise ValueError("chain theory applies to planar waves of a plain, row-periodic sheet only")
+            m, J, n_v, s_v = lat.unit_mass_kg, lat.unit_inertia_kg_m2, 2, 1
+        else:
+            raise ValueError(f"no rotating-squares theory for {lat.kind}")
+        p = rt.RotatingChainND.from_si(lat.a_m, lat.theta0_rad, lat.k_long_n_per_m, lat.k_shear_n_per_m,
+                                       lat.k_rot_n_m_per_rad, m, J, n_v, s_v)
+        ctx.cache["rot"] = (p, lat.a_m, math.sqrt(m / lat.k_long_n_per_m))
     return ctx.cache["rot"]
 
 
 def _row(quantity, measured, predicted, units, note=""):
-    from flexmm.analysis.compare import Comparison
-
     return Comparison("", quantity, float(measured), float(predicted), units, note)
 
 

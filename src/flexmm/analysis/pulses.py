@@ -272,33 +272,19 @@ def noise_level(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(v - np.median(v)))) if v.size else 0.0
 
 
-def measure_pulses(view, *, threshold_fraction: float = 0.25, min_travel_sites: float = 5.0,
-                   gate_sites: float | None = None, max_pulses: int = 20) -> list[PulseMeasurement]:
-    """Detect, track and measure every travelling pulse of a FieldView; PulseNotFound if none.
+def _thresholds(vals: np.ndarray, fraction: float, floor: float, per_sign: bool) -> tuple[float, float]:
+    """Detection levels for (positive, negative) peaks; inf switches a polarity off.
 
-    Per pulse (``PulseMeasurement``): arrival time at each crossed site (time of the peak of
-    the site's trace, least-squares parabola through its top samples); speed = inverse slope
-    of the line through (x, arrival time) with its standard error, after dropping sites within
-    max(2, FWHM) sites of the ends, sites where another pulse is within 1.5 FWHM, and outliers
-    (> 4 MAD); amplitude = median signed peak, its first and last values and the attenuation
-    rate α of |peak| ∝ exp(−α · distance); spatial FWHM (peak_widths) and fits of sech, sech²
-    and the §1.3 profile (median over up to 25 frames); temporal FWHM; polarity.
-
-    Peaks above ``threshold_fraction`` of the largest |value| and above NOISE_FACTOR times the
-    noise level (``noise_level``) are tracked; tracks that move less than ``min_travel_sites`` are dropped (standing features).
-    Pulses are returned in order of first appearance.
+    Global: ``fraction`` of the largest |value|, for both signs. Per sign: ``fraction`` of the
+    largest value of that sign. Never below ``floor`` (the noise level times NOISE_FACTOR).
     """
-    vals = view.values
-    peak = float(np.nanmax(np.abs(vals))) if vals.size else 0.0
-    if not np.isfinite(peak) or peak == 0:
-        raise PulseNotFound(f"field {view.spec!r} is identically zero or not finite")
-    noise = noise_level(vals)
-    thr = max(threshold_fraction * peak, NOISE_FACTOR * noise)
-    if peak <= thr:
-        raise PulseNotFound(f"no pulse in {view.spec!r}: peak |{view.spec}| = {peak:.3g} {view.units} is "
-                            f"within {NOISE_FACTOR:g}x the noise level {noise:.3g}")
-    gate = None if gate_sites is None else gate_sites * view.spacing_m
-    tracks = track_peaks(vals, view.time, view.x, threshold=thr, gate=gate)
+    peaks = (float(np.nanmax(vals)), float(-np.nanmin(vals)))
+    top = max(peaks)
+    return tuple(max(fraction * (p if per_sign else top), floor) if p > floor else np.inf for p in peaks)
+
+
+def _track(view, thr, gate, min_travel_sites, max_pulses):
+    tracks = track_peaks(view.values, view.time, view.x, threshold=thr, gate=gate)
     tracks = [tr for tr in tracks if len(tr.frames) >= 5 and tr.travel >= min_travel_sites * view.spacing_m]
     tracks.sort(key=lambda tr: (tr.time[0], tr.pos[0]))
     tracks = tracks[:max_pulses]
@@ -306,10 +292,49 @@ def measure_pulses(view, *, threshold_fraction: float = 0.25, min_travel_sites: 
     for tr in tracks:
         others = [(np.asarray(o.time), np.asarray(o.pos)) for o in tracks if o is not tr]
         out.extend(measure_track(view, tr, len(out), others))
+    return tracks, out
+
+
+def measure_pulses(view, *, threshold_fraction: float = 0.25, min_travel_sites: float = 5.0,
+                   gate_sites: float | None = None, max_pulses: int = 20) -> list[PulseMeasurement]:
+    """Detect, track and measure every travelling pulse of a FieldView; PulseNotFound if none.
+
+    Per pulse (``PulseMeasurement``): arrival time at each crossed site (time of the peak of
+    the site's trace, least-squares parabola through its top samples); speed = inverse slope
+    of the line through (x, arrival time) with its standard error, after dropping sites within
+    max(2, FWHM) sites of the ends, sites where a colliding pulse is near, and outliers
+    (> 4 MAD); across a collision the line keeps its slope but gets a new intercept, whose
+    change is the collision delay (phase shift, ``collision_shift_m`` > 0: pushed forward),
+    and a speed change of more than 2 % starts a new pulse; amplitude = median signed peak, its
+    first and last values and the attenuation rate α of |peak| ∝ exp(−α · distance); spatial
+    FWHM (peak_widths) and fits of sech, sech² and the §1.3 profile; temporal FWHM; polarity
+    (see ``arrivals`` and ``widths``).
+
+    Peaks above ``threshold_fraction`` of the largest |value| and above NOISE_FACTOR times the
+    noise level (``noise_level``) are tracked; if none of them travels, each sign is tried
+    against its own largest value (a compressive pulse next to much larger opening gaps, say).
+    Tracks that move less than ``min_travel_sites`` are dropped (standing features). Pulses are
+    returned in order of first appearance.
+    """
+    vals = view.values
+    peak = float(np.nanmax(np.abs(vals))) if vals.size else 0.0
+    if not np.isfinite(peak) or peak == 0:
+        raise PulseNotFound(f"field {view.spec!r} is identically zero or not finite")
+    noise = noise_level(vals)
+    floor = NOISE_FACTOR * noise
+    if peak <= floor:
+        raise PulseNotFound(f"no pulse in {view.spec!r}: peak |{view.spec}| = {peak:.3g} {view.units} is "
+                            f"within {NOISE_FACTOR:g}x the noise level {noise:.3g}")
+    gate = None if gate_sites is None else gate_sites * view.spacing_m
+    for per_sign in (False, True):
+        thr = _thresholds(vals, threshold_fraction, floor, per_sign)
+        tracks, out = _track(view, thr, gate, min_travel_sites, max_pulses)
+        if out:
+            break
     if not out:
         raise PulseNotFound(
             f"no travelling pulse in {view.spec!r}: {len(tracks)} candidate track(s) above "
-            f"{threshold_fraction:.0%} of the peak |{view.spec}| = {peak:.3g} {view.units}, none "
-            f"crossing {min_travel_sites:g}+ sites with a consistent arrival"
+            f"{threshold_fraction:.0%} of the peak of either sign (largest |{view.spec}| = {peak:.3g} "
+            f"{view.units}), none crossing {min_travel_sites:g}+ sites with a consistent arrival"
         )
     return out

@@ -70,8 +70,13 @@ def choose_kind(ctx: RunContext) -> str:
     """'driven' for a shaker, else the model theory's preference, else 'pulse'."""
     if drive_frequency(ctx.config)[0] is not None:
         return "driven"
+    from flexmm.config import ConfigError
+
     pick = theory_for(ctx).analysis
-    return pick(ctx) if pick is not None else "pulse"
+    try:
+        return pick(ctx) if pick is not None else "pulse"
+    except (ConfigError, ValueError, AttributeError):  # a stored config this version cannot read
+        return "pulse"
 
 
 def default_field_for(kind: str, ds) -> str | None:

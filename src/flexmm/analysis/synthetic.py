@@ -55,17 +55,19 @@ def pulse_dataset(pulses: list[SynthPulse], *, n_sites: int = 200, spacing_m: fl
 
 
 def front_dataset(*, n_sites: int = 200, spacing_m: float = 1.0, jump: float = 1.0,
-                  speed_m_s: float = 1.0, width_m: float = 3.0, x0_m: float = 10.0,
+                  speed_m_s: float = 1.0, width_m: float = 3.0, x0_m: float = -10.0,
                   arrest_m: float | None = None, duration_s: float = 150.0, n_frames: int = 301,
                   noise: float = 0.0, seed: int = 0) -> xr.Dataset:
-    """u = (L/2)(1 − tanh((x − X(t))/w)) (PHYSICS.md §2), X(t) = x0 + v t, stopping at ``arrest_m``."""
+    """u = (L/2)(1 − tanh((x − X(t))/w)) (PHYSICS.md §2), X(t) = x0 + v t, stopping at ``arrest_m``;
+    displacement from the initial state (start the front outside the chain, x0 < −2w, for a
+    chain that is uniform at t = 0)."""
     time = np.linspace(0.0, duration_s, n_frames)
     x = np.arange(n_sites) * spacing_m
     pos = x0_m + speed_m_s * time
     if arrest_m is not None:
         pos = np.minimum(pos, arrest_m)
     u = 0.5 * jump * (1 - np.tanh((x[None, :] - pos[:, None]) / width_m))
-    u = u - u[0]  # displacement from the initial state: sites behind x0 start switched
+    u = u - u[0]
     u += noise * np.random.default_rng(seed).standard_normal(u.shape)
     return _dataset(time, x, {"u": u}, {"u": "m"})
 

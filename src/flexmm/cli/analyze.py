@@ -117,7 +117,8 @@ def analyze(
     json_out: str = typer.Option(None, "--json", help="Write a JSON summary to this file ('-': stdout)."),
     csv_out: str = typer.Option(None, "--csv", help="Write the measured/predicted table as CSV ('-': stdout)."),
     plot: bool = typer.Option(False, "--plot", help="Write PNG figures beside each run."),
-    plot_dir: str = typer.Option(None, "--plot-dir", help="Where figures over several runs go (default: their common parent)."),
+    plot_dir: str = typer.Option(None, "--plot-dir",
+                                 help="Where figures over several runs go (default: their common parent)."),
     save: bool = typer.Option(True, "--save/--no-save", help="Write analysis.nc beside each run."),
 ) -> None:
     """Measure pulses, fronts or driven response of runs and compare with theory."""
@@ -160,7 +161,8 @@ def analyze(
                       f"{len(bands['frequencies_hz'])} drive frequencies: measured {fmt(bands['measured_hz'])}; "
                       f"linear theory {fmt(bands['predicted_hz'])}")
     if plot and results:
-        where = Path(plot_dir) if plot_dir else Path(os.path.commonpath([str(Path(r.path).resolve().parent) for r in results]))
+        parents = [str(Path(r.path).resolve().parent) for r in results]
+        where = Path(plot_dir) if plot_dir else Path(os.path.commonpath(parents))
         for p in plots.set_figures(results, where):
             console.print(f"wrote {p}")
     if json_out:

@@ -156,7 +156,7 @@ def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_m
     return applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def total_force(force, args, q, v, t, f, terms):
     """Model force plus every external term at (q, v, t) into ``f``; returns the applied power."""
     con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
@@ -194,7 +194,7 @@ def free_damping(damp, minv):
     return cd
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def acceleration(force, args, terms, minv, damp, t, q, v, f, a):
     """Impose prescribed DOFs at ``t``, then a = M⁻¹(F(q, v, t) − c v); ``f`` gets F.
 

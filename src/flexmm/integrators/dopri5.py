@@ -63,7 +63,7 @@ def state_size(ndof: int) -> int:
     return 8 + N_ARRAYS * (2 * ndof + 2)
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def _slopes(force, args, terms, minv, damp, ts, y, ky, f, n):
     """K = dy/dt at (ts, y), y = [q (n), v (n), dissipated, work]; imposes prescribed DOFs on y."""
     q = y[:n]
@@ -75,7 +75,7 @@ def _slopes(force, args, terms, minv, damp, ts, y, ky, f, n):
     ky[2 * n + 1] = power
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def _step(force, args, terms, minv, damp, t, h, y, K, ys, y_new, f, n):
     """One DP5 step from y (K[0] = slopes at y); 5th-order result in y_new, its slopes in K[6]."""
     m = y.shape[0]
@@ -128,7 +128,7 @@ def _interpolate(r, theta, out):
         out[k] = r[0, k] + theta * (r[1, k] + th1 * (r[2, k] + theta * (r[3, k] + th1 * r[4, k])))
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def _initial_step(force, args, terms, minv, damp, t, y, k1, rtol, atol, n, f):
     """Starting step from the sizes of y, y' and y'' (Hairer, Nørsett & Wanner §II.4)."""
     d0 = 0.0
@@ -150,7 +150,7 @@ def _initial_step(force, args, terms, minv, damp, t, y, k1, rtol, atol, n, f):
     return min(100.0 * h0, h1)
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def _fixed(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Fixed steps of size h (no error control): the 5th-order solution of each step."""
     n = q.shape[0]
@@ -179,7 +179,7 @@ def _fixed(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     return t
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def dopri5_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Return the state at t + nsteps·h, stepping adaptively (or fixed steps without state)."""
     n = q.shape[0]

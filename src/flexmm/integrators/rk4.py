@@ -21,7 +21,7 @@ _NODES = (0.0, 0.5, 0.5, 1.0)
 _WEIGHTS = (1.0, 2.0, 2.0, 1.0)
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def _stage(force, args, terms, minv, damp, ts, Q, V, f, A, sq, sv, w, q, v, c_next, h):
     """Slopes at stage state (Q, V, ts) added to the sums with weight ``w``; then the next stage state."""
     power, diss = acceleration(force, args, terms, minv, damp, ts, Q, V, f, A)
@@ -34,7 +34,7 @@ def _stage(force, args, terms, minv, damp, ts, Q, V, f, A, sq, sv, w, q, v, c_ne
     return power, diss
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def rk4_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Advance ``nsteps`` RK4 steps of size ``h`` from ``t``; returns the new time.
 

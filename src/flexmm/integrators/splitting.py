@@ -103,7 +103,7 @@ def _ledger_rates(v, t, cd, terms, dissipative):
     return diss, applied_power(v, t, terms[4], terms[5], terms[6], terms[7])
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def pefrl_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Advance ``nsteps`` PEFRL steps of size ``h`` from ``t``; returns the new time.
 

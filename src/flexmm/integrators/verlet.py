@@ -41,7 +41,7 @@ from flexmm.integrators.common import (
 BLOCK = 8192
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def verlet_force(force, args, q, v, t, f, terms):
     """Total force at (q, v, t): model forces plus contacts, dashpots and applied forces."""
     return total_force(force, args, q, v, t, f, terms)
@@ -134,7 +134,7 @@ def _count(acc, nsteps):
         acc[ACC_STEPS] += nsteps
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
 def verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Advance ``nsteps`` steps of size ``h`` from time ``t``; returns the new time.
 
@@ -171,7 +171,7 @@ def verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     return t
 
 
-@jit(parallel=True)
+@jit(parallel=True, cache=False)  # takes the force kernel (see flexmm._jit)
 def verlet_advance_parallel(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """``verlet_advance`` with the DOF passes split over numba's threads (same arguments).
 

@@ -97,7 +97,7 @@ def _strained(system: System, cfg, guess: np.ndarray) -> dict[int, float]:
     return held
 
 
-@jit
+@jit(cache=False)  # takes the model's force kernel as an argument (see flexmm._jit)
 def fire_relax(force, args, q, free, dt0, dt_max, tol, max_steps):
     """FIRE minimisation (Bitzek et al., PRL 97, 170201, 2006) of the energy behind ``force``.
 

@@ -20,15 +20,15 @@ import math
 
 import numpy as np
 
+from flexmm._jit import jit
 from flexmm.config.rigid import RotatingSquaresSheet
 from flexmm.models import predeform, variation
 from flexmm.models.base import FieldSpec, System
 from flexmm.models.hinge import (H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN,
                                  N_HINGE_PARAMS, hinge_law)
 from flexmm.models.linkage import empty_joints, joint_reference, joint_terms
-from flexmm.models.magnets import dipole_reference, dipole_terms, empty_dipoles, face_magnets
+from flexmm.models.magnets import MU0_OVER_4PI, dipole_reference, dipole_terms, empty_dipoles, face_magnets
 from flexmm.models.predeform import empty_loads, load_reference, load_terms
-from flexmm._jit import jit
 from flexmm.units import Scales
 
 FIELDS = (
@@ -212,7 +212,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
         mg = cfg.magnets
         pos, dirs = face_magnets(mg.recess_m / a)
         pab, off = magnet_pairs(nr, nc, px, py, h)
-        strength = mg.moment_a_m2 * math.sqrt(1e-7 / (kl * a**5))
+        strength = mg.moment_a_m2 * math.sqrt(MU0_OVER_4PI / (kl * a**5))  # s² = μ0 m²/(4π k_l a⁵)
         s = strength * (sigma if mg.polarity == "attract" else np.ones(n))
         kc = 10.0 if mg.contact_stiffness_n_per_m is None else mg.contact_stiffness_n_per_m / kl
         dip = (pab, off, pos, dirs, theta0, sigma, s, np.array([2.0 * mg.recess_m / a, kc]))

@@ -281,8 +281,9 @@ def length_key(lattice_cfg) -> str | None:
 def trim_scene(scene, keep: tuple[int, int]):
     """A copy of ``scene`` keeping only the sites ``keep[0]..keep[1]`` along x.
 
-    Site indices in the excitation (soliton centre) and imperfection (seed sites) shift with
-    the kept range; seeds outside it are dropped.
+    Site indices in the excitation (soliton centres, struck or kicked units) and imperfection
+    (seed sites) follow the kept range (2D: sites are row-major with x the fast index); seeds
+    outside it are dropped.
     """
     from flexmm.config import scene_from_dict
 
@@ -292,15 +293,26 @@ def trim_scene(scene, keep: tuple[int, int]):
     lo, hi = keep
     data = scene.model_dump(mode="json")
     n_x = getattr(scene.lattice, key)
-    data["lattice"][key] = hi - lo + 1
+    n_new = hi - lo + 1
+    data["lattice"][key] = n_new
+
+    def remap(sites):  # site = row · n_x + column (a chain has one row)
+        rows_cols = [divmod(s, n_x) for s in sites]
+        return [r * n_new + c - lo for r, c in rows_cols if lo <= c <= hi]
+
     exc = data.get("excitation") or {}
     if exc.get("kind") == "soliton":
         exc["center_site"] -= lo
     for p in exc.get("pulses") or []:
         p["center_site"] -= lo
+    if exc.get("sites"):
+        exc["sites"] = remap(exc["sites"])
+    for k in exc.get("kicks") or []:
+        if k.get("sites"):
+            k["sites"] = remap(k["sites"])
     imp = data.get("imperfection")
     if imp and imp.get("kind") == "rotation_seed":
-        imp["sites"] = [s - lo for s in imp["sites"] if lo <= s <= hi]
+        imp["sites"] = remap(imp["sites"])
     layer = (data.get("damping") or {}).get("absorbing")
     if layer:  # a layer at a trimmed end is never reached: drop it there
         ends = {"left", "right"} if layer["end"] == "both" else {layer["end"]}

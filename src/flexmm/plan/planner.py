@@ -21,6 +21,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from flexmm.plan import accuracy as acc_mod
 from flexmm.plan.continuum import ContinuumPrediction, NeedsAmplitude, NoContinuum, predict
 from flexmm.plan.dimension import reduce_dimension
@@ -136,7 +138,10 @@ def _domain(scene, fidelity: str):
     system, terms = built_system(scene)
     sc = system.scales
     duration = scene.solver.duration_s / sc.time_s
-    reach = wave_reach(scene, system, terms, duration)
+    try:
+        reach = wave_reach(scene, system, terms, duration)
+    except (ValueError, IndexError, np.linalg.LinAlgError) as exc:
+        return scene, PlanStep("domain", "kept", [f"reach not computed ({exc}): lattice kept as declared"])
     attrs = {"plan_reach_speed_m_s": reach.speed_m_s, "plan_reach_units": reach.sites_reached,
              "plan_units_declared": reach.n_declared, "plan_units_needed": reach.n_needed}
     head = (f"fastest linear group speed {reach.speed_m_s:.4g} m/s ({reach.speed_sites:.4g} units per "
@@ -146,7 +151,12 @@ def _domain(scene, fidelity: str):
         return scene, PlanStep("domain", "kept", [head + "; sources everywhere (random imperfection "
                                                   "or no excitation): nothing to trim"], attrs)
     if reach.waste < TRIM_WASTE:
-        return scene, PlanStep("domain", "kept", [head + f"; all {reach.n_declared} units needed"], attrs)
+        notes = [head + f"; all {reach.n_declared} units needed"]
+        if reach.sites_reached > reach.n_declared and scene.damping.absorbing is None:
+            t_end = reach.n_declared / reach.speed_sites * sc.time_s
+            notes.append(f"the fastest waves reach an end within {t_end:.3g} s: damping.absorbing "
+                         "{end: ...} emulates an unbounded lattice if reflections are unwanted")
+        return scene, PlanStep("domain", "kept", notes, attrs)
     waste = (f"{reach.n_declared - reach.n_needed} of {reach.n_declared} units "
              f"({100 * reach.waste:.0f} %) are never reached")
     why_not = _trimmable(scene)
@@ -154,10 +164,6 @@ def _domain(scene, fidelity: str):
         reason = "--fidelity full" if fidelity == "full" else why_not
         return scene, PlanStep("domain", "warning", [head, f"WARNING: {waste} (not trimmed: {reason})"], attrs)
     lo, hi = reach.keep
-    if system.site_coords.get("y") is not None and lo > 0:
-        lo = 0  # 2D: keep site numbering simple, trim only the far columns
-    if lo > 0 and scene.excitation.kind not in ("soliton", "solitons", "none"):
-        lo = 0
     trimmed = trim_scene(scene, (lo, hi))
     attrs.update(plan_trim_first=lo, plan_trim_last=hi)
     return trimmed, PlanStep("domain", "trimmed", [head, f"{waste}: trimmed to units {lo}..{hi}"], attrs)

@@ -51,7 +51,8 @@ def hessian_blocks(system, cell_sites: int = 1, reach: int = 2, q_ref=None) -> t
     K = blocks(mid)
     K2 = blocks(mid - cell_sites)
     if not np.allclose(K, K2, rtol=1e-5, atol=1e-7 * np.max(np.abs(K))):
-        raise ValueError(f"the Hessian is not periodic with {cell_sites} site(s) per cell; try cell_sites={2 * cell_sites}")
+        raise ValueError(f"the Hessian is not periodic with {cell_sites} site(s) per cell; "
+                         f"try cell_sites={2 * cell_sites}")
     return K, system.mass[_cell_dofs(system, mid, cell_sites)]
 
 

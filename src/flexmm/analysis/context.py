@@ -1,0 +1,58 @@
+"""What a prediction sees and returns: the run's context and one measured-vs-predicted row."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import yaml
+
+
+@dataclass
+class Comparison:
+    """One measured quantity, with the theory's value where one applies."""
+
+    item: str
+    quantity: str
+    measured: float
+    predicted: float | None
+    units: str
+    note: str = ""
+
+    @property
+    def rel_diff(self) -> float | None:
+        """(measured − predicted)/|predicted|, or None without a usable prediction."""
+        if self.predicted is None or not math.isfinite(self.predicted) or self.predicted == 0:
+            return None
+        return (self.measured - self.predicted) / abs(self.predicted)
+
+    def as_dict(self) -> dict:
+        return {"item": self.item, "quantity": self.quantity, "measured": self.measured,
+                "predicted": self.predicted, "units": self.units, "rel_diff": self.rel_diff,
+                "note": self.note}
+
+
+@dataclass
+class RunContext:
+    """What a theory may read about a run: model kind, resolved config (dict) and the dataset."""
+
+    model: str
+    config: dict
+    ds: Any = None
+    cache: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dataset(cls, ds) -> "RunContext":
+        text = ds.attrs.get("config", "")
+        config = yaml.safe_load(text) if text else {}
+        model = ds.attrs.get("model") or (config.get("lattice") or {}).get("kind", "unknown")
+        return cls(model=str(model), config=config or {}, ds=ds)
+
+    def scene(self):
+        """The validated Scene of the run (cached); ConfigError if the config does not validate."""
+        if "scene" not in self.cache:
+            from flexmm.config import scene_from_dict
+
+            self.cache["scene"] = scene_from_dict(self.config)
+        return self.cache["scene"]

@@ -1,0 +1,264 @@
+"""Work–precision: error against cost for every integrator, and for scipy's solve_ivp.
+
+Each method runs over a ladder of fixed steps (fractions of its stable step; for A-stable
+methods multiples of 2/ω_max) or tolerances (adaptive), from the scene's initial state to its
+end, with ``n_frames`` frames. Errors are against a tight reference (dopri5 at ``ref_rtol``):
+
+- ``final_error``: max |q − q_ref| over the lattice DOFs at the end (lengths in units of the
+  model's length scale, angles in rad — "displacement units");
+- ``frame_error``: the same, max over all frames;
+- ``speed_error``, ``amplitude_error``: relative errors of the leading pulse's speed and
+  amplitude (``analysis.leading_pulse`` on the rotation field, or the longitudinal one).
+
+Cost: the minimum wall time of ``repeats`` runs after a compile warm-up (integration only), and
+model-force evaluations. ``speedups`` compares the cheapest flexmm run with the cheapest
+solve_ivp run that reach the same error.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from flexmm import baseline
+from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.runner import integrate
+
+FIXED_FRACTIONS = (0.9, 0.63, 0.4, 0.25, 0.16, 0.1, 0.063, 0.04, 0.025)
+IMPLICIT_MULTIPLES = (4.0, 2.0, 1.0, 0.5, 0.25, 0.12)
+RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+ATOL_RATIO = 1e-2  # atol = ATOL_RATIO × rtol (nondimensional states are O(0.01–1))
+FLOOR = 1e-12  # a ladder stops once a method's error is below this
+
+
+@dataclass
+class Row:
+    """One run of the benchmark."""
+
+    method: str
+    family: str  # 'flexmm' or 'solve_ivp'
+    parameter: str  # 'dt' (nondimensional step), 'dt_fraction', 'rtol'
+    value: float
+    status: str
+    final_error: float
+    frame_error: float
+    speed_error: float
+    amplitude_error: float
+    wall_s: float
+    force_evaluations: int
+    steps: int
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def lattice_dofs(system) -> np.ndarray:
+    """Indices of the lattice DOFs (every field of every site; extra DOFs such as a striker excluded)."""
+    return np.arange(len(system.fields) * system.n_sites)
+
+
+def pulse_field(system) -> str:
+    return system.meta.get("rotation_field") or system.meta["longitudinal_field"]
+
+
+def pulse(problem, t: np.ndarray, q: np.ndarray) -> tuple[float, float]:
+    """(speed m/s, amplitude) of the leading pulse in frames q (F, ndof); nan if none is found."""
+    import xarray as xr
+
+    from flexmm.analysis import PulseNotFound, leading_pulse
+
+    s = problem.system
+    name = pulse_field(s)
+    k = s.field_index(name) * s.n_sites
+    sites = np.arange(s.n_sites)
+    if "n_rows" in s.meta:  # a sheet: the middle row
+        nc = s.meta["n_cols"]
+        sites = (s.meta["n_rows"] // 2) * nc + np.arange(nc)
+    x = s.site_coords["x"][sites]
+    ds = xr.Dataset({name: (("time", "site"), q[:, k + sites])},
+                    coords={"time": t * s.scales.time_s, "x": ("site", x)})
+    try:
+        p = leading_pulse(ds, name)
+    except (PulseNotFound, ValueError, np.linalg.LinAlgError):
+        return math.nan, math.nan
+    return p.speed_m_s, p.amplitude
+
+
+@dataclass
+class Reference:
+    t: np.ndarray
+    q: np.ndarray
+    speed: float
+    amplitude: float
+    rtol: float
+    wall_s: float
+
+
+def reference(problem, n_frames: int, rtol: float = 1e-12) -> Reference:
+    """dopri5 at ``rtol`` (atol = ATOL_RATIO × rtol): the accuracy reference."""
+    tr = integrate(problem, "dopri5", rtol=rtol, atol=ATOL_RATIO * rtol, n_frames=n_frames)
+    if not tr.ok:
+        raise RuntimeError("the reference run (dopri5) failed")
+    speed, amp = pulse(problem, tr.t, tr.q)
+    return Reference(tr.t, tr.q, speed, amp, rtol, tr.wall_s)
+
+
+def _errors(problem, ref: Reference, t, q) -> tuple[float, float, float, float]:
+    dofs = lattice_dofs(problem.system)
+    if q.shape[0] != ref.q.shape[0] or not np.all(np.isfinite(q)):
+        return math.inf, math.inf, math.nan, math.nan
+    diff = np.abs(q[:, dofs] - ref.q[:, dofs])
+    speed, amp = pulse(problem, t, q)
+    rel = lambda a, b: abs(a / b - 1.0) if math.isfinite(a) and math.isfinite(b) and b != 0 else math.nan
+    return float(diff[-1].max()), float(diff.max()), rel(speed, ref.speed), rel(amp, ref.amplitude)
+
+
+def ladder(name: str, problem) -> list[tuple[str, float, dict]]:
+    """(parameter name, value, integrate() keywords) for one method."""
+    spec = INTEGRATORS[name]
+    if spec.adaptive:
+        return [("rtol", r, {"rtol": r, "atol": ATOL_RATIO * r}) for r in RTOLS]
+    if not math.isfinite(spec.stability_limit):
+        return [("dt_x_2/omega", m, {"h": m * 2.0 / problem.omega_max}) for m in IMPLICIT_MULTIPLES]
+    h_stable = spec.stability_limit / problem.omega_max
+    return [("dt_fraction", f, {"h": f * h_stable}) for f in FIXED_FRACTIONS]
+
+
+def run_flexmm(problem, ref: Reference, name: str, *, repeats: int = 3, threads: int = 1,
+               budget_s: float = 30.0, log=None) -> list[Row]:
+    """Every rung of ``name``'s ladder (stops below FLOOR or past ``budget_s`` per run)."""
+    rows = []
+    n_frames = ref.t.size
+    for pname, value, kw in ladder(name, problem):
+        walls, tr = [], None
+        for _ in range(repeats):
+            tr = integrate(problem, name, n_frames=n_frames, threads=threads, **kw)
+            walls.append(tr.wall_s)
+            if not tr.ok or tr.wall_s > budget_s:
+                break
+        fe, fr, se, ae = _errors(problem, ref, tr.t, tr.q) if tr.ok else (math.inf,) * 2 + (math.nan,) * 2
+        c = tr.counters
+        rows.append(Row(name, "flexmm", pname, value, tr.status, fe, fr, se, ae, min(walls),
+                        c.get("force_evaluations", 0), c.get("steps", 0)))
+        if log:
+            log(f"{name:18s} {pname}={value:<8.3g} final error {fe:9.3g}  wall {min(walls):9.4g} s  "
+                f"{c.get('force_evaluations', 0)} force evaluations")
+        if tr.ok and fe < FLOOR or min(walls) > budget_s:
+            break
+    return rows
+
+
+def run_ivp(problem, ref: Reference, method: str, *, repeats: int = 1, budget_s: float = 60.0,
+            rtols=RTOLS, log=None) -> list[Row]:
+    rows = []
+    for r in rtols:
+        walls, run = [], None
+        for _ in range(repeats):
+            run = baseline.run(problem, method, r, ATOL_RATIO * r, ref.t)
+            walls.append(run.wall_s)
+            if run.wall_s > 1.0:
+                break
+        fe, fr, se, ae = _errors(problem, ref, run.t, run.q)
+        rows.append(Row(method, "solve_ivp", "rtol", r, run.status, fe, fr, se, ae, min(walls),
+                        run.force_evaluations, 0))
+        if log:
+            log(f"{method:18s} rtol={r:<8.3g} final error {fe:9.3g}  wall {min(walls):9.4g} s  "
+                f"{run.force_evaluations} force evaluations")
+        if min(walls) > budget_s or fe < FLOOR:
+            break
+    return rows
+
+
+def pareto(rows: list[Row], key: str = "wall_s") -> tuple[np.ndarray, np.ndarray]:
+    """(error, cost) of the cheapest run reaching each error level (sorted by error)."""
+    pts = sorted((r.final_error, getattr(r, key)) for r in rows if math.isfinite(r.final_error) and r.final_error > 0)
+    err, cost, best = [], [], math.inf
+    for e, c in sorted(pts, key=lambda p: -p[0]):
+        if c < best:
+            best = c
+        err.append(e)
+        cost.append(best)
+    return np.array(err), np.array(cost)
+
+
+def cheapest(rows: list[Row], error: float, key: str = "wall_s") -> float:
+    """Cost of the cheapest run with final_error ≤ ``error`` (inf if none)."""
+    costs = [getattr(r, key) for r in rows if r.final_error <= error]
+    return min(costs) if costs else math.inf
+
+
+def speedups(rows: list[Row], errors=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)) -> list[dict]:
+    """Best solve_ivp wall time over best flexmm wall time at equal final error."""
+    ours = [r for r in rows if r.family == "flexmm" and r.status == "finished"]
+    theirs = [r for r in rows if r.family == "solve_ivp" and r.status == "finished"]
+    out = []
+    for e in errors:
+        a, b = cheapest(ours, e), cheapest(theirs, e)
+        if math.isfinite(a) and math.isfinite(b):
+            best_ours = min((r for r in ours if r.final_error <= e), key=lambda r: r.wall_s)
+            best_theirs = min((r for r in theirs if r.final_error <= e), key=lambda r: r.wall_s)
+            out.append({"error": e, "flexmm_s": a, "flexmm_method": best_ours.method,
+                        "solve_ivp_s": b, "solve_ivp_method": best_theirs.method, "speedup": b / a})
+    return out
+
+
+def to_dataset(rows: list[Row], attrs: dict):
+    """xarray Dataset with one entry per run (dimension ``run``)."""
+    import xarray as xr
+
+    cols = {k: [getattr(r, k) for r in rows] for k in Row.__dataclass_fields__}
+    units = {"wall_s": "s", "final_error": "1", "frame_error": "1"}
+    data = {k: ("run", np.asarray(v), {"units": units.get(k, "1")}) for k, v in cols.items()}
+    return xr.Dataset(data, attrs={**attrs, "load_average": str(os.getloadavg()),
+                                   "created": time.strftime("%Y-%m-%dT%H:%M:%S")})
+
+
+def chart(rows: list[Row], path, title: str = "") -> None:
+    """Two log–log panels: final error against wall time and against force evaluations."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9.0, 3.8), dpi=100, sharey=True)
+    methods = list(dict.fromkeys(r.method for r in rows))
+    for m in methods:
+        sel = [r for r in rows if r.method == m and r.status == "finished" and math.isfinite(r.final_error)]
+        if not sel:
+            continue
+        ivp = sel[0].family == "solve_ivp"
+        style = dict(ls="--" if ivp else "-", marker="s" if ivp else "o", ms=3.5, lw=1.2,
+                     label=f"solve_ivp {m}" if ivp else m)
+        err = [max(r.final_error, 1e-16) for r in sel]
+        axes[0].loglog([r.wall_s for r in sel], err, **style)
+        axes[1].loglog([max(r.force_evaluations, 1) for r in sel], err, **style)
+    axes[0].set_xlabel("wall time (s, min of repeats, compile excluded)")
+    axes[1].set_xlabel("model-force evaluations")
+    axes[0].set_ylabel("final-state error, max |Δq| (u in a, θ in rad)")
+    for ax in axes:
+        ax.grid(True, which="major", lw=0.4, alpha=0.5)
+    axes[1].legend(fontsize=7, loc="upper right")
+    fig.suptitle(title or "work-precision", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def benchmark(problem, methods=None, ivp_methods=baseline.METHODS, *, n_frames: int = 101,
+              repeats: int = 3, ref_rtol: float = 1e-12, budget_s: float = 30.0, threads: int = 1,
+              log=None) -> tuple[list[Row], Reference]:
+    """Run the whole comparison; returns the rows and the reference."""
+    say = log or (lambda m: None)
+    ref = reference(problem, n_frames, ref_rtol)
+    say(f"reference: dopri5 rtol {ref_rtol:g} in {ref.wall_s:.3g} s; pulse speed {ref.speed:.6g} m/s, "
+        f"amplitude {ref.amplitude:.6g}")
+    rows: list[Row] = []
+    for name in methods or list(INTEGRATORS):
+        rows += run_flexmm(problem, ref, name, repeats=repeats, threads=threads, budget_s=budget_s, log=say)
+    for m in ivp_methods:
+        rows += run_ivp(problem, ref, m, budget_s=4 * budget_s, log=say)
+    return rows, ref

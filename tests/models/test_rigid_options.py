@@ -1,0 +1,175 @@
+"""Options of the rigid-unit lattices: parameter variation, magnets (tristable units), excitations
+that target any set of units (points, lines, both ends, launched soliton pairs, prescribed rotation).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from flexmm.assemble import build_problem
+from flexmm.config import ConfigError, scene_from_dict
+from flexmm.config.rigid import ParameterDefects, ParameterGradient, ParameterInterface, ParameterRandom
+from flexmm.integrators.common import MODE_DISPLACEMENT
+from flexmm.models import MODELS
+from flexmm.models.magnets import MU0_OVER_4PI, face_magnets
+from flexmm.models.variation import parameter_arrays
+
+LEGO = {"kind": "rotating_squares_chain", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
+        "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+MAGNET_SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.02, "k_long_n_per_m": 5e4, "k_shear_n_per_m": 5e4,
+                "k_rot_n_m_per_rad": 0.01, "mass_kg": 0.005,
+                "magnets": {"moment_a_m2": 0.253, "recess_m": 0.003}}
+BASE = {"theta0_rad": 0.1, "mass_kg": 1.0, "inertia_kg_m2": 2.0, "k_long_n_per_m": 10.0,
+        "k_shear_n_per_m": 3.0, "k_rot_n_m_per_rad": 5.0}
+
+
+def scene(lattice, **sections):
+    return scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}, **sections})
+
+
+# ---------------------------------------------------------------- variation
+def arrays(variations, n=6):
+    col, row = np.arange(n), np.zeros(n, int)
+    ha = np.arange(n - 1)
+    return parameter_arrays(BASE, variations, col, row, ha, ha + 1)
+
+
+def test_gradient_interface_random_defects_values():
+    sites, hinges = arrays([
+        ParameterGradient(kind="gradient", target="theta0_rad", start=0.0, end=0.5, first=1, last=5),
+        ParameterInterface(kind="interface", target="k_rot_n_m_per_rad", position=3, value=9.0),
+        ParameterDefects(kind="defects", target="mass_kg", sites=[2], factor=3.0),
+        ParameterDefects(kind="defects", target="k_long_n_per_m", sites=[5], value=1.0),
+    ])
+    np.testing.assert_allclose(sites["theta0_rad"], [0.0, 0.0, 0.125, 0.25, 0.375, 0.5])
+    np.testing.assert_allclose(hinges["k_rot_n_m_per_rad"], [5, 5, 7, 9, 9])  # the crossing hinge: mean
+    np.testing.assert_allclose(sites["mass_kg"], [1, 1, 3, 1, 1, 1])
+    np.testing.assert_allclose(hinges["k_long_n_per_m"], [10, 10, 10, 10, 1])  # hinges touching unit 5
+    np.testing.assert_allclose(sites["inertia_kg_m2"], 2.0)
+    noisy = [ParameterRandom(kind="random", target="k_shear_n_per_m", relative_std=0.1, seed=4)]
+    a, b = arrays(noisy)[1]["k_shear_n_per_m"], arrays(noisy)[1]["k_shear_n_per_m"]
+    np.testing.assert_array_equal(a, b)  # reproducible from the seed
+    assert np.std(a) > 0 and np.all(np.abs(a / 3.0 - 1) < 0.5)
+
+
+def test_chain_variation_reaches_the_tables():
+    lattice = dict(LEGO, n_units=5, variation=[
+        {"kind": "interface", "target": "k_long_n_per_m", "position": 3, "value": 2 * 71690.0},
+        {"kind": "defects", "target": "inertia_kg_m2", "sites": [0], "value": 2 * 8.7814e-8}])
+    system = MODELS["rotating_squares_chain"].build(scene(lattice).lattice)
+    hprm, sprm = system.args[2], system.args[3]
+    np.testing.assert_allclose(hprm[:, 4], [1, 1, 1.5, 2])  # k_l per hinge / base k_l
+    np.testing.assert_allclose(sprm[:, 1], 0.0)  # n_v = 1 but s_v = 0: no lateral stretch term
+    alpha2 = 8.7814e-8 / (4.52e-3 * 0.016**2)
+    np.testing.assert_allclose(system.mass[5:], [2 * alpha2] + [alpha2] * 4)
+
+
+@pytest.mark.parametrize("variation, message", [
+    ({"kind": "gradient", "target": "mass_kg", "start": 1, "end": 2, "first": 4, "last": 2}, "first < last"),
+    ({"kind": "interface", "target": "mass_kg", "position": 9, "value": 1}, "position 9 outside"),
+    ({"kind": "defects", "target": "mass_kg", "sites": [12], "value": 1}, "outside 0..7"),
+    ({"kind": "random", "target": "mass_kg", "seed": 1}, "exactly one of std or relative_std"),
+    ({"kind": "gradient", "target": "spring", "start": 1, "end": 2}, "theta0_rad"),
+])
+def test_variation_config_errors(variation, message):
+    with pytest.raises(ConfigError, match=message):
+        scene(dict(LEGO, n_units=8, variation=[variation]))
+
+
+# ---------------------------------------------------------------- magnets
+def test_dipole_pair_energy_matches_the_point_dipole_formula():
+    """Two magnet units far apart: the kernel's energy is Σ μ0/(4π r³)[m1·m2 − 3(m1·r̂)(m2·r̂)]."""
+    lattice = dict(MAGNET_SHEET, n_rows=1, n_cols=2, theta0_rad=0.2, ligament_length_m=0.1)
+    system = MODELS["rotating_squares_sheet"].build(scene(lattice).lattice)
+    q = np.zeros(system.ndof)
+    q[4:] = [0.3, -0.1]  # θ of the two units
+    a, sc = 0.02, system.scales
+    pos, dirs = face_magnets(0.003 / a)
+    expected = 0.0
+    centres = [np.zeros(2), np.array([a * math.cos(0.2) + 0.1, 0.0])]
+    phis = [0.2 + 0.3, -(0.2 - 0.1)]  # φ = σ(θ0 + θ), σ = +1, −1
+    signs = [1.0, -1.0]  # attract: σ = +1 units point out, σ = −1 in
+    mags = []
+    for c, phi, s in zip(centres, phis, signs):
+        rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
+        mags.append([(c + a * rot @ p, s * 0.253 * rot @ d) for p, d in zip(pos, dirs)])
+    for r1, m1 in mags[0]:
+        for r2, m2 in mags[1]:
+            r = r2 - r1
+            rn = np.linalg.norm(r)
+            expected += MU0_OVER_4PI / rn**3 * (m1 @ m2 - 3 * (m1 @ r / rn) * (m2 @ r / rn))
+    bare = MODELS["rotating_squares_sheet"].build(scene(dict(lattice, magnets=None)).lattice)
+    magnets = (system.energy(q, system.args) - bare.energy(q, bare.args)) * sc.energy
+    assert magnets == pytest.approx(expected, rel=1e-9)
+
+
+def test_magnet_unit_is_tristable():
+    """Relaxed from three guesses, four squares around a void settle open or closed either way."""
+    states = []
+    for guess in (0.05, 0.7, -0.7):
+        lattice = dict(MAGNET_SHEET, n_rows=2, n_cols=2, predeform={"theta_guess_rad": guess})
+        system = MODELS["rotating_squares_sheet"].build(scene(lattice).lattice)
+        theta = system.q0[8:]
+        assert np.ptp(theta) < 1e-6
+        states.append(theta.mean())
+    assert abs(states[0]) < 1e-6
+    assert states[1] == pytest.approx(-states[2], rel=1e-6)
+    assert 0.75 < states[1] < math.pi / 4 + 0.02  # the faces touch: the void is closed
+
+
+# ---------------------------------------------------------------- excitations
+def test_combined_drives_append_and_rotation_drive_prescribes_theta():
+    lattice = dict(MAGNET_SHEET, n_rows=2, n_cols=4, left="driven", right="driven")
+    exc = {"kind": "combined", "parts": [
+        {"kind": "boundary_displacement", "end": "left", "shape": "smooth_step", "amplitude_rad": 0.7,
+         "duration_s": 0.01},
+        {"kind": "boundary_displacement", "end": "right", "shape": "smooth_step", "amplitude_rad": -0.7,
+         "duration_s": 0.01}]}
+    problem = build_problem(scene(lattice, excitation=exc, solver={"duration_s": 1e-3, "dt_s": 1e-6}))
+    s, terms = problem.system, problem.terms
+    theta_dofs = [s.dof("theta", i) for i in (0, 4, 3, 7)]
+    assert terms["drv_dof"].tolist() == theta_dofs
+    assert np.all(terms["drv_mode"] == MODE_DISPLACEMENT)
+    assert terms["drv_prm"][:, 0].tolist() == [0.7, 0.7, -0.7, -0.7]
+    assert np.all(s.inv_mass[theta_dofs] == 0) and s.inv_mass[s.dof("u", 0)] > 0
+
+
+def test_kicks_points_and_edges():
+    lattice = dict(MAGNET_SHEET, n_rows=2, n_cols=3, magnets=None)
+    exc = {"kind": "kicks", "kicks": [{"sites": [4], "velocity_x_m_s": 1.0, "velocity_y_m_s": -2.0},
+                                      {"end": "top", "angular_velocity_rad_s": 10.0}]}
+    s = build_problem(scene(lattice, excitation=exc)).system
+    v, sc = s.v0, s.scales
+    assert v[s.dof("u", 4)] * sc.velocity == pytest.approx(1.0)
+    assert v[s.dof("v", 4)] * sc.velocity == pytest.approx(-2.0)
+    assert np.count_nonzero(v[: 2 * s.n_sites]) == 2
+    np.testing.assert_allclose(v[[s.dof("theta", i) for i in (3, 4, 5)]] / sc.time_s, 10.0)
+    top = build_problem(scene(dict(lattice, top="driven"), excitation={
+        "kind": "impact", "end": "top", "velocity_m_s": 1.0, "sites": [5]})).system
+    assert top.v0[top.dof("v", 5)] < 0 and np.count_nonzero(top.v0) == 1  # pushed down, into the sheet
+
+
+def test_launched_solitons_superpose():
+    lattice = dict(LEGO, n_units=200)
+    first = {"amplitude_rad": 0.5, "center_site": 60}
+    second = {"amplitude_rad": -0.5, "center_site": 140, "direction": -1}
+    systems = [build_problem(scene(lattice, excitation={"kind": "solitons", "pulses": pulses})).system
+               for pulses in ([first], [second], [first, second])]
+    a, b, both = systems
+    np.testing.assert_allclose(both.q0, a.q0 + b.q0, atol=1e-15)
+    np.testing.assert_allclose(both.v0, a.v0 + b.v0, atol=1e-15)
+    n = 200
+    assert a.q0[n + 60] == pytest.approx(0.5) and b.q0[n + 140] == pytest.approx(-0.5)
+    assert b.v0[n + 141] * b.q0[n + 141] < 0  # moving left: its right (trailing) flank relaxes
+
+
+@pytest.mark.parametrize("excitation, message", [
+    ({"kind": "impact", "end": "top", "velocity_m_s": 1.0}, "ends are left, right"),
+    ({"kind": "kicks", "kicks": [{"sites": [50], "angular_velocity_rad_s": 1.0}]}, "outside 0..9"),
+    ({"kind": "solitons", "pulses": [{"amplitude_rad": 0.5, "center_site": 10}]}, "outside 0..9"),
+    ({"kind": "kicks", "kicks": [{"end": "left", "sites": [1]}]}, "exactly one of end or sites"),
+])
+def test_excitation_targets_are_validated(excitation, message):
+    with pytest.raises(ConfigError, match=message):
+        scene(dict(LEGO, n_units=10), excitation=excitation)
