@@ -1,17 +1,14 @@
-"""Pulse extraction: arrival times → speed, peak |field| → amplitude, FWHM → width.
+"""Travelling pulses: speed, amplitude, widths, polarity.
 
-``leading_pulse`` (used by ``flexmm run``) measures the dominant pulse only; ``measure_pulses``
-detects and tracks several (trains, collisions) and measures each: see its docstring.
+``measure_pulses`` detects and tracks every pulse of a field (trains, collisions) and measures
+each one (see its docstring; the pieces live in ``detect``, ``arrivals`` and ``widths``).
 
-
-Arrival time at a site = time of the largest peak of |field(t)| there (the dominant pulse,
-not small precursors), refined by a three-point parabola through the sampled maximum. Sites
-whose largest peak is below ``threshold_fraction`` of the 90th percentile, or of the minority
-polarity, are dropped, and so are
-outliers of the line fit (> 4 median absolute deviations). Speed = inverse slope of the
-least-squares line through (position, arrival time) over the interior sites, with its
-standard error. Width = full width at half maximum of |field(x)| at the frame where the
-pulse is mid-way (scipy.signal.peak_widths), in metres.
+``leading_pulse`` is the quick measurement ``flexmm run`` prints: arrival time at a site = time
+of the largest peak of |field(t)| there, refined by a three-point parabola; sites whose largest
+peak is below ``threshold_fraction`` of the 90th percentile, or of the minority polarity, are
+dropped, and so are outliers of the line fit (> 4 median absolute deviations). Speed = inverse
+slope of the least-squares line through (position, arrival time) over the interior sites, with
+its standard error. Width = FWHM of |field(x)| at the frame where the pulse is mid-way.
 """
 
 from __future__ import annotations
@@ -200,7 +197,7 @@ def _trimmed_arrivals(view, tr_t, tr_pos, pol, fwhm, others, edge, min_sites):
 
 
 def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr) -> PulseMeasurement:
-    """Measure one pulse from its track (frames, t, pos, h) and clean arrivals (sites, times, peaks, seg)."""
+    """One pulse from its track (frames, t, pos, h) and clean arrivals (sites, times, peaks, seg)."""
     frames, t, pos, h = track
     sites, times, peaks, seg = arr
     x = view.x[sites]

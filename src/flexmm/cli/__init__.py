@@ -9,10 +9,12 @@ from __future__ import annotations
 import typer
 
 from flexmm.cli import analyze as _analyze
+from flexmm.cli import bench as _bench
 from flexmm.cli import compare as _compare
 from flexmm.cli import plan as _plan
 from flexmm.cli import run as _run
 from flexmm.cli import schema as _schema
+from flexmm.cli import stability as _stability
 from flexmm.cli import sweep as _sweep
 from flexmm.cli import validate as _validate
 
@@ -30,6 +32,8 @@ app.command("schema")(_schema.schema)
 app.command("sweep")(_sweep.sweep)
 app.command("plan")(_plan.plan)
 app.command("compare")(_compare.compare)
+app.command("stability")(_stability.stability)
+app.command("bench")(_bench.bench)
 
 
 def main() -> None:

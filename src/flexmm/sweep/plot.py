@@ -139,8 +139,7 @@ def _against_parameter(ax, ds, x: str, series, var: str, ylabel: str) -> None:
         _log_if_wide(ax, np.abs(np.asarray(ds[var].values, float)))
     ax.set_xlabel(_label(ds, x))
     ax.set_ylabel(ylabel)
-    if ax.get_yscale() == "linear":
-        ax.ticklabel_format(axis="y", useOffset=False)
+    _widen_if_flat(ax, np.asarray(ds[var].values, float))
     if ds[x].attrs.get("scale") == "log":
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
@@ -161,6 +160,13 @@ def _speed_against_amplitude(ax, ds, curves, has_theory: bool) -> None:
     ax.set_ylabel("speed (m/s)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
+
+
+def _widen_if_flat(ax, values: np.ndarray, rel: float = 1e-6) -> None:
+    """A constant observable (e.g. a front's fixed jump) gets a ±10 % axis, not offset ticks."""
+    v = np.abs(values[np.isfinite(values)])
+    if v.size and ax.get_yscale() == "linear" and np.ptp(v) <= rel * v.max() and v.max() > 0:
+        ax.set_ylim(0.9 * v.max(), 1.1 * v.max())
 
 
 def _log_if_wide(ax, values: np.ndarray, ratio: float = 20.0) -> None:
