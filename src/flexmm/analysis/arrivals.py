@@ -23,14 +23,17 @@ OVERLAP_FWHM = 3.0  # another pulse closer than this many FWHM overlaps a site
 def peak_time(t: np.ndarray, y: np.ndarray, k: int, level: float = 0.6) -> tuple[float, float]:
     """Peak time and height near the sampled maximum y[k].
 
-    Time: vertex of the least-squares parabola through the (up to 9) samples above level·y[k],
-    which averages noise; height: the three-point parabola, least biased by the peak's shape.
+    Time: vertex of the least-squares parabola through the samples above level·y[k], as many
+    on each side of k, which averages noise (a broad peak uses many samples); height: the three-point parabola, least biased
+    by the peak's shape.
     """
     lo = hi = k
-    while lo > 0 and y[lo - 1] >= level * y[k] and k - lo < 4:
+    while lo > 0 and y[lo - 1] >= level * y[k]:
         lo -= 1
-    while hi < y.size - 1 and y[hi + 1] >= level * y[k] and hi - k < 4:
+    while hi < y.size - 1 and y[hi + 1] >= level * y[k]:
         hi += 1
+    side = min(k - lo, hi - k)  # symmetric about the sampled maximum: no bias when one side is cut
+    lo, hi = k - side, k + side
     if hi - lo < 2:
         lo, hi = max(k - 1, 0), min(k + 1, y.size - 1)
     height = refine_peak(y, k)[1]

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from flexmm.sweep.spec import Point, SweepSpec
+from flexmm.io.provenance import resolved_config
+from flexmm.sweep.spec import Point, SweepSpec, spec_summary
 from flexmm.sweep.store import FAILED, FINISHED, PENDING, SweepStore, write_json_atomic
 from flexmm.sweep.worker import INTERRUPTED, ONE_THREAD, Task, init_worker, run_batch
 
@@ -117,8 +118,6 @@ def prepare(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = Fals
             continue
         states[p.hash] = store.state(p.hash)
         if states[p.hash] == PENDING or (states[p.hash] == FAILED and retry_failed):
-            from flexmm.io.provenance import resolved_config
-
             tasks.append(Task(p.hash, resolved_config(p.scene), str(store.point_dir(p.hash).resolve()),
                               _plain_params(p.params), analysis))
     return SweepPlan(spec, store, points, states, tasks, retry_failed)
@@ -140,8 +139,6 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
             local_dask: bool = False, dask_processes: bool = True,
             on_outcome: OnOutcome | None = None) -> SweepReport:
     """Run the plan's tasks; the report counts every distinct point's state afterwards."""
-    from flexmm.sweep.spec import spec_summary
-
     t0 = time.perf_counter()
     plan.store.root.mkdir(parents=True, exist_ok=True)
     write_json_atomic(plan.store.root / "spec.json", spec_summary(plan.spec))
@@ -163,7 +160,7 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
             report.interrupted = _run_dask(plan.tasks, scheduler, n_workers, batch_size, dask_processes,
                                            record, report.errors)
         else:
-            report.backend = f"local processes ({min(n_workers, len(plan.tasks))})"
+            report.backend = f"local processes ({min(n_workers, len(batches(plan.tasks, n_workers, batch_size)))})"
             report.interrupted = _run_local(plan.tasks, n_workers, batch_size, record, report.errors)
     report.interrupted |= any(o["status"] == INTERRUPTED for o in seen)
     report.n_run = sum(1 for o in seen if o["status"] != INTERRUPTED)
