@@ -19,13 +19,16 @@ FASTMATH = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 prange = range if NO_JIT else numba.prange
 
 
-def jit(fn=None, *, parallel: bool = False, cache: bool = True):
+def jit(fn=None, *, parallel: bool = False, cache: bool = True, reassoc: bool = True):
     """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT).
 
     ``cache=False`` for kernels that take other compiled functions as arguments (integrator
     steppers receive the model's ``force``): numba cannot reuse such entries across processes,
     so caching them only adds an index entry per process, and re-pickling that index fails
     ("underlying object has vanished") once it holds a dispatcher that no longer exists.
+    ``reassoc=False`` keeps the written order of floating-point operations (compensated
+    arithmetic such as the argument reduction of ``_trig.sincos``; the flags stay on the
+    instructions when the function is inlined into a caller compiled with reassociation).
     """
 
     def wrap(f):
@@ -34,7 +37,7 @@ def jit(fn=None, *, parallel: bool = False, cache: bool = True):
         return numba.njit(
             f,
             cache=cache,
-            fastmath=set(FASTMATH),
+            fastmath=set(FASTMATH) if reassoc else set(FASTMATH) - {"reassoc"},
             parallel=parallel,
             nogil=True,
             error_model="numpy",

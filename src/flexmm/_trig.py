@@ -9,8 +9,9 @@ stops LLVM from vectorising any loop that contains them. This version is branch-
 
 with |r| ≤ π/4, where the first omitted Taylor terms are below 1e-16 relative, then
 (sin x, cos x) = (s, c), (c, −s), (−s, −c), (−c, s) for k mod 4 = 0, 1, 2, 3.
-Accuracy: ≤ 2 ulp for |x| ≲ 1e5 (tests/integrators/test_trig_kernel.py); larger arguments
-lose accuracy (the reduction is not Payne–Hanek), which no lattice angle reaches.
+Accuracy: a few ulp of max(1, |x|·1e-4)... in practice ≤ 2 ulp for |x| ≲ 1e5
+(tests/integrators/test_trig_and_parallel_kernels.py); beyond ~3e6 the reduction is no
+longer exact (no Payne–Hanek), which no lattice angle reaches.
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ import numpy as np
 
 from flexmm._jit import jit
 
-_PIO2_HI = 1.5707963267341256e00  # π/2 = HI + MID + LO, HI and MID with trailing zero bits
-_PIO2_MID = 6.0771005065061922e-11
+# π/2 = HI + MID + LO to 1e-37; HI and MID have 31 and 32 significant bits, so k·HI and k·MID
+# are exact for |k| < 2^21 (|x| ≲ 3e6)
+_PIO2_HI = 1.5707963267341256e00
+_PIO2_MID = 6.077100506303966e-11
 _PIO2_LO = 2.0222662487959506e-21
 _TWO_OVER_PI = 0.6366197723675814
 
@@ -30,7 +33,7 @@ _S1, _S2, _S3, _S4, _S5, _S6, _S7 = ((-1) ** j / math.factorial(2 * j + 1) for j
 _C1, _C2, _C3, _C4, _C5, _C6, _C7, _C8 = ((-1) ** j / math.factorial(2 * j) for j in range(1, 9))
 
 
-@jit
+@jit(reassoc=False)  # the three-part reduction must not be re-associated
 def sincos(x):
     """(sin x, cos x) to ~1 ulp for |x| ≲ 1e5, branch-free so that loops vectorise."""
     kf = math.floor(x * _TWO_OVER_PI + 0.5)

@@ -48,7 +48,8 @@ class Row:
     frame_error: float
     speed_error: float
     amplitude_error: float
-    wall_s: float
+    wall_s: float  # min over repeats
+    cpu_s: float  # process CPU time of the same run (less sensitive to a busy machine)
     force_evaluations: int
     steps: int
 
@@ -134,15 +135,16 @@ def run_flexmm(problem, ref: Reference, name: str, *, repeats: int = 3, threads:
     rows = []
     n_frames = ref.t.size
     for pname, value, kw in ladder(name, problem):
-        walls, tr = [], None
+        walls, cpus, tr = [], [], None
         for _ in range(repeats):
             tr = integrate(problem, name, n_frames=n_frames, threads=threads, **kw)
             walls.append(tr.wall_s)
+            cpus.append(tr.cpu_s)
             if not tr.ok or tr.wall_s > budget_s:
                 break
         fe, fr, se, ae = _errors(problem, ref, tr.t, tr.q) if tr.ok else (math.inf,) * 2 + (math.nan,) * 2
         c = tr.counters
-        rows.append(Row(name, "flexmm", pname, value, tr.status, fe, fr, se, ae, min(walls),
+        rows.append(Row(name, "flexmm", pname, value, tr.status, fe, fr, se, ae, min(walls), min(cpus),
                         c.get("force_evaluations", 0), c.get("steps", 0)))
         if log:
             log(f"{name:18s} {pname}={value:<8.3g} final error {fe:9.3g}  wall {min(walls):9.4g} s  "
@@ -156,14 +158,15 @@ def run_ivp(problem, ref: Reference, method: str, *, repeats: int = 1, budget_s:
             rtols=RTOLS, log=None) -> list[Row]:
     rows = []
     for r in rtols:
-        walls, run = [], None
+        walls, cpus, run = [], [], None
         for _ in range(repeats):
             run = baseline.run(problem, method, r, ATOL_RATIO * r, ref.t)
             walls.append(run.wall_s)
+            cpus.append(run.cpu_s)
             if run.wall_s > 1.0:
                 break
         fe, fr, se, ae = _errors(problem, ref, run.t, run.q)
-        rows.append(Row(method, "solve_ivp", "rtol", r, run.status, fe, fr, se, ae, min(walls),
+        rows.append(Row(method, "solve_ivp", "rtol", r, run.status, fe, fr, se, ae, min(walls), min(cpus),
                         run.force_evaluations, 0))
         if log:
             log(f"{method:18s} rtol={r:<8.3g} final error {fe:9.3g}  wall {min(walls):9.4g} s  "
@@ -191,17 +194,17 @@ def cheapest(rows: list[Row], error: float, key: str = "wall_s") -> float:
     return min(costs) if costs else math.inf
 
 
-def speedups(rows: list[Row], errors=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)) -> list[dict]:
-    """Best solve_ivp wall time over best flexmm wall time at equal final error."""
+def speedups(rows: list[Row], errors=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), key: str = "wall_s") -> list[dict]:
+    """Best solve_ivp cost over best flexmm cost (``key``: wall_s or cpu_s) at equal final error."""
     ours = [r for r in rows if r.family == "flexmm" and r.status == "finished"]
     theirs = [r for r in rows if r.family == "solve_ivp" and r.status == "finished"]
     out = []
     for e in errors:
-        a, b = cheapest(ours, e), cheapest(theirs, e)
+        a, b = cheapest(ours, e, key), cheapest(theirs, e, key)
         if math.isfinite(a) and math.isfinite(b):
-            best_ours = min((r for r in ours if r.final_error <= e), key=lambda r: r.wall_s)
-            best_theirs = min((r for r in theirs if r.final_error <= e), key=lambda r: r.wall_s)
-            out.append({"error": e, "flexmm_s": a, "flexmm_method": best_ours.method,
+            best_ours = min((r for r in ours if r.final_error <= e), key=lambda r: getattr(r, key))
+            best_theirs = min((r for r in theirs if r.final_error <= e), key=lambda r: getattr(r, key))
+            out.append({"error": e, "key": key, "flexmm_s": a, "flexmm_method": best_ours.method,
                         "solve_ivp_s": b, "solve_ivp_method": best_theirs.method, "speedup": b / a})
     return out
 
@@ -211,7 +214,7 @@ def to_dataset(rows: list[Row], attrs: dict):
     import xarray as xr
 
     cols = {k: [getattr(r, k) for r in rows] for k in Row.__dataclass_fields__}
-    units = {"wall_s": "s", "final_error": "1", "frame_error": "1"}
+    units = {"wall_s": "s", "cpu_s": "s", "final_error": "1", "frame_error": "1"}
     data = {k: ("run", np.asarray(v), {"units": units.get(k, "1")}) for k, v in cols.items()}
     return xr.Dataset(data, attrs={**attrs, "load_average": str(os.getloadavg()),
                                    "created": time.strftime("%Y-%m-%dT%H:%M:%S")})

@@ -47,4 +47,4 @@ def test_all_integrators_agree_on_the_impact(tmp_path) -> None:
     ref = finals["dopri5"]
     for name, th in finals.items():
         print(f"{name}: max |θ − θ_dopri5| = {np.max(np.abs(th - ref)):.3g} rad")
-        assert np.max(np.abs(th - ref)) < 2e-3
+        assert np.max(np.abs(th - ref)) < 1e-4

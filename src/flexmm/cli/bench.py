@@ -55,7 +55,8 @@ def bench(
         writer.writeheader()
         writer.writerows(r.as_dict() for r in rows)
     wp.chart(rows, folder / "workprecision.png", f"{scene.name}: work-precision")
-    for s in wp.speedups(rows):
-        typer.echo(f"error ≤ {s['error']:.0e}: {s['flexmm_method']} {s['flexmm_s']:.4g} s vs "
-                   f"solve_ivp {s['solve_ivp_method']} {s['solve_ivp_s']:.4g} s: {s['speedup']:.0f}x faster")
+    for key, what in (("wall_s", "wall"), ("cpu_s", "CPU")):
+        for s in wp.speedups(rows, key=key):
+            typer.echo(f"error ≤ {s['error']:.0e} ({what} time): {s['flexmm_method']} {s['flexmm_s']:.4g} s vs "
+                       f"solve_ivp {s['solve_ivp_method']} {s['solve_ivp_s']:.4g} s: {s['speedup']:.1f}x faster")
     typer.echo(f"written: {folder}/workprecision.{{nc,csv,png}}")

@@ -32,6 +32,7 @@ class Trajectory:
     status: str  # 'finished' or 'failed' (non-finite state or runaway energy)
     wall_s: float  # integration only (compile excluded)
     threads: int = 1
+    cpu_s: float = 0.0  # process CPU time of the integration (all threads)
     counters: dict = field(default_factory=dict)
 
     @property
@@ -85,11 +86,12 @@ def integrate(problem, integrator, *, h: float | None = None, rtol: float | None
     ts, qs, vs = np.zeros(n_frames), np.zeros((n_frames, s.ndof)), np.zeros((n_frames, s.ndof))
     qs[0], vs[0] = q, v
     status, k, t = "finished", 0, 0.0
-    wall = 0.0
+    wall = cpu = 0.0
     for k in range(1, n_frames):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         t = advance(force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h_run, per_frame, acc)
         wall += time.perf_counter() - t0
+        cpu += time.process_time() - c0
         ts[k], qs[k], vs[k] = t, q, v
         bad = not (np.isfinite(q).all() and np.isfinite(v).all())
         if not bad and check_energy:
@@ -98,7 +100,7 @@ def integrate(problem, integrator, *, h: float | None = None, rtol: float | None
             status = "failed"
             break
     n = k + 1
-    return Trajectory(ts[:n], qs[:n], vs[:n], acc, status, wall, used, spec.counters(acc))
+    return Trajectory(ts[:n], qs[:n], vs[:n], acc, status, wall, used, cpu, spec.counters(acc))
 
 
 def run_fixed(problem, integrator, h: float, t_end: float | None = None, n_frames: int = 2, **kw) -> Trajectory:
