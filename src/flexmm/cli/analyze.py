@@ -1,5 +1,8 @@
 """``flexmm analyze RUN_DIR [RUN_DIR ...]``: measure runs and print them against theory.
 
+A sweep directory (``flexmm sweep`` output) is summarised instead: its combined dataset is
+tabulated and plotted against the varied parameters, with theory curves where available.
+
 Exit status: 0 when every run was measured, 1 when some run has no pulse/front/drive to
 measure, 2 for user errors (missing run directory, unknown field or analysis).
 """
@@ -22,6 +25,7 @@ from flexmm.analysis import figures as plots
 from flexmm.analysis import report
 from flexmm.analysis.fields import FieldError
 from flexmm.cli.common import EXIT_FAILED_RUN, EXIT_USER_ERROR, error
+from flexmm.sweep import is_sweep, open_sweep, plot_sweep
 
 
 def _fmt(x) -> str:
@@ -125,6 +129,12 @@ def analyze(
     """Measure pulses, fronts or driven response of runs and compare with theory."""
     if analysis not in report.KINDS:
         raise error(f"unknown analysis {analysis!r}; choose one of {', '.join(report.KINDS)}")
+    sweeps = [r for r in runs if is_sweep(r)]
+    for s in sweeps:
+        _sweep_summary(s, plot_dir)
+    runs = [r for r in runs if r not in sweeps]
+    if not runs:
+        return
     for r in runs:
         try:
             report.dataset_path(r)
@@ -172,6 +182,26 @@ def analyze(
         _write_text(csv_out, _csv_text(results))
     if errors:
         raise typer.Exit(EXIT_FAILED_RUN)
+
+
+def _sweep_summary(sweep_dir: str, plot_dir: str | None) -> None:
+    """Print a sweep's combined observables and plot them against the varied parameters."""
+    try:
+        ds = open_sweep(sweep_dir)
+    except FileNotFoundError as exc:
+        raise error(str(exc)) from None
+    console = Console(highlight=False)
+    names = [v for v in ("speed", "speed_theory", "amplitude", "width", "status") if v in ds]
+    table = Table(title=f"sweep {sweep_dir}", title_justify="left", header_style="bold")
+    flat = ds[names].to_dataframe().reset_index()
+    for col in flat.columns:
+        table.add_column(str(col), justify="right")
+    for _, row in flat.iterrows():
+        table.add_row(*(v if isinstance(v, str) else _fmt(v) for v in row.tolist()))
+    console.print(table)
+    target = Path(plot_dir or sweep_dir) / "sweep.png"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    console.print(f"wrote {plot_sweep(sweep_dir, target)}")
 
 
 __all__ = ["analyze", "EXIT_USER_ERROR"]
