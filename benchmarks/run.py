@@ -88,7 +88,7 @@ def throughput(sizes=(1_000, 100_000, 1_000_000), threads=(1, 2), repeats: int =
 def memory(n_units: int = 1_000_000, duration_s: float = 0.01, n_frames: int = 11) -> dict:
     """Peak RSS of ``flexmm run`` on a 1e6-unit chain (a subprocess; streamed output)."""
     out_dir = RESULTS / "memory_run"
-    cmd = [FLEXMM, "run", str(LEGO), "--quiet", "--out", str(out_dir),
+    cmd = [FLEXMM, "run", str(LEGO), "--quiet", "--fidelity", "full", "--out", str(out_dir),
            "--set", f"lattice.n_units={n_units}", "--set", f"solver.duration_s={duration_s}",
            "--set", f"output.n_frames={n_frames}"]
     t0 = time.perf_counter()

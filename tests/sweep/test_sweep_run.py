@@ -152,6 +152,18 @@ def test_plot_sweep_writes_a_png(local_run, tmp_path):
     assert out.is_file() and out.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_analyze_cli_tabulates_and_plots_a_sweep_dir(local_run, tmp_path):
+    from typer.testing import CliRunner
+
+    from flexmm.cli import app
+
+    _, d, _ = local_run
+    res = CliRunner().invoke(app, ["analyze", str(d), "--plot-dir", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert "amplitude_rad" in res.output and "finished" in res.output
+    assert (tmp_path / "sweep.png").read_bytes()[:4] == b"\x89PNG"
+
+
 def test_zip_sweep_has_a_point_dimension(tmp_path, in_process_scheduler):
     text = TINY.replace("grid:\n        excitation.amplitude_rad: [0.3, 0.45, 0.6]",
                         "zip:\n        excitation.amplitude_rad: [0.3, 0.6]\n"

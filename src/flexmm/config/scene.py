@@ -85,7 +85,7 @@ class Solver(Strict):
     )
     rtol: Positive | None = Field(None, lt=1, description="relative tolerance of dopri5 (default 1e-6)")
     atol: Positive | None = Field(
-        None, description="absolute tolerance of dopri5, nondimensional (default 1e-3 × rtol)"
+        None, description="absolute tolerance of dopri5, nondimensional (default 1e-2 × rtol)"
     )
     threads: int | None = Field(
         None, ge=1, le=1024, description="threads for parallel kernels (default: all cores for ≥ 1e5 units, else 1)"

@@ -71,7 +71,7 @@ class IntegratorSpec:
             return np.zeros(ACC_HEADER)
         acc = np.zeros(ACC_HEADER + self.state_size(ndof))
         acc[dopri5.S_RTOL] = rtol
-        acc[dopri5.S_ATOL] = rtol * 1e-3 if atol is None else atol
+        acc[dopri5.S_ATOL] = rtol * 1e-2 if atol is None else atol
         acc[dopri5.S_MAX_STEP] = 0.0 if max_step is None else max_step
         return acc
 
