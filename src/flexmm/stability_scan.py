@@ -93,7 +93,7 @@ def scan(problem, methods: list[str] | None = None, *, t_end: float | None = Non
             good = [h for h, g in trials if g]
             measured = math.inf if all(g for _, g in trials) else (max(good) if good else 0.0)
             note = (f"A-stable: finished at every step up to {implicit_max:g} x the Verlet limit"
-                    if math.isinf(measured) else "failed at a step below the ladder's top (Newton)")
+                    if math.isinf(measured) else "failed at a step below the ladder's top (Newton, even in substeps)")
             rows.append(LimitRow(name, "implicit", lim, math.inf, math.inf, measured * ts, math.inf,
                                  [(h * ts, g) for h, g in trials], note))
             say(f"{name}: {note}")
@@ -134,7 +134,9 @@ def figure(rows: list[LimitRow], path, title: str = "") -> None:
     ax.axhline(1.0, color="0.5", lw=0.8)
     for k, r in enumerate(rows):
         if not math.isfinite(r.predicted_dt_s):
-            ax.annotate(f"A-stable\n(≥ {len(r.trials)} steps ok)", (k, 1.0), ha="center", fontsize=7)
+            ok = [dt for dt, good in r.trials if good]
+            text = f"A-stable:\nfinished up to\ndt = {max(ok):.3g} s" if ok else "A-stable:\nNewton failed"
+            ax.annotate(text, (k, 1.0), ha="center", va="center", fontsize=7)
             continue
         for dt, good in r.trials:
             ax.plot(k, dt / r.predicted_dt_s, "o" if good else "x", color="tab:green" if good else "tab:red",

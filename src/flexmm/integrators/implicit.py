@@ -14,13 +14,15 @@ Held DOFs keep V = 0 (fixed) or V = (g(t + h) − g(t))/h (prescribed, so Q is t
 Energy ledger: midpoint rule, h (c·V² + dashpot power) and h P_applied(V, t + h/2) — exact for
 quadratic energies.
 
-Newton stops when the update is below ``NEWTON_RTOL`` × max|V|, or when it stops shrinking
-while below ``STALL_RTOL`` × max|V| (the round-off floor of F: hinge strains are differences
-of O(1) terms, so at tiny amplitudes F carries a relative error ~1e-16/strain).
+Newton stops when max|R| ≤ ``NEWTON_RTOL`` × the size of its terms + ``FORCE_FLOOR`` × h: the
+absolute floor is the round-off of F (hinge strains are differences of O(1) terms, so at tiny
+amplitudes F carries an absolute error ~1e-16).
 ``f`` carries the total force at the last midpoint between calls (``init`` fills it at the
-start); it only seeds the predictor V₀ = v + (h/2) M⁻¹(f − C v). A Newton iteration that
-does not converge in ``MAX_NEWTON`` iterations sets the state to NaN (the controller reports a
-failed run) and counts in ``acc[ACC_FAILED]``.
+start); it only seeds the predictor V₀ = v + (h/2) M⁻¹(f − C v). A step whose Newton iteration
+does not converge in ``MAX_NEWTON`` iterations (strong nonlinearity, or a Jacobian made
+indefinite by compression past buckling, where CG stops early) is retried as 2, 4, … substeps;
+if even ``MAX_SPLIT`` substeps fail, the state is set to NaN (the controller reports a failed
+run) and ``acc[ACC_FAILED]`` counts it.
 """
 
 from __future__ import annotations
@@ -44,8 +46,9 @@ from flexmm.integrators.common import (
 )
 
 MAX_NEWTON = 30
-NEWTON_RTOL = 1e-12  # on the update of V, relative to max |V| (plus an absolute floor)
-STALL_RTOL = 1e-6  # an update that stops shrinking below this (relative) is round-off: accept
+MAX_SPLIT = 64  # a failed step is retried as up to this many substeps
+NEWTON_RTOL = 1e-12  # on the residual, relative to the size of its terms
+FORCE_FLOOR = 1e-14  # absolute round-off of F (nondimensional): hinge strains are differences of O(1) terms
 CG_RTOL = 1e-6  # forcing term of the inexact Newton iteration
 MAX_CG = 500
 
@@ -62,6 +65,18 @@ def _residual(force, args, terms, minv, damp, q, v, V, t_mid, h, Q, F, R):
         else:
             R[k] = 0.0
     return power
+
+
+@jit
+def _converged(R, V, v, F, minv, h):
+    """|R| below NEWTON_RTOL of its terms' size, or below the absolute round-off floor of F."""
+    res = 0.0
+    size = 0.0
+    for k in range(R.shape[0]):
+        if minv[k] > 0.0:
+            res = max(res, abs(R[k]))
+            size = max(size, abs(V[k] - v[k]) / minv[k], 0.5 * h * abs(F[k]))
+    return res <= NEWTON_RTOL * size + FORCE_FLOOR * h
 
 
 @jit
@@ -133,63 +148,78 @@ def _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W
 
 
 @jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def midpoint_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """Advance ``nsteps`` implicit-midpoint steps of size ``h`` from ``t``; returns the new time."""
+def _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
+    """One midpoint step of size h in place; False (q, v untouched) if Newton did not converge."""
     drv_dof, drv_mode, drv_shape, drv_prm = terms[4], terms[5], terms[6], terms[7]
     n = q.shape[0]
-    cd = free_damping(damp, minv)
     counting = acc.shape[0] > ACC_FAILED
-    precond = np.empty(n)
+    V, Q, R, delta, q_end, v_end, precond = work[7], work[8], work[9], work[10], work[11], work[12], work[13]
     for k in range(n):
         precond[k] = 1.0 / (1.0 / minv[k] + 0.5 * h * damp[k]) if minv[k] > 0.0 else 0.0
-    V = np.empty(n)
-    Q = np.empty(n)
-    R = np.empty(n)
-    delta = np.empty(n)
-    q_end = np.empty(n)
-    v_end = np.empty(n)
-    W = np.empty((7, n))
-    for _ in range(nsteps):
-        t_mid = t + 0.5 * h
-        q_end[:] = q
-        v_end[:] = v
-        apply_prescribed(q_end, v_end, t + h, drv_dof, drv_mode, drv_shape, drv_prm)
-        for k in range(n):
-            if minv[k] > 0.0:
-                V[k] = v[k] + 0.5 * h * minv[k] * (f[k] - damp[k] * v[k])
-            else:
-                V[k] = (q_end[k] - q[k]) / h  # 0 on fixed DOFs, mean rate on prescribed ones
-        converged = False
-        power = 0.0
-        step_prev = math.inf
-        for it in range(MAX_NEWTON):
-            power = _residual(force, args, terms, minv, damp, q, v, V, t_mid, h, Q, f, R)
-            lin = _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R, delta, precond, W)
-            if counting:
-                acc[ACC_FEVALS] += 1 + lin
-                acc[ACC_REJECTED] += 1
-                acc[ACC_LINEAR] += lin
-            for k in range(n):
-                V[k] += delta[k]
-            step, size = _norm_inf(delta), _norm_inf(V)
-            # converged, or stalled at the round-off floor of F (cancellation in the springs)
-            if step <= NEWTON_RTOL * size + 1e-300 or (step >= 0.5 * step_prev and step <= STALL_RTOL * size):
-                converged = True
-                break
-            step_prev = step
-        if not converged:
-            q[:] = np.nan
-            if counting:
-                acc[ACC_FAILED] += 1
-            return t + h
-        # f and power are from the last residual, at V before its final update (≤ NEWTON_RTOL)
-        acc[0] += h * damping_power(V, cd, terms[2], terms[3])
-        acc[1] += h * power
-        for k in range(n):
-            q[k] += h * V[k]
-            v[k] = 2.0 * V[k] - v[k]
-        t += h
-        apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+    t_mid = t + 0.5 * h
+    q_end[:] = q
+    v_end[:] = v
+    apply_prescribed(q_end, v_end, t + h, drv_dof, drv_mode, drv_shape, drv_prm)
+    for k in range(n):
+        if minv[k] > 0.0:
+            V[k] = v[k] + 0.5 * h * minv[k] * (f[k] - damp[k] * v[k])
+        else:
+            V[k] = (q_end[k] - q[k]) / h  # 0 on fixed DOFs, mean rate on prescribed ones
+    power = 0.0
+    for it in range(MAX_NEWTON):
+        power = _residual(force, args, terms, minv, damp, q, v, V, t_mid, h, Q, f, R)
         if counting:
-            acc[ACC_STEPS] += 1
+            acc[ACC_FEVALS] += 1
+            acc[ACC_REJECTED] += 1
+        if _converged(R, V, v, f, minv, h):
+            acc[0] += h * damping_power(V, cd, terms[2], terms[3])
+            acc[1] += h * power
+            for k in range(n):
+                q[k] += h * V[k]
+                v[k] = 2.0 * V[k] - v[k]
+            apply_prescribed(q, v, t + h, drv_dof, drv_mode, drv_shape, drv_prm)
+            if counting:
+                acc[ACC_STEPS] += 1
+            return True
+        lin = _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R, delta, precond, work)
+        if counting:
+            acc[ACC_FEVALS] += lin
+            acc[ACC_LINEAR] += lin
+        for k in range(n):
+            V[k] += delta[k]
+        if not math.isfinite(_norm_inf(delta)):
+            return False
+    return False
+
+
+@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
+def midpoint_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """Advance ``nsteps`` implicit-midpoint steps of size ``h`` from ``t``; returns the new time.
+
+    A step whose Newton iteration fails is retried as 2, 4, …, ``MAX_SPLIT`` substeps.
+    """
+    n = q.shape[0]
+    cd = free_damping(damp, minv)
+    work = np.empty((14, n))
+    saved = np.empty((3, n))
+    for _ in range(nsteps):
+        if not _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
+            saved[0], saved[1], saved[2] = q, v, f
+            ledger = (acc[0], acc[1])
+            sub, ok = 2, False
+            while sub <= MAX_SPLIT and not ok:
+                q[:], v[:], f[:] = saved[0], saved[1], saved[2]
+                acc[0], acc[1] = ledger
+                ok = True
+                for j in range(sub):
+                    if not _step(force, args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work):
+                        ok = False
+                        break
+                sub *= 2
+            if not ok:
+                q[:] = np.nan
+                if acc.shape[0] > ACC_FAILED:
+                    acc[ACC_FAILED] += 1
+                return t + h
+        t += h
     return t

@@ -34,6 +34,8 @@ S_THETA0, S_KG, S_KR = range(3)
 N_SITE_PARAMS = 3
 #: sites per block of the parallel chain kernel (blocks are shared out among the threads)
 PARALLEL_BLOCK = 4096
+#: sites per cache block of the chain kernel's passes (~ a few arrays of 16 kB each: L1/L2)
+CACHE_BLOCK = 2048
 
 
 @jit
@@ -88,46 +90,83 @@ def _chain_sites(theta, sprm, cs, sn, out_u, out_t):
 
 @jit
 def _sites_block(q, sprm, cs, sn, out, n, lo, hi):
-    _chain_sites(q[n + lo : n + hi], sprm[lo:hi], cs[lo:hi], sn[lo:hi], out[lo:hi], out[n + lo : n + hi])
+    """``_chain_sites`` on sites lo..hi−1, in cache-sized pieces (its loops then stay in L1/L2)."""
+    for a in range(lo, hi, CACHE_BLOCK):
+        b = min(a + CACHE_BLOCK, hi)
+        _chain_sites(q[n + a : n + b], sprm[a:b], cs[a:b], sn[a:b], out[a:b], out[n + a : n + b])
 
 
 @jit
-def _chain_hinge(q, n, h, hprm, cs, sn):
-    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of hinge h between sites h and h + 1 (no shear d_s)."""
-    a = h
-    b = h + 1
+def _chain_hinge(qu, qt, h, hprm, ca, sa, cb, sb):
+    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of hinge h between sites h and h + 1 (no shear d_s).
+
+    ``qu``, ``qt``: u and θ (or views of them, with ``hprm`` viewed alike); ``ca, sa, cb, sb``:
+    cos/sin of θ0+θ at the two sites.
+    """
     hA = hprm[h, H_HALF_A]
     hB = hprm[h, H_HALF_B]
     sig = hprm[h, H_SIGN]
-    fl = hprm[h, H_KL] * (q[b] - q[a] + hprm[h, H_REST] - (hA * cs[a] + hB * cs[b]))
-    fs = hprm[h, H_KS] * sig * (hB * sn[b] - hA * sn[a])
-    fp = hprm[h, H_KT] * (q[n + a] + q[n + b])
-    return fl, fl * hA * sn[a] - fs * sig * hA * cs[a] + fp, fl * hB * sn[b] + fs * sig * hB * cs[b] + fp
+    fl = hprm[h, H_KL] * (qu[h + 1] - qu[h] + hprm[h, H_REST] - (hA * ca + hB * cb))
+    fs = hprm[h, H_KS] * sig * (hB * sb - hA * sa)
+    fp = hprm[h, H_KT] * (qt[h] + qt[h + 1])
+    return fl, fl * hA * sa - fs * sig * hA * ca + fp, fl * hB * sb + fs * sig * hB * cb + fp
 
 
 @jit
-def _chain_hinges_ordered(q, ha, hb, hprm, cs, sn, out, n, lo, hi):
-    """Hinge forces on sites lo..hi−1 when hinge h joins sites h and h + 1 (the chain order).
+def _hinges_span(qu, qt, hprm, cs, sn, ou, ot, ha, hb, first, m, fl_l, gb_l, right, cr, sr):
+    """Hinge forces on m sites starting at site ``first`` (chain order: hinge h joins h, h + 1).
 
-    Site-centred: each site takes its left hinge (carried from the previous site) and its
-    right hinge, so the loop has no scattered writes and vectorises. Returns the number of
-    hinges found out of order (then the result is invalid and the caller falls back).
+    Arrays are views starting at ``first`` (loops from 0 vectorise where they can). Site-centred:
+    each site takes its left hinge (carried: (fl_l, gb_l) of hinge first−1 on entry) and its
+    right hinge, so there are no scattered writes. The last site's right hinge uses the halo
+    (cr, sr) = cos/sin at site first+m when ``right``, else it is the chain's end. Returns the
+    number of hinges found out of order (the caller then falls back to the general loop).
     """
-    lo = max(lo, 0)  # as in _chain_sites: provably non-negative indices
-    fl_l, gb_l = 0.0, 0.0
-    if lo > 0:
-        fl_l, _, gb_l = _chain_hinge(q, n, lo - 1, hprm, cs, sn)
     bad = 0
-    for i in range(lo, min(hi, n - 1)):
-        bad += (ha[i] != i) | (hb[i] != i + 1)
-        fl_r, ga_r, gb_r = _chain_hinge(q, n, i, hprm, cs, sn)
-        out[i] = fl_r - fl_l
-        out[n + i] -= gb_l + ga_r
+    for i in range(m - 1):
+        bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
+        fl_r, ga_r, gb_r = _chain_hinge(qu, qt, i, hprm, cs[i], sn[i], cs[i + 1], sn[i + 1])
+        ou[i] = fl_r - fl_l
+        ot[i] -= gb_l + ga_r
         fl_l = fl_r
         gb_l = gb_r
-    if hi == n:
-        out[n - 1] = -fl_l
-        out[2 * n - 1] -= gb_l
+    i = m - 1
+    if right:
+        bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
+        fl_r, ga_r, gb_r = _chain_hinge(qu, qt, i, hprm, cs[i], sn[i], cr, sr)
+        ou[i] = fl_r - fl_l
+        ot[i] -= gb_l + ga_r
+    else:
+        ou[i] = -fl_l
+        ot[i] -= gb_l
+    return bad
+
+
+@jit
+def _site_trig(q, sprm, n, i):
+    """(cos, sin) of θ0+θ at site i (a halo value)."""
+    s, c = sincos(sprm[i, S_THETA0] + q[n + i])
+    return c, s
+
+
+@jit
+def _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, lo, hi):
+    """All forces on sites lo..hi−1 (chain order), one cache block at a time: the block's site
+    terms and cos/sin, then its hinges. Writes only inside lo..hi−1 (halo cos/sin are private),
+    so ranges can run on different threads. Returns the count of out-of-order hinges."""
+    bad = 0
+    for a in range(lo, hi, CACHE_BLOCK):
+        b = min(a + CACHE_BLOCK, hi)
+        _sites_block(q, sprm, cs, sn, out, n, a, min(b + 1, hi))
+        fl_l, gb_l = 0.0, 0.0
+        if a > 0:
+            cl, sl = (cs[a - 1], sn[a - 1]) if a > lo else _site_trig(q, sprm, n, a - 1)
+            fl_l, _, gb_l = _chain_hinge(q[:n], q[n:], a - 1, hprm, cl, sl, cs[a], sn[a])
+        cr, sr = 1.0, 0.0
+        if b < n:
+            cr, sr = (cs[b], sn[b]) if b < hi else _site_trig(q, sprm, n, b)
+        bad += _hinges_span(q[a:n], q[n + a : 2 * n], hprm[a:], cs[a:], sn[a:], out[a:n], out[n + a : 2 * n],
+                            ha[a:], hb[a:], a, b - a, fl_l, gb_l, b < n, cr, sr)
     return bad
 
 
@@ -166,8 +205,7 @@ def chain_force(q, args, out):
     n = sprm.shape[0]
     for k in range(2 * n, out.shape[0]):
         out[k] = 0.0
-    _sites_block(q, sprm, cs, sn, out, n, 0, n)
-    if ha.shape[0] != n - 1 or _chain_hinges_ordered(q, ha, hb, hprm, cs, sn, out, n, 0, n) > 0:
+    if ha.shape[0] != n - 1 or _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, 0, n) > 0:
         _chain_fallback(q, ha, hb, hprm, sprm, cs, sn, out, n)
 
 
@@ -178,14 +216,11 @@ def chain_force_parallel(q, args, out):
     n = sprm.shape[0]
     for k in range(2 * n, out.shape[0]):
         out[k] = 0.0
-    n_chunks = max(1, min(n // PARALLEL_BLOCK, 16))  # fixed blocks (not thread count): cacheable
-    for c in prange(n_chunks):
-        _sites_block(q, sprm, cs, sn, out, n, c * n // n_chunks, (c + 1) * n // n_chunks)
+    n_chunks = max(1, min(n // PARALLEL_BLOCK, 16))  # fixed ranges (not thread count): cacheable
     bad = 0
     if ha.shape[0] == n - 1:
         for c in prange(n_chunks):
-            bad += _chain_hinges_ordered(q, ha, hb, hprm, cs, sn, out, n, c * n // n_chunks,
-                                         (c + 1) * n // n_chunks)
+            bad += _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, c * n // n_chunks, (c + 1) * n // n_chunks)
     if ha.shape[0] != n - 1 or bad > 0:
         _chain_fallback(q, ha, hb, hprm, sprm, cs, sn, out, n)
 
