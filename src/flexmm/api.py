@@ -8,6 +8,7 @@ from typing import Callable
 from flexmm.assemble import build_problem
 from flexmm.config import Scene, load_scene
 from flexmm.controller import RunResult, run_problem
+from flexmm.io.atomic import write_text_atomic
 from flexmm.io.provenance import config_text
 
 
@@ -40,15 +41,9 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
         result = run_problem(problem, out, progress=progress, log=log, extra_attrs=plan.attrs(),
                              on_finish=plan.finisher(problem))
     scene = plan.scene
-    _atomic_write(out / "config.yaml", config_text(scene))
-    _atomic_write(out / "run.log", "\n".join(result.log) + "\n")
+    write_text_atomic(out / "config.yaml", config_text(scene))
+    write_text_atomic(out / "run.log", "\n".join(result.log) + "\n")
     return result
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 __all__ = ["load_scene", "run_scene", "run_dir_for", "build_problem"]

@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
 import flexmm
+from flexmm.io.atomic import atomic_target
 
 _SKIP = {"index", "field", "units"}
 
@@ -127,9 +127,8 @@ def write_dataset(res, path: str | Path | None = None) -> Path:
     """Write analysis.nc beside the run's dataset (atomic rename); returns its path."""
     base = Path(res.path)
     target = Path(path) if path else (base if base.is_dir() else base.parent) / "analysis.nc"
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    to_dataset(res).to_netcdf(tmp, engine="h5netcdf")
-    os.replace(tmp, target)
+    with atomic_target(target) as tmp:
+        to_dataset(res).to_netcdf(tmp, engine="h5netcdf")
     return target
 
 

@@ -16,3 +16,15 @@ class Strict(BaseModel):
     """Frozen, closed model: unknown keys are errors, values are never silently coerced to str."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+
+
+def exactly_one(model: Strict, a: str, b: str, meanings: tuple[str, str] | None = None) -> Strict:
+    """Require exactly one of the optional fields ``a`` and ``b``; return the model.
+
+    For use in ``model_validator(mode="after")``; the message names both fields (the loader
+    uses the names to point at the right lines).
+    """
+    if (getattr(model, a) is None) == (getattr(model, b) is None):
+        la, lb = (f"{a} ({meanings[0]})", f"{b} ({meanings[1]})") if meanings else (a, b)
+        raise ValueError(f"give exactly one of {la} or {lb}")
+    return model

@@ -6,7 +6,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import End, Finite, NonNegative, Positive, Strict
+from flexmm.config.base import End, Finite, NonNegative, Positive, Strict, exactly_one
 
 
 class Striker(Strict):
@@ -54,9 +54,7 @@ class Shaker(Strict):
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        if (self.amplitude_m is None) == (self.amplitude_n is None):
-            raise ValueError("give exactly one of amplitude_m (displacement) or amplitude_n (force)")
-        return self
+        return exactly_one(self, "amplitude_m", "amplitude_n", ("displacement", "force"))
 
     @property
     def mode(self) -> str:
@@ -80,9 +78,7 @@ class BoundaryDisplacement(Strict):
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        if (self.amplitude_m is None) == (self.amplitude_rad is None):
-            raise ValueError("give exactly one of amplitude_m (displacement) or amplitude_rad (rotation)")
-        return self
+        return exactly_one(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"))
 
 
 class Soliton(Strict):
@@ -105,9 +101,7 @@ class Kick(Strict):
 
     @model_validator(mode="after")
     def _where(self):
-        if (self.end is None) == (self.sites is None):
-            raise ValueError("give exactly one of end or sites")
-        return self
+        return exactly_one(self, "end", "sites")
 
 
 class Kicks(Strict):

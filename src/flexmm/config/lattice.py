@@ -7,7 +7,7 @@ from typing import Literal, Union
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import Finite, NonNegative, Positive, Strict
+from flexmm.config.base import Finite, NonNegative, Positive
 from flexmm.config.mass_chain import MassChain, MassGrid, MassNetwork
 from flexmm.config.rigid import BistableLinkage, RotatingSquaresSheet, RigidOptions, check_variation
 

@@ -14,7 +14,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import Finite, NonNegative, Positive, Strict
+from flexmm.config.base import Finite, NonNegative, Positive, Strict, exactly_one
 
 EndCondition = Literal["free", "fixed", "driven"]
 
@@ -124,9 +124,7 @@ class Dipole(_Law):
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.coefficient_j_m_p is None) == (self.moment_a_m2 is None):
-            raise ValueError("give exactly one of coefficient_j_m_p or moment_a_m2")
-        return self
+        return exactly_one(self, "coefficient_j_m_p", "moment_a_m2")
 
     @property
     def coefficient(self) -> float:
@@ -205,8 +203,7 @@ class Defects(Strict):
 
     @model_validator(mode="after")
     def _what(self):
-        if (self.value is None) == (self.factor is None):
-            raise ValueError("give exactly one of value or factor")
+        exactly_one(self, "value", "factor")
         if not self.sites and self.box is None:
             raise ValueError("give sites or box")
         return self

@@ -15,7 +15,7 @@ from typing import Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import Finite, NonNegative, Positive, Strict
+from flexmm.config.base import Finite, NonNegative, Positive, Strict, exactly_one
 
 EdgeCondition = Literal["free", "fixed", "periodic", "driven"]
 Axis = Literal["x", "y"]
@@ -72,9 +72,7 @@ class ParameterRandom(Strict):
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.std is None) == (self.relative_std is None):
-            raise ValueError("give exactly one of std or relative_std")
-        return self
+        return exactly_one(self, "std", "relative_std")
 
 
 class ParameterDefects(Strict):
@@ -91,9 +89,7 @@ class ParameterDefects(Strict):
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.value is None) == (self.factor is None):
-            raise ValueError("give exactly one of value or factor")
-        return self
+        return exactly_one(self, "value", "factor")
 
 
 ParameterVariation = Annotated[
@@ -189,8 +185,7 @@ class RotatingSquaresSheet(RigidOptions):
     def _check(self):
         if not abs(self.theta0_rad) < math.pi / 4:
             raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
-        if (self.mass_kg is None) == (self.areal_density_kg_m2 is None):
-            raise ValueError("give exactly one of mass_kg or areal_density_kg_m2")
+        exactly_one(self, "mass_kg", "areal_density_kg_m2")
         for a, b, n, what in (("left", "right", self.n_cols, "n_cols"), ("bottom", "top", self.n_rows, "n_rows")):
             pa, pb = getattr(self, a) == "periodic", getattr(self, b) == "periodic"
             if pa != pb:

@@ -7,7 +7,7 @@ from typing import Annotated, Literal, Union
 from pydantic import AliasChoices, Field, model_validator
 
 from flexmm.config.absorbing import AbsorbingLayer
-from flexmm.config.base import NonNegative, Positive, Strict
+from flexmm.config.base import NonNegative, Positive, Strict, exactly_one
 from flexmm.config.excitation import ExcitationConfig, NoExcitation
 from flexmm.config.lattice import LatticeConfig
 
@@ -27,8 +27,7 @@ class Viscous(Strict):
 
     @model_validator(mode="after")
     def _one_way(self):
-        if (self.coefficient_n_s_per_m is None) == (self.damping_ratio is None):
-            raise ValueError("give exactly one of coefficient_n_s_per_m or damping_ratio")
+        exactly_one(self, "coefficient_n_s_per_m", "damping_ratio")
         if self.damping_ratio is not None and self.rotational_coefficient_n_m_s is not None:
             raise ValueError("rotational_coefficient_n_m_s goes with coefficient_n_s_per_m, not damping_ratio")
         return self

@@ -13,6 +13,8 @@ from pathlib import Path
 import h5netcdf
 import numpy as np
 
+from flexmm.io.atomic import temporary_name
+
 BUFFER_BYTES = 32 * 2**20
 CHUNK_BYTES = 4 * 2**20
 
@@ -26,7 +28,7 @@ class DatasetWriter:
 
     def __init__(self, path: Path, n_site: int, site_vars: dict, time_vars: dict, site_coords: dict):
         self.path = Path(path)
-        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self.tmp = temporary_name(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.n_site = n_site
         self.site_names = list(site_vars)

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from flexmm.io.atomic import atomic_target
 from flexmm.sweep.observe import OBSERVABLES
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
@@ -152,7 +153,6 @@ def write_combined(plan) -> Path:
             os.utime(path)
             return path
     ds = combine(plan)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    ds.to_netcdf(tmp, engine="h5netcdf")
-    os.replace(tmp, path)
+    with atomic_target(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
     return path

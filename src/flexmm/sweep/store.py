@@ -19,9 +19,10 @@ interrupted sweep never leaves a point that looks finished but is not.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
+
+from flexmm.io.atomic import write_text_atomic
 
 DONE = "done.json"
 ERROR = "error.json"
@@ -33,12 +34,7 @@ FINISHED, FAILED, PENDING = "finished", "failed", "pending"
 
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON to a hidden temporary file, fsync, then rename it into place."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=1, sort_keys=True, default=_plain)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(data, indent=1, sort_keys=True, default=_plain))
 
 
 def _plain(obj: Any):
