@@ -1,7 +1,7 @@
 """flexmm benchmarks: throughput, memory, the 2D target and work–precision (not timed tests).
 
     python benchmarks/run.py                  # throughput + memory + sheet (a few minutes)
-    python benchmarks/run.py throughput       # one section: throughput | memory | sheet | workprecision
+    python benchmarks/run.py throughput       # one section: throughput | bandwidth | memory | sheet | workprecision
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum over repeats after a compile warm-up; thread/process CPU time is
@@ -43,45 +43,118 @@ def _chain(n_units: int):
     return system, tuple(terms[k] for k in keys), damp
 
 
-def throughput(sizes=(1_000, 100_000, 1_000_000), threads=(1, 2), repeats: int = 7) -> list[dict]:
-    """Unit-steps per second of velocity Verlet on the LEGO chain (compile excluded)."""
+def _grade(system) -> None:
+    """Vary the lateral torsional stiffness by ±0.1 % along the chain: not uniform, so the fused
+    Verlet streams the parameter tables instead of keeping block-sized copies in cache."""
+    from flexmm.models.hinge import S_KR
+
+    system.args[3][:, S_KR] *= 1.0 + 1e-3 * np.linspace(-1.0, 1.0, system.n_sites)
+
+
+def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: int) -> dict:
+    from flexmm.integrators.parallel import kernels
+
+    advance, force, used = kernels(spec, system.force, threads)
+    q, v, f, acc = system.q0.copy(), system.v0.copy(), np.zeros(system.ndof), np.zeros(8)
+    spec.init(force, system.args, q, v, 0.0, f, terms)
+    advance(force, system.args, q, v, f, system.inv_mass, damp, terms, 0.0, 0.1, 2, acc)
+    walls, cpus = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        advance(force, system.args, q, v, f, system.inv_mass, damp, terms, 0.0, 0.1, steps, acc)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    n = system.n_sites
+    return {"n_units": n, "threads": used, "steps": steps, "wall_min_s": min(walls),
+            "wall_median_s": float(np.median(walls)), "cpu_min_s": min(cpus),
+            "M_unit_steps_per_s": steps * n / min(walls) / 1e6,
+            "M_unit_steps_per_cpu_s": steps * n / min(cpus) / 1e6 * used,
+            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__}
+
+
+def throughput(sizes=(1_000, 100_000, 1_000_000), threads=(1, 2), repeats: int = 7,
+               graded_sizes=(100_000, 1_000_000)) -> list[dict]:
+    """Unit-steps per second of velocity Verlet on the LEGO chain (compile excluded); uniform
+    chains for ``sizes``, graded ones (``_grade``) for ``graded_sizes``."""
     import numba
 
     from flexmm.integrators import INTEGRATORS
-    from flexmm.integrators.parallel import kernels
 
     spec = INTEGRATORS["velocity_verlet"]
     out = []
-    for n in sizes:
+    cases = [(n, "uniform") for n in sizes] + [(n, "graded") for n in graded_sizes]
+    for n, chain in cases:
         system, terms, damp = _chain(n)
-        steps = max(20, int(3e7 / n))
+        if chain == "graded":
+            _grade(system)
         for th in threads:
             if th > numba.config.NUMBA_NUM_THREADS:
                 continue
-            advance, force, used = kernels(spec, system.force, th)
-            q, v, f, acc = system.q0.copy(), system.v0.copy(), np.zeros(system.ndof), np.zeros(8)
-            spec.init(force, system.args, q, v, 0.0, f, terms)
-            advance(force, system.args, q, v, f, system.inv_mass, damp, terms, 0.0, 0.1, 2, acc)
+            row = {"chain": chain, **_time_advance(spec, system, terms, damp, th, max(20, int(3e7 / n)), repeats)}
+            rate = row["M_unit_steps_per_s"]
+            print(f"N = {n:>9,d} {chain:7s} threads {row['threads']}: {rate:7.1f} M unit-steps/s (wall, min of "
+                  f"{repeats}; median {rate * row['wall_min_s'] / row['wall_median_s']:.1f}); per CPU-second x "
+                  f"threads {row['M_unit_steps_per_cpu_s']:.1f} ({row['kernel']})")
+            out.append(row)
+    for n, chain in cases:
+        rate = {r["threads"]: r["M_unit_steps_per_s"] for r in out if (r["n_units"], r["chain"]) == (n, chain)}
+        if 1 in rate and 2 in rate:
+            print(f"N = {n:>9,d} {chain:7s}: two threads / one thread = {rate[2] / rate[1]:.2f}x")
+    return out
+
+
+def _triad_kernel():
+    from flexmm._jit import jit, prange
+
+    @jit
+    def triad_block(a, b, c, s):
+        for i in range(a.shape[0]):
+            a[i] = b[i] + s * c[i]
+
+    @jit(parallel=True, cache=False)
+    def triad(a, b, c, s, nb):
+        n = a.shape[0]
+        for k in prange(nb):
+            lo, hi = k * n // nb, (k + 1) * n // nb
+            triad_block(a[lo:hi], b[lo:hi], c[lo:hi], s)
+
+    return triad
+
+
+def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) -> list[dict]:
+    """STREAM-like triad a = b + s c (24 bytes per element) on one and two threads.
+
+    2e6 doubles (16 MiB per array) is the size of the state vector of a 1e6-unit chain; the
+    ratio of the two-thread to the one-thread figure bounds the scaling of any kernel that is
+    limited by memory traffic at that size.
+    """
+    import numba
+
+    triad = _triad_kernel()
+    out = []
+    for n in sizes:
+        rng = np.random.default_rng(0)
+        a, b, c = rng.random(n), rng.random(n), rng.random(n)
+        for th in threads:
+            if th > numba.config.NUMBA_NUM_THREADS:
+                continue
+            numba.set_num_threads(th)
+            triad(a, b, c, 0.5, 16)
             walls, cpus = [], []
             for _ in range(repeats):
                 t0, c0 = time.perf_counter(), time.process_time()
-                advance(force, system.args, q, v, f, system.inv_mass, damp, terms, 0.0, 0.1, steps, acc)
+                triad(a, b, c, 0.5, 16)
                 walls.append(time.perf_counter() - t0)
                 cpus.append(time.process_time() - c0)
-            row = {"n_units": n, "threads": used, "steps": steps, "wall_min_s": min(walls),
-                   "wall_median_s": float(np.median(walls)), "cpu_min_s": min(cpus),
-                   "M_unit_steps_per_s": steps * n / min(walls) / 1e6,
-                   "M_unit_steps_per_cpu_s": steps * n / min(cpus) / 1e6 * used,
-                   "finite": bool(np.isfinite(q).all())}
-            print(f"N = {n:>9,d}  threads {used}: {row['M_unit_steps_per_s']:7.1f} M unit-steps/s "
-                  f"(wall, min of {repeats}; median {steps * n / row['wall_median_s'] / 1e6:.1f}); "
-                  f"per CPU-second x threads {row['M_unit_steps_per_cpu_s']:.1f}")
+            row = {"n": n, "threads": th, "GB_per_s": 24 * n / min(walls) / 1e9,
+                   "GB_per_s_median": 24 * n / float(np.median(walls)) / 1e9, "cpu_over_wall": min(cpus) / min(walls)}
+            print(f"triad {n:>11,d} doubles ({8 * n / 2**20:.0f} MiB/array), threads {th}: {row['GB_per_s']:6.1f} GB/s "
+                  f"(max of {repeats}; median {row['GB_per_s_median']:.1f}; CPU/wall {row['cpu_over_wall']:.2f})")
             out.append(row)
     for n in sizes:
-        one = [r for r in out if r["n_units"] == n and r["threads"] == 1]
-        two = [r for r in out if r["n_units"] == n and r["threads"] == 2]
-        if one and two:
-            print(f"N = {n:>9,d}: two threads / one thread = {two[0]['M_unit_steps_per_s'] / one[0]['M_unit_steps_per_s']:.2f}x")
+        r = {row["threads"]: row["GB_per_s"] for row in out if row["n"] == n}
+        if 1 in r and 2 in r:
+            print(f"triad {n:>11,d}: two threads / one thread = {r[2] / r[1]:.2f}x")
     return out
 
 
@@ -151,7 +224,8 @@ def workprecision() -> list[str]:
     return done
 
 
-SECTIONS = {"throughput": throughput, "memory": memory, "sheet": sheet, "workprecision": workprecision}
+SECTIONS = {"throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
+            "workprecision": workprecision}
 
 
 def main(argv: list[str]) -> None:

@@ -50,11 +50,20 @@ def _end_dofs(system: System, end: str, field_name: str | None = None,
 
 
 def _launch_solitons(system: System, scene: Scene, pulses) -> None:
-    """Superpose launched solitons (each launcher overwrites q0, v0; their states are added)."""
-    launch = MODELS[scene.lattice.kind].launch_soliton
+    """Superpose launched solitons (each launcher overwrites q0, v0; their states are added).
+
+    On a predeformed lattice the launchers write displacements from the rest state, added to it.
+    """
+    entry = MODELS[scene.lattice.kind]
+    launch = entry.launch_soliton
     if launch is None:
         raise SceneError(f"model {scene.lattice.kind} has no soliton launcher")
-    q, v = np.zeros_like(system.q0), np.zeros_like(system.v0)
+    rest = system.meta.get("rest_state")
+    if rest is not None and not entry.soliton_on_predeformed:
+        raise SceneError(f"model {scene.lattice.kind} launches solitons on an undeformed lattice only; "
+                         "remove lattice.predeform or use another excitation")
+    q = np.zeros_like(system.q0) if rest is None else rest.copy()
+    v = np.zeros_like(system.v0)
     for p in pulses:
         system.q0[:], system.v0[:] = 0.0, 0.0
         try:
@@ -151,6 +160,38 @@ def _apply_one(system: System, scene: Scene, exc, terms: dict) -> None:
             row = [amp, sigma, 2.0 * dur, 0.0]
         else:
             row = [amp, dur, 0.0, 0.0]
+    for dof_list, factor in _drive_components(system, exc, dofs):
+        _append_drive(system, exc, terms, dof_list, mode, shape, [row[0] * factor] + row[1:])
+
+
+#: inward normal of each end in the (x, y) plane
+_INWARD_XY = {"left": (1.0, 0.0), "right": (-1.0, 0.0), "bottom": (0.0, 1.0), "top": (0.0, -1.0)}
+
+
+def _drive_components(system: System, exc, dofs: list[int]) -> list[tuple[list[int], float]]:
+    """The drive's DOF lists and amplitude factors: the end's normal field, or (angle_deg ≠ 0) x and y.
+
+    The amplitude was signed along the normal; a tilt rotates the inward normal counter-clockwise
+    by ``angle_deg`` and drives u and v with the components of that direction.
+    """
+    angle = getattr(exc, "angle_deg", 0.0)
+    if not angle or getattr(exc, "amplitude_rad", None) is not None:
+        return [(dofs, 1.0)]
+    axes = system.meta.get("axis_fields", {})
+    if "y" not in axes:
+        raise SceneError(f"excitation.angle_deg = {angle}: model {system.model!r} has no y motion "
+                         "(a tilted drive needs a 2D lattice)")
+    nx, ny = _INWARD_XY[exc.end]
+    a = math.radians(angle)
+    dx, dy = nx * math.cos(a) - ny * math.sin(a), nx * math.sin(a) + ny * math.cos(a)
+    sites = system.meta["ends"][exc.end] if exc.sites is None else exc.sites
+    sign = INWARD[exc.end]  # undo the normal's sign already in the amplitude
+    return [([system.dof(axes[f], s) for s in sites], sign * comp)
+            for f, comp in (("x", dx), ("y", dy)) if abs(comp) > 1e-15]
+
+
+def _append_drive(system: System, exc, terms: dict, dofs: list[int], mode: int, shape: int, row: list) -> None:
+    """Append one drive row per DOF; a prescribed displacement holds those DOFs (infinite mass)."""
     k = len(dofs)
     terms["drv_dof"] = np.concatenate([terms["drv_dof"], np.asarray(dofs, np.int64)])
     terms["drv_mode"] = np.concatenate([terms["drv_mode"], np.full(k, mode, np.int64)])

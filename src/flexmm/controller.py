@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -21,16 +20,13 @@ from flexmm.integrators.common import ACC_STEPS, apply_prescribed, contact_energ
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.parallel import choose_threads
 from flexmm.integrators.parallel import kernels as parallel_kernels
+from flexmm.integrators.runaway import RunawayGuard
 from flexmm.io.dataset import DatasetWriter, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
-RUNAWAY_FACTOR = 1e4
 #: relative tolerance of adaptive integrators when solver.rtol is not given
 DEFAULT_RTOL = 1e-6
-#: frames count towards the runaway reference only once this many steps old, so an unstable
-#: mode (energy × ≥ 1.5 per step) cannot raise its own threshold when frames are frequent
-RUNAWAY_LAG_STEPS = 100
 
 
 @dataclass
@@ -202,9 +198,7 @@ def run_problem(
     spec.init(force, s.args, q, v, t, f, terms)
     advance(force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, t, h, 0, acc.copy())
     compile_s = _time.perf_counter() - tc
-    e_max = abs(obs.frame(problem, t, q, v, acc))
-    recent: deque[tuple[int, float]] = deque()  # (step, |E|) of frames not yet RUNAWAY_LAG_STEPS old
-    drive_scale = float(np.sum(s.mass * s.v0**2)) + float(np.sum(np.abs(terms[7][:, 0]))) ** 2 * s.n_sites + 1e-12
+    guard = RunawayGuard(s, terms, obs.frame(problem, t, q, v, acc))
     status, reason, n_steps = "finished", "", 0
     prog = _progress(len(chunks), progress)
     t_wall = _time.perf_counter()
@@ -216,7 +210,7 @@ def run_problem(
             bad = not (np.isfinite(q).all() and np.isfinite(v).all())
             if not bad:
                 kin, pot = obs.energies(problem, q, v, acc)
-                bad = (kin + pot) > RUNAWAY_FACTOR * max(e_max, drive_scale + acc[1])
+                bad = guard.runaway(kin + pot, acc[1])
             if bad:
                 status = "failed"
                 reason = (f"blow-up between t = {t_prev * sc.time_s:.6g} s and {t * sc.time_s:.6g} s "
@@ -224,9 +218,7 @@ def run_problem(
                           f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
                           f"last good time {t_prev * sc.time_s:.6g} s kept")
                 break
-            recent.append((n_steps, abs(obs.frame(problem, t, q, v, acc))))
-            while recent and recent[0][0] <= n_steps - RUNAWAY_LAG_STEPS:
-                e_max = max(e_max, recent.popleft()[1])
+            guard.record(n_steps, obs.frame(problem, t, q, v, acc))
             if prog:
                 prog.advance(prog.task_ids[0])
     except KeyboardInterrupt:

@@ -13,7 +13,7 @@ from integrator_helpers import LEGO, chain_problem
 from flexmm.assemble import SceneError, check_velocity_forces
 from flexmm.config import ConfigError, scene_from_dict
 from flexmm.config.scene import ADAPTIVE_INTEGRATORS, Solver
-from flexmm.integrators import INTEGRATORS, splitting
+from flexmm.integrators import INTEGRATORS, composition, splitting
 from flexmm.integrators.parallel import PARALLEL_MIN_SITES, choose_threads
 
 
@@ -42,6 +42,26 @@ def test_pefrl_coefficients_are_consistent() -> None:
     assert sum(splitting.DRIFTS) == pytest.approx(1.0, abs=1e-15)
     assert sum(splitting.KICKS) == pytest.approx(1.0, abs=1e-15)
     assert splitting.DRIFTS == splitting.DRIFTS[::-1] and splitting.KICKS == splitting.KICKS[::-1]  # symmetric
+
+
+def test_blanes_moan_coefficients_are_consistent() -> None:
+    kicks, drifts = composition.blanes_moan_6()
+    assert len(kicks) == 12 and len(drifts) == 11
+    assert sum(kicks) == pytest.approx(1.0, abs=1e-14) and sum(drifts) == pytest.approx(1.0, abs=1e-14)
+    assert kicks == kicks[::-1] and drifts == drifts[::-1]  # symmetric: time-reversible, even order
+
+
+def test_blanes_moan_refuses_velocity_dependent_forces() -> None:
+    spec = INTEGRATORS["blanes_moan6"]
+    for variant in ("viscous", "dashpot"):
+        problem = chain_problem(8, variant=variant)
+        with pytest.raises(SceneError, match="depend on velocity"):
+            check_velocity_forces(spec, problem.damp, problem.terms, 0.0)
+    with pytest.raises(SceneError, match="depend on velocity"):
+        from flexmm.assemble import build_problem
+
+        build_problem(scene_from_dict({**scene(integrator="blanes_moan6"),
+                                       "damping": {"viscous": {"damping_ratio": 0.05}}}))
 
 
 def test_tolerances_only_for_adaptive_methods() -> None:

@@ -39,6 +39,21 @@ def test_stability_command(tiny_config, tmp_path) -> None:
     assert (out / "stability.png").stat().st_size > 1000
 
 
+def test_stability_linear_uses_the_growth_criterion(tiny_config, tmp_path) -> None:
+    out = tmp_path / "lin"
+    res = runner.invoke(app, ["stability", str(tiny_config), "--methods", "velocity_verlet", "--linear",
+                              "--growth-threshold", "1e-3", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "amplitude growth above 0.001 per step" in res.output and "not |R| > 1" in res.output
+    row = json.loads((out / "stability.json").read_text())[0]
+    assert abs(row["ratio"] - 1.0) < 0.01 and abs(row["ratio_to_threshold"] - 1.0) < 0.01
+
+
+def test_growth_threshold_needs_linear(tiny_config) -> None:
+    res = runner.invoke(app, ["stability", str(tiny_config), "--growth-threshold", "1e-4"])
+    assert res.exit_code == 2 and "only with --linear" in res.output
+
+
 def test_stability_rejects_unknown_method(tiny_config) -> None:
     res = runner.invoke(app, ["stability", str(tiny_config), "--methods", "euler"])
     assert res.exit_code == 2 and "unknown integrator" in res.output
@@ -47,9 +62,10 @@ def test_stability_rejects_unknown_method(tiny_config) -> None:
 def test_bench_command(tiny_config, tmp_path) -> None:
     out = tmp_path / "bench"
     res = runner.invoke(app, ["bench", str(tiny_config), "--methods", "velocity_verlet", "--ivp", "RK45",
-                              "--frames", "11", "--repeats", "1", "--out", str(out)])
+                              "--repeats", "1", "--out", str(out)])
     assert res.exit_code == 0, res.output
     ds = xr.open_dataset(out / "workprecision.nc", engine="h5netcdf")
     assert set(ds.method.values) == {"velocity_verlet", "RK45"}
+    assert "11 frames" in res.output  # the scene's output.n_frames
     assert (ds.final_error.values > 0).all() and (ds.force_evaluations.values > 0).all()
     assert "faster" in res.output and (out / "workprecision.png").exists()

@@ -1,4 +1,5 @@
-"""The vectorised sincos and the threaded chain kernels give the serial results."""
+"""The vectorised sincos, the threaded chain kernels and velocity Verlet fused with the chain
+force give the serial, unfused results."""
 
 from __future__ import annotations
 
@@ -11,7 +12,10 @@ from flexmm._jit import jit
 from flexmm._trig import sincos
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.parallel import kernels
-from flexmm.models.hinge import chain_force, chain_force_parallel
+from flexmm.integrators.verlet import verlet_advance
+from flexmm.integrators.verlet_chain import (_cached_tables, _fusable, chain_verlet_advance,
+                                             chain_verlet_advance_parallel)
+from flexmm.models.hinge import H_KS, S_KR, chain_force, chain_force_parallel, chain_reference
 
 
 @jit
@@ -67,3 +71,61 @@ def test_parallel_verlet_equals_serial(variant) -> None:
     np.testing.assert_allclose(out[1][0], out[0][0], rtol=0, atol=1e-13)
     np.testing.assert_allclose(out[1][1], out[0][1], rtol=0, atol=1e-13)
     np.testing.assert_allclose(out[1][2][:2], out[0][2][:2], rtol=1e-12)
+
+
+def test_chain_force_over_several_cache_blocks_matches_reference() -> None:
+    """5000 units: three cache blocks, so the carried and recomputed block-edge hinges are used."""
+    s = chain_problem(5_000, theta0_rad=0.2, n_lateral=2, lateral_stretch=True).system
+    q = 0.1 * np.random.default_rng(4).standard_normal(s.ndof)
+    f = np.zeros(s.ndof)
+    chain_force(q, s.args, f)
+    _, f_ref = chain_reference(q, s.args)
+    np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-13 * np.max(np.abs(f_ref)))
+
+
+def _advance(advance, force, problem, q0, v0, steps):
+    s, terms = problem.system, problem.terms_tuple()
+    q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), INTEGRATORS["velocity_verlet"].new_acc(s.ndof)
+    INTEGRATORS["velocity_verlet"].init(force, s.args, q, v, 0.0, f, terms)
+    t = advance(force, s.args, q, v, f, s.inv_mass, problem.damp, terms, 0.0, 0.1, steps, acc)
+    return q, v, f, t, acc
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("chain", ["uniform", "graded"])
+def test_fused_chain_verlet_equals_unfused(threads, chain) -> None:
+    """Fused sweep (several cache blocks and thread ranges) = verlet_advance + chain_force, with
+    the cached parameter tables of a uniform chain and with the chain's own (graded) tables."""
+    problem = chain_problem(20_000, theta0_rad=0.2, n_lateral=2, lateral_stretch=True, right="fixed")
+    s = problem.system
+    assert _fusable(s.args, s.q0, s.inv_mass, problem.damp, problem.terms_tuple())
+    assert _cached_tables(s.args[2], s.args[3])[0].shape[0] > 0
+    if chain == "graded":
+        s.args[2][:, H_KS] *= np.linspace(0.5, 1.5, s.n_sites - 1)
+        s.args[3][:, S_KR] *= np.linspace(1.5, 0.5, s.n_sites)
+        assert _cached_tables(s.args[2], s.args[3])[0].shape[0] == 0
+    rng = np.random.default_rng(5)
+    q0, v0 = 0.05 * rng.standard_normal(s.ndof), 0.05 * rng.standard_normal(s.ndof)
+    ref = _advance(verlet_advance, chain_force, problem, q0, v0, 20)
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    fused = chain_verlet_advance if threads == 1 else chain_verlet_advance_parallel
+    out = _advance(fused, chain_force, problem, q0, v0, 20)
+    for a, b in zip(out[:3], ref[:3]):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
+    assert out[3] == ref[3]
+    np.testing.assert_array_equal(out[4], ref[4])  # ledger and counters
+
+
+def test_kernels_pick_the_fused_verlet_only_where_it_applies() -> None:
+    spec = INTEGRATORS["velocity_verlet"]
+    undamped = chain_problem(50)
+    assert kernels(spec, chain_force, 1)[0] is chain_verlet_advance
+    assert kernels(INTEGRATORS["pefrl"], chain_force, 1)[0] is INTEGRATORS["pefrl"].advance
+    s = undamped.system
+    assert _fusable(s.args, s.q0, s.inv_mass, undamped.damp, undamped.terms_tuple())
+    for variant in ("viscous", "drive+damping", "prescribed"):
+        p = chain_problem(50, variant=variant)
+        assert not _fusable(p.system.args, p.system.q0, p.system.inv_mass, p.damp, p.terms_tuple()), variant
+    ha, hb, *rest = s.args
+    shuffled = (ha[::-1].copy(), hb[::-1].copy(), *rest)
+    assert not _fusable(shuffled, s.q0, s.inv_mass, undamped.damp, undamped.terms_tuple())

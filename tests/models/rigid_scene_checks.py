@@ -89,13 +89,3 @@ def wall_position(row: np.ndarray) -> float:
     """Interpolated zero crossing of θ between a + domain (left) and a − domain (right)."""
     k = int(np.flatnonzero((row[:-1] > 0) & (row[1:] <= 0))[-1])
     return k + row[k] / (row[k] - row[k + 1])
-
-
-def harmonics(signal: np.ndarray, time: np.ndarray, frequency_hz: float, cycles: int = 3) -> dict:
-    """Crest/trough ratio and |H2|/|H1| of the last ``cycles`` periods of a signal."""
-    sel = time > time[-1] - cycles / frequency_hz
-    y = signal[sel] - signal[sel].mean()
-    spec = np.abs(np.fft.rfft(y * np.hanning(y.size)))
-    f = np.fft.rfftfreq(y.size, time[1] - time[0])
-    h1, h2 = (spec[np.argmin(np.abs(f - k * frequency_hz))] for k in (1, 2))
-    return {"crest_trough": float(y.max() / -y.min()), "h2_h1": float(h2 / h1)}

@@ -7,10 +7,12 @@ import math
 
 import numpy as np
 import pytest
-from rigid_scene_checks import (front_positions, harmonics, row_fields, run, run_edited, sound_bullet, track,
+from rigid_scene_checks import (front_positions, row_fields, run, run_edited, sound_bullet, track,
                                 wall_position)
 
+from flexmm.analysis.oblique import fold_axis, wave_groups
 from flexmm.theory.rotating import RotatingChainND, amplitude_gap, lego_parameters, soliton_speed
+from flexmm.theory.sheet import acoustic_modes
 
 pytestmark = pytest.mark.slow
 LEGO_T = (4.52e-3 / 71690) ** 0.5  # time unit sqrt(m/k_l) of the LEGO chain (s)
@@ -38,6 +40,30 @@ def test_scene_a_sound_bullet_stays_collimated(tmp_path):
     assert np.all(theta_w <= 20)  # the rotation beam stays ≈ the 11-unit push wide over 100 units
     assert np.all(np.asarray(r["theta_peak"]) > 0.2)
     assert strain_w[-1] > theta_w[-1]  # while the compression it travels with spreads
+
+
+def test_scene_a_oblique_push_separates_into_the_two_acoustic_modes(tmp_path):
+    """At 26.6° to the lattice axes the push splits into a fast and a slow group whose speeds and
+    polarisations are those of the sheet's two long-wave acoustic modes (Bloch analysis of the
+    Hessian, flexmm.theory.sheet); along the x axis it stays one longitudinal group."""
+    scene, ds, _ = run("a_sheet_mode_separation", tmp_path)
+    lat = scene.lattice
+    c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.unit_mass_kg)
+    (c_slow, p_slow), (c_fast, p_fast) = acoustic_modes(lat, math.atan2(lat.skew_cols, lat.n_rows))
+    fast, slow = wave_groups(ds)  # exactly two groups
+    assert fast.speed_m_s == pytest.approx(c_fast * c0, rel=0.03)
+    assert slow.speed_m_s == pytest.approx(c_slow * c0, rel=0.03)
+    assert abs(fold_axis(fast.polarisation_deg - p_fast)) < 4.0
+    assert abs(fold_axis(slow.polarisation_deg - p_slow)) < 4.0
+    assert min(fast.energy_fraction, slow.energy_fraction) > 0.1
+    assert fast.position_m - slow.position_m > 100 * lat.a_m  # separated by > 100 spacings
+    assert np.abs(ds["theta"].values[-1]).max() > 0.05  # both carry rotation: vector waves
+
+    _, ds, _ = run("a_sheet_mode_separation", tmp_path / "axis", ["lattice.skew_cols=0", "excitation.angle_deg=0"])
+    groups = wave_groups(ds)
+    (_, _), (c_long, _) = acoustic_modes(lat.model_copy(update={"skew_cols": 0}), 0.0)
+    assert groups and all(abs(g.polarisation_deg) < 5.0 for g in groups)  # longitudinal only
+    assert all(g.speed_m_s > 0.85 * c_long * c0 for g in groups)  # no slow (transverse) group
 
 
 # ---------------------------------------------------------------- (b) LEGO chain
@@ -158,27 +184,4 @@ def test_scene_k_linkage_deploys(tmp_path):
     assert x[-1] - x[0] == pytest.approx(expected, rel=0.01)  # deployed length
 
 
-# ---------------------------------------------------------------- predeformed squares
-def test_scene_predeformed_rarefaction_pulses(tmp_path):
-    """Pulling the precompressed chain launches slow tensile pulses that re-open the units."""
-    scene, ds, _ = run("predeformed_rarefaction_soliton", tmp_path)
-    theta, t = ds["theta"].values, ds["time"].values
-    u = ds["u"].values / scene.lattice.a_m
-    opening = -np.minimum(theta - theta[0], 0.0)  # rotation against the static θ_s > 0
-    strain = np.diff(u, axis=1) - np.diff(u[0])
-    times, pos, amp = track(opening, t, 20, 110, 0.6, 1.5)
-    assert np.all((amp > 0.07) & (amp < 0.15))  # |Δθ| ≈ 0.08–0.14 rad, below 2 θ_s
-    frames = [int(np.argmin(np.abs(t - tt))) for tt in times]
-    assert np.all(strain[frames, np.round(pos).astype(int)] > 0.03)  # tensile: rarefaction
-    assert np.polyfit(times, pos, 1)[0] > 20  # units/s, away from the pulled end
-
-
-def test_scene_predeformed_cnoidal_waves(tmp_path):
-    scene, ds, _ = run("predeformed_cnoidal_shaker", tmp_path)
-    f = scene.excitation.frequency_hz
-    theta, t = ds["theta"].values, ds["time"].values
-    strong = harmonics(theta[:, 20] - theta[0, 20], t, f)
-    assert strong["crest_trough"] > 1.3 and strong["h2_h1"] > 0.15  # sharp crests, flat troughs
-    _, ds, _ = run("predeformed_cnoidal_shaker", tmp_path / "weak", ["excitation.amplitude_n=0.005"])
-    weak = harmonics(ds["theta"].values[:, 20] - ds["theta"].values[0, 20], ds["time"].values, f)
-    assert weak["h2_h1"] < 0.05 and weak["crest_trough"] == pytest.approx(1.0, abs=0.1)  # a sinusoid
+# predeformed squares (rarefaction soliton, cnoidal shaker): test_predeformed_scenes.py

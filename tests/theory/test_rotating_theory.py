@@ -68,12 +68,15 @@ def forces(p, U, th, periodic=False):
     return fU, fT
 
 
-def simulate(p, state, T, n_out=11):
+def simulate(p, state, T, n_out=11, onsite=None):
+    """Integrate the chain of PHYSICS.md §1.1 (plus an on-site torque -onsite(theta), if given)."""
     N = state.U.size
 
     def rhs(t, y):
         U, th, V, W = y.reshape(4, N)
         fU, fT = forces(p, U, th)
+        if onsite is not None:
+            fT = fT - onsite(th)
         return np.concatenate([V, W, fU, fT / p.alpha2])
 
     y0 = np.concatenate([state.U, state.theta, state.U_dot, state.theta_dot])
@@ -378,9 +381,10 @@ def test_initial_state_directions_are_mirror_images():
     assert np.allclose(b.U_dot, -a.U_dot[::-1], atol=1e-14)
 
 
-def _track(p, A, gradient, N=300, T=150.0, x0=60.0):
+def _track(p, A, gradient, N=300, T=150.0, x0=60.0, onsite=None):
+    """(measured/predicted speed, max shape error / |A|) of a launched soliton after time T."""
     state = rt.soliton_initial_state(p, A, N, x0, gradient=gradient)
-    t, y = simulate(p, state, T)
+    t, y = simulate(p, state, T, onsite=onsite)
     n = np.arange(N)
     pos = []
     for k in range(t.size):

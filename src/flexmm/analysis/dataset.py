@@ -7,6 +7,7 @@ analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
 - per pulse: every scalar of PulseMeasurement (``pulse_speed_m_s``, ...), ``arrival_time``
   and ``peak`` on (pulse, position), ``track_position`` on (pulse, time);
 - per front: scalars, ``switch_time`` on (front, position), ``front_position`` on (front, time);
+- oblique plane waves (analysis ``modes``): per group, every scalar of WaveGroup on ``group``;
 - driven: ``steady_amplitude`` (position), ``harmonic_amplitude`` (harmonic),
   ``far_spectrum`` (frequency) and scalars;
 - the comparison table (``item``, ``quantity``, ``measured``, ``predicted``, ``rel_diff``,
@@ -43,7 +44,7 @@ def _scalar_vars(prefix: str, dim: str, items: list[dict]) -> dict:
             arr = np.asarray(vals, dtype=np.int64)
         else:
             arr = np.asarray(vals, dtype=float)
-        unit = next((u for suffix, u in (("_m_s", "m/s"), ("_per_m", "1/m"), ("_s", "s"), ("_m", "m"))
+        unit = next((u for suffix, u in (("_m_s", "m/s"), ("_per_m", "1/m"), ("_s", "s"), ("_m", "m"), ("_deg", "degree"))
                      if key.endswith(suffix)), "")
         out[f"{prefix}_{key}"] = ((dim,), arr, {"units": unit, "long_name": key.replace("_", " ")})
     return out
@@ -95,6 +96,8 @@ def to_dataset(res) -> xr.Dataset:
                                   "s", "time of the 50 % crossing")
         data["front_position"] = var(("front", "time"), _on_time(v, [(f.track_time_s, f.track_pos_m) for f in fs]),
                                      "m", "50 % crossing position")
+    if res.groups:
+        data.update(_scalar_vars("group", "group", [g.scalars() for g in res.groups]))
     d = res.driven
     if d is not None:
         data["steady_amplitude"] = var(("position",), d.amplitude, v.units, "steady amplitude at the drive frequency")
@@ -150,6 +153,7 @@ def to_dict(res) -> dict:
         "pulses": [{k: _clean(x) for k, x in p.scalars().items()} for p in res.pulses],
         "fronts": [{k: _clean(x) for k, x in f.scalars().items()} for f in res.fronts],
         "driven": {k: _clean(x) for k, x in res.driven.scalars().items()} if res.driven else None,
+        "groups": [{k: _clean(x) for k, x in g.scalars().items()} for g in res.groups],
         "energy": {k: _clean(x) for k, x in res.energy.scalars().items()} if res.energy else None,
         "comparisons": [{k: _clean(x) for k, x in c.as_dict().items()} for c in res.comparisons],
     }

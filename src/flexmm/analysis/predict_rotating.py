@@ -6,7 +6,9 @@ lengths in units of a (X = x/a), speeds in c0 = a sqrt(k_l/m), frequencies in sq
 the sech fit for θ0 = 0, with the §1.3-profile fit otherwise), FWHM and temporal FWHM of the
 exact (non-truncated) soliton. Below the amplitude gap, and for longitudinal pulses without a
 rotational soliton, the linear long-wave speed. Strain pulses riding on a θ soliton (a vector
-soliton): the soliton speed and the strain peak U' = η G(A)/(c² − η²).
+soliton): the soliton speed and the strain peak U' = η G(A)/(c² − η²). A predeformed chain is
+compared with the prestressed theory about its rest rotation (flexmm.theory.prestressed), its
+fields having been measured from the rest state (analysis.rest).
 """
 
 from __future__ import annotations
@@ -38,8 +40,21 @@ def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
             raise ValueError(f"no rotating-squares theory for {lat.kind}")
         p = rt.RotatingChainND.from_si(lat.a_m, lat.theta0_rad, lat.k_long_n_per_m, lat.k_shear_n_per_m,
                                        lat.k_rot_n_m_per_rad, m, J, n_v, s_v)
+        if getattr(lat, "predeform", None) is not None:
+            p = _prestressed(ctx, p)
         ctx.cache["rot"] = (p, lat.a_m, math.sqrt(m / lat.k_long_n_per_m))
     return ctx.cache["rot"]
+
+
+def _prestressed(ctx, p: rt.RotatingChainND) -> rt.RotatingChainND:
+    """The predeformed chain about its rest rotation θ_s in the middle (flexmm.theory.prestressed)."""
+    from flexmm.analysis.rest import rest_fields
+    from flexmm.theory.prestressed import prestressed_chain
+
+    if ctx.scene().lattice.kind != "rotating_squares_chain":
+        raise ValueError("the prestressed theory is for the chain only")
+    theta = rest_fields(ctx)["theta"]
+    return prestressed_chain(p, float(theta[theta.size // 2]))
 
 
 def _row(quantity, measured, predicted, units, note=""):
@@ -58,7 +73,7 @@ def soliton_rows(ctx, A: float, p_meas) -> list:
     """Speed, width and FWHM rows for a θ soliton of amplitude A."""
     p, a, T = params(ctx)
     c = float(rt.soliton_speed(p, A))
-    W = rt.soliton_width(p, c)
+    W = rt.soliton_width(p, c, "full" if p.theta_s else "physics_md")  # PHYSICS.md's D(c) fails prestressed
     fw = _fwhm_exact(p, A)
     width_q = "width W (sech fit)" if p.theta0 == 0 else "width W (§1.3 fit)"
     width_m = p_meas.width_sech_m if p.theta0 == 0 else p_meas.width_kg_m
@@ -104,6 +119,8 @@ def pulse(ctx, p_meas) -> list:
         A = p_meas.amplitude
         if rt.soliton_exists(p, A):
             return soliton_rows(ctx, A, p_meas)
+        if p.theta_s:
+            return _linear_rows(ctx, p_meas, "linear long-wave speed (no prestressed soliton of this amplitude)")
         gap = rt.amplitude_gap(p, int(np.sign(A)) or 1)
         return _linear_rows(ctx, p_meas, f"linear long-wave speed (|A| below soliton range, gap {gap:.3g} rad)")
     partner = _theta_partner(ctx, p_meas)

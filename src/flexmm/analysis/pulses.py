@@ -254,6 +254,8 @@ def measure_track(view, tr: Track, index: int, others: list, *, edge_sites: floa
             continue
         pad = 2 * fwhm * abs(np.polyfit(view.x[sites][m], times[m], 1)[0])  # 2 FWHM in time
         f = (t >= times[m].min() - pad) & (t <= times[m].max() + pad)
+        if not f.any():  # the arrivals do not overlap the tracked frames: not this track's pulse
+            continue
         out.append(_measure_group(view, index + len(out), tr.polarity, direction, fwhm, bounds, others,
                                   (frames[f], t[f], pos[f], h[f]), (sites[m], times[m], peaks[m], seg[m])))
     return out

@@ -3,7 +3,8 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of ``compare.THEORY``, and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out.
+of ``compare.THEORY``, and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
+a predeformed run are measured from its relaxed state (``analysis.rest``).
 """
 
 from __future__ import annotations
@@ -18,9 +19,11 @@ from flexmm.analysis.driven import DrivenMeasurement, NotDriven, drive_frequency
 from flexmm.analysis.energy import EnergyBudget, energy_budget
 from flexmm.analysis.fields import FieldView, field_view
 from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fronts
+from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
+from flexmm.analysis.rest import from_rest, rest_fields
 
-KINDS = ("auto", "pulse", "front", "driven")
+KINDS = ("auto", "pulse", "front", "driven", "modes")
 
 
 class RunNotFound(Exception):
@@ -38,6 +41,7 @@ class RunAnalysis:
     pulses: list[PulseMeasurement] = field(default_factory=list)
     fronts: list[FrontMeasurement] = field(default_factory=list)
     driven: DrivenMeasurement | None = None
+    groups: list[WaveGroup] = field(default_factory=list)
     energy: EnergyBudget | None = None
     comparisons: list[Comparison] = field(default_factory=list)
 
@@ -66,10 +70,23 @@ def open_dataset(path: str | Path):
         raise RunNotFound(f"cannot read {nc}: {exc}") from None
 
 
+def _rest(ctx: RunContext):
+    """rest.rest_fields, or None when the stored config does not validate in this version."""
+    from flexmm.config import ConfigError
+
+    try:
+        return rest_fields(ctx)
+    except (ConfigError, ValueError):
+        return None
+
+
 def choose_kind(ctx: RunContext) -> str:
-    """'driven' for a shaker, else the model theory's preference, else 'pulse'."""
+    """'driven' for a shaker, 'modes' for oblique plane waves, else the model theory's preference,
+    else 'pulse'."""
     if drive_frequency(ctx.config)[0] is not None:
         return "driven"
+    if is_oblique(ctx):
+        return "modes"
     from flexmm.config import ConfigError
 
     pick = theory_for(ctx).analysis
@@ -96,6 +113,7 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
         raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
     ds = open_dataset(path)
     ctx = RunContext.from_dataset(ds)
+    ctx.ds = ds = from_rest(ds, _rest(ctx))  # predeformed runs: measure what moves on the rest state
     kind = choose_kind(ctx) if kind == "auto" else kind
     view = field_view(ds, field_spec or default_field_for(kind, ds), row=row)
     out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
@@ -103,6 +121,11 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
         out.pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
         for p in out.pulses:
             out.comparisons += compare_pulse(ctx, p)
+    elif kind == "modes":
+        out.groups = wave_groups(ds)
+        if not out.groups:
+            raise NoWaveGroups("no group of the oblique wave travelled 40 spacings in the second half of the run")
+        out.comparisons += compare_groups(ctx, out.groups)
     elif kind == "front":
         out.fronts = measure_fronts(view, jump=jump)
         for f in out.fronts:
@@ -115,7 +138,7 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
 
 
 __all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "open_dataset",
-           "FrontNotFound", "NotDriven", "PulseNotFound"]
+           "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound"]
 
 
 def sweep_bands(results: list[RunAnalysis], pass_level: float = 0.1) -> dict | None:

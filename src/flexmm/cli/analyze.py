@@ -65,6 +65,7 @@ SUMMARY = {
     "pulse": ("amplitude", "speed", "width W (sech fit)"),
     "front": ("speed", "width 10–90 %", "distance"),
     "driven": ("drive frequency", "transmission", "decay per site"),
+    "modes": ("speed", "polarisation"),
 }
 
 
@@ -114,7 +115,7 @@ def _csv_text(results) -> str:
 def analyze(
     runs: list[str] = typer.Argument(..., help="Run directories (or dataset.nc files)."),
     field: str = typer.Option(None, "--field", "-f", help="Field: theta, u, u_dot, strain[:NAME], velocity[:NAME]."),
-    analysis: str = typer.Option("auto", "--analysis", "-a", help="auto, pulse, front or driven."),
+    analysis: str = typer.Option("auto", "--analysis", "-a", help="auto, pulse, front, driven or modes (oblique plane waves on a skew-periodic sheet)."),
     row: int = typer.Option(None, "--row", help="Row of a 2D lattice to analyse (default: middle)."),
     threshold: float = typer.Option(0.25, "--threshold", min=0.01, max=1.0,
                                     help="Pulse detection level, fraction of the peak."),
@@ -148,7 +149,7 @@ def analyze(
                                      threshold_fraction=threshold, jump=jump)
         except (report.RunNotFound, FieldError, ValueError) as exc:
             raise error(f"{r}: {exc}") from None
-        except (report.PulseNotFound, report.FrontNotFound, report.NotDriven) as exc:
+        except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups) as exc:
             console.print(f"[bold red]{r}[/]: {exc}")
             errors.append({"run": str(r), "error": str(exc)})
             continue

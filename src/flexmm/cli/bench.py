@@ -22,7 +22,8 @@ def bench(
     overrides: list[str] = OverrideOption,
     methods: str = typer.Option(",".join(INTEGRATORS), "--methods", "-m", help="Comma-separated integrators."),
     ivp: str = typer.Option("RK45,DOP853,LSODA", "--ivp", help="solve_ivp methods ('' for none)."),
-    frames: int = typer.Option(101, "--frames", help="Saved frames (errors are checked on all of them)."),
+    frames: int = typer.Option(None, "--frames", min=2,
+                               help="Saved frames, errors checked on all (default: the scene's output.n_frames)."),
     repeats: int = typer.Option(3, "--repeats", help="Timed runs per setting (the minimum is kept)."),
     budget_s: float = typer.Option(30.0, "--budget", help="Stop a method's ladder past this wall time per run."),
     out: str = typer.Option(None, "--out", "-o", help="Output directory (default runs/<name>/bench)."),
@@ -43,7 +44,8 @@ def bench(
         problem = build_problem(scene)
     except (UnstableStepError, SceneError) as exc:
         raise error(f"{config}: {exc}") from None
-    rows, ref = wp.benchmark(problem, names, ivps, n_frames=frames, repeats=repeats, budget_s=budget_s,
+    n_frames = frames or scene.output.n_frames  # a frame interval also caps the largest step
+    rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s,
                              log=lambda m: typer.echo(m, err=True))
     folder = Path(out) if out else Path(scene.output.directory) / scene.name / "bench"
     folder.mkdir(parents=True, exist_ok=True)

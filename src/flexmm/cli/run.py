@@ -5,6 +5,8 @@ from __future__ import annotations
 import typer
 
 from flexmm.analysis import PulseNotFound, leading_pulse
+from flexmm.analysis.context import RunContext
+from flexmm.analysis.rest import from_rest, rest_fields
 from flexmm.api import run_scene
 from flexmm.assemble import SceneError, UnstableStepError
 from flexmm.cli.common import EXIT_FAILED_RUN, OverrideOption, error, load_or_exit, stderr_is_tty
@@ -41,6 +43,7 @@ def run(
     if quiet:
         return
     ds = open_run(result.path)
+    ds = from_rest(ds, rest_fields(RunContext.from_dataset(ds)))  # a predeformed run: from its rest state
     field = "theta" if "theta" in ds else next(v for v in ds.data_vars if ds[v].dims == ("time", "site"))
     try:
         p = leading_pulse(ds, field)

@@ -48,6 +48,10 @@ class Shaker(Strict):
     amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
     ramp_cycles: NonNegative = Field(3.0, description="cycles of smooth ramp-up")
     duration_s: Positive | None = Field(None, description="drive stops (smoothly) after this")
+    angle_deg: Finite = Field(
+        0.0, ge=-90.0, le=90.0, description="2D lattices: drive direction tilted from the end's inward "
+        "normal by this angle, counter-clockwise (drives both in-plane displacements)"
+    )
     sites: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="units driven (a point or a line); default every unit of the end"
     )
@@ -72,13 +76,20 @@ class BoundaryDisplacement(Strict):
         None, description="instead: peak staggered rotation θ of the driven units (rad); u, v stay free"
     )
     duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")
+    angle_deg: Finite = Field(
+        0.0, ge=-90.0, le=90.0, description="2D lattices: drive direction tilted from the end's inward "
+        "normal by this angle, counter-clockwise (drives both in-plane displacements)"
+    )
     sites: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="units driven (a point or a line); default every unit of the end"
     )
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        return exactly_one(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"))
+        exactly_one(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"))
+        if self.angle_deg and self.amplitude_rad is not None:
+            raise ValueError("angle_deg tilts a displacement drive; a prescribed rotation has no direction")
+        return self
 
 
 class Soliton(Strict):

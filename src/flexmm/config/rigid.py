@@ -179,6 +179,10 @@ class RotatingSquaresSheet(RigidOptions):
     right: EdgeCondition = "free"
     bottom: EdgeCondition = "free"
     top: EdgeCondition = "free"
+    skew_cols: int = Field(
+        0, description="bottom/top periodic wrap shifted by this many columns: the top row's upper "
+        "neighbours are the bottom row's units skew_cols columns to the right. A sheet of n_rows rows "
+        "then carries planar waves at φ = atan(skew_cols/n_rows) to the x axis (skew_cols ≡ n_rows mod 2)")
     magnets: Magnets | None = None
 
     @model_validator(mode="after")
@@ -192,6 +196,14 @@ class RotatingSquaresSheet(RigidOptions):
                 raise ValueError(f"{a} and {b} must both be periodic or neither")
             if pa and (n < 2 or n % 2):
                 raise ValueError(f"periodic {a}/{b} needs an even {what} ≥ 2 (checkerboard), got {n}")
+        if self.skew_cols:
+            if self.bottom != "periodic":
+                raise ValueError("skew_cols shifts the bottom/top periodic wrap: set bottom and top to periodic")
+            if (self.skew_cols - self.n_rows) % 2:
+                raise ValueError(f"skew_cols ({self.skew_cols}) and n_rows ({self.n_rows}) must have the same "
+                                 "parity, or the wrap joins two units of the same checkerboard colour")
+            if self.magnets is not None:
+                raise ValueError("magnets are not supported on a skew-periodic sheet (skew_cols ≠ 0)")
         check_variation(self.variation, self.n_cols, self.n_rows, self.n_units)
         return self
 

@@ -72,10 +72,11 @@ class Solver(Strict):
     step; the fixed-step methods take ``dt_s`` (or ``dt_fraction`` of their stable limit).
     """
 
-    integrator: Literal["velocity_verlet", "pefrl", "rk4", "dopri5", "implicit_midpoint"] = Field(
+    integrator: Literal["velocity_verlet", "pefrl", "blanes_moan6", "rk4", "dopri5", "implicit_midpoint"] = Field(
         "velocity_verlet",
         description="velocity_verlet (default, 2nd order symplectic), pefrl (4th order symplectic), "
-        "rk4, dopri5 (adaptive 5(4), error control), implicit_midpoint (A-stable, stiff scenes)",
+        "blanes_moan6 (6th order symplectic, no velocity-dependent forces), rk4, "
+        "dopri5 (adaptive 5(4), error control), implicit_midpoint (A-stable, stiff scenes)",
     )
     dt_s: Positive | None = Field(
         None,

@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from flexmm.integrators import dopri5
+from flexmm.integrators import composition, dopri5
 from flexmm.integrators.common import (
     ACC_FEVALS,
     ACC_HEADER,
@@ -37,7 +37,7 @@ from flexmm.integrators.common import (
 )
 from flexmm.integrators.implicit import midpoint_advance
 from flexmm.integrators.rk4 import rk4_advance
-from flexmm.integrators.splitting import pefrl_advance
+from flexmm.integrators.splitting import make_splitting_advance, pefrl_advance
 from flexmm.integrators.verlet import verlet_advance, verlet_advance_parallel, verlet_force
 
 
@@ -97,6 +97,12 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
         velocity_dependent_forces=True, advance=pefrl_advance, init=total_force,
         force_evals=4.0,
         description="4th-order symplectic splitting (Omelyan PEFRL), exact damped kicks",
+    ),
+    "blanes_moan6": IntegratorSpec(
+        name="blanes_moan6", order=6, symplectic=True, stability_limit=3.141436,
+        velocity_dependent_forces=False, advance=make_splitting_advance(*composition.blanes_moan_6()),
+        init=total_force, force_evals=11.0,
+        description="6th-order symplectic RKN splitting (Blanes & Moan 2002, SRKN11b), forces of q only",
     ),
     "rk4": IntegratorSpec(
         name="rk4", order=4, symplectic=False, stability_limit=2.0 * math.sqrt(2.0),

@@ -16,9 +16,9 @@ import numpy as np
 
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators import parallel
-from flexmm.integrators.common import apply_prescribed, contact_energy
+from flexmm.integrators.common import ACC_STEPS, apply_prescribed, contact_energy
+from flexmm.integrators.runaway import RunawayGuard
 
-RUNAWAY_FACTOR = 1e4
 
 
 @dataclass
@@ -59,7 +59,7 @@ def integrate(problem, integrator, *, h: float | None = None, rtol: float | None
     Fixed-step methods take ``h`` (rounded down so every frame interval holds whole steps);
     adaptive ones take ``rtol`` (and ``atol``, ``max_step``), or ``h`` for fixed steps.
     Frames are at k·t_end/(n_frames − 1). A non-finite state or an energy above
-    ``RUNAWAY_FACTOR`` × (initial energy + applied work) stops the run as 'failed'.
+    energy that runs away (flexmm.integrators.runaway) stops the run as 'failed'.
     """
     spec = _spec(integrator)
     s = problem.system
@@ -82,7 +82,7 @@ def integrate(problem, integrator, *, h: float | None = None, rtol: float | None
     # compile / warm up on copies (one step), so wall time is integration only
     advance(force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, 0.0,
             h_run, 1, acc.copy())
-    e_ref = abs(energy(problem, q, v)) + 1e-300
+    guard = RunawayGuard(s, terms, energy(problem, q, v))
     ts, qs, vs = np.zeros(n_frames), np.zeros((n_frames, s.ndof)), np.zeros((n_frames, s.ndof))
     qs[0], vs[0] = q, v
     status, k, t = "finished", 0, 0.0
@@ -95,10 +95,13 @@ def integrate(problem, integrator, *, h: float | None = None, rtol: float | None
         ts[k], qs[k], vs[k] = t, q, v
         bad = not (np.isfinite(q).all() and np.isfinite(v).all())
         if not bad and check_energy:
-            bad = energy(problem, q, v) > RUNAWAY_FACTOR * (e_ref + max(acc[1], 0.0))
+            e = energy(problem, q, v)
+            bad = guard.runaway(e, acc[1])
         if bad:
             status = "failed"
             break
+        if check_energy:
+            guard.record(int(acc[ACC_STEPS]) if adaptive else k * per_frame, e)
     n = k + 1
     return Trajectory(ts[:n], qs[:n], vs[:n], acc, status, wall, used, cpu, spec.counters(acc))
 

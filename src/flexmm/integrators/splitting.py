@@ -1,5 +1,10 @@
-"""PEFRL: 4th-order symplectic splitting (Omelyan, Mryglod & Folk, Comput. Phys. Commun. 146,
-188 (2002), "position-extended Forest–Ruth-like"), with damping by exact flows (PHYSICS.md §3).
+"""Symplectic splittings of drifts and kicks, with damping by exact flows (PHYSICS.md §3).
+
+``make_splitting_advance(kicks, drifts)`` compiles the ``advance`` of any splitting given its
+coefficients (PEFRL below; Blanes–Moan's 6th-order method, ``composition``).
+
+PEFRL: 4th-order symplectic splitting (Omelyan, Mryglod & Folk, Comput. Phys. Commun. 146,
+188 (2002), "position-extended Forest–Ruth-like").
 
 One step of size h alternates drifts D(τ): q ← q + τ v and kicks K(τ): v ← v + τ F(q)/m,
 
@@ -98,58 +103,106 @@ def _kick_rk4(v, fp, minv, damp, terms, tau, work):
 
 
 @jit
+def _kick(v, f, minv, damp, terms, tau, vdep, damped, factors, work):
+    """One kick of size τ with the frozen-q force f: RK4 flow, exact damped flow or plain."""
+    if vdep:
+        _kick_rk4(v, f, minv, damp, terms, tau, work)
+    elif damped:
+        _kick_exact(v, f, factors[0], factors[1])
+    else:
+        _kick_undamped(v, f, minv, tau)
+
+
+@jit
 def _ledger_rates(v, t, cd, terms, dissipative):
     diss = damping_power(v, cd, terms[2], terms[3]) if dissipative else 0.0
     return diss, applied_power(v, t, terms[4], terms[5], terms[6], terms[7])
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def pefrl_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """Advance ``nsteps`` PEFRL steps of size ``h`` from ``t``; returns the new time.
+def _kick_slots(kicks: tuple) -> tuple[tuple, tuple]:
+    """(slot of each kick, distinct kick coefficients): the damped-kick factors are per value."""
+    values: list[float] = []
+    slots = []
+    for c in kicks:
+        if c not in values:
+            values.append(c)
+        slots.append(values.index(c))
+    return tuple(slots), tuple(values)
 
-    ``f`` is scratch (the last kick's force); ``acc`` as in ``common.ACC_*``.
+
+def make_splitting_advance(kicks: tuple, drifts: tuple):
+    """Compiled ``advance`` for the splitting K(k₀h) D(d₀h) K(k₁h) … D(d_{m−1}h) K(k_m h).
+
+    ``kicks`` has one more entry than ``drifts``. A drift-first method (PEFRL) has k₀ = k_m = 0
+    and m − 1 force evaluations per step; a kick-first one (a composition of velocity Verlet
+    steps, an SRKN method) reuses the force after its last drift for the next step's first kick
+    (first same as last): m evaluations per step, plus one at the start of each call. Kicks are
+    the exact damped flows of the module docstring (an RK4 kick with dashpots or friction).
     """
-    con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
-    n = q.shape[0]
-    cd = free_damping(damp, minv)
-    damped = False
-    for k in range(n):
-        damped = damped or damp[k] * minv[k] != 0.0
-    vdep = has_velocity_terms(terms)
-    dissipative = damped or dash_ij.shape[0] > 0
-    e1, g1 = _kick_factors(minv, damp, KICKS[0] * h)
-    e2, g2 = _kick_factors(minv, damp, KICKS[1] * h)
-    work = np.empty((6, n if vdep else 0))
-    d0, p0 = _ledger_rates(v, t, cd, terms, dissipative)
-    for _ in range(nsteps):
-        ts = t
-        for s in range(5):
-            c = DRIFTS[s] * h
-            for k in range(n):
-                q[k] += c * v[k]
-            ts += c
-            if s == 4:
-                break
-            apply_prescribed(q, v, ts, drv_dof, drv_mode, drv_shape, drv_prm)
+    KICKS = tuple(float(c) for c in kicks)
+    DRIFTS = tuple(float(c) for c in drifts)
+    if len(KICKS) != len(DRIFTS) + 1:
+        raise ValueError("a splitting needs one kick more than drifts (pad with zero kicks)")
+    FSAL = KICKS[0] != 0.0
+    if not FSAL and KICKS[-1] != 0.0:
+        raise ValueError("a drift-first splitting must also end with a drift (last kick 0)")
+    M = len(DRIFTS)
+    SLOT, VALUES = _kick_slots(KICKS)
+    NSLOT = len(VALUES)
+    EVALS = M if FSAL else M - 1
+
+    @jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
+    def advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+        """Advance ``nsteps`` steps of size ``h`` from ``t``; returns the new time.
+
+        ``f`` is scratch (the last kick's force); ``acc`` as in ``common.ACC_*``.
+        """
+        con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
+        n = q.shape[0]
+        cd = free_damping(damp, minv)
+        damped = False
+        for k in range(n):
+            damped = damped or damp[k] * minv[k] != 0.0
+        vdep = has_velocity_terms(terms)
+        dissipative = damped or dash_ij.shape[0] > 0
+        factors = np.empty((NSLOT, 2, n if damped and not vdep else 0))
+        if damped and not vdep:
+            for j in range(NSLOT):
+                factors[j, 0], factors[j, 1] = _kick_factors(minv, damp, VALUES[j] * h)
+        work = np.empty((6, n if vdep else 0))
+        d0, p0 = _ledger_rates(v, t, cd, terms, dissipative)
+        if FSAL:
+            apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
             force(q, args, f)
-            position_forces(q, ts, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
-            tau = KICKS[s] * h
-            if vdep:
-                _kick_rk4(v, f, minv, damp, terms, tau, work)
-            elif damped:
-                if s == 0 or s == 3:
-                    _kick_exact(v, f, e1, g1)
-                else:
-                    _kick_exact(v, f, e2, g2)
-            else:
-                _kick_undamped(v, f, minv, tau)
-        t += h
-        apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        d1, p1 = _ledger_rates(v, t, cd, terms, dissipative)
-        acc[0] += 0.5 * h * (d0 + d1)
-        acc[1] += 0.5 * h * (p0 + p1)
-        d0, p0 = d1, p1
-    if acc.shape[0] > ACC_STEPS:
-        acc[ACC_FEVALS] += 4 * nsteps
-        acc[ACC_STEPS] += nsteps
-    return t
+            position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
+        for _ in range(nsteps):
+            ts = t
+            for s in range(M):
+                if KICKS[s] != 0.0:
+                    _kick(v, f, minv, damp, terms, KICKS[s] * h, vdep, damped, factors[SLOT[s]], work)
+                c = DRIFTS[s] * h
+                for k in range(n):
+                    q[k] += c * v[k]
+                ts += c
+                if s == M - 1 and not FSAL:
+                    break  # a drift-first method ends with this drift
+                apply_prescribed(q, v, ts, drv_dof, drv_mode, drv_shape, drv_prm)
+                force(q, args, f)
+                position_forces(q, ts, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
+            if FSAL:
+                _kick(v, f, minv, damp, terms, KICKS[M] * h, vdep, damped, factors[SLOT[M]], work)
+            t += h
+            apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+            d1, p1 = _ledger_rates(v, t, cd, terms, dissipative)
+            acc[0] += 0.5 * h * (d0 + d1)
+            acc[1] += 0.5 * h * (p0 + p1)
+            d0, p0 = d1, p1
+        if acc.shape[0] > ACC_STEPS:
+            acc[ACC_FEVALS] += EVALS * nsteps + (1 if FSAL else 0)
+            acc[ACC_STEPS] += nsteps
+        return t
+
+    return advance
+
+
+pefrl_advance = make_splitting_advance((0.0, *KICKS, 0.0), DRIFTS)

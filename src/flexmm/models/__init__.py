@@ -20,11 +20,13 @@ class ModelEntry:
     build: Callable[..., System]
     fields: tuple[FieldSpec, ...]
     launch_soliton: Callable[..., None] | None = None
+    #: the launcher knows the prestressed theory (solitons on a predeformed lattice)
+    soliton_on_predeformed: bool = False
 
 
 MODELS: dict[str, ModelEntry] = {
     "rotating_squares_chain": ModelEntry(
-        rotating_chain.build, rotating_chain.FIELDS, rotating_chain.launch_soliton
+        rotating_chain.build, rotating_chain.FIELDS, rotating_chain.launch_soliton, True
     ),
     "rotating_squares_sheet": ModelEntry(
         rotating_sheet.build, rotating_sheet.FIELDS, rotating_sheet.launch_soliton

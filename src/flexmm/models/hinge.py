@@ -113,60 +113,73 @@ def _chain_hinge(qu, qt, h, hprm, ca, sa, cb, sb):
 
 
 @jit
-def _hinges_span(qu, qt, hprm, cs, sn, ou, ot, ha, hb, first, m, fl_l, gb_l, right, cr, sr):
+def _hinges_span(qu, qt, hprm, cs, sn, ou, ot, ha, hb, first, m, fl_l, gb_l, fl_r, ga_r, right, check):
     """Hinge forces on m sites starting at site ``first`` (chain order: hinge h joins h, h + 1).
 
-    Arrays are views starting at ``first`` (loops from 0 vectorise where they can). Site-centred:
-    each site takes its left hinge (carried: (fl_l, gb_l) of hinge first−1 on entry) and its
-    right hinge, so there are no scattered writes. The last site's right hinge uses the halo
-    (cr, sr) = cos/sin at site first+m when ``right``, else it is the chain's end. Returns the
-    number of hinges found out of order (the caller then falls back to the general loop).
+    Arrays are views starting at ``first`` (``cs``, ``sn``, ``ou``, ``ot`` may be block scratch).
+    Site-centred: each site takes its left hinge (carried: (fl_l, gb_l) of hinge first−1 on entry)
+    and its right hinge, so there are no scattered writes; the last site's right hinge
+    (fl_r, ga_r) is given by the caller (zeros at the chain's end; ``right``: it exists).
+    With ``check``, returns the number of hinges found out of order (the caller then falls back
+    to the general loop), else 0 without reading ``ha``, ``hb``.
     """
     bad = 0
     for i in range(m - 1):
-        bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
-        fl_r, ga_r, gb_r = _chain_hinge(qu, qt, i, hprm, cs[i], sn[i], cs[i + 1], sn[i + 1])
-        ou[i] = fl_r - fl_l
-        ot[i] -= gb_l + ga_r
-        fl_l = fl_r
-        gb_l = gb_r
+        if check:
+            bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
+        fl, ga, gb = _chain_hinge(qu, qt, i, hprm, cs[i], sn[i], cs[i + 1], sn[i + 1])
+        ou[i] = fl - fl_l
+        ot[i] -= gb_l + ga
+        fl_l = fl
+        gb_l = gb
     i = m - 1
-    if right:
+    if check and right:
         bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
-        fl_r, ga_r, gb_r = _chain_hinge(qu, qt, i, hprm, cs[i], sn[i], cr, sr)
-        ou[i] = fl_r - fl_l
-        ot[i] -= gb_l + ga_r
-    else:
-        ou[i] = -fl_l
-        ot[i] -= gb_l
+    ou[i] = fl_r - fl_l
+    ot[i] -= gb_l + ga_r
     return bad
 
 
 @jit
-def _site_trig(q, sprm, n, i):
-    """(cos, sin) of θ0+θ at site i (a halo value)."""
-    s, c = sincos(sprm[i, S_THETA0] + q[n + i])
-    return c, s
+def hinge_at(q, hp, sp, n, i):
+    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of hinge i−1 ↔ i from q; zeros if i is 0 or n (no hinge).
+
+    ``hp``, ``sp``: the hinge and site parameter tables viewed from hinge / site i−1.
+    """
+    if i <= 0 or i >= n:
+        return 0.0, 0.0, 0.0
+    sa, ca = sincos(sp[0, S_THETA0] + q[n + i - 1])
+    sb, cb = sincos(sp[1, S_THETA0] + q[n + i])
+    return _chain_hinge(q[i - 1 : n], q[n + i - 1 : 2 * n], 0, hp, ca, sa, cb, sb)
+
+
+@jit
+def chain_block(q, ha, hb, hp, sp, cs, sn, ou, ot, n, a, b, left, right, check):
+    """All forces on sites a..b−1 into ``ou``, ``ot`` (u and θ parts, views from site a).
+
+    ``hp``, ``sp``: parameter tables viewed from site a; ``cs``, ``sn``: scratch from site a;
+    ``left`` = (fl, gb) of hinge a−1 ↔ a, ``right`` = (fl, ga) of hinge b−1 ↔ b (``hinge_at``).
+    Reads q only on sites a..b−1, so a caller may already have moved the neighbouring sites.
+    Returns the out-of-order count (``check``).
+    """
+    _chain_sites(q[n + a : n + b], sp, cs, sn, ou, ot)
+    return _hinges_span(q[a:n], q[n + a : 2 * n], hp, cs, sn, ou, ot, ha[a:], hb[a:], a, b - a,
+                        left[0], left[1], right[0], right[1], b < n, check)
 
 
 @jit
 def _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, lo, hi):
-    """All forces on sites lo..hi−1 (chain order), one cache block at a time: the block's site
-    terms and cos/sin, then its hinges. Writes only inside lo..hi−1 (halo cos/sin are private),
-    so ranges can run on different threads. Returns the count of out-of-order hinges."""
+    """All forces on sites lo..hi−1 (chain order), one cache block at a time (site terms and
+    cos/sin, then hinges, with the blocks' boundary hinges from ``hinge_at``). Writes only inside
+    lo..hi−1, so ranges can run on different threads. Returns the count of out-of-order hinges."""
     bad = 0
+    fl_l, _, gb_l = hinge_at(q, hprm[lo - 1 :], sprm[lo - 1 :], n, lo)
     for a in range(lo, hi, CACHE_BLOCK):
         b = min(a + CACHE_BLOCK, hi)
-        _sites_block(q, sprm, cs, sn, out, n, a, min(b + 1, hi))
-        fl_l, gb_l = 0.0, 0.0
-        if a > 0:
-            cl, sl = (cs[a - 1], sn[a - 1]) if a > lo else _site_trig(q, sprm, n, a - 1)
-            fl_l, _, gb_l = _chain_hinge(q[:n], q[n:], a - 1, hprm, cl, sl, cs[a], sn[a])
-        cr, sr = 1.0, 0.0
-        if b < n:
-            cr, sr = (cs[b], sn[b]) if b < hi else _site_trig(q, sprm, n, b)
-        bad += _hinges_span(q[a:n], q[n + a : 2 * n], hprm[a:], cs[a:], sn[a:], out[a:n], out[n + a : 2 * n],
-                            ha[a:], hb[a:], a, b - a, fl_l, gb_l, b < n, cr, sr)
+        fl_r, ga_r, gb_r = hinge_at(q, hprm[b - 1 :], sprm[b - 1 :], n, b)
+        bad += chain_block(q, ha, hb, hprm[a:], sprm[a:], cs[a:], sn[a:], out[a:n], out[n + a : 2 * n], n, a, b,
+                           (fl_l, gb_l), (fl_r, ga_r), True)
+        fl_l, gb_l = fl_r, gb_r
     return bad
 
 

@@ -145,12 +145,30 @@ def build(cfg: RotatingSquaresChain) -> System:
 
 
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
-    """Overwrite q0, v0 with the exact continuum vector soliton (PHYSICS.md §1.3)."""
-    from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
+    """Overwrite q0, v0 with the exact continuum vector soliton (PHYSICS.md §1.3).
 
-    m = system.meta
+    On a predeformed chain (``meta['rest_state']``) this is the prestressed soliton of
+    flexmm.theory.prestressed about the rest rotation θ_s at ``center``, written as the
+    displacement from the rest state (the caller adds the rest state).
+    """
+    from flexmm.theory.prestressed import prestressed_chain, soliton_window
+    from flexmm.theory.rotating import RotatingChainND, soliton_exists, soliton_initial_state
+
+    m, n = system.meta, system.n_sites
     p = RotatingChainND(m["theta0"], m["Ks"], m["Ktheta"], m["alpha2"], m["n_v"], m["s_v"])
-    U, T, dU, dT = soliton_initial_state(p, amplitude, system.n_sites, center, direction)
-    n = system.n_sites
+    rest = m.get("rest_state")
+    if rest is not None:
+        theta = rest[n : 2 * n]
+        near = theta[max(center - 10, 0) : center + 11]
+        if np.ptp(near) > 1e-4:  # rad; the boundary layers of the ends must have decayed
+            raise ValueError(f"the predeformed state is not uniform around unit {center} "
+                             f"(θ varies by {np.ptp(near):.2g} rad); launch the soliton further from the ends")
+        p = prestressed_chain(p, float(theta[center]))
+        if not soliton_exists(p, amplitude):
+            window = soliton_window(p, 1 if amplitude > 0 else -1, n=400)
+            span = "none of this polarity" if window is None else f"{window[0]:.3f} to {window[1]:.3f} rad"
+            raise ValueError(f"no soliton of amplitude {amplitude} rad on this predeformed chain "
+                             f"(θ_s = {p.theta_s:.4f} rad; amplitudes: {span})")
+    U, T, dU, dT = soliton_initial_state(p, amplitude, n, center, direction)
     system.q0[:n], system.q0[n : 2 * n] = U, T
     system.v0[:n], system.v0[n : 2 * n] = dU, dT

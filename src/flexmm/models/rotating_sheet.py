@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm._trig import sincos
 from flexmm.config.rigid import RotatingSquaresSheet
 from flexmm.models import predeform, variation
 from flexmm.models.base import FieldSpec, System
@@ -42,11 +43,19 @@ COORD_ATTRS = {"row": ("1", "row index of the unit"), "col": ("1", "column index
 # ---------------------------------------------------------------- kernels
 @jit
 def _angles(q, theta0, cs, sn):
+    """cos/sin of θ0 + θ per site into the scratch ``cs``, ``sn`` (N,).
+
+    Two simple loops over a view from 0 so that both vectorise (``_trig.sincos``); with
+    libm's scalar sin/cos this pass cost as much as the hinge loop (benchmarks/).
+    """
     n = theta0.shape[0]
+    th = q[2 * n : 3 * n]
     for i in range(n):
-        ang = theta0[i] + q[2 * n + i]
-        cs[i] = math.cos(ang)
-        sn[i] = math.sin(ang)
+        cs[i] = theta0[i] + th[i]
+    for i in range(n):
+        s, c = sincos(cs[i])
+        cs[i] = c
+        sn[i] = s
 
 
 @jit
@@ -135,15 +144,22 @@ def checkerboard(n_rows: int, n_cols: int) -> np.ndarray:
     return np.where((r + c) % 2 == 0, 1.0, -1.0)
 
 
-def hinge_pairs(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool):
-    """Hinges of the sheet: (a (H,), b (H,), axis (H,)), axis 0 horizontal (A left of B), 1 vertical."""
+def hinge_pairs(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, skew: int = 0):
+    """Hinges of the sheet: (a (H,), b (H,), axis (H,)), axis 0 horizontal (A left of B), 1 vertical.
+
+    ``skew``: the top row's upper neighbours are the bottom row's units ``skew`` columns to the right
+    (wrapped if periodic in x, dropped past the ends otherwise).
+    """
     site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
     a_h, b_h = site[:, :-1].ravel(), site[:, 1:].ravel()
     a_v, b_v = site[:-1, :].ravel(), site[1:, :].ravel()
     if periodic_x:
         a_h, b_h = np.concatenate([a_h, site[:, -1]]), np.concatenate([b_h, site[:, 0]])
     if periodic_y:
-        a_v, b_v = np.concatenate([a_v, site[-1, :]]), np.concatenate([b_v, site[0, :]])
+        cols = np.arange(n_cols) + skew
+        keep = slice(None) if periodic_x else (cols >= 0) & (cols < n_cols)
+        top, bottom = site[-1, :][keep], site[0, cols % n_cols][keep]
+        a_v, b_v = np.concatenate([a_v, top]), np.concatenate([b_v, bottom])
     a = np.concatenate([a_h, a_v]).astype(np.int64)
     b = np.concatenate([b_h, b_v]).astype(np.int64)
     axis = np.concatenate([np.zeros(a_h.size), np.ones(a_v.size)]).astype(np.int64)
@@ -196,7 +212,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
     m, J, kl, a = cfg.unit_mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
     scales = Scales(a, math.sqrt(m / kl), m)
     px, py = cfg.left == "periodic", cfg.bottom == "periodic"
-    ha, hb, hax = hinge_pairs(nr, nc, px, py)
+    ha, hb, hax = hinge_pairs(nr, nc, px, py, cfg.skew_cols)
     row, col = np.divmod(np.arange(n), nc)
     base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": J, "k_long_n_per_m": kl,
             "k_shear_n_per_m": cfg.k_shear_n_per_m, "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}

@@ -15,7 +15,8 @@ err(h₁, t) ≈ |q_{h₁} − q_{h₁/2}| 2^p/(2^p − 1) at t = T_p/2 and T_p,
 
     h = h₁ (S · accuracy / err(h₁, T))^{1/p},   S = SAFETY,
 
-between FLOOR and CAP × the stable step h_stab = stability_limit/ω_max. When that h is so small
+between FLOOR × the stable step h_stab = stability_limit/ω_max and h₁ (no extrapolation to steps
+larger than the pilot's: a sixth-order method's error grows faster than h^6 there). When that h is so small
 that a pilot over the whole duration costs at most LONG_PILOT_SHARE of the run, the pilot is
 repeated over all of T (late error growth — chaos setting in after several reflections — is
 then seen, not extrapolated). If even FLOOR·h_stab is predicted to miss, the plan says the
@@ -217,8 +218,10 @@ def _pilot_errors(problem, spec, h1: float, t_p: float) -> tuple[tuple[float, fl
 
 
 def _step_for(accuracy: float, err1: float, h1: float, p: int, h_stab: float, T: float) -> float:
+    """The step for ``accuracy``, never above the pilot's largest step h1: the h^p law was only
+    observed below it (above it a high-order method's error grows faster than h^p)."""
     h = h1 * (SAFETY * accuracy / err1) ** (1.0 / p) if err1 > 0 else CAP * h_stab
-    return min(max(h, FLOOR * h_stab), CAP * h_stab, T)
+    return min(max(h, FLOOR * h_stab), CAP * h_stab, h1, T)
 
 
 def choose(problem, accuracy: float, only: str | None = None) -> Choice:

@@ -78,6 +78,8 @@ def _rotating_params(lat):
 
     if getattr(lat, "variation", None):
         raise NoContinuum("parameters vary along the chain")
+    if getattr(lat, "predeform", None) is not None:  # theory.prestressed needs the relaxed state
+        raise NoContinuum("predeformed: the soliton rides on the relaxed, loaded state")
     nd = nondimensional(lat)
     p = RotatingChainND(lat.theta0_rad, nd["Ks"], nd["Ktheta"], nd["alpha2"], lat.n_lateral,
                         int(lat.lateral_stretch))

@@ -43,6 +43,9 @@ def _check_planar(data: dict, lat) -> None:
     if lat.bottom != "periodic":
         raise NotPlanar(f"bottom/top edges are {lat.bottom}/{lat.top}, not periodic: the wave does not "
                         "stay planar near them")
+    if lat.skew_cols:
+        raise NotPlanar(f"skew-periodic sheet (skew_cols = {lat.skew_cols}): its waves are oblique, "
+                        "not uniform along columns")
     if lat.n_rows <= 2:
         raise NotPlanar(f"{lat.n_rows} rows: already the smallest periodic sheet")
     if lat.magnets is not None:

@@ -1,8 +1,9 @@
 """Analytical theory for flexmm: closed forms and reduced ODEs used to seed and check simulations.
 
 Pure numpy/scipy and nondimensional (PHYSICS.md §1.1 scales for the rotating-squares chain).
-`rotating` covers the rotating-squares chain (PHYSICS.md §1.3, §1.4); `chains` covers chains of
-masses with nonlinear springs and on-site potentials (PHYSICS.md §2).
+`rotating` covers the rotating-squares chain (PHYSICS.md §1.3, §1.4), `prestressed` the chain held
+rotated by an end load, `cnoidal` periodic (cnoidal) waves and the driven wave of a chain; `chains`
+covers chains of masses with nonlinear springs and on-site potentials (PHYSICS.md §2).
 """
 from flexmm.theory.chains import (
     BistableFront,
@@ -23,6 +24,8 @@ from flexmm.theory.chains import (
     toda_soliton,
     toda_speed,
 )
+from flexmm.theory.cnoidal import CnoidalWave, DrivenWave, cnoidal_through, driven_wave, linear_speed
+from flexmm.theory.prestressed import prestressed_chain, soliton_window, static_rotation
 from flexmm.theory.rotating import (
     BandEdges,
     RotatingChainND,
@@ -50,7 +53,9 @@ from flexmm.theory.rotating import (
 )
 
 __all__ = [
-    "BandEdges", "BistableFront", "RotatingChainND", "SechWave", "TravellingState",
+    "BandEdges", "BistableFront", "CnoidalWave", "DrivenWave", "RotatingChainND", "SechWave",
+    "TravellingState", "cnoidal_through", "driven_wave", "linear_speed", "prestressed_chain",
+    "soliton_window", "static_rotation",
     "amplitude_gap", "band_edges", "bistable_front", "bistable_front_profile", "cnoidal_wave",
     "continuum_coefficients", "dispersion_chain", "dispersion_rotational", "evanescent_decay",
     "exact_soliton", "front_kinetic_energy", "gradient_coefficient", "hinge_stretch",

@@ -8,6 +8,11 @@ Gradient models: 'physics_md' uses the constant D(c) of PHYSICS.md §1.3 (the Kl
 'full' (default for exact profiles) keeps the theta dependence of the gradient coefficient derived in
 exact_soliton. Both give the same exact speed law; 'full' agrees with the discrete chain far better
 (and, unlike PHYSICS.md's D(c), with the exact linear dispersion when theta0 != 0).
+
+A chain held in a rotated state by an external load (theta_s != 0, see flexmm.theory.prestressed for
+the derivation) is the stress-free chain of rest angle theta0 plus the on-site potential
+W(theta) = gamma theta_s [theta - G(theta)/s0]; the speed law, exact profiles, continuum
+coefficients and linear dispersion below include it.
 """
 from __future__ import annotations
 
@@ -25,6 +30,8 @@ class RotatingChainND:
 
     theta0: rest angle [rad]; Ks = k_s/k_l; Ktheta = k_theta/(k_l a^2); alpha2 = J/(m a^2);
     n_v: lateral hinges per unit (0, 1, 2); s_v: 1 if lateral contraction is blocked.
+    theta_s: part of theta0 held by an external load (prestress, flexmm.theory.prestressed); 0 for a
+    stress-free chain. Then theta0 is the loaded equilibrium angle and theta is measured from it.
     """
 
     theta0: float
@@ -33,6 +40,7 @@ class RotatingChainND:
     alpha2: float
     n_v: int = 0
     s_v: int = 0
+    theta_s: float = 0.0
 
     def __post_init__(self):
         if not abs(self.theta0) < math.pi / 2:
@@ -41,6 +49,8 @@ class RotatingChainND:
             raise ValueError("need alpha2 > 0, Ks >= 0, Ktheta >= 0")
         if self.n_v not in (0, 1, 2) or self.s_v not in (0, 1):
             raise ValueError(f"n_v must be 0, 1 or 2 and s_v 0 or 1, got {self.n_v}, {self.s_v}")
+        if self.theta_s != 0 and self.theta0 == 0:
+            raise ValueError("a prestressed chain (theta_s != 0) needs theta0 != 0")
 
     @classmethod
     def from_si(cls, a_m, theta0_rad, k_long, k_shear, k_rot, mass, inertia, n_v=0, s_v=0):
@@ -90,12 +100,30 @@ def hinge_stretch(p: RotatingChainND, theta):
     return np.asarray(theta, dtype=float) * _g(p, theta)
 
 
+def _prestress(p: RotatingChainND, theta):
+    """(2 W/theta^2, W') of the prestress potential W = gamma theta_s [theta - G/s0]; shapes of theta.
+
+    theta - G/s0 = (theta - sin theta) - (eta/s0)(1 - cos theta); both zero when theta_s = 0.
+    """
+    th = np.asarray(theta, dtype=float)
+    if p.theta_s == 0:
+        return np.zeros_like(th), np.zeros_like(th)
+    k, r = p.gamma * p.theta_s, p.eta / p.s0
+    small = np.abs(th) < 1e-3
+    t = np.where(small, 1.0, th)
+    cubic = np.where(small, th / 6 - th**3 / 120, (t - np.sin(t)) / t**2)  # (theta - sin theta)/theta^2
+    w2 = 2 * k * (cubic - r * 0.5 * np.sinc(th / (2 * np.pi)) ** 2)
+    return w2, k * (1 - np.sin(p.theta0 + th) / p.s0)
+
+
 def continuum_coefficients(p: RotatingChainND, c: float, gradient: str = "physics_md"):
     """(C1, C2, C3) of theta'' = C1 theta + C2 theta^2 + C3 theta^3 at speed c (PHYSICS.md §1.3).
 
     C1 = -(gamma + S s0^2)/D, C2 = -(3/2) S s0 eta/D, C3 = -S(eta^2/2 - 2 s0^2/3)/D with
     S = c^2/(c^2 - eta^2) + n_v s_v/2 and D = D(c) of PHYSICS.md; gradient='full' uses D = D_full(0)
-    from gradient_coefficient instead (correct linear tail for theta0 != 0).
+    from gradient_coefficient instead (correct linear tail for theta0 != 0). A prestress adds the
+    Taylor terms of W' = k[-(eta/s0) theta + theta^2/2 + (eta/s0) theta^3/6], k = gamma theta_s:
+    -k eta/s0, k/2 and k eta/(6 s0) to the brackets of C1, C2 and C3.
     """
     if abs(c * c - p.eta**2) < 1e-14:
         raise ValueError(f"c = {c} equals the longitudinal speed cos(theta0): S(c) is singular")
@@ -103,8 +131,9 @@ def continuum_coefficients(p: RotatingChainND, c: float, gradient: str = "physic
     D = float(gradient_coefficient(p, c, 0.0, gradient)[0])
     if D == 0:
         raise ValueError(f"D = 0 at c = {c}: c is the rotational cut-off speed")
-    return (-(p.gamma + S * p.s0**2) / D, -1.5 * S * p.s0 * p.eta / D,
-            -S * (p.eta**2 / 2 - 2 * p.s0**2 / 3) / D)
+    k, r = p.gamma * p.theta_s, (p.eta / p.s0 if p.theta_s else 0.0)
+    return (-(p.gamma - k * r + S * p.s0**2) / D, -(1.5 * S * p.s0 * p.eta + k / 2) / D,
+            -(S * (p.eta**2 / 2 - 2 * p.s0**2 / 3) + k * r / 6) / D)
 
 
 def soliton_width(p: RotatingChainND, c: float, gradient: str = "physics_md") -> float:
@@ -140,11 +169,15 @@ def soliton_speed(p: RotatingChainND, A):
     """Exact speed-amplitude law c = eta sqrt(Q/(1+Q)), Q = gamma A^2/G(A)^2 + n_v s_v/2 (§1.3).
 
     Written as c^2 = eta^2 (gamma + n_v s_v g^2/2)/(gamma + (1 + n_v s_v/2) g^2), g = G(A)/A, which is
-    regular at A = 0 (c -> long_wave_speed). Shape of A. Existence is not checked (see soliton_exists).
+    regular at A = 0 (c -> long_wave_speed). With a prestress gamma A^2 becomes gamma A^2 + 2 W(A)
+    (flexmm.theory.prestressed); nan where that is negative. Shape of A. Existence is not checked
+    (see soliton_exists).
     """
     g2 = _g(p, A) ** 2
     h = p.n_v * p.s_v / 2
-    return p.eta * np.sqrt((p.gamma + h * g2) / (p.gamma + (1 + h) * g2))
+    gam = p.gamma + _prestress(p, A)[0]
+    with np.errstate(invalid="ignore"):
+        return p.eta * np.sqrt((gam + h * g2) / (gam + (1 + h) * g2))
 
 
 def long_wave_speed(p: RotatingChainND) -> float:
@@ -168,6 +201,9 @@ def _turn(p, theta):
 
 def _branch(p: RotatingChainND, sign: int, branch: str) -> tuple[float, float]:
     """|A| interval on which c(A) is monotone, for polarity sign (see soliton_amplitude)."""
+    if p.theta_s != 0:
+        raise ValueError("branches are mapped for stress-free chains only (theta_s = 0); for a "
+                         "prestressed chain use soliton_speed and soliton_exists")
     if sign not in (1, -1):
         raise ValueError("sign must be +1 or -1")
     t0, same = abs(p.theta0), sign * p.theta0 >= 0
@@ -231,9 +267,15 @@ def soliton_exists(p: RotatingChainND, A: float, gradient: str = "full", n_check
     if A == 0 or gA == 0 or p.gamma == 0:
         return False
     c = float(soliton_speed(p, A))
+    if not 0 < c < p.eta:
+        return False
     th = A * np.linspace(0.0, 1.0, n_check)[:-1]
-    F = -(p.gamma - p.gamma * (_g(p, th) / gA) ** 2) / gradient_coefficient(p, c, th, gradient)[0]
-    return bool(np.all(F > 0) and abs(float(_turn(p, A))) > 1e-12 * max(1.0, abs(A)))
+    (wA,), (dwA,) = _prestress(p, [A])
+    gam = p.gamma + _prestress(p, th)[0]
+    F = -(gam - (p.gamma + wA) * (_g(p, th) / gA) ** 2) / gradient_coefficient(p, c, th, gradient)[0]
+    # f'(A) != 0, scaled to G - A G' (= _turn) when theta_s = 0
+    turn = float(_turn(p, A)) + (dwA * gA - wA * A * float(np.sin(p.theta0 + A))) / p.gamma
+    return bool(np.all(F > 0) and abs(turn) > 1e-12 * max(1.0, abs(A)))
 
 
 def amplitude_gap(p: RotatingChainND, sign: int = +1) -> float:
@@ -267,18 +309,18 @@ def _exact(p: RotatingChainND, A: float, zeta, gradient: str):
     if not soliton_exists(p, A, gradient):
         raise ValueError(f"no regular soliton of amplitude A = {A} for {p} (gradient={gradient!r})")
     c = float(soliton_speed(p, A))
-    S = -p.gamma / float(_g(p, A)) ** 2
+    S = -(p.gamma + float(_prestress(p, A)[0])) / float(_g(p, A)) ** 2
     kU = p.eta / (c * c - p.eta**2)
 
     def F(th):  # f(theta)/theta^2
-        return -(S * _g(p, th) ** 2 + p.gamma) / gradient_coefficient(p, c, th, gradient)[0]
+        return -(S * _g(p, th) ** 2 + p.gamma + _prestress(p, th)[0]) / gradient_coefficient(p, c, th, gradient)[0]
 
     C1 = float(F(0.0))
 
     def core(z, y):
         G = float(hinge_stretch(p, y[0]))
         D, dD = (float(v) for v in gradient_coefficient(p, c, y[0], gradient))
-        dV = S * G * math.sin(p.theta0 + y[0]) + p.gamma * y[0]
+        dV = S * G * math.sin(p.theta0 + y[0]) + p.gamma * y[0] + float(_prestress(p, y[0])[1])
         return [y[1], -(dV + 0.5 * dD * y[1] ** 2) / D, kU * G]
 
     def tail(z, y):
@@ -396,7 +438,8 @@ def _kq(p: RotatingChainND, q):
     q = np.asarray(q, dtype=float)
     s2, c2 = np.sin(q / 2) ** 2, np.cos(q / 2) ** 2
     R = (p.s0**2 * c2 + p.Ks * p.eta**2 * s2 + 4 * p.Ktheta * c2
-         + p.n_v * (p.s_v * p.s0**2 / 2 + 2 * p.Ktheta))
+         + p.n_v * (p.s_v * p.s0**2 / 2 + 2 * p.Ktheta)
+         - (p.gamma * p.theta_s * p.eta / p.s0 if p.theta_s else 0.0))  # W''(0) of a prestress
     return 4 * s2, (p.s0 * np.sin(q)) ** 2, R
 
 

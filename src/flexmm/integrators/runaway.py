@@ -1,0 +1,39 @@
+"""The blow-up test every integration loop applies at its frames (controller and runner alike).
+
+A run is a runaway when its energy exceeds ``RUNAWAY_FACTOR`` × a reference: the largest of
+
+- the largest |E| seen at frames at least ``RUNAWAY_LAG_STEPS`` steps old (an unstable mode grows
+  by ≥ 1.5 per step, so it cannot raise its own threshold when frames are frequent);
+- the drive scale: initial kinetic energy plus (sum of drive amplitudes)² × units — a run that
+  starts at rest and is driven by a prescribed displacement, whose work is not accumulated, has
+  no other energy scale at its first frames — plus the work recorded so far.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+RUNAWAY_FACTOR = 1e4
+RUNAWAY_LAG_STEPS = 100
+
+
+class RunawayGuard:
+    """Feed it each frame's energy (``check``, then ``record``); see the module docstring."""
+
+    def __init__(self, system, terms: tuple, e0: float):
+        self.e_max = abs(e0)
+        self.recent: deque[tuple[int, float]] = deque()
+        amp = float(np.sum(np.abs(terms[7][:, 0]))) if len(terms) > 7 else 0.0
+        self.drive_scale = float(np.sum(system.mass * system.v0**2)) + amp**2 * system.n_sites + 1e-12
+
+    def runaway(self, energy: float, work: float) -> bool:
+        """True when ``energy`` (this frame) is a runaway given the recorded ``work`` so far."""
+        return energy > RUNAWAY_FACTOR * max(self.e_max, self.drive_scale + max(work, 0.0))
+
+    def record(self, step: int, energy: float) -> None:
+        """Remember a good frame's |E| at cumulative step count ``step``."""
+        self.recent.append((step, abs(energy)))
+        while self.recent and self.recent[0][0] <= step - RUNAWAY_LAG_STEPS:
+            self.e_max = max(self.e_max, self.recent.popleft()[1])

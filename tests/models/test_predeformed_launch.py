@@ -1,0 +1,59 @@
+"""Solitons launched on a predeformed chain, and fields measured from its rest state (fast)."""
+
+import numpy as np
+import pytest
+
+from flexmm.analysis.context import RunContext
+from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.assemble import SceneError, build_problem
+from flexmm.config import scene_from_dict
+from flexmm.theory.prestressed import prestressed_chain
+from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
+
+LATTICE = {"kind": "rotating_squares_chain", "n_units": 100, "a_m": 0.016, "theta0_rad": 0.05,
+           "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
+           "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1,
+           "predeform": {"loads": [{"end": "left", "force_n": 0.2}, {"end": "right", "force_n": 0.2}],
+                         "theta_guess_rad": 0.1}}
+
+
+def _scene(amplitude=-0.38, center=50, lattice=LATTICE):
+    return scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3},
+                            "excitation": {"kind": "soliton", "amplitude_rad": amplitude, "center_site": center}})
+
+
+def test_soliton_rides_on_the_relaxed_state():
+    system = build_problem(_scene()).system
+    n, rest = system.n_sites, system.meta["rest_state"]
+    p = prestressed_chain(RotatingChainND(0.05, system.meta["Ks"], system.meta["Ktheta"], system.meta["alpha2"], 1, 0),
+                          float(rest[n + 50]))
+    s = soliton_initial_state(p, -0.38, n, 50)
+    assert np.allclose(system.q0[n:] - rest[n:], s.theta, atol=1e-14)
+    assert np.allclose(system.q0[:n] - rest[:n], s.U, atol=1e-14)
+    assert np.allclose(system.v0, np.concatenate([s.U_dot, s.theta_dot]), atol=1e-14)
+    assert np.abs(system.q0[n:] - rest[n:])[:20].max() < 1e-6  # far from the pulse: the rest state
+
+
+@pytest.mark.parametrize("amplitude,center,match", [(-0.38, 8, "not uniform"), (-0.2, 50, "-0.34[67] to -0.40")])
+def test_bad_launches_are_reported(amplitude, center, match):
+    with pytest.raises(SceneError, match=match):
+        build_problem(_scene(amplitude, center))
+
+
+def test_from_rest_subtracts_the_relaxed_state():
+    import xarray as xr
+
+    scene = _scene()
+    system = build_problem(scene).system
+    n, a = system.n_sites, LATTICE["a_m"]
+    q = system.meta["rest_state"]
+    ds = xr.Dataset({"u": (("time", "site"), np.tile(q[:n] * a, (2, 1)), {"units": "m"}),
+                     "theta": (("time", "site"), np.tile(q[n:], (2, 1)), {"units": "rad"})},
+                    coords={"time": [0.0, 1.0], "site": np.arange(n), "x": ("site", np.arange(n) * a)})
+    ctx = RunContext("rotating_squares_chain", {"name": "t", "lattice": LATTICE, "solver": {"duration_s": 1e-3}})
+    moved = from_rest(ds, rest_fields(ctx))
+    assert np.abs(moved["theta"].values).max() < 1e-15 and np.abs(moved["u"].values).max() < 1e-15
+    assert np.allclose(moved["x"].values, ds["x"].values + q[:n] * a)
+    plain = RunContext("rotating_squares_chain", {"name": "t", "lattice": {**LATTICE, "predeform": None},
+                                                  "solver": {"duration_s": 1e-3}})
+    assert rest_fields(plain) is None and from_rest(ds, None) is ds
