@@ -86,7 +86,7 @@ def test_second_run_does_no_work(local_run):
     assert snapshot(d) == before
 
 
-def test_same_sweep_on_a_dask_local_cluster_gives_identical_results(local_run, tmp_path):
+def test_same_sweep_on_a_dask_local_cluster_gives_the_same_results(local_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     spec, d_local, _ = local_run
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
@@ -95,11 +95,14 @@ def test_same_sweep_on_a_dask_local_cluster_gives_identical_results(local_run, t
     assert report.ok and report.n_run == 3 and report.backend.startswith("dask")
     a = xr.load_dataset(d_local / "sweep.nc", engine="h5netcdf")
     b = xr.load_dataset(tmp_path / "dask" / "sweep.nc", engine="h5netcdf")
-    names = ["speed", "speed_stderr", "amplitude", "width", "status", "run"]
-    xr.testing.assert_identical(a[names], b[names])
-    for p in spec.points():
+    for p in spec.points():  # the integration is bit-for-bit the same
         ra, rb = open_run(d_local / "points" / p.hash), open_run(tmp_path / "dask" / "points" / p.hash)
         np.testing.assert_array_equal(ra["theta"].values, rb["theta"].values)
+    xr.testing.assert_identical(a[["status", "run"]], b[["status", "run"]])
+    # fitted observables: equal to the last bits (once, in a full-suite run on a fresh clone, they
+    # differed there — pool workers run with one BLAS thread, the in-process cluster with several)
+    xr.testing.assert_allclose(a[["speed", "speed_stderr", "amplitude", "width"]],
+                               b[["speed", "speed_stderr", "amplitude", "width"]], rtol=1e-12, atol=0)
 
 
 @pytest.fixture
