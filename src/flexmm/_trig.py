@@ -33,7 +33,7 @@ _S1, _S2, _S3, _S4, _S5, _S6, _S7 = ((-1) ** j / math.factorial(2 * j + 1) for j
 _C1, _C2, _C3, _C4, _C5, _C6, _C7, _C8 = ((-1) ** j / math.factorial(2 * j) for j in range(1, 9))
 
 
-@jit(reassoc=False)  # the three-part reduction must not be re-associated
+@jit  # the three-part reduction relies on the written order (no reassociation: flexmm._jit)
 def sincos(x):
     """(sin x, cos x) to ~1 ulp for |x| ≲ 1e5, branch-free so that loops vectorise."""
     kf = math.floor(x * _TWO_OVER_PI + 0.5)
