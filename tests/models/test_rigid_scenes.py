@@ -11,6 +11,7 @@ from rigid_scene_checks import (front_positions, row_fields, run, run_edited, so
                                 wall_position)
 
 from flexmm.analysis.oblique import fold_axis, wave_groups
+from flexmm.sweep.observe import observe_run
 from flexmm.theory.rotating import RotatingChainND, amplitude_gap, lego_parameters, soliton_speed
 from flexmm.theory.sheet import acoustic_modes
 
@@ -46,7 +47,7 @@ def test_scene_a_oblique_push_separates_into_the_two_acoustic_modes(tmp_path):
     """At 26.6° to the lattice axes the push splits into a fast and a slow group whose speeds and
     polarisations are those of the sheet's two long-wave acoustic modes (Bloch analysis of the
     Hessian, flexmm.theory.sheet); along the x axis it stays one longitudinal group."""
-    scene, ds, _ = run("a_sheet_mode_separation", tmp_path)
+    scene, ds, result = run("a_sheet_mode_separation", tmp_path)
     lat = scene.lattice
     c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.unit_mass_kg)
     (c_slow, p_slow), (c_fast, p_fast) = acoustic_modes(lat, math.atan2(lat.skew_cols, lat.n_rows))
@@ -58,6 +59,9 @@ def test_scene_a_oblique_push_separates_into_the_two_acoustic_modes(tmp_path):
     assert min(fast.energy_fraction, slow.energy_fraction) > 0.1
     assert fast.position_m - slow.position_m > 100 * lat.a_m  # separated by > 100 spacings
     assert np.abs(ds["theta"].values[-1]).max() > 0.05  # both carry rotation: vector waves
+    obs = observe_run(result.path)  # what a sweep over such scenes records: the fast group
+    assert obs["kind"] == "modes" and obs["speed"] == pytest.approx(fast.speed_m_s, rel=1e-12)
+    assert obs["speed_theory"] == pytest.approx(c_fast * c0, rel=1e-9)
 
     _, ds, _ = run("a_sheet_mode_separation", tmp_path / "axis", ["lattice.skew_cols=0", "excitation.angle_deg=0"])
     groups = wave_groups(ds)

@@ -39,6 +39,11 @@ class WaveGroup:
         return {k: float(v) for k, v in asdict(self).items()}
 
 
+def speed_unit(lat) -> float:
+    """c0 = a sqrt(k_l/m) of a sheet lattice config (m/s)."""
+    return lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.unit_mass_kg)
+
+
 def propagation_angle(ds) -> float:
     """φ (rad) of a skew-periodic sheet's plane waves, from the dataset's resolved config."""
     lat = yaml.safe_load(ds.attrs["config"])["lattice"]
@@ -75,8 +80,8 @@ def wave_groups(ds, *, smooth: float = 15.0, threshold_fraction: float = 0.15, m
     """The groups an oblique planar wave separates into (fastest first); see the module docstring.
 
     ``t_from`` (s): ignore earlier frames (default: the second half of the run, once the pulses
-    have left the drive). ``c0_m_s``: speed unit for ``speed_c0`` (default a sqrt(k_l/m) from the
-    config).
+    have left the drive). ``c0_m_s``: speed unit for ``speed_c0`` (default ``speed_unit`` of the
+    run's lattice).
     """
     phi = propagation_angle(ds)
     idx, centres, h = _zeta_bins(ds, phi)
@@ -92,9 +97,7 @@ def wave_groups(ds, *, smooth: float = 15.0, threshold_fraction: float = 0.15, m
                                        gate=3.0 * smooth * h)
               if tr.polarity > 0 and tr.travel >= min_travel * h and len(tr.pos) >= 4]
     if c0_m_s is None:
-        lat = yaml.safe_load(ds.attrs["config"])["lattice"]
-        m = lat.get("mass_kg") or lat["areal_density_kg_m2"] * lat["a_m"] ** 2 / 2
-        c0_m_s = lat["a_m"] * math.sqrt(lat["k_long_n_per_m"] / m)
+        c0_m_s = speed_unit(RunContext.from_dataset(ds).scene().lattice)
     last = energy[-1]
     groups = []
     for tr in tracks:
@@ -126,7 +129,7 @@ def compare_groups(ctx: RunContext, groups: list[WaveGroup]) -> list[Comparison]
 
     lat = ctx.scene().lattice
     modes = acoustic_modes(lat, propagation_angle(ctx.ds))
-    c0 = groups[0].speed_m_s / groups[0].speed_c0 if groups else 1.0
+    c0 = speed_unit(lat)
     out = []
     for i, g in enumerate(groups, 1):
         j = min(range(len(modes)), key=lambda m: abs(fold_axis(g.polarisation_deg - modes[m][1])))

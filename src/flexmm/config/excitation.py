@@ -38,16 +38,10 @@ class Impact(Strict):
         return self
 
 
-class Shaker(Strict):
-    """Harmonic boundary drive at 10 Hz–10 kHz, with a smooth ramp-up (and ramp-down)."""
+class EndDrive(Strict):
+    """Where a drive acts: an end (or listed sites of it), in the end's normal direction or tilted."""
 
-    kind: Literal["shaker"]
     end: End = "left"
-    frequency_hz: float = Field(ge=10.0, le=10_000.0, description="drive frequency (Hz)")
-    amplitude_m: Positive | None = Field(None, description="displacement amplitude (m)")
-    amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
-    ramp_cycles: NonNegative = Field(3.0, description="cycles of smooth ramp-up")
-    duration_s: Positive | None = Field(None, description="drive stops (smoothly) after this")
     angle_deg: Finite = Field(
         0.0, ge=-90.0, le=90.0, description="2D lattices: drive direction tilted from the end's inward "
         "normal by this angle, counter-clockwise (drives both in-plane displacements)"
@@ -55,6 +49,17 @@ class Shaker(Strict):
     sites: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="units driven (a point or a line); default every unit of the end"
     )
+
+
+class Shaker(EndDrive):
+    """Harmonic boundary drive at 10 Hz–10 kHz, with a smooth ramp-up (and ramp-down)."""
+
+    kind: Literal["shaker"]
+    frequency_hz: float = Field(ge=10.0, le=10_000.0, description="drive frequency (Hz)")
+    amplitude_m: Positive | None = Field(None, description="displacement amplitude (m)")
+    amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
+    ramp_cycles: NonNegative = Field(3.0, description="cycles of smooth ramp-up")
+    duration_s: Positive | None = Field(None, description="drive stops (smoothly) after this")
 
     @model_validator(mode="after")
     def _one_amplitude(self):
@@ -65,24 +70,16 @@ class Shaker(Strict):
         return "displacement" if self.amplitude_m is not None else "force"
 
 
-class BoundaryDisplacement(Strict):
+class BoundaryDisplacement(EndDrive):
     """A prescribed displacement pulse u_0(t) of the end unit (or a prescribed rotation θ_0(t))."""
 
     kind: Literal["boundary_displacement"]
-    end: End = "left"
     shape: Literal["half_sine", "smooth_step", "gaussian"] = "half_sine"
     amplitude_m: Finite | None = Field(None, description="peak displacement, positive into the lattice (m)")
     amplitude_rad: Finite | None = Field(
         None, description="instead: peak staggered rotation θ of the driven units (rad); u, v stay free"
     )
     duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")
-    angle_deg: Finite = Field(
-        0.0, ge=-90.0, le=90.0, description="2D lattices: drive direction tilted from the end's inward "
-        "normal by this angle, counter-clockwise (drives both in-plane displacements)"
-    )
-    sites: list[Annotated[int, Field(ge=0)]] | None = Field(
-        None, description="units driven (a point or a line); default every unit of the end"
-    )
 
     @model_validator(mode="after")
     def _one_amplitude(self):

@@ -8,11 +8,11 @@ front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says
   first pulse of an impact or a launched soliton);
 - pulse on a derived field (``strain``, the default without rotations), fronts and driven runs:
   ``analyze_run`` — the dominant item (largest |amplitude| among pulses tracked over ≥ 10 sites;
-  the front that switched most sites);
+  the front that switched most sites; the fastest group of an oblique plane wave);
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
   predicted speed (fronts), from ``flexmm.analysis.compare.THEORY``.
 
-Options (``analysis:`` block): ``kind`` (auto, pulse, front, driven), ``field``,
+Options (``analysis:`` block): ``kind`` (auto, pulse, front, driven, modes), ``field``,
 ``threshold_fraction``, ``trim_fraction`` (leading_pulse only).
 """
 
@@ -81,11 +81,12 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
 
 def _full(path, kind: str, field: str | None, opts: dict) -> dict:
     from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound, analyze_run
+    from flexmm.analysis.oblique import NoWaveGroups
 
     kw = {k: opts[k] for k in ("threshold_fraction",) if k in opts}
     try:
         a = analyze_run(path, field_spec=field, kind=kind, **kw)
-    except (PulseNotFound, FrontNotFound, NotDriven, FieldError) as exc:
+    except (PulseNotFound, FrontNotFound, NotDriven, NoWaveGroups, FieldError) as exc:
         return _nan_result(kind, field or "", "", f"no {kind}: {exc}")
     out = _nan_result(a.kind, a.view.spec, a.view.units, "")
     if a.kind == "pulse":
@@ -102,6 +103,9 @@ def _full(path, kind: str, field: str | None, opts: dict) -> dict:
         item = f"front {f.index}"
         if f.arrested:
             out["note"] = f"front arrested after {f.distance_m:.4g} m"
+    elif a.kind == "modes":  # oblique plane waves: the fastest group
+        out.update(speed=a.groups[0].speed_m_s)
+        item = "group 1"
     else:
         d = a.driven
         out.update(amplitude=d.amplitude_far, transmission=d.transmission)

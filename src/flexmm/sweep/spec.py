@@ -52,7 +52,7 @@ from flexmm.sweep.values import parse_values, values_of
 SPEC_KEYS = ("name", "description", "base", "set", "vary", "analysis")
 MODES = ("grid", "zip")
 ANALYSIS_KEYS = ("kind", "field", "threshold_fraction", "trim_fraction")
-ANALYSIS_KINDS = ("auto", "pulse", "front", "driven")
+ANALYSIS_KINDS = ("auto", "pulse", "front", "driven", "modes")
 
 
 @dataclass(frozen=True)
