@@ -1,7 +1,8 @@
 """flexmm benchmarks: throughput, memory, the 2D target and work–precision (not timed tests).
 
-    python benchmarks/run.py                  # throughput + memory + sheet (a few minutes)
-    python benchmarks/run.py throughput       # one section: throughput | bandwidth | memory | sheet | workprecision
+    python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
+    python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
+                                              #              | sheet | workprecision
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum over repeats after a compile warm-up; thread/process CPU time is
@@ -31,16 +32,15 @@ def _chain(n_units: int):
     """The LEGO impact chain with n_units, built without the ω_max solve (not needed here)."""
     from flexmm.assemble import apply_excitation, damping_arrays
     from flexmm.config import load_scene
-    from flexmm.integrators.common import empty_terms
+    from flexmm.integrators.common import Terms, empty_terms
     from flexmm.models import MODELS
 
     scene = load_scene(LEGO, [f"lattice.n_units={n_units}"])
     system = MODELS[scene.lattice.kind].build(scene.lattice)
-    terms = empty_terms()
+    terms = empty_terms()._asdict()
     apply_excitation(system, scene, terms)
     damp = damping_arrays(system, scene, terms)
-    keys = ("con_ij", "con_prm", "dash_ij", "dash_c", "drv_dof", "drv_mode", "drv_shape", "drv_prm")
-    return system, tuple(terms[k] for k in keys), damp
+    return system, Terms(**terms), damp
 
 
 def _grade(system) -> None:
@@ -52,18 +52,17 @@ def _grade(system) -> None:
 
 
 def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: int) -> dict:
-    from flexmm.integrators.parallel import kernels
+    from flexmm.integrators.stepper import Stepper
 
-    advance, force, used = kernels(spec, system.force, threads)
-    q, v, f, acc = system.q0.copy(), system.v0.copy(), np.zeros(system.ndof), np.zeros(8)
-    spec.init(force, system.args, q, v, 0.0, f, terms)
-    advance(force, system.args, q, v, f, system.inv_mass, damp, terms, 0.0, 0.1, 2, acc)
+    st = Stepper(spec, system, terms, damp, 0.1, threads=threads, check_energy=False)
+    st.warm_up()
     walls, cpus = [], []
     for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        advance(force, system.args, q, v, f, system.inv_mass, damp, terms, 0.0, 0.1, steps, acc)
-        walls.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
+        w0, c0 = st.wall_s, st.cpu_s
+        st.advance(steps)
+        walls.append(st.wall_s - w0)
+        cpus.append(st.cpu_s - c0)
+    q, used, advance = st.q, st.threads, st.kernel
     n = system.n_sites
     return {"n_units": n, "threads": used, "steps": steps, "wall_min_s": min(walls),
             "wall_median_s": float(np.median(walls)), "cpu_min_s": min(cpus),
@@ -111,7 +110,7 @@ def _triad_kernel():
         for i in range(a.shape[0]):
             a[i] = b[i] + s * c[i]
 
-    @jit(parallel=True, cache=False)
+    @jit(parallel=True)
     def triad(a, b, c, s, nb):
         n = a.shape[0]
         for k in prange(nb):
@@ -223,14 +222,109 @@ def workprecision() -> list[str]:
         done.append(str(out))
     return done
 
+def _timed(cmd: list[str], env: dict | None = None) -> tuple[float, float, int]:
+    """(wall s, CPU s of the child, exit code) of one subprocess run."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu, proc.returncode
 
-SECTIONS = {"throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
+
+def _repeat(name: str, cmd: list[str], repeats: int, warmup: int = 1, env: dict | None = None,
+            fresh_cache: bool = False) -> dict:
+    """Min and median wall (and CPU) time of ``cmd`` over ``repeats`` runs after ``warmup`` runs;
+    ``fresh_cache``: every run gets an empty numba cache directory (a first run after install)."""
+    import tempfile
+
+    walls, cpus, codes = [], [], []
+    for k in range(warmup + repeats):
+        run_env = dict(env or os.environ)
+        tmp = tempfile.mkdtemp(prefix="flexmm-bench-cache-") if fresh_cache else None
+        if tmp:
+            run_env["NUMBA_CACHE_DIR"] = tmp
+        wall, cpu, code = _timed(cmd, run_env)
+        if tmp:
+            subprocess.run(["rm", "-rf", tmp], check=False)
+        if k >= warmup:
+            walls.append(wall)
+            cpus.append(cpu)
+            codes.append(code)
+    row = {"what": name, "repeats": repeats, "wall_min_s": min(walls), "wall_median_s": float(np.median(walls)),
+           "cpu_min_s": min(cpus), "cpu_median_s": float(np.median(cpus)), "exit_codes": sorted(set(codes)),
+           "load_after": os.getloadavg()[0]}
+    print(f"{name:<44s} wall min {row['wall_min_s']:6.2f} s, median {row['wall_median_s']:6.2f} s; "
+          f"CPU min {row['cpu_min_s']:6.2f} s (n = {repeats}, load {row['load_after']:.2f}, exit {row['exit_codes']})")
+    return row
+
+
+def startup(repeats: int = 7) -> list[dict]:
+    """What a user waits for: --help, validate, the demo's second run, the first run after install.
+
+    Whole processes (the console script), minimum and median of repeats after a warm-up run;
+    the first run after install gets an empty numba cache each time (it compiles every kernel
+    the demo needs). The load average is printed with each row: the machine may be shared.
+    """
+    out_dir = RESULTS / "startup_run"
+    run = [FLEXMM, "run", str(LEGO), "--quiet", "--out", str(out_dir)]
+    rows = [
+        _repeat("flexmm --help", [FLEXMM, "--help"], repeats),
+        _repeat("flexmm validate (demo)", [FLEXMM, "validate", str(LEGO)], repeats),
+        _repeat("flexmm run (demo, cache warm)", run, repeats),
+        _repeat("flexmm run (demo, first run: empty cache)", run, max(2, repeats // 3), warmup=0, fresh_cache=True),
+    ]
+    return rows
+
+
+def sweep_overhead(points: tuple[int, int] = (2, 10), repeats: int = 3) -> dict:
+    """Per-point cost of a sweep beyond integration: the slope of wall time against points.
+
+    One worker process sweeps the demo's impact velocity over ``points`` (few and many points,
+    fresh output directories, a warm numba cache); (W_many − W_few)/(many − few) is what one
+    more point costs, and the integration time each point's dataset records is subtracted.
+    """
+    import tempfile
+
+    import xarray as xr
+
+    walls = {n: [] for n in points}
+    integ = []
+    for _ in range(repeats):
+        for n in points:
+            d = Path(tempfile.mkdtemp(prefix="flexmm-bench-sweep-"))
+            cmd = [FLEXMM, "sweep", str(LEGO), "--vary", f"excitation.velocity_m_s=0.5:3:{n}", "--out", str(d),
+                   "--workers", "1", "--quiet"]
+            wall, _, code = _timed(cmd)
+            if code != 0:
+                raise RuntimeError(f"sweep failed ({code}): {' '.join(cmd)}")
+            walls[n].append(wall)
+            if n == points[-1]:
+                for ds_path in d.glob("points/*/dataset.nc"):
+                    with xr.open_dataset(ds_path) as ds:
+                        integ.append(float(ds.attrs["wall_time_s"]))
+            subprocess.run(["rm", "-rf", str(d)], check=False)
+    few, many = points
+    slope = (float(np.median(walls[many])) - float(np.median(walls[few]))) / (many - few)
+    mean_integ = float(np.mean(integ)) if integ else float("nan")
+    row = {"points": points, "wall_median_s": {n: float(np.median(w)) for n, w in walls.items()},
+           "per_point_s": slope, "integration_per_point_s": mean_integ, "overhead_per_point_s": slope - mean_integ,
+           "load": os.getloadavg()[0]}
+    print(f"sweep of the demo, 1 worker: {few} points {row['wall_median_s'][few]:.2f} s, {many} points "
+          f"{row['wall_median_s'][many]:.2f} s (medians of {repeats}): {slope:.3f} s per point, of which "
+          f"integration {mean_integ:.3f} s: overhead {row['overhead_per_point_s']:.3f} s per point (load {row['load']:.2f})")
+    return row
+
+
+
+SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
             "workprecision": workprecision}
 
 
 def main(argv: list[str]) -> None:
     RESULTS.mkdir(exist_ok=True)
-    names = argv or ["throughput", "memory", "sheet"]
+    names = argv or ["startup", "sweep", "throughput", "memory", "sheet"]
     print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs")
     for name in names:
         result = SECTIONS[name]()

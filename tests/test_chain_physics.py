@@ -13,7 +13,8 @@ from scipy.signal import peak_widths
 
 from flexmm.analysis import leading_pulse
 from flexmm.api import run_scene
-from flexmm.assemble import UnstableStepError, build_problem
+from flexmm.assemble import build_problem
+from flexmm.stability import UnstableStepError
 from flexmm.io.dataset import open_run
 from flexmm.theory import RotatingChainND, soliton_speed
 

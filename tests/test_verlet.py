@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from flexmm.integrators.stepper import make_stepper
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
 from flexmm.integrators import INTEGRATORS
@@ -38,19 +39,17 @@ def nonlinear_state(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def integrate(problem, spec, q0, v0, h, nsteps):
-    s, terms = problem.system, problem.terms_tuple()
-    q, v, f, acc = q0.copy(), v0.copy(), np.zeros_like(q0), np.zeros(2)
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
-    spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, 0.0, h, nsteps, acc)
-    return q, v
+    st = make_stepper(problem, spec, h=h, q0=q0, v0=v0, threads=1, check_energy=False)
+    st.advance(nsteps)
+    return st.q, st.v
 
 
 def dop853(problem, q0, v0, t_end):
     """The same equations (model force, viscous damping, dashpots) with an independent solver."""
     s = problem.system
     n = s.ndof
-    dash_ij, dash_c = problem.terms["dash_ij"], problem.terms["dash_c"]
-    assert problem.terms["drv_dof"].size == 0 and problem.terms["con_ij"].size == 0
+    dash_ij, dash_c = problem.terms.dash_ij, problem.terms.dash_c
+    assert problem.terms.drv_dof.size == 0 and problem.terms.con_ij.size == 0
     f = np.zeros(n)
 
     def rhs(_, y):
@@ -91,14 +90,10 @@ def test_observed_order(name, damping, make_scene, scene_dict, lego_config):
 
 
 def energy_history(problem, spec, q0, v0, h, nsteps, every):
-    s, terms = problem.system, problem.terms_tuple()
-    q, v, f, acc = q0.copy(), v0.copy(), np.zeros_like(q0), np.zeros(2)
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
-    t, out = 0.0, np.empty(nsteps // every)
-    for k in range(out.size):
-        t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, every, acc)
-        out[k] = s.energy(q, s.args) + s.kinetic_energy(v)
-    return out
+    st = make_stepper(problem, spec, h=h, q0=q0, v0=v0, threads=1, check_energy=False)
+    out = []
+    st.run([every] * (nsteps // every), lambda s: out.append(sum(s.energies())))
+    return np.array(out)
 
 
 @pytest.mark.parametrize("name", [k for k, v in INTEGRATORS.items() if v.symplectic])

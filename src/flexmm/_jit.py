@@ -1,4 +1,4 @@
-"""The single numba wrapper every compiled kernel goes through.
+"""The single numba wrapper every compiled kernel goes through, and where its cache lives.
 
 All numba flags live here: ``cache=True``, a fastmath subset that keeps NaN/inf checks
 working (no ``nnan``/``ninf``), and ``FLEXMM_NO_JIT=1`` in the environment to run every
@@ -8,12 +8,33 @@ No reassociation and no contraction into fused multiply-adds: with them, a kerne
 a stepper compiled in the same process (a cold numba cache) and the same kernel loaded from the
 cache were optimised differently, and the same config gave results differing in the last bits
 (≈ 1e-15) depending on the cache state. Without them the operations keep their written order
-and rounding everywhere; the price is ≈ 14 % of the chain's single-thread throughput.
+and rounding everywhere.
+
+Compiled once per machine. No kernel takes another compiled function as an argument (models
+are reached through ``flexmm.models.kernels``, dispatched on the type of their arguments), so
+every kernel, integrator loops included, is cached across processes. The cache directory is
+
+1. ``$NUMBA_CACHE_DIR`` when set (numba's own variable; flexmm only checks it is writable);
+2. otherwise ``$XDG_CACHE_HOME/flexmm/numba/<key>`` (``~/.cache/flexmm/numba/<key>``), where
+   ``<key>`` hashes flexmm's version, the kernel sources and the numba version — numba checks
+   only the timestamp of a cached function's own file, not of the kernels it inlined, so a
+   key per source state keeps a changed hinge law from being served from a stale integrator.
+   keys unused for a week are removed (``prune_cache``);
+3. if that cannot be written, a per-user directory under the system's temporary directory, with
+   a warning; if nothing is writable, caching is off (every process compiles) and a warning
+   says so.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
 
 import numba
 
@@ -22,29 +43,102 @@ NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
 # NaN/inf semantics are kept so blow-ups are seen; see the module docstring for reassoc/contract.
 FASTMATH = frozenset({"nsz", "arcp", "afn"})
 
+#: numba options of every kernel (``jit`` adds ``parallel`` where asked)
+JIT_OPTIONS = {
+    "fastmath": set(FASTMATH), "nogil": True, "error_model": "numpy", "boundscheck": False,
+}
+
 prange = range if NO_JIT else numba.prange
 
+_PACKAGE = Path(__file__).resolve().parent
+#: packages and modules whose source is compiled (their text keys the cache directory)
+_KERNEL_SOURCES = ("_jit.py", "_trig.py", "stability.py", "models", "integrators")
+#: cache directories of other source states are removed once unused this long
+PRUNE_AGE_S = 7 * 86400.0
 
-def jit(fn=None, *, parallel: bool = False, cache: bool = True):
-    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT).
 
-    ``cache=False`` for kernels that take other compiled functions as arguments (integrator
-    steppers receive the model's ``force``): numba cannot reuse such entries across processes,
-    so caching them only adds an index entry per process, and re-pickling that index fails
-    ("underlying object has vanished") once it holds a dispatcher that no longer exists.
+def source_key() -> str:
+    """A short hash of flexmm's compiled sources, its version and numba's version."""
+    h = hashlib.sha256()
+    h.update(numba.__version__.encode())
+    h.update(sys.version.encode())
+    for name in _KERNEL_SOURCES:
+        path = _PACKAGE / name
+        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
+        for f in files:
+            if f.exists():
+                h.update(f.relative_to(_PACKAGE).as_posix().encode())
+                h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _writable(path: Path) -> bool:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".probe"):
+            pass
+        return True
+    except OSError:
+        return False
+
+
+def _user_cache_root() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "flexmm" / "numba"
+
+
+def prune_cache(root: Path, keep: str, max_age_s: float = PRUNE_AGE_S) -> None:
+    """Remove cache directories of other source states under ``root`` unused for ``max_age_s``.
+
+    The kept directory's time stamp is refreshed at each start, so a directory another
+    installation still uses survives (best effort: errors are ignored).
     """
+    now = time.time()
+    try:
+        os.utime(root / keep)
+        for d in root.iterdir():
+            if d.is_dir() and d.name != keep and now - d.stat().st_mtime > max_age_s:
+                shutil.rmtree(d, ignore_errors=True)
+    except OSError:
+        pass
+
+
+def _choose_cache_dir() -> tuple[Path | None, str]:
+    """(cache directory or None when caching is off, a note when it is not the usual one)."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        if _writable(Path(env)):
+            return Path(env), ""
+        note = f"NUMBA_CACHE_DIR={env} is not writable"
+    else:
+        key = source_key()
+        root = _user_cache_root()
+        if _writable(root / key):
+            prune_cache(root, key)
+            return root / key, ""
+        note = f"{root} is not writable"
+        env = None
+    uid = os.getuid() if hasattr(os, "getuid") else "user"
+    fallback = Path(tempfile.gettempdir()) / f"flexmm-numba-{uid}" / source_key()
+    if _writable(fallback):
+        return fallback, f"{note}; compiled kernels are cached in {fallback} instead"
+    return None, (f"{note} and neither is {fallback}: compiled kernels are not cached, so every "
+                  "process compiles them again (set NUMBA_CACHE_DIR to a writable directory)")
+
+
+CACHE_DIR, CACHE_NOTE = (None, "") if NO_JIT else _choose_cache_dir()
+if CACHE_DIR is not None:
+    numba.config.CACHE_DIR = str(CACHE_DIR)  # read when each kernel below enables caching
+if CACHE_NOTE:
+    warnings.warn(f"flexmm: {CACHE_NOTE}", RuntimeWarning, stacklevel=2)
+
+
+def jit(fn=None, *, parallel: bool = False):
+    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT)."""
 
     def wrap(f):
         if NO_JIT:
             return f
-        return numba.njit(
-            f,
-            cache=cache,
-            fastmath=set(FASTMATH),
-            parallel=parallel,
-            nogil=True,
-            error_model="numpy",
-            boundscheck=False,
-        )
+        return numba.njit(f, cache=CACHE_DIR is not None, parallel=parallel, **JIT_OPTIONS)
 
     return wrap if fn is None else wrap(fn)

@@ -20,15 +20,16 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
               analysis: str | None = None) -> RunResult:
-    """Plan, build and integrate a scene; write dataset.nc, config.yaml and run.log in its run dir.
+    """Plan, build (once) and integrate a scene; write dataset.nc, config.yaml and run.log in its run dir.
 
     ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
     declared; the CLI uses 'auto'); the plan is logged and stored in the dataset attrs, and
     config.yaml holds the scene that actually ran.
     """
+    from flexmm.continuum_run import run_continuum
     from flexmm.plan import make_plan
-    from flexmm.plan.continuum import run_continuum
     from flexmm.plan.output import parse_analysis
+    from flexmm.prepare import accuracy_check, prepare
 
     out = run_dir_for(scene, run_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -36,10 +37,9 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     if plan.skip_discrete:
         result = run_continuum(plan.scene, plan.prediction, out, extra_attrs=plan.attrs(), log=log)
     else:
-        problem = plan.problem or build_problem(plan.scene)
-        problem.notes[:0] = plan.lines()
+        problem = prepare(plan)
         result = run_problem(problem, out, progress=progress, log=log, extra_attrs=plan.attrs(),
-                             on_finish=plan.finisher(problem))
+                             on_finish=accuracy_check(plan, problem))
     scene = plan.scene
     write_text_atomic(out / "config.yaml", config_text(scene))
     write_text_atomic(out / "run.log", "\n".join(result.log) + "\n")

@@ -11,11 +11,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexmm.config.scene import RandomRotation, RotationSeed, Scene
+from flexmm.errors import FlexmmError
 from flexmm.integrators import INTEGRATORS
-from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, MODE_FRICTION, SHAPES, empty_terms
+from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, MODE_FRICTION, SHAPES, Terms, empty_terms
 from flexmm.models import MODELS, System
 from flexmm.models.predeform import INWARD
-from flexmm.stability import UnstableStepError, omega_max, resolve_dt
+from flexmm.stability import omega_max, resolve_dt
 
 
 @dataclass
@@ -24,7 +25,7 @@ class Problem:
 
     scene: Scene
     system: System
-    terms: dict[str, np.ndarray]
+    terms: Terms
     damp: np.ndarray
     dt: float
     duration: float
@@ -32,21 +33,17 @@ class Problem:
     stable_dt: float
     notes: list[str] = field(default_factory=list)
 
-    def terms_tuple(self) -> tuple:
-        t = self.terms
-        return (t["con_ij"], t["con_prm"], t["dash_ij"], t["dash_c"],
-                t["drv_dof"], t["drv_mode"], t["drv_shape"], t["drv_prm"])
 
 
-class SceneError(ValueError):
+class SceneError(FlexmmError, ValueError):
     """A scene that validates but cannot be built (a user error; the CLI exits with status 2)."""
 
 
 def _end_dofs(system: System, end: str, field_name: str | None = None,
               sites: list[int] | None = None) -> list[int]:
     """DOFs of ``field_name`` (default: the end's normal field) at an end's units (or ``sites``)."""
-    fname = field_name or system.meta.get("end_fields", {}).get(end, system.meta["longitudinal_field"])
-    return [system.dof(fname, s) for s in (system.meta["ends"][end] if sites is None else sites)]
+    fname = field_name or system.end_field(end)
+    return [system.dof(fname, s) for s in (system.ends[end] if sites is None else sites)]
 
 
 def _launch_solitons(system: System, scene: Scene, pulses) -> None:
@@ -58,7 +55,7 @@ def _launch_solitons(system: System, scene: Scene, pulses) -> None:
     launch = entry.launch_soliton
     if launch is None:
         raise SceneError(f"model {scene.lattice.kind} has no soliton launcher")
-    rest = system.meta.get("rest_state")
+    rest = system.rest_state
     if rest is not None and not entry.soliton_on_predeformed:
         raise SceneError(f"model {scene.lattice.kind} launches solitons on an undeformed lattice only; "
                          "remove lattice.predeform or use another excitation")
@@ -77,9 +74,9 @@ def _launch_solitons(system: System, scene: Scene, pulses) -> None:
 
 def _apply_kicks(system: System, kicks) -> None:
     """Add initial velocities (x, y, rotation) to the kicked units."""
-    sc, axes = system.scales, system.meta.get("axis_fields", {"x": system.meta["longitudinal_field"]})
+    sc, axes = system.scales, system.axis_fields
     for kick in kicks:
-        sites = system.meta["ends"][kick.end] if kick.sites is None else kick.sites
+        sites = system.ends[kick.end] if kick.sites is None else kick.sites
         for axis, value in (("x", kick.velocity_x_m_s), ("y", kick.velocity_y_m_s)):
             if value:
                 if axis not in axes:
@@ -177,14 +174,14 @@ def _drive_components(system: System, exc, dofs: list[int]) -> list[tuple[list[i
     angle = getattr(exc, "angle_deg", 0.0)
     if not angle or getattr(exc, "amplitude_rad", None) is not None:
         return [(dofs, 1.0)]
-    axes = system.meta.get("axis_fields", {})
+    axes = system.axis_fields
     if "y" not in axes:
         raise SceneError(f"excitation.angle_deg = {angle}: model {system.model!r} has no y motion "
                          "(a tilted drive needs a 2D lattice)")
     nx, ny = _INWARD_XY[exc.end]
     a = math.radians(angle)
     dx, dy = nx * math.cos(a) - ny * math.sin(a), nx * math.sin(a) + ny * math.cos(a)
-    sites = system.meta["ends"][exc.end] if exc.sites is None else exc.sites
+    sites = system.ends[exc.end] if exc.sites is None else exc.sites
     sign = INWARD[exc.end]  # undo the normal's sign already in the amplitude
     return [([system.dof(axes[f], s) for s in sites], sign * comp)
             for f, comp in (("x", dx), ("y", dy)) if abs(comp) > 1e-15]
@@ -206,28 +203,36 @@ def _append_drive(system: System, exc, terms: dict, dofs: list[int], mode: int, 
 
 def _rotation_field(system: System, what: str) -> str:
     """The model's rotation field, or a clear error for models without one."""
-    rot = system.meta.get("rotation_field")
+    rot = system.rotation_field
     if rot is None:
         raise SceneError(f"{what} needs a rotation field; model {system.model!r} has none")
     return rot
 
 
-def apply_friction(system: System, terms: dict) -> float:
-    """Append the model's ground friction as drive rows (mode 2); return its max rate F/(m v_ε)."""
-    fr = system.meta.get("friction")
-    if fr is None:
+def friction_rate_of(system: System) -> float:
+    """The largest rate F/(m v_ε) of the model's ground friction (0 without): explicit regularised
+    friction needs h F/(m v_ε) ≤ 1."""
+    fr = system.friction
+    if fr is None or fr.sites.size == 0:
         return 0.0
-    k = system.field_index(system.meta["longitudinal_field"]) * system.n_sites
-    dofs = fr["sites"] + k
+    dofs = fr.sites + system.field_index(system.longitudinal_field) * system.n_sites
+    return float(np.max(np.maximum(fr.forward, fr.backward) * system.inv_mass[dofs]) / fr.velocity)
+
+
+def apply_friction(system: System, terms: dict) -> None:
+    """Append the model's ground friction as drive rows (mode 2)."""
+    fr = system.friction
+    if fr is None:
+        return
+    k = system.field_index(system.longitudinal_field) * system.n_sites
+    dofs = fr.sites + k
     n = dofs.size
     prm = np.zeros((n, 4))
-    prm[:, 0], prm[:, 1], prm[:, 2] = fr["forward"], fr["velocity"], fr["backward"]
+    prm[:, 0], prm[:, 1], prm[:, 2] = fr.forward, fr.velocity, fr.backward
     terms["drv_dof"] = np.concatenate([terms["drv_dof"], dofs]).astype(np.int64)
     terms["drv_mode"] = np.concatenate([terms["drv_mode"], np.full(n, MODE_FRICTION)]).astype(np.int64)
     terms["drv_shape"] = np.concatenate([terms["drv_shape"], np.zeros(n, np.int64)]).astype(np.int64)
     terms["drv_prm"] = np.concatenate([terms["drv_prm"], prm])
-    level = np.maximum(fr["forward"], fr["backward"])
-    return float(np.max(level * system.inv_mass[dofs]) / fr["velocity"]) if n else 0.0
 
 
 def apply_imperfection(system: System, scene: Scene) -> None:
@@ -251,7 +256,7 @@ def damping_arrays(system: System, scene: Scene, terms: dict) -> np.ndarray:
     vis = scene.damping.viscous
     if vis is not None:
         if vis.damping_ratio is not None:
-            damp = 2.0 * vis.damping_ratio * system.meta["omega_ref"] * system.mass
+            damp = 2.0 * vis.damping_ratio * system.omega_ref * system.mass
         else:
             rate = vis.coefficient_n_s_per_m / sc.mass_kg * sc.time_s
             for k, f in enumerate(system.fields):
@@ -263,35 +268,71 @@ def damping_arrays(system: System, scene: Scene, terms: dict) -> np.ndarray:
                 else:
                     damp[sl] = rate * system.mass[sl]
     if scene.damping.dashpot_n_s_per_m > 0:
-        k = system.field_index(system.meta["longitudinal_field"]) * system.n_sites
-        pairs = system.meta.get("neighbour_pairs")
+        k = system.field_index(system.longitudinal_field) * system.n_sites
+        pairs = system.neighbour_pairs
         if pairs is None:
             idx = np.arange(system.n_sites - 1, dtype=np.int64)
             pairs = np.stack([idx, idx + 1], axis=1)
         terms["dash_ij"] = np.asarray(pairs, np.int64) + k
         terms["dash_c"] = np.full(len(pairs), scene.damping.dashpot_n_s_per_m * sc.time_s / sc.mass_kg)
     if scene.damping.absorbing is not None:
-        from flexmm.plan.domain import absorbing_damping
-
         damp = damp + absorbing_damping(system, scene.damping.absorbing)
     return damp
 
 
-def build_problem(scene: Scene) -> Problem:
-    """Build the system of a scene and resolve its time step against the stable limit."""
+def absorbing_damping(system: System, layer) -> np.ndarray:
+    """Extra per-DOF damping coefficients (nondimensional, (ndof,)) of an absorbing layer.
+
+    ζ(d) = max_ratio (d/n)^power on units at depth d = n − (distance to the end in sites),
+    γ = 2 ζ ω_ref, c = γ m for every lattice DOF of the unit (config/absorbing.py).
+    """
+    ix, _ = system.site_grid()
+    n_x = int(ix.max()) + 1
+    if layer.n_units >= n_x:
+        raise SceneError(f"damping.absorbing.n_units = {layer.n_units} must be below the {n_x} units along x")
+    zeta = np.zeros(system.n_sites)
+    ends = ("left", "right") if layer.end == "both" else (layer.end,)
+    for end in ends:
+        dist = ix if end == "left" else (n_x - 1 - ix)
+        depth = np.clip(layer.n_units - dist, 0, None) / layer.n_units
+        zeta = np.maximum(zeta, layer.max_ratio * depth**layer.power)
+    out = np.zeros(system.ndof)
+    w_ref = system.omega_ref
+    for f in range(len(system.fields)):
+        sl = slice(f * system.n_sites, (f + 1) * system.n_sites)
+        out[sl] = 2.0 * zeta * w_ref * system.mass[sl]
+    return out
+
+
+def build_system(scene: Scene) -> tuple[System, Terms]:
+    """The scene's system with its imperfection, excitation and friction applied (no dt analysis)."""
+    system = MODELS[scene.lattice.kind].build(scene.lattice)
+    terms = empty_terms()._asdict()
+    apply_imperfection(system, scene)
+    apply_excitation(system, scene, terms)
+    apply_friction(system, terms)
+    return system, Terms(**terms)
+
+
+def build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> Problem:
+    """Build the system of a scene and resolve its time step against the stable limit.
+
+    ``built``: the (system, terms) of ``scene`` with imperfection and excitation already applied
+    (``build_system``; planning makes it): used instead of building again.
+    """
     try:
-        return _build_problem(scene)
+        return _build_problem(scene, built)
     except (ArithmeticError, np.linalg.LinAlgError) as err:  # e.g. a_m = 1e-300 with mass_kg = 1e300
         raise SceneError(f"the scene's parameters are out of floating-point range "
                          f"({type(err).__name__}: {err})") from None
 
 
-def check_velocity_forces(spec, damp: np.ndarray, terms: dict, friction_rate: float) -> None:
+def check_velocity_forces(spec, damp: np.ndarray, terms: Terms, friction_rate: float) -> None:
     """Refuse velocity-dependent forces for a method that assumes forces depend on q only."""
     if spec.velocity_dependent_forces:
         return
     found = [name for name, present in (("viscous damping", bool(np.any(damp > 0))),
-                                        ("dashpots", terms["dash_c"].size > 0),
+                                        ("dashpots", terms.dash_c.size > 0),
                                         ("ground friction", friction_rate > 0)) if present]
     if found:
         ok = ", ".join(k for k, v in INTEGRATORS.items() if v.velocity_dependent_forces)
@@ -300,16 +341,18 @@ def check_velocity_forces(spec, damp: np.ndarray, terms: dict, friction_rate: fl
                          f"{' and '.join(found)}, which depend on velocity; use one of: {ok}")
 
 
-def _build_problem(scene: Scene) -> Problem:
-    system = MODELS[scene.lattice.kind].build(scene.lattice)
-    terms = empty_terms()
-    apply_imperfection(system, scene)
-    apply_excitation(system, scene, terms)
-    friction_rate = apply_friction(system, terms)
+def _build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> Problem:
+    if built is None:
+        system, terms = build_system(scene)
+    else:
+        system, terms = built
+    terms = terms._asdict()  # damping adds dashpots below
+    friction_rate = friction_rate_of(system)
     damp = damping_arrays(system, scene, terms)
+    terms = Terms(**terms)
     spec = INTEGRATORS[scene.solver.integrator]
     check_velocity_forces(spec, damp, terms, friction_rate)
-    rest = system.meta.get("rest_state")  # predeformed equilibrium: linearise about it
+    rest = system.rest_state  # predeformed equilibrium: linearise about it
     q_ref = None if rest is None else np.concatenate([rest, system.q0[rest.size:]])
     w_max = omega_max(system, terms, q_ref)
     if not math.isfinite(w_max):

@@ -22,7 +22,7 @@ METHODS = ("RK45", "DOP853", "LSODA")
 def make_rhs(problem):
     """(rhs(t, y), counter) for ``problem``; ``counter[0]`` counts calls (= force evaluations)."""
     s = problem.system
-    terms = problem.terms_tuple()
+    terms = problem.terms
     n = s.ndof
     f, a = np.zeros(n), np.zeros(n)
     q, v = np.zeros(n), np.zeros(n)
@@ -32,7 +32,7 @@ def make_rhs(problem):
         counter[0] += 1
         q[:] = y[:n]
         v[:] = y[n:]
-        acceleration(s.force, s.args, terms, s.inv_mass, problem.damp, t, q, v, f, a)
+        acceleration(s.args, terms, s.inv_mass, problem.damp, t, q, v, f, a)
         return np.concatenate([v, a])
 
     return rhs, counter
@@ -55,7 +55,7 @@ def run(problem, method: str, rtol: float, atol: float, times: np.ndarray) -> Iv
     s = problem.system
     n = s.ndof
     q0, v0 = s.q0.copy(), s.v0.copy()
-    apply_prescribed(q0, v0, 0.0, *problem.terms_tuple()[4:])
+    apply_prescribed(q0, v0, 0.0, *problem.terms.drives)
     rhs, counter = make_rhs(problem)
     rhs(0.0, np.concatenate([q0, v0]))  # compile outside the timing
     counter[0] = 0

@@ -7,7 +7,6 @@ blow-up checks, progress reporting and the dataset writer; kernels only see arra
 from __future__ import annotations
 
 import math
-import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -16,18 +15,11 @@ import numpy as np
 
 from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
-from flexmm.integrators.common import ACC_STEPS, apply_prescribed, contact_energy
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
-from flexmm.integrators.parallel import choose_threads
-from flexmm.integrators.parallel import kernels as parallel_kernels
-from flexmm.integrators.runaway import RunawayGuard
-from flexmm.io.dataset import DatasetWriter, estimate_bytes
+from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
+from flexmm.io.dataset import REST_SUFFIX, DatasetWriter, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
-
-#: relative tolerance of adaptive integrators when solver.rtol is not given
-DEFAULT_RTOL = 1e-6
-
 
 @dataclass
 class RunResult:
@@ -101,38 +93,39 @@ class _Observer:
             u, du = UNITS[kind]
             time_vars[name + "_position"] = (u, f"{name} displacement")
             time_vars[name + "_velocity"] = (du, f"{name} velocity")
-        attrs = sys_.meta.get("site_coord_attrs", {})  # (units, long_name) of non-length coordinates
+        attrs = sys_.site_coord_attrs  # (units, long_name) of non-length coordinates
         coords = {k: (v[self.sites], *attrs.get(k, ("m", f"rest {k} position")))
                   for k, v in sys_.site_coords.items()}
+        rest = sys_.rest_state
+        if rest is not None:  # a predeformed run: its equilibrium, so analysis need not rebuild it
+            for k, f in enumerate(sys_.fields):
+                coords[f.name + REST_SUFFIX] = (rest[k * sys_.n_sites + self.sites] * sc.coordinate(f.kind),
+                                                UNITS[f.kind][0], f"{f.long_name} in the predeformed rest state")
         self.site_vars, self.time_vars = site_vars, time_vars
         self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords)
         self.sc = sc
 
-    def energies(self, problem: Problem, q, v, acc) -> tuple[float, float]:
-        s, t = self.sys, problem.terms
-        pot = s.energy(q, s.args) + contact_energy(q, t["con_ij"], t["con_prm"])
-        return s.kinetic_energy(v), float(pot)
-
-    def frame(self, problem: Problem, t: float, q, v, acc) -> float:
+    def frame(self, st: Stepper) -> None:
+        """Write the stepper's current state as one SI frame."""
         s, sc = self.sys, self.sc
+        q, v = st.q, st.v
         site_vals, time_vals = {}, {}
         for f in self.fields:
             k = s.field_index(f.name) * s.n_sites
             site_vals[f.name] = q[k + self.sites] * sc.coordinate(f.kind)
             if self.velocities:
                 site_vals[f.name + "_dot"] = v[k + self.sites] * sc.rate(f.kind)
-        kin, pot = self.energies(problem, q, v, acc)
         if self.energy:
+            kin, pot = st.last_energies or st.energies()
             e = sc.energy
             time_vals.update(
                 kinetic_energy=kin * e, potential_energy=pot * e, total_energy=(kin + pot) * e,
-                dissipated_energy=acc[0] * e, applied_work=acc[1] * e,
+                dissipated_energy=st.ledger.dissipated * e, applied_work=st.ledger.work * e,
             )
         for name, (idx, kind) in s.extra_dofs.items():
             time_vals[name + "_position"] = q[idx] * sc.coordinate(kind)
             time_vals[name + "_velocity"] = v[idx] * sc.rate(kind)
-        self.writer.append(t * sc.time_s, site_vals, time_vals)
-        return kin + pot
+        self.writer.append(st.t * sc.time_s, site_vals, time_vals)
 
 
 def _progress(total: int, enabled: bool):
@@ -175,69 +168,57 @@ def run_problem(
         h, chunks = schedule(problem.duration, frame_dt, scene.output.n_frames, every)
     else:
         h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, every)
-    threads = choose_threads(s.n_sites, scene.solver.threads)
-    advance, force, threads = parallel_kernels(spec, s.force, threads)
     obs = _Observer(problem, run_dir / "dataset.nc")
     n_frames = len(chunks) + 1
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
     steps = (f"adaptive steps (rtol {scene.solver.rtol or DEFAULT_RTOL:g})" if spec.adaptive
              else f"{sum(chunks)} steps of {h * sc.time_s:.4g} s")
+    stepper = make_stepper(problem, spec, h=h, threads=scene.solver.threads,
+                           rtol=(scene.solver.rtol or DEFAULT_RTOL) if spec.adaptive else None,
+                           atol=scene.solver.atol,
+                           max_step=scene.solver.dt_s / sc.time_s if scene.solver.dt_s else None, warm=False)
+    threads = stepper.threads
     say(f"{s.model}: {s.n_sites} units, {s.ndof} DOFs, {spec.name}, {steps} "
         f"(stable limit {problem.stable_dt * sc.time_s:.4g} s), {n_frames} frames, ~{size / 2**20:.1f} MiB"
         + (f", {threads} threads" if threads > 1 else ""))
 
-    q, v = s.q0.copy(), s.v0.copy()
-    f = np.zeros_like(q)
-    acc = spec.new_acc(s.ndof, rtol=scene.solver.rtol or DEFAULT_RTOL, atol=scene.solver.atol,
-                       max_step=scene.solver.dt_s / sc.time_s if scene.solver.dt_s else None)
-    terms = problem.terms_tuple()
-    t = 0.0
-    drv = terms[4:]
-    apply_prescribed(q, v, t, *drv)
-    tc = _time.perf_counter()
-    spec.init(force, s.args, q, v, t, f, terms)
-    advance(force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, t, h, 0, acc.copy())
-    compile_s = _time.perf_counter() - tc
-    guard = RunawayGuard(s, terms, obs.frame(problem, t, q, v, acc))
-    status, reason, n_steps = "finished", "", 0
+    compile_s = stepper.warm_up()
+    obs.frame(stepper)
     prog = _progress(len(chunks), progress)
-    t_wall = _time.perf_counter()
+
+    def on_frame(st: Stepper) -> None:
+        obs.frame(st)
+        if prog:
+            prog.advance(prog.task_ids[0])
+
     try:
-        for k, nsteps in enumerate(chunks):
-            t_prev = t
-            t = advance(force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, nsteps, acc)
-            n_steps = int(acc[ACC_STEPS]) if spec.adaptive else n_steps + nsteps
-            bad = not (np.isfinite(q).all() and np.isfinite(v).all())
-            if not bad:
-                kin, pot = obs.energies(problem, q, v, acc)
-                bad = guard.runaway(kin + pot, acc[1])
-            if bad:
-                status = "failed"
-                reason = (f"blow-up between t = {t_prev * sc.time_s:.6g} s and {t * sc.time_s:.6g} s "
-                          f"(non-finite state or runaway energy) with dt = {h * sc.time_s:.4g} s; "
-                          f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
-                          f"last good time {t_prev * sc.time_s:.6g} s kept")
-                break
-            guard.record(n_steps, obs.frame(problem, t, q, v, acc))
-            if prog:
-                prog.advance(prog.task_ids[0])
-    except KeyboardInterrupt:
-        status, reason = "interrupted", f"interrupted by the user at t = {t * sc.time_s:.6g} s"
+        outcome = stepper.run(chunks, on_frame)
     finally:
         if prog:
             prog.stop()
-    wall = _time.perf_counter() - t_wall
+    status, t = outcome.status, stepper.t
+    n_steps = stepper.steps
+    reason = ""
+    if status == "failed":
+        reason = (f"blow-up between t = {outcome.t_good * sc.time_s:.6g} s and {t * sc.time_s:.6g} s "
+                  f"({outcome.reason}) with dt = {h * sc.time_s:.4g} s; "
+                  f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
+                  f"last good time {outcome.t_good * sc.time_s:.6g} s kept")
+    elif status == "interrupted":
+        reason = f"interrupted by the user at t = {t * sc.time_s:.6g} s"
+    wall = stepper.wall_s
     mups = n_steps * s.n_sites / wall / 1e6 if wall > 0 else float("nan")
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
     if reason:
         say(reason)
     if on_finish is not None and status == "finished":
-        extra_attrs = {**(extra_attrs or {}), **on_finish(q, v, h, say)}
-    counters = spec.counters(acc)
+        extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say)}
+    counters = stepper.ledger.counters()
     solver_attrs = {"threads": threads, "force_evaluations": counters["force_evaluations"]}
     if spec.adaptive:
         h = t / n_steps if n_steps else h  # mean accepted step (frames are dense output)
-        solver_attrs.update(rtol=float(acc[S_RTOL]), atol=float(acc[S_ATOL]), rejected_steps=counters["rejected_or_newton"])
+        solver_attrs.update(rtol=float(stepper.acc[S_RTOL]), atol=float(stepper.acc[S_ATOL]),
+                            rejected_steps=counters["rejected_or_newton"])
     if spec.implicit:
         solver_attrs.update(newton_iterations=counters["rejected_or_newton"], krylov_iterations=counters["krylov"])
     attrs = {

@@ -20,8 +20,12 @@ import math
 import numpy as np
 from scipy.linalg import eigvalsh_tridiagonal
 
+from flexmm._blas import single_blas_thread
 from flexmm._jit import jit
+from flexmm.errors import FlexmmError
 from flexmm.models.base import System
+from flexmm.integrators.common import Terms
+from flexmm.models.kernels import model_force
 
 DENSE_LIMIT = 400
 LANCZOS_MAX_ITER = 600
@@ -29,9 +33,9 @@ LANCZOS_RTOL = 1e-6
 GRID_STEP = 2e-4  # scan of h·ω in ``harmonic_limit``: Blanes–Moan's band at hω ≈ π is 9e-4 wide
 
 
-def _contact_stiffness(system: System, terms: dict) -> list[tuple[int, int, float]]:
+def _contact_stiffness(system: System, terms: Terms) -> list[tuple[int, int, float]]:
     out = []
-    for (i, j), (k, p, _) in zip(terms["con_ij"], terms["con_prm"]):
+    for (i, j), (k, p, _) in zip(terms.con_ij, terms.con_prm):
         if p == 1.0:
             out.append((int(i), int(j), float(k)))
             continue
@@ -42,7 +46,7 @@ def _contact_stiffness(system: System, terms: dict) -> list[tuple[int, int, floa
     return out
 
 
-def hessian_operator(system: System, terms: dict, q_ref: np.ndarray | None = None):
+def hessian_operator(system: System, terms: Terms, q_ref: np.ndarray | None = None):
     """Matrix-free Hessian-vector product K x at ``q_ref`` (default: rest)."""
     q_ref = np.zeros(system.ndof) if q_ref is None else q_ref
     fp, fm = np.zeros(system.ndof), np.zeros(system.ndof)
@@ -105,8 +109,8 @@ def lanczos_max(op, n: int, *, max_iter: int = LANCZOS_MAX_ITER, rtol: float = L
     return history[-1]
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _lanczos_steps(force, args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_prev, b, alpha, beta, k0, k1):
+@jit
+def _lanczos_steps(args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_prev, b, alpha, beta, k0, k1):
     """Lanczos iterations k0..k1−1 on W K W (W = M^{-1/2}, K by central differences of force)."""
     n = x.shape[0]
     for it in range(k0, k1):
@@ -117,10 +121,10 @@ def _lanczos_steps(force, args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_pre
         eps = 1e-6 / scale if scale > 0.0 else 1.0
         for k in range(n):
             qt[k] = q_ref[k] + eps * r[k]
-        force(qt, args, fp)
+        model_force(qt, args, fp)
         for k in range(n):
             qt[k] = q_ref[k] - eps * r[k]
-        force(qt, args, fm)
+        model_force(qt, args, fm)
         for c in range(con_ij.shape[0]):
             i, j = con_ij[c, 0], con_ij[c, 1]
             d = con_k[c] * (r[i] - r[j]) * 2.0 * eps
@@ -145,7 +149,7 @@ def _lanczos_steps(force, args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_pre
     return b, k1
 
 
-def _dense_dynamical_matrix(system: System, terms: dict, free: np.ndarray, q_ref=None) -> np.ndarray:
+def _dense_dynamical_matrix(system: System, terms: Terms, free: np.ndarray, q_ref=None) -> np.ndarray:
     """M^{-1/2} K M^{-1/2} over the free DOFs (n_free, n_free), symmetrised, column by column."""
     w = np.sqrt(system.inv_mass[free])
     kx = hessian_operator(system, terms, q_ref)
@@ -160,14 +164,15 @@ def _dense_dynamical_matrix(system: System, terms: dict, free: np.ndarray, q_ref
     return 0.5 * (a + a.T)
 
 
-def omega_max(system: System, terms: dict, q_ref: np.ndarray | None = None) -> float:
+def omega_max(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> float:
     """Largest angular frequency of small oscillations about ``q_ref`` (nondimensional)."""
     free = np.flatnonzero(system.inv_mass > 0)
     if free.size == 0:
         return 0.0
     n = free.size
     if n <= DENSE_LIMIT:
-        lam = np.linalg.eigvalsh(_dense_dynamical_matrix(system, terms, free, q_ref))[-1]
+        with single_blas_thread():  # small dense problem: BLAS threads only cost
+            lam = np.linalg.eigvalsh(_dense_dynamical_matrix(system, terms, free, q_ref))[-1]
     else:
         # full-size operator W K W with W = M^{-1/2} (0 on held DOFs): same top eigenvalue,
         # no gathers (held DOFs only add zero eigenvalues)
@@ -177,12 +182,12 @@ def omega_max(system: System, terms: dict, q_ref: np.ndarray | None = None) -> f
         con_k = np.array([k for _, _, k in contacts], float)
         q0 = np.zeros(system.ndof) if q_ref is None else np.asarray(q_ref, float)
         scratch = [np.zeros(system.ndof) for _ in range(4)]
-        state = (system.force, system.args, q0, w, con_ij, con_k, *scratch)
+        state = (system.args, q0, w, con_ij, con_k, *scratch)
         lam = lanczos_max((_lanczos_steps, state), system.ndof)
     return float(np.sqrt(max(lam, 0.0)))
 
 
-def top_mode(system: System, terms: dict, q_ref: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+def top_mode(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """(ω_max, shape (ndof,)): the fastest small-oscillation mode about ``q_ref`` (default rest).
 
     The shape x solves K x = ω_max² M x (held DOFs 0), scaled to max |x| = 1. Dense for small
@@ -194,7 +199,8 @@ def top_mode(system: System, terms: dict, q_ref: np.ndarray | None = None) -> tu
     free = np.flatnonzero(system.inv_mass > 0)
     w = np.sqrt(system.inv_mass[free])
     if free.size <= DENSE_LIMIT:
-        lam, vec = np.linalg.eigh(_dense_dynamical_matrix(system, terms, free, q_ref))
+        with single_blas_thread():
+            lam, vec = np.linalg.eigh(_dense_dynamical_matrix(system, terms, free, q_ref))
         lam, y = lam[-1], vec[:, -1]
     else:
         kx = hessian_operator(system, terms, q_ref)
@@ -236,11 +242,6 @@ def trajectory_omega_max(problem, n_samples: int = 8, duration_fraction: float =
     return best, when
 
 
-@jit
-def _harmonic_force(q, args, out):
-    out[0] = -args[0] * q[0]
-
-
 def harmonic_limit(spec, *, hi: float = 6.0, steps: int = 1, tol: float = 1e-6,
                    growth_per_step: float = 0.0) -> float:
     """Largest h ω for which ``spec``'s one-step map of x'' = −ω² x has spectral radius ≤ e^g.
@@ -253,18 +254,18 @@ def harmonic_limit(spec, *, hi: float = 6.0, steps: int = 1, tol: float = 1e-6,
     a measurement with that detection threshold sees, ``stability_scan``).
     """
     from flexmm.integrators.common import empty_terms
+    from flexmm.models.harmonic import HarmonicArgs
 
-    terms = tuple(empty_terms()[k] for k in ("con_ij", "con_prm", "dash_ij", "dash_c",
-                                            "drv_dof", "drv_mode", "drv_shape", "drv_prm"))
-    args = (1.0,)
+    terms = empty_terms()
+    args = HarmonicArgs(np.ones(1))
     minv, damp = np.ones(1), np.zeros(1)
 
     def radius(h: float) -> float:
         cols = []
         for q0, v0 in ((1.0, 0.0), (0.0, 1.0)):
             q, v, f = np.array([q0]), np.array([v0]), np.zeros(1)
-            spec.init(_harmonic_force, args, q, v, 0.0, f, terms)
-            spec.advance(_harmonic_force, args, q, v, f, minv, damp, terms, 0.0, h, steps, np.zeros(2))
+            spec.init(args, q, v, 0.0, f, terms)
+            spec.advance(args, q, v, f, minv, damp, terms, 0.0, h, steps, spec.new_acc(1))
             cols.append([q[0], v[0]])
         return float(np.max(np.abs(np.linalg.eigvals(np.array(cols).T))))
 
@@ -282,7 +283,7 @@ def harmonic_limit(spec, *, hi: float = 6.0, steps: int = 1, tol: float = 1e-6,
     return 0.5 * (a + b)
 
 
-class UnstableStepError(Exception):
+class UnstableStepError(FlexmmError):
     """dt is above the integrator's stable limit (a user error unless forced)."""
 
 

@@ -73,7 +73,7 @@ def lattice_dofs(system) -> np.ndarray:
 
 
 def pulse_field(system) -> str:
-    return system.meta.get("rotation_field") or system.meta["longitudinal_field"]
+    return system.rotation_field or system.longitudinal_field
 
 
 def pulse(problem, t: np.ndarray, q: np.ndarray) -> tuple[float, float]:
@@ -86,9 +86,9 @@ def pulse(problem, t: np.ndarray, q: np.ndarray) -> tuple[float, float]:
     name = pulse_field(s)
     k = s.field_index(name) * s.n_sites
     sites = np.arange(s.n_sites)
-    if "n_rows" in s.meta:  # a sheet: the middle row
-        nc = s.meta["n_cols"]
-        sites = (s.meta["n_rows"] // 2) * nc + np.arange(nc)
+    if s.grid_shape is not None:  # a sheet or grid: the middle row
+        nr, nc = s.grid_shape
+        sites = (nr // 2) * nc + np.arange(nc)
     x = s.site_coords["x"][sites]
     ds = xr.Dataset({name: (("time", "site"), q[:, k + sites])},
                     coords={"time": t * s.scales.time_s, "x": ("site", x)})

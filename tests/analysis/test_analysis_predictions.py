@@ -20,7 +20,7 @@ from flexmm.models import MODELS
 from flexmm.models.rotating_chain import nondimensional
 from flexmm.theory import chains as th
 from flexmm.theory import rotating as rt
-from flexmm.theory.dispersion import band_edges_numeric, bloch_frequencies
+from flexmm.linear.dispersion import band_edges_numeric, bloch_frequencies
 
 
 def _write_run(path, scene, fields: dict, time, x):

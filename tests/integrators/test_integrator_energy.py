@@ -19,6 +19,7 @@ import pytest
 from integrator_helpers import chain_problem, nonlinear_state, total_energy
 
 from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.stepper import make_stepper
 
 N_UNITS = 16
 #: (h ω_max, steps) per symplectic method (long enough for the initial pulse to spread)
@@ -27,16 +28,11 @@ SYMPLECTIC_RUNS = {"velocity_verlet": (0.6, 100_000), "pefrl": (0.45, 25_000), "
 
 
 def energy_history(problem, name, h, nsteps, every):
-    spec = INTEGRATORS[name]
-    s, terms = problem.system, problem.terms_tuple()
     q0, v0 = nonlinear_state(N_UNITS)
-    q, v, f, acc = q0.copy(), v0.copy(), np.zeros_like(q0), np.zeros(2)
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
-    t, out = 0.0, np.empty(nsteps // every)
-    for k in range(out.size):
-        t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, every, acc)
-        out[k] = total_energy(problem, q, v)
-    return out - total_energy(problem, q0, v0), total_energy(problem, q0, v0)
+    st = make_stepper(problem, name, h=h, q0=q0, v0=v0, threads=1, check_energy=False)
+    out = []
+    st.run([every] * (nsteps // every), lambda s: out.append(total_energy(problem, s.q, s.v)))
+    return np.array(out) - total_energy(problem, q0, v0), total_energy(problem, q0, v0)
 
 
 def test_symplectic_entries_are_tested() -> None:

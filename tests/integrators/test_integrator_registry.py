@@ -89,7 +89,8 @@ def test_velocity_dependent_forces_refused_with_a_reason() -> None:
 
 @pytest.mark.parametrize("name", [k for k, v in INTEGRATORS.items() if v.explicit_limit])
 def test_dt_above_each_methods_limit_is_refused(name) -> None:
-    from flexmm.assemble import UnstableStepError, build_problem
+    from flexmm.assemble import build_problem
+    from flexmm.stability import UnstableStepError
 
     ok = build_problem(scene_from_dict(scene(integrator=name)))
     limit_s = ok.stable_dt * ok.system.scales.time_s

@@ -19,13 +19,13 @@ def test_rhs_is_the_acceleration_of_the_model() -> None:
     # independent evaluation: numpy reference force, on-site damping, dashpots, applied force
     _, f = s.reference(q, s.args)
     t = problem.terms
-    dv = v[t["dash_ij"][:, 1]] - v[t["dash_ij"][:, 0]]
-    np.add.at(f, t["dash_ij"][:, 0], t["dash_c"] * dv)
-    np.add.at(f, t["dash_ij"][:, 1], -t["dash_c"] * dv)
+    dv = v[t.dash_ij[:, 1]] - v[t.dash_ij[:, 0]]
+    np.add.at(f, t.dash_ij[:, 0], t.dash_c * dv)
+    np.add.at(f, t.dash_ij[:, 1], -t.dash_c * dv)
     from flexmm.integrators.common import waveform
 
-    for d, dof in enumerate(t["drv_dof"]):
-        f[dof] += waveform(t["drv_shape"][d], t["drv_prm"][d], 0.7)[0]
+    for d, dof in enumerate(t.drv_dof):
+        f[dof] += waveform(t.drv_shape[d], t.drv_prm[d], 0.7)[0]
     np.testing.assert_allclose(dy[: s.ndof], v)
     np.testing.assert_allclose(dy[s.ndof :], s.inv_mass * (f - problem.damp * v), rtol=1e-12, atol=1e-14)
     assert count[0] == 1

@@ -11,9 +11,12 @@ from integrator_helpers import chain_problem
 from flexmm._jit import jit
 from flexmm._trig import sincos
 from flexmm.integrators import INTEGRATORS
-from flexmm.integrators.parallel import kernels
+from flexmm.integrators.parallel import advance_kernel
+from flexmm.integrators.stepper import make_stepper
+from flexmm.models.hinge import ChainArgs
+from flexmm.models.sheet_kernels import SheetArgs
 from flexmm.integrators.verlet import verlet_advance
-from flexmm.integrators.verlet_chain import (_cached_tables, _fusable, chain_verlet_advance,
+from flexmm.integrators.verlet_chain import (_cached_tables, fusable, chain_verlet_advance,
                                              chain_verlet_advance_parallel)
 from flexmm.models.hinge import H_KS, S_KR, chain_force, chain_force_parallel, chain_reference
 
@@ -55,19 +58,16 @@ def test_parallel_chain_force_equals_serial() -> None:
 @pytest.mark.parametrize("variant", ["undamped", "drive+damping"])
 def test_parallel_verlet_equals_serial(variant) -> None:
     problem = chain_problem(20_000, variant=variant)
-    s, terms = problem.system, problem.terms_tuple()
-    spec = INTEGRATORS["velocity_verlet"]
+    s = problem.system
     rng = np.random.default_rng(3)
     q0 = 0.05 * rng.standard_normal(s.ndof)
     v0 = 0.05 * rng.standard_normal(s.ndof)
     out = []
     for threads in (1, 2):
-        advance, force, used = kernels(spec, s.force, threads)
-        assert used == min(threads, numba.config.NUMBA_NUM_THREADS)
-        q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), np.zeros(8)
-        spec.init(force, s.args, q, v, 0.0, f, terms)
-        advance(force, s.args, q, v, f, s.inv_mass, problem.damp, terms, 0.0, 0.1, 20, acc)
-        out.append((q, v, acc))
+        st = make_stepper(problem, "velocity_verlet", h=0.1, threads=threads, q0=q0, v0=v0)
+        assert st.threads == min(threads, numba.config.NUMBA_NUM_THREADS)
+        st.advance(20)
+        out.append((st.q, st.v, st.acc))
     np.testing.assert_allclose(out[1][0], out[0][0], rtol=0, atol=1e-13)
     np.testing.assert_allclose(out[1][1], out[0][1], rtol=0, atol=1e-13)
     np.testing.assert_allclose(out[1][2][:2], out[0][2][:2], rtol=1e-12)
@@ -83,11 +83,11 @@ def test_chain_force_over_several_cache_blocks_matches_reference() -> None:
     np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-13 * np.max(np.abs(f_ref)))
 
 
-def _advance(advance, force, problem, q0, v0, steps):
-    s, terms = problem.system, problem.terms_tuple()
+def _advance(advance, problem, q0, v0, steps):
+    s, terms = problem.system, problem.terms
     q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), INTEGRATORS["velocity_verlet"].new_acc(s.ndof)
-    INTEGRATORS["velocity_verlet"].init(force, s.args, q, v, 0.0, f, terms)
-    t = advance(force, s.args, q, v, f, s.inv_mass, problem.damp, terms, 0.0, 0.1, steps, acc)
+    INTEGRATORS["velocity_verlet"].init(s.args, q, v, 0.0, f, terms)
+    t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, 0.0, 0.1, steps, acc)
     return q, v, f, t, acc
 
 
@@ -98,7 +98,7 @@ def test_fused_chain_verlet_equals_unfused(threads, chain) -> None:
     the cached parameter tables of a uniform chain and with the chain's own (graded) tables."""
     problem = chain_problem(20_000, theta0_rad=0.2, n_lateral=2, lateral_stretch=True, right="fixed")
     s = problem.system
-    assert _fusable(s.args, s.q0, s.inv_mass, problem.damp, problem.terms_tuple())
+    assert fusable(s.args, s.q0, s.inv_mass, problem.damp, problem.terms)
     assert _cached_tables(s.args[2], s.args[3])[0].shape[0] > 0
     if chain == "graded":
         s.args[2][:, H_KS] *= np.linspace(0.5, 1.5, s.n_sites - 1)
@@ -106,10 +106,10 @@ def test_fused_chain_verlet_equals_unfused(threads, chain) -> None:
         assert _cached_tables(s.args[2], s.args[3])[0].shape[0] == 0
     rng = np.random.default_rng(5)
     q0, v0 = 0.05 * rng.standard_normal(s.ndof), 0.05 * rng.standard_normal(s.ndof)
-    ref = _advance(verlet_advance, chain_force, problem, q0, v0, 20)
+    ref = _advance(verlet_advance, problem, q0, v0, 20)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     fused = chain_verlet_advance if threads == 1 else chain_verlet_advance_parallel
-    out = _advance(fused, chain_force, problem, q0, v0, 20)
+    out = _advance(fused, problem, q0, v0, 20)
     for a, b in zip(out[:3], ref[:3]):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
     assert out[3] == ref[3]
@@ -119,13 +119,20 @@ def test_fused_chain_verlet_equals_unfused(threads, chain) -> None:
 def test_kernels_pick_the_fused_verlet_only_where_it_applies() -> None:
     spec = INTEGRATORS["velocity_verlet"]
     undamped = chain_problem(50)
-    assert kernels(spec, chain_force, 1)[0] is chain_verlet_advance
-    assert kernels(INTEGRATORS["pefrl"], chain_force, 1)[0] is INTEGRATORS["pefrl"].advance
     s = undamped.system
-    assert _fusable(s.args, s.q0, s.inv_mass, undamped.damp, undamped.terms_tuple())
+
+    def pick(spec, p):
+        return advance_kernel(spec, p.system.args, p.system.inv_mass, p.damp, p.terms, 1)[0]
+
+    assert fusable(s.args, s.q0, s.inv_mass, undamped.damp, undamped.terms)
+    assert pick(spec, undamped) is chain_verlet_advance
+    assert pick(INTEGRATORS["pefrl"], undamped) is INTEGRATORS["pefrl"].advance
     for variant in ("viscous", "drive+damping", "prescribed"):
         p = chain_problem(50, variant=variant)
-        assert not _fusable(p.system.args, p.system.q0, p.system.inv_mass, p.damp, p.terms_tuple()), variant
+        assert not fusable(p.system.args, p.system.q0, p.system.inv_mass, p.damp, p.terms), variant
+        assert pick(spec, p) is spec.advance, variant
     ha, hb, *rest = s.args
-    shuffled = (ha[::-1].copy(), hb[::-1].copy(), *rest)
-    assert not _fusable(shuffled, s.q0, s.inv_mass, undamped.damp, undamped.terms_tuple())
+    shuffled = ChainArgs(ha[::-1].copy(), hb[::-1].copy(), *rest)
+    assert not fusable(shuffled, s.q0, s.inv_mass, undamped.damp, undamped.terms)
+    sheet = SheetArgs(*([np.zeros(0)] * 10))
+    assert not fusable(sheet, s.q0, s.inv_mass, undamped.damp, undamped.terms)

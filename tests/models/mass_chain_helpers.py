@@ -6,7 +6,7 @@ import numpy as np
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict, load_scene
-from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.runner import integrate
 
 
 def problem_from(lattice: dict, duration_s: float, **extra):
@@ -17,22 +17,10 @@ def problem_from(lattice: dict, duration_s: float, **extra):
 
 
 def run_in_memory(problem, n_frames: int = 400):
-    """Integrate with the scene's integrator; return (t (F,), q (F, ndof), v (F, ndof), work)."""
-    s = problem.system
-    spec = INTEGRATORS[problem.scene.solver.integrator]
-    terms = problem.terms_tuple()
-    q, v = s.q0.copy(), s.v0.copy()
-    f, acc = np.zeros_like(q), np.zeros(2)
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
-    per = max(1, int(np.ceil(problem.duration / problem.dt / n_frames)))
-    h = problem.duration / (per * n_frames)
-    t, ts, qs, vs = 0.0, [0.0], [q.copy()], [v.copy()]
-    for _ in range(n_frames):
-        t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, per, acc)
-        ts.append(t)
-        qs.append(q.copy())
-        vs.append(v.copy())
-    return np.array(ts), np.array(qs), np.array(vs), acc
+    """Integrate with the scene's integrator; return (t (F,), q (F, ndof), v (F, ndof), acc)."""
+    tr = integrate(problem, problem.scene.solver.integrator, h=problem.dt, n_frames=n_frames + 1,
+                   check_energy=False)
+    return tr.t, tr.q, tr.v, tr.acc
 
 
 def run_config(path: str, overrides: list[str] | None = None, n_frames: int = 400):

@@ -100,7 +100,7 @@ def switched_mask(name: str, tmp: Path, overrides=None, tag: str = "", *, toward
     scene, ds = run(name, tmp, overrides, tag)
     from flexmm.models import MODELS
 
-    x0 = MODELS[scene.lattice.kind].build(scene.lattice).meta["initial_m"]
+    x0 = MODELS[scene.lattice.kind].build(scene.lattice).initial_displacement_m
     x1 = ds.u.values[-1] + x0
     return np.abs(x1 - towards) < np.abs(x1 - x0), scene, ds
 

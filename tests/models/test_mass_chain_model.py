@@ -74,7 +74,7 @@ def test_mass_chain_relaxed_state_is_an_equilibrium_and_q_is_measured_from_it():
     f = np.zeros(s.ndof)
     s.force(np.zeros(s.ndof), s.args, f)
     assert np.abs(f).max() < 1e-8
-    x0 = s.meta["initial_m"]
+    x0 = s.initial_displacement_m
     assert np.all(np.abs(x0 - 0.004) < 2e-4)  # every site in the lower-energy well at L = 4 mm
     assert x0[0] > x0[5] > x0[-1]  # the static end load compresses the chain
 
@@ -116,20 +116,29 @@ def test_mass_chain_config_errors_are_readable():
         scene({**LATTICES["mass_chain"], "bond": {"law": "spring", "k_n_per_m": 1.0}})
 
 
+def test_mass_grid_shape_is_rows_by_columns():
+    s = system_of(LATTICES["mass_grid"])  # nx = 4 columns, ny = 3 rows
+    assert s.grid_shape == (3, 4)
+    row, col = np.divmod(np.arange(s.n_sites), 4)
+    np.testing.assert_allclose(s.site_coords["x"], col * 0.01)
+    np.testing.assert_allclose(s.site_coords["y"], row * 0.01)
+    assert system_of(LATTICES["mass_chain"]).grid_shape is None
+
+
 def test_mass_network_ends_and_dashpots_follow_the_branches():
     sc = scene(LATTICES["mass_network"], damping={"dashpot_n_s_per_m": 0.01},
                excitation={"kind": "impact", "velocity_m_s": 0.1})
     p = build_problem(sc)
     s = p.system
-    assert s.meta["ends"]["left"] == [0, 4] and s.meta["ends"]["right"] == [11]
+    assert s.ends["left"] == [0, 4] and s.ends["right"] == [11]
     assert np.count_nonzero(s.v0) == 2
-    assert len(p.terms["dash_ij"]) == len(s.meta["neighbour_pairs"]) == 12
+    assert len(p.terms.dash_ij) == len(s.neighbour_pairs) == 12
 
 
 def test_mass_chain_friction_enters_as_explicit_drive_and_limits_dt():
     lat = {**LATTICES["mass_chain"], "friction": {"force_n": 0.02, "regularisation_m_s": 1e-4}}
     p = build_problem(scene(lat))
-    rows = p.terms["drv_mode"] == 2
+    rows = p.terms.drv_mode == 2
     assert rows.sum() == 12
     rate = 0.02 / (0.002 * 1e-4) * p.system.scales.time_s
     assert p.stable_dt <= 1.0 / rate * (1 + 1e-12)

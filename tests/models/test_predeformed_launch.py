@@ -24,8 +24,8 @@ def _scene(amplitude=-0.38, center=50, lattice=LATTICE):
 
 def test_soliton_rides_on_the_relaxed_state():
     system = build_problem(_scene()).system
-    n, rest = system.n_sites, system.meta["rest_state"]
-    p = prestressed_chain(RotatingChainND(0.05, system.meta["Ks"], system.meta["Ktheta"], system.meta["alpha2"], 1, 0),
+    n, rest, m = system.n_sites, system.rest_state, system.rotating_squares
+    p = prestressed_chain(RotatingChainND(0.05, m.Ks, m.Ktheta, m.alpha2, 1, 0),
                           float(rest[n + 50]))
     s = soliton_initial_state(p, -0.38, n, 50)
     assert np.allclose(system.q0[n:] - rest[n:], s.theta, atol=1e-14)
@@ -46,7 +46,7 @@ def test_from_rest_subtracts_the_relaxed_state():
     scene = _scene()
     system = build_problem(scene).system
     n, a = system.n_sites, LATTICE["a_m"]
-    q = system.meta["rest_state"]
+    q = system.rest_state
     ds = xr.Dataset({"u": (("time", "site"), np.tile(q[:n] * a, (2, 1)), {"units": "m"}),
                      "theta": (("time", "site"), np.tile(q[n:], (2, 1)), {"units": "rad"})},
                     coords={"time": [0.0, 1.0], "site": np.arange(n), "x": ("site", np.arange(n) * a)})

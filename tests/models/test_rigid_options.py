@@ -129,9 +129,9 @@ def test_combined_drives_append_and_rotation_drive_prescribes_theta():
     problem = build_problem(scene(lattice, excitation=exc, solver={"duration_s": 1e-3, "dt_s": 1e-6}))
     s, terms = problem.system, problem.terms
     theta_dofs = [s.dof("theta", i) for i in (0, 4, 3, 7)]
-    assert terms["drv_dof"].tolist() == theta_dofs
-    assert np.all(terms["drv_mode"] == MODE_DISPLACEMENT)
-    assert terms["drv_prm"][:, 0].tolist() == [0.7, 0.7, -0.7, -0.7]
+    assert terms.drv_dof.tolist() == theta_dofs
+    assert np.all(terms.drv_mode == MODE_DISPLACEMENT)
+    assert terms.drv_prm[:, 0].tolist() == [0.7, 0.7, -0.7, -0.7]
     assert np.all(s.inv_mass[theta_dofs] == 0) and s.inv_mass[s.dof("u", 0)] > 0
 
 

@@ -32,7 +32,7 @@ def test_uniaxial_strain_closes_the_sheet_isotropically():
     eps, theta0 = -0.05, 0.2
     system = build(dict(SHEET, n_rows=10, n_cols=10, theta0_rad=theta0, predeform={"strain_x": eps}))
     n, q = system.n_sites, system.q0
-    assert system.meta["predeform"]["residual"] < 1e-10
+    assert system.predeformation.residual < 1e-10
     col, row = system.site_coords["col"], system.site_coords["row"]
     inner = (col >= 3) & (col <= 6) & (row >= 3) & (row <= 6)  # away from the free and held edges
     x, y = system.site_coords["x"] / 0.01, system.site_coords["y"] / 0.01
@@ -43,7 +43,7 @@ def test_uniaxial_strain_closes_the_sheet_isotropically():
     theta = math.acos((1 + eps_y) * math.cos(theta0)) - theta0  # the free direction is pure mechanism
     np.testing.assert_allclose(q[2 * n :][inner], theta, rtol=2e-3)
     # the strained ends are held during the dynamics
-    for s in system.meta["ends"]["left"] + system.meta["ends"]["right"]:
+    for s in system.ends["left"] + system.ends["right"]:
         assert system.inv_mass[s] == 0 and system.inv_mass[2 * n + s] > 0
 
 

@@ -13,7 +13,7 @@ from rigid_scene_checks import (front_positions, row_fields, run, run_edited, so
 from flexmm.analysis.oblique import fold_axis, wave_groups
 from flexmm.sweep.observe import observe_run
 from flexmm.theory.rotating import RotatingChainND, amplitude_gap, lego_parameters, soliton_speed
-from flexmm.theory.sheet import acoustic_modes
+from flexmm.linear.sheet import acoustic_modes
 
 pytestmark = pytest.mark.slow
 LEGO_T = (4.52e-3 / 71690) ** 0.5  # time unit sqrt(m/k_l) of the LEGO chain (s)
@@ -46,7 +46,7 @@ def test_scene_a_sound_bullet_stays_collimated(tmp_path):
 def test_scene_a_oblique_push_separates_into_the_two_acoustic_modes(tmp_path):
     """At 26.6° to the lattice axes the push splits into a fast and a slow group whose speeds and
     polarisations are those of the sheet's two long-wave acoustic modes (Bloch analysis of the
-    Hessian, flexmm.theory.sheet); along the x axis it stays one longitudinal group."""
+    Hessian, flexmm.linear.sheet); along the x axis it stays one longitudinal group."""
     scene, ds, result = run("a_sheet_mode_separation", tmp_path)
     lat = scene.lattice
     c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.unit_mass_kg)

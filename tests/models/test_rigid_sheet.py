@@ -72,7 +72,7 @@ def test_planar_state_with_v_held_gives_the_chain_forces():
 
 def test_ends_coordinates_and_masses():
     system, cfg = build(n_rows=3, n_cols=4, theta0_rad=0.1, mass_kg=2e-3, areal_density_kg_m2=None)
-    ends = system.meta["ends"]
+    ends = system.ends
     assert ends["left"] == [0, 4, 8] and ends["right"] == [3, 7, 11]
     assert ends["bottom"] == [0, 1, 2, 3] and ends["top"] == [8, 9, 10, 11]
     h = 0.01 * math.cos(0.1)
@@ -80,7 +80,8 @@ def test_ends_coordinates_and_masses():
     np.testing.assert_allclose(system.site_coords["y"], np.repeat(np.arange(3), 4) * h)
     assert system.site_coords["row"].tolist() == np.repeat(np.arange(3), 4).tolist()
     # inertia from the solid square of diagonal a: J = m a²/12, α² = 1/12
-    assert system.meta["alpha2"] == pytest.approx(1 / 12)
+    assert system.rotating_squares.alpha2 == pytest.approx(1 / 12)
+    assert system.grid_shape == (3, 4)
     fixed, _ = build(n_rows=3, n_cols=4, left="fixed")
     n = fixed.n_sites
     assert np.all(fixed.inv_mass[[0, 4, 8, n, n + 4, 2 * n + 8]] == 0)

@@ -62,8 +62,8 @@ def test_tilted_drive_moves_u_and_v_by_cos_and_sin():
     problem = build_problem(scene_from_dict(_data()))
     t = problem.terms
     n = problem.system.n_sites
-    amp = t["drv_prm"][:, 0]
-    u_rows, v_rows = t["drv_dof"] < n, (t["drv_dof"] >= n) & (t["drv_dof"] < 2 * n)
+    amp = t.drv_prm[:, 0]
+    u_rows, v_rows = t.drv_dof < n, (t.drv_dof >= n) & (t.drv_dof < 2 * n)
     ang = math.radians(26.565)
     assert np.allclose(amp[u_rows], 0.01 / 0.01 * math.cos(ang)) and np.allclose(amp[v_rows], math.sin(ang))
     assert u_rows.sum() == v_rows.sum() == 4

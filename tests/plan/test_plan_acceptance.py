@@ -14,9 +14,11 @@ from flexmm.assemble import build_problem
 from flexmm.config import load_scene, scene_from_dict
 from flexmm.integrators import INTEGRATORS
 from flexmm.models import MODELS
+from flexmm.prepare import prepare
 from flexmm.plan import make_plan
-from flexmm.plan.accuracy import integrate, new_acc, state_error
-from flexmm.plan.compare import compare_fidelities
+from flexmm.integrators.stepper import frame_chunks, make_stepper
+from flexmm.accuracy import integrate, state_error
+from flexmm.fidelity import compare_fidelities
 from flexmm.plan.output import AnalysisRequest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -46,19 +48,17 @@ LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_sh
 
 
 def _states(problem, times):
-    """States (q, v) of the problem at the given (increasing, nondimensional) times."""
-    s = problem.system
-    spec = INTEGRATORS[problem.scene.solver.integrator]
-    q, v = s.q0.copy(), s.v0.copy()
-    f, acc = np.zeros_like(q), new_acc(spec, q.size)
-    terms = problem.terms_tuple()
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
-    h = problem.dt
-    t, out = 0.0, []
-    for tm in times:
-        k = max(1, int(round((tm - t) / h)))
-        t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, (tm - t) / k, k, acc)
-        out.append((q.copy(), v.copy()))
+    """States (q, v) of the problem at uniform, increasing, nondimensional ``times`` (> 0)."""
+    st = make_stepper(problem, threads=1, check_energy=False)
+    out = []
+
+    def keep(s) -> None:
+        out.append((s.q.copy(), s.v.copy()))
+
+    st.h, first = frame_chunks(times[0], problem.dt, 2)
+    st.run(first, keep)
+    st.h, chunks = frame_chunks(times[-1] - times[0], problem.dt, len(times))
+    st.run(chunks, keep)
     return out
 
 
@@ -111,7 +111,7 @@ def test_accuracy_met_in_nine_of_ten_scenes():
     for name, data, acc in scenes():
         sc = scene_from_dict({**data, "solver": {**data["solver"], "accuracy": acc}})
         plan = make_plan(sc, "full")
-        prob = plan.problem or build_problem(plan.scene)
+        prob = prepare(plan)
         spec = INTEGRATORS[plan.choice.integrator]
         q, _, pk, n = integrate(prob, spec, plan.choice.dt, prob.duration)
         qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 16, prob.duration)

@@ -1,17 +1,20 @@
-"""solver.accuracy: integrator and dt from a pilot, checked by step doubling (flexmm.plan.accuracy)."""
+"""solver.accuracy: integrator and dt from a pilot, checked by step doubling (flexmm.accuracy);
+planning itself runs nothing, and a run builds its model once."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from flexmm.api import run_scene
-from flexmm.assemble import build_problem
-from flexmm.config import scene_from_dict
+from flexmm.config import load_scene, scene_from_dict
 from flexmm.integrators import INTEGRATORS
 from flexmm.io.dataset import open_run
+from flexmm.prepare import prepare
 from flexmm.plan import PlanError, make_plan
-from flexmm.plan.accuracy import extrapolate, integrate, state_error
+from flexmm.accuracy import extrapolate, integrate, state_error
 
 LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
             k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
@@ -44,13 +47,15 @@ def test_extrapolation_linear_and_exponential():
 def test_accuracy_run_meets_its_target(tmp_path):
     sc = soliton_scene(1e-4, integrator="velocity_verlet")  # one method: keeps the test quick
     plan = make_plan(sc, "full")
+    assert plan.step("accuracy").action == "pending" and plan.choice is None  # planning runs nothing
+    prob = prepare(plan)
     assert plan.scene.solver.accuracy is None and plan.scene.solver.dt_s is not None
+    assert plan.step("accuracy").action == "chosen"
     res = run_scene(sc, run_dir=tmp_path)
     ds = open_run(res.path)
     assert ds.attrs["accuracy_requested"] == 1e-4
     assert ds.attrs["accuracy_estimate"] < 1e-4 and ds.attrs["accuracy_met"] == 1
     # against a tight reference
-    prob = plan.problem or build_problem(plan.scene)
     spec = INTEGRATORS[plan.choice.integrator]
     q, _, pk, _ = integrate(prob, spec, plan.choice.dt, prob.duration)
     qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 16, prob.duration)
@@ -63,11 +68,11 @@ def test_accuracy_run_meets_its_target(tmp_path):
 def test_accuracy_picks_the_cheapest_method():
     """At 1e-7 a fourth-order method beats Verlet; the choice still meets the target."""
     plan = make_plan(soliton_scene(1e-7), "full")
+    prob = prepare(plan)
     table = {r["integrator"]: r for r in plan.choice.table}
     assert "velocity_verlet" in table and len(table) >= 2
     assert plan.choice.integrator != "velocity_verlet"
     assert plan.choice.cost == min(r["cost"] for r in table.values())
-    prob = plan.problem or build_problem(plan.scene)
     spec = INTEGRATORS[plan.choice.integrator]
     q, _, pk, _ = integrate(prob, spec, plan.choice.dt, prob.duration)
     qr, _, pkr, _ = integrate(prob, spec, plan.choice.dt / 8, prob.duration)
@@ -77,3 +82,24 @@ def test_accuracy_picks_the_cheapest_method():
 def test_accuracy_and_dt_conflict():
     with pytest.raises(PlanError, match="remove solver.dt_s"):
         make_plan(soliton_scene(1e-4, dt_s=1e-6))
+
+
+def test_a_run_builds_its_model_once(tmp_path, monkeypatch):
+    """Plan (which builds to linearise), run and summary together build the lattice once."""
+    import flexmm.models as models
+
+    entry = models.MODELS["rotating_squares_chain"]
+    calls = []
+
+    def counting(cfg):
+        calls.append(cfg.n_units)
+        return entry.build(cfg)
+
+    monkeypatch.setitem(models.MODELS, "rotating_squares_chain",
+                        entry.__class__(counting, entry.fields, entry.launch_soliton, entry.soliton_on_predeformed))
+    demo = load_scene(Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml")
+    assert run_scene(demo, run_dir=tmp_path / "demo", fidelity="auto").ok
+    assert len(calls) == 1, calls  # not trimmed: the plan's build runs
+    calls.clear()
+    assert run_scene(soliton_scene(1e-4, integrator="velocity_verlet"), run_dir=tmp_path / "acc").ok
+    assert len(calls) == 1, calls  # the accuracy pilots reuse it too

@@ -8,7 +8,7 @@ import pytest
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
-from flexmm.plan.accuracy import integrate
+from flexmm.accuracy import integrate
 from flexmm.plan.dimension import reduce_dimension
 
 SHEET = dict(kind="rotating_squares_sheet", n_rows=6, n_cols=40, a_m=0.016, k_long_n_per_m=71690,

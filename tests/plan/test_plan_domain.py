@@ -8,8 +8,9 @@ import pytest
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
-from flexmm.plan.accuracy import integrate
-from flexmm.plan.domain import absorbing_damping, bloch_dispersion, trim_scene, wave_reach
+from flexmm.accuracy import integrate
+from flexmm.assemble import absorbing_damping
+from flexmm.plan.domain import bloch_dispersion, trim_scene, wave_reach
 from flexmm.theory.rotating import RotatingChainND, dispersion_chain
 
 LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
@@ -28,8 +29,9 @@ def test_bloch_dispersion_matches_chain_theory(theta0, n_v, s_v):
     sc = chain_scene(40, theta0_rad=theta0, n_lateral=n_v, lateral_stretch=bool(s_v))
     p = build_problem(sc)
     d = bloch_dispersion(p.system, p.terms)
-    m = p.system.meta
-    par = RotatingChainND(theta0, m["Ks"], m["Ktheta"], m["alpha2"], n_v, s_v)
+    m = p.system.rotating_squares
+    assert (m.theta0, m.n_v, m.s_v) == (theta0, n_v, s_v)
+    par = RotatingChainND(theta0, m.Ks, m.Ktheta, m.alpha2, n_v, s_v)
     lo, hi = dispersion_chain(par, d.k)
     lo2, hi2 = dispersion_chain(par, d.k + np.pi)  # the 2-site probe cell folds the zone
     ref = np.sort(np.stack([lo, hi, lo2, hi2], 1), 1)

@@ -1,4 +1,4 @@
-"""Plane-wave acoustic modes of the 2D sheet (flexmm.theory.sheet) against independent results."""
+"""Plane-wave acoustic modes of the 2D sheet (flexmm.linear.sheet) against independent results."""
 
 import math
 from pathlib import Path
@@ -7,7 +7,7 @@ import pytest
 
 from flexmm.config import load_scene
 from flexmm.theory.rotating import RotatingChainND, long_wave_speed
-from flexmm.theory.sheet import acoustic_modes, bloch_frequencies
+from flexmm.linear.sheet import acoustic_modes, bloch_frequencies
 
 REPO = Path(__file__).resolve().parents[2]
 

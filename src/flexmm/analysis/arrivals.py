@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexmm._blas import single_blas_thread
 from flexmm.analysis.detect import refine_peak
 
 SPEED_CHANGE = 0.02  # relative speed change that ends a pulse at a collision
@@ -112,13 +113,14 @@ def segment_fit(x, t, seg):
     """Common slope, its standard error, intercepts per segment and residuals of t = s x + b_seg."""
     ids = np.unique(seg)
     A = np.column_stack([x] + [(seg == k).astype(float) for k in ids])
-    coef, *_ = np.linalg.lstsq(A, t, rcond=None)
-    res = t - A @ coef
-    dof = x.size - A.shape[1]
-    err = np.nan
-    if dof > 0:
-        cov = np.linalg.pinv(A.T @ A) * float(res @ res) / dof
-        err = float(np.sqrt(max(cov[0, 0], 0.0)))
+    with single_blas_thread():  # a small least-squares problem: BLAS threads only add overhead
+        coef, *_ = np.linalg.lstsq(A, t, rcond=None)
+        res = t - A @ coef
+        dof = x.size - A.shape[1]
+        err = np.nan
+        if dof > 0:
+            cov = np.linalg.pinv(A.T @ A) * float(res @ res) / dof
+            err = float(np.sqrt(max(cov[0, 0], 0.0)))
     return float(coef[0]), err, coef[1:], res
 
 

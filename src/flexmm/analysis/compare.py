@@ -118,13 +118,13 @@ def compare_front(ctx: RunContext, f) -> list[Comparison]:
 
 
 def generic_bands_hz(ctx: RunContext) -> list[tuple[float, float]]:
-    """Linear pass bands (Hz) of any 1D model from its Bloch eigenproblem (theory.dispersion).
+    """Linear pass bands (Hz) of any 1D model from its Bloch eigenproblem (linear.dispersion).
 
     Built on a short copy of the lattice (n_units = 32); ValueError for models without
     ``n_units`` or whose Hessian is not periodic.
     """
     from flexmm.models import MODELS
-    from flexmm.theory.dispersion import band_edges_numeric
+    from flexmm.linear.dispersion import band_edges_numeric
 
     lat = ctx.scene().lattice
     if "n_units" not in type(lat).model_fields:

@@ -17,8 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.errors import FlexmmError
 
-class FieldError(ValueError):
+
+class FieldError(FlexmmError, ValueError):
     """The requested field does not exist in (or cannot be derived from) the dataset."""
 
 

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 from scipy.ndimage import uniform_filter1d
 
+from flexmm._blas import single_blas_thread
 from flexmm.analysis.context import Comparison, RunContext
 from flexmm.analysis.detect import track_peaks
 
@@ -65,7 +66,8 @@ def _zeta_bins(ds, phi: float) -> tuple[np.ndarray, np.ndarray, float]:
 def _polarisation(ud: np.ndarray, vd: np.ndarray, phi: float) -> float:
     """Principal axis of the velocity vectors, degrees from the propagation direction, in (−90, 90]."""
     cov = np.array([[ud @ ud, ud @ vd], [ud @ vd, vd @ vd]])
-    w, vec = np.linalg.eigh(cov)
+    with single_blas_thread():
+        w, vec = np.linalg.eigh(cov)
     ex, ey = vec[:, 1]
     return fold_axis(math.degrees(math.atan2(ey, ex) - phi))
 
@@ -125,7 +127,7 @@ def is_oblique(ctx: RunContext) -> bool:
 
 def compare_groups(ctx: RunContext, groups: list[WaveGroup]) -> list[Comparison]:
     """Speed and polarisation of each group against the long-wave acoustic mode nearest in polarisation."""
-    from flexmm.theory.sheet import acoustic_modes
+    from flexmm.linear.sheet import acoustic_modes
 
     lat = ctx.scene().lattice
     modes = acoustic_modes(lat, propagation_angle(ctx.ds))

@@ -22,11 +22,12 @@ from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fron
 from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
 from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.errors import FlexmmError
 
 KINDS = ("auto", "pulse", "front", "driven", "modes")
 
 
-class RunNotFound(Exception):
+class RunNotFound(FlexmmError):
     """The path is not a run directory (no dataset.nc) or the dataset cannot be read."""
 
 

@@ -1,15 +1,17 @@
 """Predeformed runs: measure fields from the relaxed, loaded state, not from the stress-free lattice.
 
 A run whose lattice has ``predeform`` starts from a static equilibrium (models.predeform.relax)
-that is not stored in the dataset: θ carries the static rotation θ_s and u the static shortening.
-Pulses, strains and drives are what moves on top of it, so ``from_rest`` rebuilds the equilibrium
-from the run's config and subtracts it field by field (rates are unchanged: the state is static);
+whose fields the dataset stores per saved site (``u_rest``, ``theta_rest``, ...): θ carries the
+static rotation θ_s and u the static shortening. Pulses, strains and drives are what moves on top
+of it, so ``from_rest`` subtracts it field by field (rates are unchanged: the state is static);
 site coordinates move to the rest positions (x + u_rest), so speeds and widths use the loaded spacing.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from flexmm.io.dataset import REST_SUFFIX
 
 #: displacement field -> the site coordinate it moves
 AXES = {"u": "x", "v": "y"}
@@ -18,16 +20,24 @@ AXES = {"u": "x", "v": "y"}
 def rest_fields(ctx) -> dict[str, np.ndarray] | None:
     """SI rest values per site field, shape (n_sites,), of a predeformed run; None if not predeformed.
 
-    Cached in ``ctx.cache['rest']``; the lattice is rebuilt (and relaxed) from the stored config.
+    Read from the dataset's ``<field>_rest`` site coordinates (on the saved sites); a dataset
+    written before they existed has the lattice rebuilt (and relaxed) from its stored config.
+    Cached in ``ctx.cache['rest']``.
     """
     if "rest" not in ctx.cache:
         ctx.cache["rest"] = None
+        stored = {} if ctx.ds is None else {
+            name[: -len(REST_SUFFIX)]: np.asarray(ctx.ds.coords[name].values, float)
+            for name in ctx.ds.coords if name.endswith(REST_SUFFIX)}
+        if stored:
+            ctx.cache["rest"] = stored
+            return stored
         lat = ctx.scene().lattice
         if getattr(lat, "predeform", None) is not None:
             from flexmm.models import MODELS
 
             system = MODELS[lat.kind].build(lat)
-            n, q = system.n_sites, system.meta["rest_state"]
+            n, q = system.n_sites, system.rest_state
             ctx.cache["rest"] = {f.name: q[k * n : (k + 1) * n] * system.scales.coordinate(f.kind)
                                  for k, f in enumerate(system.fields)}
     return ctx.cache["rest"]

@@ -1,13 +1,21 @@
 """The ``flexmm`` command line: a thin layer over the library, one module per command.
 
-User errors (bad config, unstable dt) print a clear message and exit with status 2;
-a failed run exits with 1; only genuine bugs show a traceback.
+User errors (``flexmm.errors.FlexmmError``: bad config, unstable dt, bad option, unwritable
+output) print ``error: <message>`` and exit with status 2 (``cli.common.UserErrorCommand`` is
+the one place they are caught); a failed run exits with 1, an interrupted sweep with 130; only
+genuine bugs show a traceback.
+
+Start-up is kept short: the command modules import only typer and the standard library at
+module level, and load the library (numpy, numba, xarray, matplotlib, scipy) inside the
+command, so ``flexmm --help``, ``flexmm schema`` and ``flexmm validate`` never import plotting
+or signal processing (``tests/test_cli_startup.py``).
 """
 
 from __future__ import annotations
 
 import typer
 
+from flexmm import __version__
 from flexmm.cli import analyze as _analyze
 from flexmm.cli import bench as _bench
 from flexmm.cli import compare as _compare
@@ -17,24 +25,48 @@ from flexmm.cli import schema as _schema
 from flexmm.cli import stability as _stability
 from flexmm.cli import sweep as _sweep
 from flexmm.cli import validate as _validate
+from flexmm.cli.common import FlexmmGroup, UserErrorCommand
 
 app = typer.Typer(
     name="flexmm",
+    cls=FlexmmGroup,
     help="Nonlinear waves in flexible mechanical metamaterials: run, validate and inspect scenes.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
 )
-app.command("run")(_run.run)
-app.command("analyze")(_analyze.analyze)
-app.command("validate")(_validate.validate)
-app.command("schema")(_schema.schema)
-app.command("sweep")(_sweep.sweep)
-app.command("plan")(_plan.plan)
-app.command("compare")(_compare.compare)
-app.command("stability")(_stability.stability)
-app.command("bench")(_bench.bench)
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        typer.echo(f"flexmm {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", "-V", callback=_print_version, is_eager=True,
+                                 help="Print the flexmm version and exit."),
+) -> None:
+    """Nonlinear waves in flexible mechanical metamaterials: run, validate and inspect scenes."""
+
+
+for _name, _func in (
+    ("run", _run.run),
+    ("analyze", _analyze.analyze),
+    ("validate", _validate.validate),
+    ("schema", _schema.schema),
+    ("sweep", _sweep.sweep),
+    ("plan", _plan.plan),
+    ("compare", _compare.compare),
+    ("stability", _stability.stability),
+    ("bench", _bench.bench),
+):
+    app.command(_name, cls=UserErrorCommand)(_func)
 
 
 def main() -> None:
     app()
+
+
+__all__ = ["app", "main"]

@@ -11,25 +11,22 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
-from rich.console import Console
-from rich.table import Table
 
-from flexmm.analysis import dataset as out_ds
-from flexmm.analysis import figures as plots
-from flexmm.analysis import report
-from flexmm.analysis.fields import FieldError
-from flexmm.cli.common import EXIT_FAILED_RUN, EXIT_USER_ERROR, error
-from flexmm.sweep import is_sweep, open_sweep, plot_sweep
+from flexmm.cli.common import EXIT_FAILED_RUN, EXIT_USER_ERROR, error, writing
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 
 def _fmt(x) -> str:
-    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "—"
     return f"{x:.4g}"
 
@@ -40,6 +37,8 @@ def _rel(x) -> str:
 
 def run_table(res) -> Table:
     """Measured against predicted for one run."""
+    from rich.table import Table
+
     t = Table(title=f"{res.name} — {res.ctx.model}, {res.kind} analysis of {res.view.spec}",
               title_justify="left", header_style="bold")
     for col, just in (("item", "left"), ("quantity", "left"), ("measured", "right"),
@@ -71,6 +70,8 @@ SUMMARY = {
 
 def summary_tables(results) -> list[Table]:
     """Per analysis kind, one line per run and feature with the headline numbers side by side."""
+    from rich.table import Table
+
     tables = []
     for kind, quantities in SUMMARY.items():
         rows = [r for r in results if r.kind == kind]
@@ -101,10 +102,13 @@ def _write_text(target: str, text: str) -> None:
     if target == "-":
         sys.stdout.write(text)
     else:
-        Path(target).write_text(text)
+        with writing(target):
+            Path(target).write_text(text)
 
 
 def _csv_text(results) -> str:
+    from flexmm.analysis import dataset as out_ds
+
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=out_ds.CSV_COLUMNS)
     w.writeheader()
@@ -126,43 +130,59 @@ def analyze(
     plot_dir: str = typer.Option(None, "--plot-dir",
                                  help="Where figures over several runs go (default: their common parent)."),
     save: bool = typer.Option(True, "--save/--no-save", help="Write analysis.nc beside each run."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
 ) -> None:
     """Measure pulses, fronts or driven response of runs and compare with theory."""
+    from rich.console import Console
+
+    from flexmm.analysis import dataset as out_ds
+    from flexmm.analysis import figures as plots
+    from flexmm.analysis import report
+    from flexmm.sweep import is_sweep
+
     if analysis not in report.KINDS:
         raise error(f"unknown analysis {analysis!r}; choose one of {', '.join(report.KINDS)}")
+    data_to_stdout = json_out == "-" or csv_out == "-"
+    console = Console(stderr=data_to_stdout, highlight=False, quiet=quiet)
+
+    def wrote(path) -> None:
+        if quiet:
+            typer.echo(str(path), err=data_to_stdout)
+        else:
+            console.print(f"wrote {path}")
+
     sweeps = [r for r in runs if is_sweep(r)]
     for s in sweeps:
-        _sweep_summary(s, plot_dir)
+        _sweep_summary(s, plot_dir, console, wrote)
     runs = [r for r in runs if r not in sweeps]
     if not runs:
         return
     for r in runs:
-        try:
-            report.dataset_path(r)
-        except report.RunNotFound as exc:
-            raise error(str(exc)) from None
-    console = Console(stderr=json_out == "-" or csv_out == "-", highlight=False)
+        report.dataset_path(r)  # RunNotFound (a user error) before any run is analysed
     results, errors = [], []
     for r in runs:
         try:
             res = report.analyze_run(r, field_spec=field, kind=analysis, row=row,
                                      threshold_fraction=threshold, jump=jump)
-        except (report.RunNotFound, FieldError, ValueError) as exc:
-            raise error(f"{r}: {exc}") from None
         except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups) as exc:
+            if quiet:
+                typer.echo(f"{r}: {exc}", err=True)
             console.print(f"[bold red]{r}[/]: {exc}")
             errors.append({"run": str(r), "error": str(exc)})
             continue
+        except ValueError as exc:  # an unknown field (FieldError) or an analysis that does not apply to the run
+            raise error(f"{r}: {exc}") from None
         results.append(res)
         console.print(run_table(res))
         line = energy_line(res)
         if line:
             console.print(line)
-        if save:
-            console.print(f"wrote {out_ds.write_dataset(res)}")
-        if plot:
-            for p in plots.run_figures(res):
-                console.print(f"wrote {p}")
+        with writing(r):
+            if save:
+                wrote(out_ds.write_dataset(res))
+            if plot:
+                for p in plots.run_figures(res):
+                    wrote(p)
     if len(results) > 1:
         for table in summary_tables(results):
             console.print(table)
@@ -175,23 +195,31 @@ def analyze(
     if plot and results:
         parents = [str(Path(r.path).resolve().parent) for r in results]
         where = Path(plot_dir) if plot_dir else Path(os.path.commonpath(parents))
-        for p in plots.set_figures(results, where):
-            console.print(f"wrote {p}")
+        with writing(where):
+            for p in plots.set_figures(results, where):
+                wrote(p)
     if json_out:
         _write_text(json_out, out_ds.to_json(results, errors, bands=bands))
+        if quiet and json_out != "-":
+            wrote(json_out)
     if csv_out:
         _write_text(csv_out, _csv_text(results))
+        if quiet and csv_out != "-":
+            wrote(csv_out)
     if errors:
         raise typer.Exit(EXIT_FAILED_RUN)
 
 
-def _sweep_summary(sweep_dir: str, plot_dir: str | None) -> None:
+def _sweep_summary(sweep_dir: str, plot_dir: str | None, console, wrote) -> None:
     """Print a sweep's combined observables and plot them against the varied parameters."""
+    from rich.table import Table
+
+    from flexmm.sweep import open_sweep, plot_sweep
+
     try:
         ds = open_sweep(sweep_dir)
-    except FileNotFoundError as exc:
+    except FileNotFoundError as exc:  # not a finished sweep
         raise error(str(exc)) from None
-    console = Console(highlight=False)
     names = [v for v in ("speed", "speed_theory", "amplitude", "width", "status") if v in ds]
     table = Table(title=f"sweep {sweep_dir}", title_justify="left", header_style="bold")
     flat = ds[names].to_dataframe().reset_index()
@@ -201,8 +229,9 @@ def _sweep_summary(sweep_dir: str, plot_dir: str | None) -> None:
         table.add_row(*(v if isinstance(v, str) else _fmt(v) for v in row.tolist()))
     console.print(table)
     target = Path(plot_dir or sweep_dir) / "sweep.png"
-    target.parent.mkdir(parents=True, exist_ok=True)
-    console.print(f"wrote {plot_sweep(sweep_dir, target)}")
+    with writing(target.parent):
+        target.parent.mkdir(parents=True, exist_ok=True)
+        wrote(plot_sweep(sweep_dir, target))
 
 
 __all__ = ["analyze", "EXIT_USER_ERROR"]

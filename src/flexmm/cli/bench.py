@@ -12,51 +12,56 @@ from pathlib import Path
 
 import typer
 
-from flexmm.assemble import SceneError, UnstableStepError, build_problem
-from flexmm.cli.common import OverrideOption, error, load_or_exit
-from flexmm.integrators import INTEGRATORS
+from flexmm.cli.common import OverrideOption, check_output_dir, error, load_or_exit, output_dir, writing
+
+FILES = ("workprecision.nc", "workprecision.csv", "workprecision.png")
 
 
 def bench(
     config: str = typer.Argument(..., help="Scene YAML file."),
     overrides: list[str] = OverrideOption,
-    methods: str = typer.Option(",".join(INTEGRATORS), "--methods", "-m", help="Comma-separated integrators."),
+    methods: str = typer.Option(None, "--methods", "-m", help="Comma-separated integrators (default: all)."),
     ivp: str = typer.Option("RK45,DOP853,LSODA", "--ivp", help="solve_ivp methods ('' for none)."),
     frames: int = typer.Option(None, "--frames", min=2,
                                help="Saved frames, errors checked on all (default: the scene's output.n_frames)."),
     repeats: int = typer.Option(3, "--repeats", help="Timed runs per setting (the minimum is kept)."),
     budget_s: float = typer.Option(30.0, "--budget", help="Stop a method's ladder past this wall time per run."),
     out: str = typer.Option(None, "--out", "-o", help="Output directory (default runs/<name>/bench)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
 ) -> None:
     """Chart error against cost for each integrator and for solve_ivp on the same equations."""
     from flexmm import baseline
     from flexmm import workprecision as wp
+    from flexmm.assemble import build_problem
+    from flexmm.integrators import INTEGRATORS
     from flexmm.io.provenance import config_text
 
-    names = [m.strip() for m in methods.split(",") if m.strip()]
+    names = [m.strip() for m in (methods or ",".join(INTEGRATORS)).split(",") if m.strip()]
     ivps = [m.strip() for m in ivp.split(",") if m.strip()]
     bad = [m for m in names if m not in INTEGRATORS] + [m for m in ivps if m not in baseline.METHODS]
     if bad:
         raise error(f"unknown method(s) {bad}; integrators: {', '.join(INTEGRATORS)}; "
                     f"solve_ivp: {', '.join(baseline.METHODS)}")
     scene = load_or_exit(config, list(overrides or []))
-    try:
-        problem = build_problem(scene)
-    except (UnstableStepError, SceneError) as exc:
-        raise error(f"{config}: {exc}") from None
+    problem = build_problem(scene)
+    folder = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "bench")
     n_frames = frames or scene.output.n_frames  # a frame interval also caps the largest step
-    rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s,
-                             log=lambda m: typer.echo(m, err=True))
-    folder = Path(out) if out else Path(scene.output.directory) / scene.name / "bench"
-    folder.mkdir(parents=True, exist_ok=True)
+    say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
+    rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s, log=say)
     attrs = {"config": config_text(scene), "reference": f"dopri5 rtol {ref.rtol:g}",
              "reference_pulse_speed_m_s": ref.speed, "reference_pulse_amplitude": ref.amplitude}
-    wp.to_dataset(rows, attrs).to_netcdf(folder / "workprecision.nc", engine="h5netcdf")
-    with open(folder / "workprecision.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(rows[0].as_dict()))
-        writer.writeheader()
-        writer.writerows(r.as_dict() for r in rows)
-    wp.chart(rows, folder / "workprecision.png", f"{scene.name}: work-precision")
+    output_dir(folder)
+    with writing(folder):
+        wp.to_dataset(rows, attrs).to_netcdf(folder / "workprecision.nc", engine="h5netcdf")
+        with open(folder / "workprecision.csv", "w", newline="") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(rows[0].as_dict()))
+            writer.writeheader()
+            writer.writerows(r.as_dict() for r in rows)
+        wp.chart(rows, folder / "workprecision.png", f"{scene.name}: work-precision")
+    if quiet:
+        for name in FILES:
+            typer.echo(folder / name)
+        return
     for key, what in (("wall_s", "wall"), ("cpu_s", "CPU")):
         for s in wp.speedups(rows, key=key):
             typer.echo(f"error ≤ {s['error']:.0e} ({what} time): {s['flexmm_method']} {s['flexmm_s']:.4g} s vs "

@@ -1,36 +1,157 @@
-"""Helpers shared by CLI commands: loading a scene with user-facing errors."""
+"""Helpers shared by CLI commands: the one user-error handler, loading a scene, output paths.
+
+Every command is a ``UserErrorCommand``: a ``flexmm.errors.FlexmmError`` raised anywhere in it
+(bad config, scene that cannot be built, unstable dt, impossible plan, unknown field, bad option,
+unwritable output) is printed as ``error: <message>`` on stderr and exits with status 2, without
+a traceback. Commands therefore raise user errors and never catch them to exit.
+
+This module is imported for ``flexmm --help``: it must stay light (typer and the standard
+library only; flexmm.config and heavier modules are imported inside functions).
+"""
 
 from __future__ import annotations
 
+import os
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
+from typer.core import TyperCommand, TyperGroup
 
-from flexmm.config import ConfigError, Scene, load_scene
+from flexmm.errors import FlexmmError, OutputError, UsageError
+
+if TYPE_CHECKING:
+    from flexmm.config import Scene
 
 EXIT_USER_ERROR = 2
 EXIT_FAILED_RUN = 1
+EXIT_INTERRUPTED = 130
 
 OverrideOption = typer.Option(
     None, "--set", "-s", help="Override a config value, e.g. --set solver.dt_s=1e-6 (repeatable)."
 )
 
 
-def error(message: str, code: int = EXIT_USER_ERROR) -> typer.Exit:
-    typer.echo(f"error: {message}", err=True)
-    return typer.Exit(code)
+def user_error_message(exc: FlexmmError, ctx: typer.Context | None = None) -> str:
+    """``error: ...`` text of a user error, as printed by the CLI.
+
+    A config error lists its issues (each ``file:line: path: got ...; expected ...``) under a
+    count; an error about the scene (it cannot be built, dt too large, no plan) is prefixed with
+    the CONFIG argument of the command; command-line and output errors name what they concern.
+    """
+    issues = getattr(exc, "issues", None)
+    if issues:
+        n = len(issues)
+        what = "sweep" if ctx is not None and ctx.command.name == "sweep" else "config"
+        return "\n".join([f"error: {n} problem{'s' if n > 1 else ''} in the {what}:"]
+                         + [f"  {issue}" for issue in issues])
+    config = ctx.params.get("config") if ctx is not None else None
+    if config and not isinstance(exc, UsageError | OutputError):
+        return f"error: {config}: {exc}"
+    return f"error: {exc}"
+
+
+class _FlagsAsFlags:
+    """Help shows ``--force``, not ``--force <bool>``: flags take no value, so they get no metavar.
+
+    (Typer's rich help prints the type of every option, ``<bool>`` for flags included.)
+    """
+
+    def get_params(self, ctx: typer.Context) -> list:
+        params = super().get_params(ctx)
+        for param in params:
+            if getattr(param, "is_flag", False) and param.metavar is None:
+                param.metavar = ""
+        return params
+
+
+class UserErrorCommand(_FlagsAsFlags, TyperCommand):
+    """A typer command that turns user errors into ``error: <message>`` and exit status 2.
+
+    This is the only place the CLI catches ``FlexmmError``; everything else propagates (a failed
+    run exits 1 via ``typer.Exit``, an interrupted sweep 130, a bug keeps its traceback).
+    """
+
+    def invoke(self, ctx: typer.Context):
+        try:
+            return super().invoke(ctx)
+        except FlexmmError as exc:
+            typer.echo(user_error_message(exc, ctx), err=True)
+            raise typer.Exit(EXIT_USER_ERROR) from None
+
+
+class FlexmmGroup(_FlagsAsFlags, TyperGroup):
+    """The ``flexmm`` group: its own flags (``--version``, ``--help``, completion) shown as flags."""
+
+
+def error(message: str) -> UsageError:
+    """A command-line error to raise: ``raise error("give --a or --b, not both")``."""
+    return UsageError(message)
 
 
 def load_or_exit(path: str, overrides: list[str] | None) -> Scene:
+    """Load and validate a scene; ``ConfigError`` (a user error: exit 2) if it does not validate."""
+    from flexmm.config import load_scene
+
+    return load_scene(path, overrides or [])
+
+
+def analysis_request(spec: str | None):
+    """Parse ``--analysis`` (pulse[:FIELD], front[:FIELD], energy, none); UsageError if unknown."""
+    from flexmm.plan.output import parse_analysis
+
     try:
-        return load_scene(path, overrides or [])
-    except ConfigError as exc:
-        n = len(exc.issues)
-        typer.echo(f"error: {n} problem{'s' if n > 1 else ''} in the config:", err=True)
-        for issue in exc.issues:
-            typer.echo(f"  {issue}", err=True)
-        raise typer.Exit(EXIT_USER_ERROR) from None
+        return parse_analysis(spec)
+    except ValueError as exc:
+        raise UsageError(f"--analysis: {exc}") from None
+
+
+def check_output_dir(path: str | Path) -> Path:
+    """An output directory that exists or can be created, checked before any work is done.
+
+    ``OutputError`` if the path is an existing file, a parent is a file, or the nearest existing
+    directory is not writable. Nothing is created.
+    """
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"output path {p} exists and is not a directory")
+    probe = p.absolute()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OutputError(f"cannot create output directory {p}: {probe} is not a directory")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise OutputError(f"cannot create output directory {p}: {probe} is not writable")
+    return p
+
+
+def output_dir(path: str | Path) -> Path:
+    """``check_output_dir``, then create the directory (and its parents)."""
+    p = check_output_dir(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create output directory {p}: {exc.strerror or exc}") from None
+    return p
+
+
+@contextmanager
+def writing(where: str | Path) -> Iterator[None]:
+    """Turn an ``OSError`` while writing outputs into ``OutputError`` naming where and why."""
+    try:
+        yield
+    except OSError as exc:
+        name = f" {exc.filename}:" if exc.filename else ""
+        raise OutputError(f"cannot write outputs in {where}:{name} {exc.strerror or exc}") from None
 
 
 def stderr_is_tty() -> bool:
     return sys.stderr.isatty()
+
+
+__all__ = ["EXIT_FAILED_RUN", "EXIT_INTERRUPTED", "EXIT_USER_ERROR", "FlexmmGroup", "OverrideOption",
+           "UserErrorCommand", "analysis_request", "check_output_dir", "error", "load_or_exit", "output_dir",
+           "stderr_is_tty", "user_error_message", "writing"]

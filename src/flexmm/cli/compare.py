@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from flexmm.cli.common import OverrideOption, error, load_or_exit
+from flexmm.cli.common import OverrideOption, analysis_request, check_output_dir, error, load_or_exit, writing
 
 
 def compare(
@@ -18,23 +18,19 @@ def compare(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the comparison."),
 ) -> None:
     """Run a scene at two fidelities and report differences in speed, amplitude, width and cost."""
-    from flexmm.assemble import SceneError, UnstableStepError
-    from flexmm.plan import FIDELITIES, PlanError
-    from flexmm.plan.compare import compare_fidelities
-    from flexmm.plan.output import parse_analysis
+    from flexmm.fidelity import compare_fidelities
+    from flexmm.plan import FIDELITIES
 
     pair = tuple(f.strip() for f in fidelity.split(","))
     if len(pair) != 2 or any(f not in FIDELITIES for f in pair):
         raise error(f"--fidelity takes two of {', '.join(FIDELITIES)} separated by a comma, got {fidelity!r}")
-    request = parse_analysis(analysis)
+    request = analysis_request(analysis)
     if request is None or request.kind not in ("pulse", "front"):
         raise error("--analysis must be pulse[:FIELD] or front[:FIELD]")
     scene = load_or_exit(config, overrides)
-    root = Path(out) if out else Path(scene.output.directory) / scene.name / "compare"
+    root = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "compare")
     log = None if quiet else (lambda m: typer.echo(m, err=True))
-    try:
+    with writing(root):
         cmp = compare_fidelities(scene, pair, root, request, log=log)
-    except (PlanError, UnstableStepError, SceneError) as exc:
-        raise error(f"{config}: {exc}") from None
     for line in cmp.table():
         typer.echo(line)

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from flexmm.assemble import UnstableStepError
-from flexmm.cli.common import OverrideOption, error, load_or_exit
+from flexmm.cli.common import OverrideOption, analysis_request, load_or_exit
 
 FidelityOption = typer.Option("auto", "--fidelity", "-f", help="auto (reduce what keeps the answer), full, continuum.")
 AnalysisOption = typer.Option(
@@ -21,16 +20,22 @@ def plan(
     show_config: bool = typer.Option(False, "--show-config", help="Also print the planned scene as YAML."),
 ) -> None:
     """Plan a scene: domain reach and trimming, planar chain, continuum, output, integrator and dt."""
-    from flexmm.assemble import SceneError
+    from flexmm.errors import FlexmmError
     from flexmm.io.provenance import config_text
     from flexmm.plan import PlanError, make_plan
-    from flexmm.plan.output import parse_analysis
 
+    request = analysis_request(analysis)
     scene = load_or_exit(config, overrides)
     try:
-        p = make_plan(scene, fidelity, parse_analysis(analysis))
-    except (PlanError, UnstableStepError, SceneError, ValueError) as exc:
-        raise error(f"{config}: {exc}") from None
+        p = make_plan(scene, fidelity, request)
+    except FlexmmError:
+        raise
+    except ValueError as exc:  # the planner's plain ValueErrors (e.g. an absorbing layer wider than the lattice)
+        raise PlanError(str(exc)) from None
+    if p.scene.solver.accuracy is not None and not p.skip_discrete:
+        from flexmm.prepare import prepare
+
+        prepare(p)  # the accuracy pilots choose integrator and dt (they run; nothing is written)
     for line in p.lines():
         typer.echo(line)
     if show_config:

@@ -4,16 +4,10 @@ from __future__ import annotations
 
 import typer
 
-from flexmm.analysis import PulseNotFound, leading_pulse
-from flexmm.analysis.context import RunContext
-from flexmm.analysis.rest import from_rest, rest_fields
-from flexmm.api import run_scene
-from flexmm.assemble import SceneError, UnstableStepError
-from flexmm.cli.common import EXIT_FAILED_RUN, OverrideOption, error, load_or_exit, stderr_is_tty
+from flexmm.cli.common import (
+    EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, stderr_is_tty, writing,
+)
 from flexmm.cli.plan import AnalysisOption, FidelityOption
-from flexmm.io.dataset import open_run
-from flexmm.plan import PlanError
-from flexmm.plan.continuum import alongside
 
 
 def run(
@@ -21,28 +15,41 @@ def run(
     overrides: list[str] = OverrideOption,
     out: str = typer.Option(None, "--out", "-o", help="Run directory (default output.directory/name)."),
     force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path (no label)."),
     fidelity: str = FidelityOption,
     analysis: str = AnalysisOption,
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units)."""
+    from flexmm.api import run_dir_for, run_scene
+
     ov = list(overrides or [])
     if force:
         ov.append("solver.allow_unstable=true")
+    analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
     scene = load_or_exit(config, ov)
+    run_dir = check_output_dir(run_dir_for(scene, out))
     log = None if quiet else (lambda m: typer.echo(m, err=True))
-    try:
+    with writing(run_dir):
         result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
                            fidelity=fidelity, analysis=analysis)
-    except (UnstableStepError, SceneError, PlanError) as exc:
-        raise error(f"{config}: {exc}") from None
-    typer.echo(f"dataset: {result.path}")
+    typer.echo(result.path if quiet else f"dataset: {result.path}")
     if not result.ok:
         typer.echo(f"status: {result.status}: {result.reason}", err=True)
         raise typer.Exit(EXIT_FAILED_RUN)
     if quiet:
         return
-    ds = open_run(result.path)
+    _print_leading_pulse(result.path)
+
+
+def _print_leading_pulse(path) -> None:
+    """The quick single-pulse measurement of a finished run, with the continuum's prediction."""
+    from flexmm.analysis import PulseNotFound, leading_pulse
+    from flexmm.analysis.context import RunContext
+    from flexmm.analysis.rest import from_rest, rest_fields
+    from flexmm.io.dataset import open_run
+    from flexmm.plan.continuum import alongside
+
+    ds = open_run(path)
     ds = from_rest(ds, rest_fields(RunContext.from_dataset(ds)))  # a predeformed run: from its rest state
     field = "theta" if "theta" in ds else next(v for v in ds.data_vars if ds[v].dims == ("time", "site"))
     try:

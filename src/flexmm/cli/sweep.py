@@ -6,18 +6,9 @@ from pathlib import Path
 
 import typer
 
-from flexmm.cli.common import EXIT_FAILED_RUN, EXIT_USER_ERROR, OverrideOption, error, stderr_is_tty
-from flexmm.config import ConfigError
-
-EXIT_INTERRUPTED = 130
-
-
-def _config_error(exc: ConfigError) -> typer.Exit:
-    n = len(exc.issues)
-    typer.echo(f"error: {n} problem{'s' if n > 1 else ''} in the sweep:", err=True)
-    for issue in exc.issues:
-        typer.echo(f"  {issue}", err=True)
-    return typer.Exit(EXIT_USER_ERROR)
+from flexmm.cli.common import (
+    EXIT_FAILED_RUN, EXIT_INTERRUPTED, OverrideOption, check_output_dir, error, stderr_is_tty, writing,
+)
 
 
 def _load(path: str, vary: list[str], zip_axes: bool, overrides: list[str]):
@@ -89,7 +80,7 @@ def sweep(
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the points with their state; run nothing."),
     reanalyse: bool = typer.Option(False, "--reanalyse", help="Measure finished points again (no re-run)."),
     plot: str = typer.Option(None, "--plot", help="Also plot the finished sweep to this PNG."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the sweep dataset path."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths written (sweep dataset, figure)."),
 ) -> None:
     """Run every point of a sweep (skipping finished ones) and combine them into SWEEP_DIR/sweep.nc."""
     from flexmm.sweep.combine import write_combined
@@ -98,13 +89,10 @@ def sweep(
 
     if scheduler and local_dask:
         raise error("give --scheduler or --local-dask, not both")
-    try:
-        sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
-        base = sw.base_scene()
-        sweep_dir = Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name
-        plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
-    except ConfigError as exc:
-        raise _config_error(exc) from None
+    sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
+    base = sw.base_scene()
+    sweep_dir = check_output_dir(Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name)
+    plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
     say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
     n_distinct = len(plan.states)
     say(f"sweep {sw.name}: {sw.n_points} points ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
@@ -135,12 +123,15 @@ def sweep(
         raise typer.Exit(EXIT_INTERRUPTED)
     if report.n_pending:
         raise typer.Exit(EXIT_FAILED_RUN)
-    path = write_combined(plan)
-    typer.echo(f"sweep dataset: {path}")
+    with writing(sweep_dir):
+        path = write_combined(plan)
+    typer.echo(path if quiet else f"sweep dataset: {path}")
     if plot:
         from flexmm.sweep.plot import plot_sweep
 
-        typer.echo(f"figure: {plot_sweep(sweep_dir, plot)}")
+        with writing(plot):
+            figure = plot_sweep(sweep_dir, plot)
+        typer.echo(figure if quiet else f"figure: {figure}")
     if report.n_failed:
         _list_failed(plan)
         raise typer.Exit(EXIT_FAILED_RUN)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Literal, Union
+from typing import ClassVar, Literal, Union
 
 from pydantic import Field, model_validator
 
@@ -18,6 +18,8 @@ class RotatingSquaresChain(RigidOptions):
     """1D chain of rigid squares joined by hinges (PHYSICS.md §1.1), DOFs u and θ per unit."""
 
     kind: Literal["rotating_squares_chain"]
+    #: per-site coordinates of the built model, in state order (models.rotating_chain.FIELDS)
+    FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "theta")
     n_units: int = Field(ge=2, le=20_000_000, description="number of rigid units")
     a_m: Positive = Field(description="hinge-to-hinge size of a unit (m)")
     theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad)")

@@ -16,6 +16,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from flexmm.config.scene import Scene
+from flexmm.errors import FlexmmError
 
 Path_ = tuple[Any, ...]
 
@@ -54,7 +55,7 @@ class ConfigIssue:
         return f"{where}:{field} {self.message}"
 
 
-class ConfigError(Exception):
+class ConfigError(FlexmmError):
     """A user error in a config; ``str()`` is the full, readable report."""
 
     def __init__(self, issues: list[ConfigIssue]):

@@ -10,7 +10,7 @@ bond and (displacement − offset) on site.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import ClassVar, Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
@@ -226,6 +226,9 @@ class Friction(Strict):
 
 # ---------------------------------------------------------------- lattices
 class _MassLattice(Strict):
+    #: per-site coordinates of the built model (models.mass_chain.FIELDS)
+    FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u",)
+
     spacing_m: Positive = Field(description="distance between neighbouring sites (length scale)")
     mass_kg: Positive = Field(description="mass of a site")
     bond: Law = Field(description="nearest-neighbour law")

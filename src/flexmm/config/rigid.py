@@ -11,7 +11,7 @@ Options shared by the rotating-squares chain and sheet:
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from typing import ClassVar, Annotated, Literal, Union
 
 from pydantic import Field, model_validator
 
@@ -164,6 +164,8 @@ class RotatingSquaresSheet(RigidOptions):
     """
 
     kind: Literal["rotating_squares_sheet"]
+    #: per-site coordinates of the built model, in state order (models.rotating_sheet.FIELDS)
+    FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
     n_rows: int = Field(ge=1, le=100_000)
     n_cols: int = Field(ge=2, le=100_000)
     a_m: Positive = Field(description="hinge-to-hinge size (diagonal) of a unit (m)")
@@ -232,6 +234,8 @@ class BistableLinkage(Strict):
     """
 
     kind: Literal["bistable_linkage"]
+    #: per-site coordinates of the built model, in state order (models.rotating_sheet.FIELDS)
+    FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
     n_cols: int = Field(ge=2, le=1_000_000, description="units (crosses) per row; two rows")
     bar_length_m: Positive
     theta0_rad: float = Field(gt=0, lt=math.pi / 2, description="bar angle of the initial (folded) state")

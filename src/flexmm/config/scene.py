@@ -165,9 +165,7 @@ class Scene(Strict):
             if bad:
                 raise ValueError(f"imperfection.sites {bad} outside 0..{n - 1}")
         if self.output.fields is not None:
-            from flexmm.models import model_fields
-
-            valid = model_fields(lat.kind)
+            valid = type(lat).FIELD_NAMES
             unknown = [f for f in self.output.fields if f not in valid]
             if unknown:
                 raise ValueError(f"output.fields {unknown} not in this model's fields {list(valid)}")

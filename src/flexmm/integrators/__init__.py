@@ -5,14 +5,15 @@ order, energy behaviour and stability limit, so a new entry is checked automatic
 
 A new method must provide, as compiled functions:
 
-1. ``advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc) -> t``: advance
-   q, v (in place) from t to t + nsteps·h and return the new time. ``force(q, args, out)`` is
-   the model kernel, ``terms`` the external terms of ``common`` (contacts, dashpots, drives,
-   friction — all must be honoured), ``minv`` the inverse masses (0: held DOF), ``damp`` the
-   on-site viscous coefficients. ``acc[0]``/``acc[1]`` accumulate the dissipated energy and
-   the applied work; further slots (``common.ACC_*``, present if the caller allocated them
-   with ``new_acc``) count force evaluations and steps and hold any method state.
-2. ``init(force, args, q, v, t, f, terms)``: fill ``f`` with the total force at the start.
+1. ``advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc) -> t``: advance q, v (in
+   place) from t to t + nsteps·h and return the new time. ``args`` is the model's NamedTuple:
+   the model force is ``models.kernels.model_force(q, args, out)`` (dispatched on the type of
+   ``args``, so the loop takes no function argument and numba caches it). ``terms`` is a
+   ``common.Terms`` (contacts, dashpots, drives, friction — all must be honoured), ``minv`` the
+   inverse masses (0: held DOF), ``damp`` the on-site viscous coefficients. ``acc`` (from
+   ``new_acc``) accumulates the dissipated energy and the applied work in its named slots
+   (``common.ACC_*``), counts force evaluations and steps and holds any method state.
+2. ``init(args, q, v, t, f, terms)``: fill ``f`` with the total force at the start.
 3. Metadata below; ``stability_limit`` is max h·ω_max on the harmonic oscillator
    (``stability.linear_limit`` recomputes it from the method), inf for A-stable methods.
 """
@@ -27,12 +28,8 @@ import numpy as np
 
 from flexmm.integrators import composition, dopri5
 from flexmm.integrators.common import (
-    ACC_FEVALS,
     ACC_HEADER,
-    ACC_LINEAR,
-    ACC_REJECTED,
-    ACC_STEPS,
-    ACC_FAILED,
+    Accumulators,
     total_force,
 )
 from flexmm.integrators.implicit import midpoint_advance
@@ -78,11 +75,7 @@ class IntegratorSpec:
     @staticmethod
     def counters(acc: np.ndarray) -> dict[str, int]:
         """Work done so far, from an accumulator made by ``new_acc``."""
-        if acc.shape[0] < ACC_HEADER:
-            return {}
-        return {"force_evaluations": int(acc[ACC_FEVALS]), "steps": int(acc[ACC_STEPS]),
-                "rejected_or_newton": int(acc[ACC_REJECTED]), "krylov": int(acc[ACC_LINEAR]),
-                "failed": int(acc[ACC_FAILED])}
+        return Accumulators(acc).counters()
 
 
 INTEGRATORS: dict[str, IntegratorSpec] = {

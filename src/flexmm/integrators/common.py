@@ -13,10 +13,12 @@ Arrays (nondimensional):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm.models.kernels import model_force
 
 #: waveform codes and the meaning of their parameter row (A = amplitude)
 SHAPES = {
@@ -29,9 +31,8 @@ MODE_DISPLACEMENT = 0
 MODE_FORCE = 1
 MODE_FRICTION = 2
 
-#: Slots of the accumulator ``acc`` every ``advance`` updates. ``acc[:2]`` is the energy ledger;
-#: an accumulator from ``IntegratorSpec.new_acc`` (``ACC_HEADER`` slots, plus the state of an
-#: adaptive method) also counts work, and a bare ``np.zeros(2)`` is still accepted.
+#: Slots of the accumulator ``acc`` every ``advance`` updates (``IntegratorSpec.new_acc`` makes
+#: it: ``ACC_HEADER`` slots, plus the state of an adaptive method; ``Accumulators`` reads it).
 ACC_DISSIPATED = 0  # energy removed by damping, dashpots since t = 0
 ACC_WORK = 1  # work of applied forces (and ground friction) since t = 0
 ACC_FEVALS = 2  # model-force evaluations
@@ -40,6 +41,24 @@ ACC_REJECTED = 4  # rejected steps (adaptive) / Newton iterations (implicit)
 ACC_LINEAR = 5  # Krylov iterations (implicit)
 ACC_FAILED = 6  # steps whose Newton iteration did not converge (implicit)
 ACC_HEADER = 8
+
+
+class Terms(NamedTuple):
+    """External terms shared by all models (arrays of the module docstring; numba takes it)."""
+
+    con_ij: np.ndarray  # (C, 2) int64: contact pairs (i pushed back, j pushed on)
+    con_prm: np.ndarray  # (C, 3): k, exponent p, direction d
+    dash_ij: np.ndarray  # (P, 2) int64: dashpot pairs
+    dash_c: np.ndarray  # (P,): dashpot coefficients
+    drv_dof: np.ndarray  # (D,) int64: driven DOF
+    drv_mode: np.ndarray  # (D,) int64: MODE_DISPLACEMENT, MODE_FORCE or MODE_FRICTION
+    drv_shape: np.ndarray  # (D,) int64: waveform code (SHAPES)
+    drv_prm: np.ndarray  # (D, 4): waveform parameters
+
+    @property
+    def drives(self) -> tuple:
+        """(drv_dof, drv_mode, drv_shape, drv_prm), the arguments of ``apply_prescribed``."""
+        return self.drv_dof, self.drv_mode, self.drv_shape, self.drv_prm
 
 
 @jit
@@ -156,22 +175,21 @@ def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_m
     return applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def total_force(force, args, q, v, t, f, terms):
+@jit
+def total_force(args, q, v, t, f, terms):
     """Model force plus every external term at (q, v, t) into ``f``; returns the applied power."""
-    con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
-    force(q, args, f)
-    return external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm)
+    model_force(q, args, f)
+    return external_forces(q, v, t, f, terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c,
+                           terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
 
 
 @jit
 def has_velocity_terms(terms):
     """Whether the external terms depend on velocity (dashpots or ground friction)."""
-    dash_ij, drv_mode = terms[2], terms[5]
-    if dash_ij.shape[0] > 0:
+    if terms.dash_ij.shape[0] > 0:
         return True
-    for d in range(drv_mode.shape[0]):
-        if drv_mode[d] == MODE_FRICTION:
+    for d in range(terms.drv_mode.shape[0]):
+        if terms.drv_mode[d] == MODE_FRICTION:
             return True
     return False
 
@@ -194,26 +212,20 @@ def free_damping(damp, minv):
     return cd
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def acceleration(force, args, terms, minv, damp, t, q, v, f, a):
+@jit
+def acceleration(args, terms, minv, damp, t, q, v, f, a):
     """Impose prescribed DOFs at ``t``, then a = M⁻¹(F(q, v, t) − c v); ``f`` gets F.
 
     Returns (applied power, dissipated power) at (q, v, t): the rates of the energy ledger.
     """
-    drv_dof, drv_mode, drv_shape, drv_prm = terms[4], terms[5], terms[6], terms[7]
-    apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-    power = total_force(force, args, q, v, t, f, terms)
-    diss = dashpot_power(v, terms[2], terms[3])
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    power = total_force(args, q, v, t, f, terms)
+    diss = dashpot_power(v, terms.dash_ij, terms.dash_c)
     for k in range(q.shape[0]):
         a[k] = minv[k] * (f[k] - damp[k] * v[k])
         if minv[k] > 0.0:
             diss += damp[k] * v[k] * v[k]
     return power, diss
-
-
-def count(acc: np.ndarray, slot: int) -> float:
-    """A counter from an accumulator (0 if the caller passed the bare 2-slot ledger)."""
-    return float(acc[slot]) if acc.shape[0] > slot else 0.0
 
 
 @jit
@@ -238,15 +250,53 @@ def dashpot_power(v, dash_ij, dash_c):
     return s
 
 
-def empty_terms() -> dict[str, np.ndarray]:
-    """Arrays for a system with no drives, contacts or dashpots."""
-    return {
-        "con_ij": np.zeros((0, 2), np.int64),
-        "con_prm": np.zeros((0, 3)),
-        "dash_ij": np.zeros((0, 2), np.int64),
-        "dash_c": np.zeros(0),
-        "drv_dof": np.zeros(0, np.int64),
-        "drv_mode": np.zeros(0, np.int64),
-        "drv_shape": np.zeros(0, np.int64),
-        "drv_prm": np.zeros((0, 4)),
-    }
+def empty_terms() -> Terms:
+    """Terms of a system with no drives, contacts or dashpots."""
+    return Terms(np.zeros((0, 2), np.int64), np.zeros((0, 3)), np.zeros((0, 2), np.int64), np.zeros(0),
+                 np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 4)))
+
+
+class Accumulators:
+    """Named view of an accumulator array (the energy ledger and the work counters)."""
+
+    def __init__(self, acc: np.ndarray):
+        self.array = acc
+
+    @property
+    def dissipated(self) -> float:
+        """Energy removed by damping and dashpots since t = 0 (nondimensional)."""
+        return float(self.array[ACC_DISSIPATED])
+
+    @property
+    def work(self) -> float:
+        """Work of applied forces and ground friction since t = 0 (nondimensional)."""
+        return float(self.array[ACC_WORK])
+
+    @property
+    def force_evaluations(self) -> int:
+        return int(self.array[ACC_FEVALS])
+
+    @property
+    def steps(self) -> int:
+        """Steps taken (accepted steps of an adaptive method)."""
+        return int(self.array[ACC_STEPS])
+
+    @property
+    def rejected_or_newton(self) -> int:
+        """Rejected steps (adaptive) or Newton iterations (implicit)."""
+        return int(self.array[ACC_REJECTED])
+
+    @property
+    def krylov(self) -> int:
+        return int(self.array[ACC_LINEAR])
+
+    @property
+    def failed(self) -> int:
+        """Steps whose Newton iteration did not converge (implicit)."""
+        return int(self.array[ACC_FAILED])
+
+    def counters(self) -> dict[str, int]:
+        """The work counters as a dict (dataset attrs, benchmarks)."""
+        return {"force_evaluations": self.force_evaluations, "steps": self.steps,
+                "rejected_or_newton": self.rejected_or_newton, "krylov": self.krylov,
+                "failed": self.failed}

@@ -27,6 +27,8 @@ import numpy as np
 
 from flexmm._jit import jit
 from flexmm.integrators.common import (
+    ACC_DISSIPATED,
+    ACC_WORK,
     ACC_FEVALS,
     ACC_HEADER,
     ACC_REJECTED,
@@ -63,20 +65,20 @@ def state_size(ndof: int) -> int:
     return 8 + N_ARRAYS * (2 * ndof + 2)
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _slopes(force, args, terms, minv, damp, ts, y, ky, f, n):
+@jit
+def _slopes(args, terms, minv, damp, ts, y, ky, f, n):
     """K = dy/dt at (ts, y), y = [q (n), v (n), dissipated, work]; imposes prescribed DOFs on y."""
     q = y[:n]
     v = y[n : 2 * n]
     a = ky[n : 2 * n]
-    power, diss = acceleration(force, args, terms, minv, damp, ts, q, v, f, a)
+    power, diss = acceleration(args, terms, minv, damp, ts, q, v, f, a)
     ky[:n] = v
     ky[2 * n] = diss
     ky[2 * n + 1] = power
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _step(force, args, terms, minv, damp, t, h, y, K, ys, y_new, f, n):
+@jit
+def _step(args, terms, minv, damp, t, h, y, K, ys, y_new, f, n):
     """One DP5 step from y (K[0] = slopes at y); 5th-order result in y_new, its slopes in K[6]."""
     m = y.shape[0]
     for s in range(1, 7):
@@ -86,7 +88,7 @@ def _step(force, args, terms, minv, damp, t, h, y, K, ys, y_new, f, n):
             for j in range(s):
                 acc += A[s, j] * K[j, k]
             target[k] = y[k] + h * acc
-        _slopes(force, args, terms, minv, damp, t + C[s] * h, target, K[s], f, n)
+        _slopes(args, terms, minv, damp, t + C[s] * h, target, K[s], f, n)
 
 
 @jit
@@ -128,8 +130,8 @@ def _interpolate(r, theta, out):
         out[k] = r[0, k] + theta * (r[1, k] + th1 * (r[2, k] + theta * (r[3, k] + th1 * r[4, k])))
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _initial_step(force, args, terms, minv, damp, t, y, k1, rtol, atol, n, f):
+@jit
+def _initial_step(args, terms, minv, damp, t, y, k1, rtol, atol, n, f):
     """Starting step from the sizes of y, y' and y'' (Hairer, Nørsett & Wanner §II.4)."""
     d0 = 0.0
     d1 = 0.0
@@ -140,7 +142,7 @@ def _initial_step(force, args, terms, minv, damp, t, y, k1, rtol, atol, n, f):
     h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
     y1 = y + h0 * k1
     k2 = np.empty_like(y)
-    _slopes(force, args, terms, minv, damp, t + h0, y1, k2, f, n)
+    _slopes(args, terms, minv, damp, t + h0, y1, k2, f, n)
     d2 = 0.0
     for k in range(2 * n):
         d2 = max(d2, abs(k2[k] - k1[k]) / (atol + rtol * abs(y[k])))
@@ -150,44 +152,44 @@ def _initial_step(force, args, terms, minv, damp, t, y, k1, rtol, atol, n, f):
     return min(100.0 * h0, h1)
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _fixed(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit
+def _fixed(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Fixed steps of size h (no error control): the 5th-order solution of each step."""
     n = q.shape[0]
     m = 2 * n + 2
     y = np.empty(m)
     y[:n] = q
     y[n : 2 * n] = v
-    y[2 * n] = acc[0]
-    y[2 * n + 1] = acc[1]
+    y[2 * n] = acc[ACC_DISSIPATED]
+    y[2 * n + 1] = acc[ACC_WORK]
     K = np.empty((7, m))
     ys = np.empty(m)
     y_new = np.empty(m)
-    _slopes(force, args, terms, minv, damp, t, y, K[0], f, n)
+    _slopes(args, terms, minv, damp, t, y, K[0], f, n)
     for _ in range(nsteps):
-        _step(force, args, terms, minv, damp, t, h, y, K, ys, y_new, f, n)
+        _step(args, terms, minv, damp, t, h, y, K, ys, y_new, f, n)
         y[:] = y_new
         K[0] = K[6]
         t += h
     q[:] = y[:n]
     v[:] = y[n : 2 * n]
-    acc[0] = y[2 * n]
-    acc[1] = y[2 * n + 1]
+    acc[ACC_DISSIPATED] = y[2 * n]
+    acc[ACC_WORK] = y[2 * n + 1]
     if acc.shape[0] > ACC_STEPS:
         acc[ACC_FEVALS] += 1 + 6 * nsteps
         acc[ACC_STEPS] += nsteps
     return t
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def dopri5_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit
+def dopri5_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Return the state at t + nsteps·h, stepping adaptively (or fixed steps without state)."""
     n = q.shape[0]
     m = 2 * n + 2
     if nsteps <= 0:
         return t
     if acc.shape[0] < S_ARRAYS + N_ARRAYS * m or acc[S_RTOL] <= 0.0:
-        return _fixed(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+        return _fixed(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
     rtol, atol, h_max = acc[S_RTOL], acc[S_ATOL], acc[S_MAX_STEP]
     arrays = acc[S_ARRAYS : S_ARRAYS + N_ARRAYS * m].reshape((N_ARRAYS, m))
     y = arrays[0]
@@ -197,10 +199,10 @@ def dopri5_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     if acc[S_READY] == 0.0:
         y[:n] = q
         y[n : 2 * n] = v
-        y[2 * n] = acc[0]
-        y[2 * n + 1] = acc[1]
-        _slopes(force, args, terms, minv, damp, t, y, k1, f, n)
-        acc[S_H_NEXT] = _initial_step(force, args, terms, minv, damp, t, y, k1, rtol, atol, n, f)
+        y[2 * n] = acc[ACC_DISSIPATED]
+        y[2 * n + 1] = acc[ACC_WORK]
+        _slopes(args, terms, minv, damp, t, y, k1, f, n)
+        acc[S_H_NEXT] = _initial_step(args, terms, minv, damp, t, y, k1, rtol, atol, n, f)
         acc[ACC_FEVALS] += 2
         acc[S_T] = t
         acc[S_READY] = 1.0
@@ -217,7 +219,7 @@ def dopri5_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
             q[:] = np.nan  # step size underflow: report as a failed (non-finite) state
             return t_end
         K[0] = k1
-        _step(force, args, terms, minv, damp, tn, hn, y, K, ys, y_new, f, n)
+        _step(args, terms, minv, damp, tn, hn, y, K, ys, y_new, f, n)
         acc[ACC_FEVALS] += 6
         err = _error(K, y, y_new, hn, minv, rtol, atol, n)
         if err <= 1.0:  # NaN compares False: rejected, the step shrinks until it underflows
@@ -246,7 +248,7 @@ def dopri5_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         _interpolate(r, (t_end - acc[S_T_OLD]) / acc[S_H_OLD], out)
     q[:] = out[:n]
     v[:] = out[n : 2 * n]
-    acc[0] = out[2 * n]
-    acc[1] = out[2 * n + 1]
-    apply_prescribed(q, v, t_end, terms[4], terms[5], terms[6], terms[7])
+    acc[ACC_DISSIPATED] = out[2 * n]
+    acc[ACC_WORK] = out[2 * n + 1]
+    apply_prescribed(q, v, t_end, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
     return t_end

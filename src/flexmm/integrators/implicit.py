@@ -41,12 +41,13 @@ import numpy as np
 
 from flexmm._jit import jit
 from flexmm.integrators.common import (
+    ACC_DISSIPATED,
+    ACC_WORK,
     ACC_FAILED,
     ACC_FEVALS,
     ACC_LINEAR,
     ACC_REJECTED,
     ACC_STEPS,
-    applied_power,
     apply_prescribed,
     damping_power,
     free_damping,
@@ -63,12 +64,12 @@ CG_RTOL = 1e-6  # forcing term of the inexact Newton iteration
 MAX_CG = 500
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _residual(force, args, terms, minv, damp, q, v, V, t_mid, h, Q, F, R):
+@jit
+def _residual(args, terms, minv, damp, q, v, V, t_mid, h, Q, F, R):
     """R(V) on the free DOFs (0 on held ones); leaves Q and F at the midpoint. Returns P_applied."""
     for k in range(q.shape[0]):
         Q[k] = q[k] + 0.5 * h * V[k]
-    power = total_force(force, args, Q, V, t_mid, F, terms)
+    power = total_force(args, Q, V, t_mid, F, terms)
     for k in range(q.shape[0]):
         if minv[k] > 0.0:
             R[k] = (V[k] - v[k]) / minv[k] - 0.5 * h * (F[k] - damp[k] * V[k])
@@ -112,8 +113,8 @@ def _dot(x, y):
     return s
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _jacobian_product(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, x, out, W):
+@jit
+def _jacobian_product(args, terms, minv, damp, q, v, V, t_mid, h, R0, x, out, W):
     """out ≈ J x = (R(V + εx) − R(V))/ε, by one force evaluation."""
     Vp, Qp, Fp = W[0], W[1], W[2]
     xn = _norm_inf(x)
@@ -123,13 +124,13 @@ def _jacobian_product(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, x, 
     eps = 1e-7 * (1.0 + _norm_inf(V)) / xn
     for k in range(V.shape[0]):
         Vp[k] = V[k] + eps * x[k]
-    _residual(force, args, terms, minv, damp, q, v, Vp, t_mid, h, Qp, Fp, out)
+    _residual(args, terms, minv, damp, q, v, Vp, t_mid, h, Qp, Fp, out)
     for k in range(V.shape[0]):
         out[k] = (out[k] - R0[k]) / eps
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W):
+@jit
+def _cg(args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W):
     """Solve J δ = −R0 approximately by preconditioned CG; returns the iterations used."""
     r, z, p, Ap = W[3], W[4], W[5], W[6]
     delta[:] = 0.0
@@ -144,7 +145,7 @@ def _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W
     it = 0
     while it < MAX_CG:
         it += 1
-        _jacobian_product(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, p, Ap, W)
+        _jacobian_product(args, terms, minv, damp, q, v, V, t_mid, h, R0, p, Ap, W)
         pAp = _dot(p, Ap)
         if not pAp > 0.0:  # not positive definite (or NaN): keep what we have
             break
@@ -164,10 +165,10 @@ def _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W
     return it
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
+@jit
+def _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
     """One midpoint step of size h in place; False (q, v untouched) if Newton did not converge."""
-    drv_dof, drv_mode, drv_shape, drv_prm = terms[4], terms[5], terms[6], terms[7]
+    drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     n = q.shape[0]
     counting = acc.shape[0] > ACC_FAILED
     V, Q, R, delta, q_end, v_end, precond = work[7], work[8], work[9], work[10], work[11], work[12], work[13]
@@ -185,7 +186,7 @@ def _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
     power = 0.0
     rtol = NEWTON_RTOL
     for it in range(MAX_NEWTON):
-        power = _residual(force, args, terms, minv, damp, q, v, V, t_mid, h, Q, f, R)
+        power = _residual(args, terms, minv, damp, q, v, V, t_mid, h, Q, f, R)
         if counting:
             acc[ACC_FEVALS] += 1
             acc[ACC_REJECTED] += 1
@@ -193,8 +194,8 @@ def _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
         if it == 0:
             rtol = newton_rtol(res, size)
         if res <= rtol * size + FORCE_FLOOR * h:
-            acc[0] += h * damping_power(V, cd, terms[2], terms[3])
-            acc[1] += h * power
+            acc[ACC_DISSIPATED] += h * damping_power(V, cd, terms.dash_ij, terms.dash_c)
+            acc[ACC_WORK] += h * power
             for k in range(n):
                 q[k] += h * V[k]
                 v[k] = 2.0 * V[k] - v[k]
@@ -202,7 +203,7 @@ def _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
             if counting:
                 acc[ACC_STEPS] += 1
             return True
-        lin = _cg(force, args, terms, minv, damp, q, v, V, t_mid, h, R, delta, precond, work)
+        lin = _cg(args, terms, minv, damp, q, v, V, t_mid, h, R, delta, precond, work)
         if counting:
             acc[ACC_FEVALS] += lin
             acc[ACC_LINEAR] += lin
@@ -213,8 +214,8 @@ def _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
     return False
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def midpoint_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit
+def midpoint_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Advance ``nsteps`` implicit-midpoint steps of size ``h`` from ``t``; returns the new time.
 
     A step whose Newton iteration fails is retried as 2, 4, …, ``MAX_SPLIT`` substeps.
@@ -224,16 +225,16 @@ def midpoint_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
     work = np.empty((14, n))
     saved = np.empty((3, n))
     for _ in range(nsteps):
-        if not _step(force, args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
+        if not _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
             saved[0], saved[1], saved[2] = q, v, f
-            ledger = (acc[0], acc[1])
+            ledger = (acc[ACC_DISSIPATED], acc[ACC_WORK])
             sub, ok = 2, False
             while sub <= MAX_SPLIT and not ok:
                 q[:], v[:], f[:] = saved[0], saved[1], saved[2]
-                acc[0], acc[1] = ledger
+                acc[ACC_DISSIPATED], acc[ACC_WORK] = ledger
                 ok = True
                 for j in range(sub):
-                    if not _step(force, args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work):
+                    if not _step(args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work):
                         ok = False
                         break
                 sub *= 2

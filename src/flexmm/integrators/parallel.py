@@ -1,8 +1,8 @@
-"""Threaded variants and the rule for when to use them.
+"""Threaded variants, fused kernels and the rule for when to use them.
 
 Numba parallel loops pay only when a step has enough work to hide the fork/join of each
 parallel region (a few µs): ``PARALLEL_MIN_SITES`` (≈ 1e5 units, benchmarks/) is where two
-threads start to win on the chain. Below it, or for models without a threaded force kernel,
+threads start to win on the chain. Below it, or for methods without a threaded variant,
 everything runs on one thread.
 """
 
@@ -12,16 +12,14 @@ import os
 from typing import Callable
 
 import numba
+import numpy as np
 
-from flexmm.integrators.verlet import verlet_advance
-from flexmm.integrators.verlet_chain import chain_verlet_advance, chain_verlet_advance_parallel
-from flexmm.models.hinge import chain_force, chain_force_parallel
+from flexmm.integrators.verlet_chain import chain_verlet_advance, chain_verlet_advance_parallel, fusable
+from flexmm.models.hinge import ChainArgs
 
-#: serial force kernel -> the same kernel with threaded site loops
-PARALLEL_FORCES: dict[Callable, Callable] = {chain_force: chain_force_parallel}
-#: (advance, serial force kernel) -> (serial, threaded) advance fused with that force
-FUSED: dict[tuple[Callable, Callable], tuple[Callable, Callable]] = {
-    (verlet_advance, chain_force): (chain_verlet_advance, chain_verlet_advance_parallel),
+#: (integrator name, model args type) -> (serial, threaded) advance fused with that model's force
+FUSED: dict[tuple[str, type], tuple[Callable, Callable]] = {
+    ("velocity_verlet", ChainArgs): (chain_verlet_advance, chain_verlet_advance_parallel),
 }
 PARALLEL_MIN_SITES = 100_000
 
@@ -42,16 +40,18 @@ def choose_threads(n_sites: int, requested: int | None = None) -> int:
     return available_threads() if n_sites >= PARALLEL_MIN_SITES else 1
 
 
-def kernels(spec, force: Callable, threads: int) -> tuple[Callable, Callable, int]:
-    """(advance, force, threads actually used) for ``threads`` requested threads.
+def advance_kernel(spec, args, minv: np.ndarray, damp: np.ndarray, terms, threads: int) -> tuple[Callable, int]:
+    """(advance, threads actually used) of ``spec`` for a model with arguments ``args``.
 
-    Falls back to the serial kernels (and 1 thread) when the method or the model has no
-    threaded variant; uses the method's stepper fused with the model's force where ``FUSED``
-    has one (same results, less memory traffic). Sets numba's thread count when threads > 1.
+    Uses the method's stepper fused with the model's force where ``FUSED`` has one and the
+    scene allows it (``verlet_chain.fusable``: same results, less memory traffic); falls back
+    to the serial kernel (and 1 thread) when the method has no threaded variant. Sets numba's
+    thread count when threads > 1.
     """
-    par_force = PARALLEL_FORCES.get(force)
-    fused = FUSED.get((spec.advance, force))
-    if threads > 1 and spec.advance_parallel is not None and par_force is not None:
+    fused = FUSED.get((spec.name, type(args)))
+    if fused is not None and not fusable(args, np.empty(minv.shape[0]), minv, damp, terms):
+        fused = None
+    if threads > 1 and spec.advance_parallel is not None:
         numba.set_num_threads(threads)
-        return (fused[1] if fused else spec.advance_parallel), par_force, threads
-    return (fused[0] if fused else spec.advance), force, 1
+        return (fused[1] if fused else spec.advance_parallel), threads
+    return (fused[0] if fused else spec.advance), 1

@@ -14,17 +14,17 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.integrators.common import ACC_FEVALS, ACC_STEPS, acceleration, apply_prescribed
+from flexmm.integrators.common import ACC_DISSIPATED, ACC_WORK, ACC_FEVALS, ACC_STEPS, acceleration, apply_prescribed
 
 #: stage nodes and weights (×6)
 _NODES = (0.0, 0.5, 0.5, 1.0)
 _WEIGHTS = (1.0, 2.0, 2.0, 1.0)
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def _stage(force, args, terms, minv, damp, ts, Q, V, f, A, sq, sv, w, q, v, c_next, h):
+@jit
+def _stage(args, terms, minv, damp, ts, Q, V, f, A, sq, sv, w, q, v, c_next, h):
     """Slopes at stage state (Q, V, ts) added to the sums with weight ``w``; then the next stage state."""
-    power, diss = acceleration(force, args, terms, minv, damp, ts, Q, V, f, A)
+    power, diss = acceleration(args, terms, minv, damp, ts, Q, V, f, A)
     for k in range(Q.shape[0]):
         vk = V[k]
         sq[k] += w * vk
@@ -34,8 +34,8 @@ def _stage(force, args, terms, minv, damp, ts, Q, V, f, A, sq, sv, w, q, v, c_ne
     return power, diss
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def rk4_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit
+def rk4_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Advance ``nsteps`` RK4 steps of size ``h`` from ``t``; returns the new time.
 
     ``f`` is scratch (holds the last stage's total force); ``acc`` as in ``common.ACC_*``.
@@ -55,17 +55,17 @@ def rk4_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         diss = 0.0
         for s in range(4):
             c_next = _NODES[s + 1] if s < 3 else 0.0
-            p, d = _stage(force, args, terms, minv, damp, t + _NODES[s] * h, Q, V, f, A, sq, sv,
+            p, d = _stage(args, terms, minv, damp, t + _NODES[s] * h, Q, V, f, A, sq, sv,
                           _WEIGHTS[s], q, v, c_next, h)
             power += _WEIGHTS[s] * p
             diss += _WEIGHTS[s] * d
         for k in range(n):
             q[k] += h / 6.0 * sq[k]
             v[k] += h / 6.0 * sv[k]
-        acc[0] += h / 6.0 * diss
-        acc[1] += h / 6.0 * power
+        acc[ACC_DISSIPATED] += h / 6.0 * diss
+        acc[ACC_WORK] += h / 6.0 * power
         t += h
-        apply_prescribed(q, v, t, terms[4], terms[5], terms[6], terms[7])
+        apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
     if acc.shape[0] > ACC_STEPS:
         acc[ACC_FEVALS] += 4 * nsteps
         acc[ACC_STEPS] += nsteps

@@ -25,7 +25,7 @@ class RunawayGuard:
     def __init__(self, system, terms: tuple, e0: float):
         self.e_max = abs(e0)
         self.recent: deque[tuple[int, float]] = deque()
-        amp = float(np.sum(np.abs(terms[7][:, 0]))) if len(terms) > 7 else 0.0
+        amp = float(np.sum(np.abs(terms.drv_prm[:, 0])))
         self.drive_scale = float(np.sum(system.mass * system.v0**2)) + amp**2 * system.n_sites + 1e-12
 
     def runaway(self, energy: float, work: float) -> bool:

@@ -31,7 +31,10 @@ import math
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm.models.kernels import model_force
 from flexmm.integrators.common import (
+    ACC_DISSIPATED,
+    ACC_WORK,
     ACC_FEVALS,
     ACC_STEPS,
     applied_power,
@@ -79,7 +82,7 @@ def _kick_undamped(v, f, minv, tau):
 def _velocity_rhs(vv, fp, minv, damp, terms, out, gbuf):
     """out = M⁻¹(F_q + G(vv)) − γ vv with G the dashpot and friction forces."""
     gbuf[:] = 0.0
-    velocity_forces(vv, gbuf, terms[2], terms[3], terms[4], terms[5], terms[7])
+    velocity_forces(vv, gbuf, terms.dash_ij, terms.dash_c, terms.drv_dof, terms.drv_mode, terms.drv_prm)
     for k in range(vv.shape[0]):
         out[k] = minv[k] * (fp[k] + gbuf[k] - damp[k] * vv[k])
 
@@ -115,8 +118,8 @@ def _kick(v, f, minv, damp, terms, tau, vdep, damped, factors, work):
 
 @jit
 def _ledger_rates(v, t, cd, terms, dissipative):
-    diss = damping_power(v, cd, terms[2], terms[3]) if dissipative else 0.0
-    return diss, applied_power(v, t, terms[4], terms[5], terms[6], terms[7])
+    diss = damping_power(v, cd, terms.dash_ij, terms.dash_c) if dissipative else 0.0
+    return diss, applied_power(v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
 
 
 def _kick_slots(kicks: tuple) -> tuple[tuple, tuple]:
@@ -151,13 +154,14 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
     NSLOT = len(VALUES)
     EVALS = M if FSAL else M - 1
 
-    @jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-    def advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    @jit
+    def advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         """Advance ``nsteps`` steps of size ``h`` from ``t``; returns the new time.
 
         ``f`` is scratch (the last kick's force); ``acc`` as in ``common.ACC_*``.
         """
-        con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
+        con_ij, con_prm, dash_ij, dash_c = terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c
+        drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
         n = q.shape[0]
         cd = free_damping(damp, minv)
         damped = False
@@ -173,7 +177,7 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
         d0, p0 = _ledger_rates(v, t, cd, terms, dissipative)
         if FSAL:
             apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-            force(q, args, f)
+            model_force(q, args, f)
             position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
         for _ in range(nsteps):
             ts = t
@@ -187,15 +191,15 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
                 if s == M - 1 and not FSAL:
                     break  # a drift-first method ends with this drift
                 apply_prescribed(q, v, ts, drv_dof, drv_mode, drv_shape, drv_prm)
-                force(q, args, f)
+                model_force(q, args, f)
                 position_forces(q, ts, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
             if FSAL:
                 _kick(v, f, minv, damp, terms, KICKS[M] * h, vdep, damped, factors[SLOT[M]], work)
             t += h
             apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
             d1, p1 = _ledger_rates(v, t, cd, terms, dissipative)
-            acc[0] += 0.5 * h * (d0 + d1)
-            acc[1] += 0.5 * h * (p0 + p1)
+            acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
+            acc[ACC_WORK] += 0.5 * h * (p0 + p1)
             d0, p0 = d1, p1
         if acc.shape[0] > ACC_STEPS:
             acc[ACC_FEVALS] += EVALS * nsteps + (1 if FSAL else 0)

@@ -25,7 +25,10 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit, prange
+from flexmm.models.kernels import model_force, model_force_parallel
 from flexmm.integrators.common import (
+    ACC_DISSIPATED,
+    ACC_WORK,
     ACC_FEVALS,
     ACC_STEPS,
     applied_power,
@@ -41,10 +44,10 @@ from flexmm.integrators.common import (
 BLOCK = 8192
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def verlet_force(force, args, q, v, t, f, terms):
+@jit
+def verlet_force(args, q, v, t, f, terms):
     """Total force at (q, v, t): model forces plus contacts, dashpots and applied forces."""
-    return total_force(force, args, q, v, t, f, terms)
+    return total_force(args, q, v, t, f, terms)
 
 
 @jit
@@ -115,7 +118,8 @@ def _onsite_power(v, cd):
 @jit
 def _external(q, v, t, f, terms, kick, post, f_model, v_pred, vdep):
     """Add external terms to the model force in ``f``; velocity terms at the predicted v'."""
-    con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms
+    con_ij, con_prm, dash_ij, dash_c = terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c
+    drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     if vdep:
         f_model[:] = f
     power = external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm)
@@ -134,8 +138,8 @@ def _count(acc, nsteps):
         acc[ACC_STEPS] += nsteps
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit
+def verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """Advance ``nsteps`` steps of size ``h`` from time ``t``; returns the new time.
 
     ``f`` must hold the total force at entry and is kept current. ``acc`` accumulates the
@@ -143,11 +147,12 @@ def verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """
     if nsteps <= 0:
         return t
-    dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms[2:]
+    dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = (terms.dash_ij, terms.dash_c, terms.drv_dof,
+                                                          terms.drv_mode, terms.drv_shape, terms.drv_prm)
     n = q.shape[0]
     kick, pre, post, cd, damped = _factors(minv, damp, h)
     vdep = has_velocity_terms(terms)
-    external = terms[0].shape[0] + dash_ij.shape[0] + drv_dof.shape[0] > 0
+    external = terms.con_ij.shape[0] + dash_ij.shape[0] + drv_dof.shape[0] > 0
     dissipative = damped or dash_ij.shape[0] > 0
     f_model = np.empty(n if vdep else 0)
     v_pred = np.empty(n if vdep else 0)
@@ -156,13 +161,13 @@ def verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         power0 = applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)  # with v½ at t
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        force(q, args, f)
+        model_force(q, args, f)
         power = 0.0
         if external:
             power = _external(q, v, t, f, terms, kick, post, f_model, v_pred, vdep)
         if dissipative:
-            acc[0] += h * damping_power(v, cd, dash_ij, dash_c)
-        acc[1] += 0.5 * h * (power0 + power)
+            acc[ACC_DISSIPATED] += h * damping_power(v, cd, dash_ij, dash_c)
+        acc[ACC_WORK] += 0.5 * h * (power0 + power)
         if s < nsteps - 1:
             _end_start(q, v, f, kick, pre, post, h, damped)
         else:
@@ -171,20 +176,21 @@ def verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     return t
 
 
-@jit(parallel=True, cache=False)  # takes the force kernel (see flexmm._jit)
-def verlet_advance_parallel(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit(parallel=True)
+def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """``verlet_advance`` with the DOF passes split over numba's threads (same arguments).
 
-    Pass a parallel force kernel (``integrators.parallel.parallel_force``) to use the threads
+    The model's threaded force kernel (``models.kernels.model_force_parallel``) uses the threads
     for the force too; the scheme and results are those of ``verlet_advance``.
     """
     if nsteps <= 0:
         return t
-    dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = terms[2:]
+    dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm = (terms.dash_ij, terms.dash_c, terms.drv_dof,
+                                                          terms.drv_mode, terms.drv_shape, terms.drv_prm)
     n = q.shape[0]
     kick, pre, post, cd, damped = _factors(minv, damp, h)
     vdep = has_velocity_terms(terms)
-    external = terms[0].shape[0] + dash_ij.shape[0] + drv_dof.shape[0] > 0
+    external = terms.con_ij.shape[0] + dash_ij.shape[0] + drv_dof.shape[0] > 0
     nb = max(1, min(n // BLOCK, 16))
     f_model = np.empty(n if vdep else 0)
     v_pred = np.empty(n if vdep else 0)
@@ -195,7 +201,7 @@ def verlet_advance_parallel(force, args, q, v, f, minv, damp, terms, t, h, nstep
         power0 = applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        force(q, args, f)
+        model_force_parallel(q, args, f)
         power = 0.0
         if external:
             power = _external(q, v, t, f, terms, kick, post, f_model, v_pred, vdep)
@@ -204,10 +210,10 @@ def verlet_advance_parallel(force, args, q, v, f, minv, damp, terms, t, h, nstep
             for b in prange(nb):
                 lo, hi = b * n // nb, (b + 1) * n // nb
                 diss += _onsite_power(v[lo:hi], cd[lo:hi])
-            acc[0] += h * diss
+            acc[ACC_DISSIPATED] += h * diss
         if dash_ij.shape[0] > 0:
-            acc[0] += h * dashpot_power(v, dash_ij, dash_c)
-        acc[1] += 0.5 * h * (power0 + power)
+            acc[ACC_DISSIPATED] += h * dashpot_power(v, dash_ij, dash_c)
+        acc[ACC_WORK] += 0.5 * h * (power0 + power)
         last = s == nsteps - 1
         for b in prange(nb):
             lo, hi = b * n // nb, (b + 1) * n // nb

@@ -17,7 +17,7 @@ chain, whose parameter tables are replaced by block-sized copies that stay in ca
 (``_cached_tables``; benchmarks/).
 
 Used for scenes without damping or external terms (contacts, dashpots, drives) and with the
-chain's own hinge order; anything else goes to ``verlet_advance`` unchanged.
+chain's own hinge order (``fusable``); anything else runs ``verlet_advance``.
 """
 
 from __future__ import annotations
@@ -25,25 +25,26 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit, prange
-from flexmm.integrators.verlet import BLOCK, _count, _start, verlet_advance, verlet_advance_parallel
-from flexmm.models.hinge import CACHE_BLOCK, PARALLEL_BLOCK, chain_block, hinge_at
+from flexmm.integrators.verlet import BLOCK, _count, _start
+from flexmm.models.hinge import CACHE_BLOCK, PARALLEL_BLOCK, ChainArgs, chain_block, hinge_at
 
 
-@jit
-def _fusable(args, q, minv, damp, terms):
-    """Whether the fused sweep applies: chain-ordered hinges, 2N DOFs, no damping, no terms."""
-    ha, hb, _, sprm, _, _ = args
-    n = sprm.shape[0]
-    if q.shape[0] != 2 * n or ha.shape[0] != n - 1:
+def fusable(args, q: np.ndarray, minv: np.ndarray, damp: np.ndarray, terms) -> bool:
+    """Whether the fused sweep applies: chain-ordered hinges, 2N DOFs, no damping, no terms.
+
+    Checked once in Python when a stepper is made (``parallel.advance_kernel``), so the fused
+    kernels carry no fallback and a first run compiles one Verlet kernel, not two.
+    """
+    if not isinstance(args, ChainArgs):
         return False
-    if terms[0].shape[0] + terms[2].shape[0] + terms[4].shape[0] > 0:
+    n = args.site_prm.shape[0]
+    if q.shape[0] != 2 * n or args.hinge_a.shape[0] != n - 1:
         return False
-    bad = 0
-    for k in range(q.shape[0]):
-        bad += damp[k] * minv[k] != 0.0
-    for i in range(n - 1):
-        bad += (ha[i] != i) | (hb[i] != i + 1)
-    return bad == 0
+    if terms.con_ij.shape[0] + terms.dash_ij.shape[0] + terms.drv_dof.shape[0] > 0:
+        return False
+    idx = np.arange(n - 1)
+    return (not np.any(damp * minv != 0.0) and np.array_equal(args.hinge_a, idx)
+            and np.array_equal(args.hinge_b, idx + 1))
 
 
 @jit
@@ -155,11 +156,14 @@ def _range_step(q, v, f, kick, args, tables, buf, edges, n_ranges, r, h, last):
            (edges[r, 0], edges[r, 2]), (edges[r + 1, 0], edges[r + 1, 1], edges[r + 1, 2]), h, last)
 
 
-@jit(cache=False)  # takes the model's force kernel (see flexmm._jit)
-def chain_verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """``verlet_advance`` for ``hinge.chain_force`` (same arguments and results), fused."""
-    if nsteps <= 0 or not _fusable(args, q, minv, damp, terms):
-        return verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+@jit
+def chain_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``verlet_advance`` for ``hinge.chain_force`` (same arguments and results), fused.
+
+    Only for states where ``fusable`` holds (the caller checks).
+    """
+    if nsteps <= 0:
+        return t
     kick, tables, buf, edges = _prepare(args, minv, h, 1)
     _start(q, v, f, kick, kick, h, False)
     for s in range(nsteps):
@@ -169,11 +173,11 @@ def chain_verlet_advance(force, args, q, v, f, minv, damp, terms, t, h, nsteps, 
     return t
 
 
-@jit(parallel=True, cache=False)  # takes the force kernel (see flexmm._jit)
-def chain_verlet_advance_parallel(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+@jit(parallel=True)
+def chain_verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     """``chain_verlet_advance`` with the site ranges shared out among numba's threads."""
-    if nsteps <= 0 or not _fusable(args, q, minv, damp, terms):
-        return verlet_advance_parallel(force, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+    if nsteps <= 0:
+        return t
     nr = max(1, min(args[3].shape[0] // PARALLEL_BLOCK, 16))  # fixed ranges (not thread count)
     kick, tables, buf, edges = _prepare(args, minv, h, nr)
     nd = q.shape[0]

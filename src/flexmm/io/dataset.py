@@ -15,6 +15,9 @@ import numpy as np
 
 from flexmm.io.atomic import temporary_name
 
+#: suffix of the site coordinates holding a predeformed run's rest state (``u_rest``, ``theta_rest``)
+REST_SUFFIX = "_rest"
+
 BUFFER_BYTES = 32 * 2**20
 CHUNK_BYTES = 4 * 2**20
 

@@ -7,7 +7,7 @@ models may append extra DOFs after the lattice (a striker mass, for instance).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import NamedTuple, Callable
 
 import numpy as np
 
@@ -23,6 +23,58 @@ class FieldSpec:
     long_name: str
 
 
+@dataclass(frozen=True)
+class GroundFriction:
+    """Regularised Coulomb friction against the ground, per listed site (nondimensional).
+
+    The assembler turns it into explicit drive rows on the longitudinal field (``assemble.apply_friction``).
+    """
+
+    sites: np.ndarray
+    """(k,) int64 site indices that feel friction."""
+    forward: np.ndarray
+    """(k,) friction force level for velocity > 0 (units of ``Scales.force``)."""
+    backward: np.ndarray
+    """(k,) friction force level for velocity < 0 (units of ``Scales.force``)."""
+    velocity: float
+    """Regularisation velocity v_ε below which the force ramps linearly (units of ``Scales.velocity``)."""
+
+
+@dataclass(frozen=True)
+class Predeformation:
+    """The static equilibrium a predeformed lattice starts from (``models.predeform.relax``)."""
+
+    rest_state: np.ndarray
+    """(n_fields * n_sites,) nondimensional lattice state of the loaded equilibrium (no extra DOFs)."""
+    residual: float
+    """Max |force| over the free DOFs at the end of the minimisation (nondimensional)."""
+    steps: int
+    """FIRE steps taken."""
+    energy: float
+    """Potential energy of the equilibrium, loads included (nondimensional)."""
+
+
+@dataclass(frozen=True)
+class RotatingSquaresND:
+    """Nondimensional parameters of the uniform rotating-squares lattice (PHYSICS.md §1.1).
+
+    The arguments of ``flexmm.theory.rotating.RotatingChainND``, for soliton launchers and checks.
+    """
+
+    theta0: float
+    """Rest angle of the squares [rad]."""
+    Ks: float
+    """Shear stiffness k_s / k_l."""
+    Ktheta: float
+    """Rotational stiffness k_θ / (k_l a²)."""
+    alpha2: float
+    """Rotational inertia J / (m a²)."""
+    n_v: int
+    """Lateral hinges per unit (0, 1, 2)."""
+    s_v: int
+    """1 if lateral contraction is blocked, else 0."""
+
+
 @dataclass
 class System:
     """A model ready to integrate (nondimensional).
@@ -33,12 +85,15 @@ class System:
     n_sites : number of lattice sites.
     mass : (ndof,) generalised masses (inertia for angle DOFs), used for kinetic energy.
     inv_mass : (ndof,) inverse masses; 0 for fixed or prescribed DOFs.
-    force : compiled ``force(q, args, out)`` writing -dE/dq into ``out`` (ndof,).
-    energy : compiled ``energy(q, args) -> float`` potential energy.
-    args : tuple of arrays the kernels read (connectivity, per-element parameters, scratch).
+    args : the model's NamedTuple of arrays its kernels read (connectivity, per-element
+        parameters, scratch); its type selects the kernels (``models.kernels.KERNELS``):
+        ``force``, ``energy`` and ``reference`` below are those kernels.
     q0, v0 : (ndof,) initial state.
     site_coords : name -> (n_sites,) rest coordinates in SI, for the dataset.
     extra_dofs : name -> (index, kind) of DOFs beyond the lattice (e.g. the striker).
+
+    The fields after ``extra_dofs`` describe the lattice to the assembler, planners and analyses;
+    each has its own docstring.
     """
 
     model: str
@@ -47,20 +102,82 @@ class System:
     scales: Scales
     mass: np.ndarray
     inv_mass: np.ndarray
-    force: Callable[..., None]
-    energy: Callable[..., float]
-    args: tuple
+    args: NamedTuple
     q0: np.ndarray
     v0: np.ndarray
     spacing_m: float
     site_coords: dict[str, np.ndarray] = field(default_factory=dict)
     extra_dofs: dict[str, tuple[int, str]] = field(default_factory=dict)
-    reference: Callable[..., tuple[float, np.ndarray]] | None = None
-    meta: dict[str, Any] = field(default_factory=dict)
+    ends: dict[str, list[int]] = field(default_factory=dict)
+    """End name ('left', 'right', 'bottom', 'top') -> its site indices (excitations, loads, fixed ends)."""
+    longitudinal_field: str = "u"
+    """Field along x: default field of ends, kicks and drives; dashpots and friction act on it."""
+    rotation_field: str | None = None
+    """Field of the unit rotations [rad]; None for models without rotations."""
+    axis_fields: dict[str, str] = field(default_factory=dict)
+    """Axis ('x', 'y') -> displacement field along it; filled with {'x': longitudinal_field} if empty."""
+    end_fields: dict[str, str] = field(default_factory=dict)
+    """End name -> the field normal to that end (drives, loads); ends not listed get longitudinal_field."""
+    omega_ref: float = 1.0
+    """Reference angular frequency (nondimensional) that viscous damping ratios are relative to."""
+    grid_shape: tuple[int, int] | None = None
+    """(n_rows, n_cols) of a rectangular lattice with site = row * n_cols + col; None otherwise."""
+    site_coord_attrs: dict[str, tuple[str, str]] = field(default_factory=dict)
+    """site_coords name -> (units, long_name) for coordinates that are not lengths in m."""
+    neighbour_pairs: np.ndarray | None = None
+    """(P, 2) int site pairs joined by dashpots on the longitudinal field (nearest-neighbour bonds;
+    x hinges of the rigid sheets); None: consecutive sites (i, i + 1)."""
+    site_groups: dict[str, list[int]] = field(default_factory=dict)
+    """Named site groups (branches and junctions of a mass network) -> site indices."""
+    friction: GroundFriction | None = None
+    """Ground friction on the longitudinal field, or None."""
+    predeformation: Predeformation | None = None
+    """The static equilibrium q0 was relaxed to (``lattice.predeform``); None for a stress-free start."""
+    rotating_squares: RotatingSquaresND | None = None
+    """Nondimensional rotating-squares parameters (rotating-squares chain and sheet models); else None."""
+    initial_displacement_m: np.ndarray | None = None
+    """(n_sites,) SI displacements of the initial (relaxed) state, folded into the element shifts so
+    that q = 0 there (mass models); None for other models."""
+    relax_residual: float | None = None
+    """Max residual force (nondimensional) of that initial relaxation (mass models with relax); else None."""
+
+    def __post_init__(self) -> None:
+        if not self.axis_fields:
+            self.axis_fields = {"x": self.longitudinal_field}
+
+    @property
+    def rest_state(self) -> np.ndarray | None:
+        """(n_fields * n_sites,) predeformed equilibrium state, or None (the rest state is q = 0)."""
+        return None if self.predeformation is None else self.predeformation.rest_state
+
+    @property
+    def force(self) -> Callable[..., None]:
+        """Compiled ``force(q, args, out)`` writing −∂E/∂q into ``out`` (ndof,)."""
+        from flexmm.models.kernels import kernels_of
+
+        return kernels_of(type(self.args)).force
+
+    @property
+    def energy(self) -> Callable[..., float]:
+        """Compiled ``energy(q, args) -> float``, the potential energy."""
+        from flexmm.models.kernels import kernels_of
+
+        return kernels_of(type(self.args)).energy
+
+    @property
+    def reference(self) -> Callable[..., tuple[float, np.ndarray]]:
+        """Numpy ``reference(q, args) -> (E, F)``: the tests' oracle for the compiled kernels."""
+        from flexmm.models.kernels import kernels_of
+
+        return kernels_of(type(self.args)).reference
 
     @property
     def ndof(self) -> int:
         return self.mass.shape[0]
+
+    def end_field(self, end: str) -> str:
+        """The field normal to ``end`` (``end_fields``, else the longitudinal field)."""
+        return self.end_fields.get(end, self.longitudinal_field)
 
     def field_index(self, name: str) -> int:
         for k, f in enumerate(self.fields):
@@ -84,3 +201,10 @@ class System:
 
     def kinetic_energy(self, v: np.ndarray) -> float:
         return 0.5 * float(np.dot(self.mass, v * v))
+
+    def site_grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """Integer site indices (ix, iy) (n_sites,) from the rest coordinates (iy = 0 for chains)."""
+        h = self.spacing_m
+        x = np.asarray(self.site_coords.get("x", np.arange(self.n_sites) * h), float)
+        y = np.asarray(self.site_coords.get("y", np.zeros(self.n_sites)), float)
+        return np.rint((x - x.min()) / h).astype(np.int64), np.rint((y - y.min()) / h).astype(np.int64)

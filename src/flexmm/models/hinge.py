@@ -20,6 +20,7 @@ E_v = ½ k_g (cos θ0 − cos(θ0+θ))² + ½ k_r θ² with k_g = n_v s_v k_l a�
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -202,6 +203,22 @@ def _chain_hinges_general(q, ha, hb, hprm, cs, sn, out, n):
 def _chain_fallback(q, ha, hb, hprm, sprm, cs, sn, out, n):
     _sites_block(q, sprm, cs, sn, out, n, 0, n)
     _chain_hinges_general(q, ha, hb, hprm, cs, sn, out, n)
+
+
+class ChainArgs(NamedTuple):
+    """What the chain kernels read (``chain_force``, ``chain_energy``; numba takes NamedTuples).
+
+    ``hinge_a``/``hinge_b`` (H,) the units each hinge joins, ``hinge_prm`` (H, 7) its law's
+    parameters (``H_*`` columns), ``site_prm`` (N, 3) each unit's on-site parameters (``S_*``),
+    ``cos``/``sin`` (N,) scratch for the units' angles.
+    """
+
+    hinge_a: np.ndarray
+    hinge_b: np.ndarray
+    hinge_prm: np.ndarray
+    site_prm: np.ndarray
+    cos: np.ndarray
+    sin: np.ndarray
 
 
 @jit

@@ -10,10 +10,10 @@ parameters (``mass_params``) and variation (``mass_variation``) only build those
 Nondimensional units: length = site spacing a, mass = site mass m, time = sqrt(m/k_ref) with
 k_ref the bond law's rest stiffness (or ``reference_stiffness_n_per_m``), so speeds are in
 units of c0 = a sqrt(k_ref/m). ``u`` is the displacement from the initial state: the initial
-(relaxed) positions are folded into the element shifts and kept in ``meta['initial_m']``.
+(relaxed) positions are folded into the element shifts and kept in ``System.initial_displacement_m``.
 
 Ground friction is a velocity-dependent force; it is not part of the conservative kernels
-but listed in ``meta['friction']`` for the assembler (explicit term, see ``assemble``).
+but listed in ``System.friction`` for the assembler (explicit term, see ``assemble``).
 """
 
 from __future__ import annotations
@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from flexmm._jit import jit
 from flexmm.models import laws as lw
-from flexmm.models.base import FieldSpec, System
+from flexmm.models.base import FieldSpec, GroundFriction, System
+from flexmm.models.mass_kernels import MassArgs, mass_energy, mass_force
 from flexmm.models.mass_params import law_rows, rest_stiffness
 from flexmm.models.mass_topology import Topology, build_topology
 from flexmm.models.mass_variation import apply_variation
@@ -33,58 +33,6 @@ from flexmm.units import Scales
 FIELDS = (FieldSpec("u", "length", "displacement"),)
 
 
-@jit
-def mass_force(q, args, out):
-    """−∂E/∂q into ``out`` (ndof,). ``args`` = (bi (B,), bj (B,), bcode (B,), bprm (B, P),
-    si (S,), scode (S,), sprm (S, P), tab (T,)); DOFs beyond the sites get only what acts on them."""
-    bi, bj, bcode, bprm, si, scode, sprm, tab = args
-    for k in range(out.shape[0]):
-        out[k] = 0.0
-    for b in range(bi.shape[0]):
-        i = bi[b]
-        j = bj[b]
-        _, t = lw.law(bcode[b], q[j] - q[i], bprm[b], tab)
-        out[i] += t
-        out[j] -= t
-    for s in range(si.shape[0]):
-        i = si[s]
-        _, d = lw.law(scode[s], q[i], sprm[s], tab)
-        out[i] -= d
-
-
-@jit
-def mass_energy(q, args):
-    """Potential energy Σ_bonds E_b + Σ_terms V_t (same ``args`` as ``mass_force``)."""
-    bi, bj, bcode, bprm, si, scode, sprm, tab = args
-    total = 0.0
-    for b in range(bi.shape[0]):
-        e, _ = lw.law(bcode[b], q[bj[b]] - q[bi[b]], bprm[b], tab)
-        total += e
-    for s in range(si.shape[0]):
-        e, _ = lw.law(scode[s], q[si[s]], sprm[s], tab)
-        total += e
-    return total
-
-
-def mass_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
-    """Numpy oracle: each element through its law's numpy reference, forces by ``np.add.at``."""
-    bi, bj, bcode, bprm, si, scode, sprm, tab = args
-    f = np.zeros_like(q)
-    energy = 0.0
-    for code in np.unique(bcode):
-        for b in np.flatnonzero(bcode == code):
-            e, t = lw.reference(int(code), q[bj[b]] - q[bi[b]], bprm[b], tab)
-            energy += float(e)
-            np.add.at(f, [bi[b], bj[b]], [float(t), -float(t)])
-    for code in np.unique(scode):
-        for s in np.flatnonzero(scode == code):
-            e, d = lw.reference(int(code), q[si[s]], sprm[s], tab)
-            energy += float(e)
-            f[si[s]] -= float(d)
-    return energy, f
-
-
-# ---------------------------------------------------------------- building
 def _law_slots(cfg, topo: Topology) -> list[tuple[str, object, np.ndarray]]:
     """(prefix, law, elements) for every law family: bonds, bonds2, on-site terms."""
     slots = [("bond", cfg.bond, topo.bonds)]
@@ -164,7 +112,7 @@ def element_arrays(cfg, topo: Topology, vals: dict, sc: Scales) -> tuple:
         for site, sign in ((0, 1.0), (topo.n_sites - 1, -1.0)):
             sites.append((np.array([site]), lw.POLY, lw.poly_row([-sign * p])[None, :]))
     tab = _tables(made, tabs)
-    return _pack_bonds(bonds) + _pack_sites(sites) + (tab,)
+    return MassArgs(*_pack_bonds(bonds), *_pack_sites(sites), tab)
 
 
 def _pack_bonds(groups) -> tuple:
@@ -245,13 +193,13 @@ def _fixed_sites(cfg, topo: Topology, conditions=("fixed",)) -> list[int]:
     return out
 
 
-def friction_arrays(fr, force_n: np.ndarray, sc: Scales) -> dict:
+def friction_arrays(fr, force_n: np.ndarray, sc: Scales) -> GroundFriction:
     """Nondimensional regularised-Coulomb levels per site (forward v > 0, backward v < 0)."""
     ratio = 1.0 if fr.backward_force_n is None else (
         fr.backward_force_n / fr.force_n if fr.force_n > 0 else math.inf)
     back = force_n * ratio if math.isfinite(ratio) else np.full(force_n.size, fr.backward_force_n)
-    return {"sites": np.arange(force_n.size, dtype=np.int64), "forward": force_n / sc.force,
-            "backward": back / sc.force, "velocity": fr.regularisation_m_s / sc.velocity}
+    return GroundFriction(sites=np.arange(force_n.size, dtype=np.int64), forward=force_n / sc.force,
+                          backward=back / sc.force, velocity=fr.regularisation_m_s / sc.velocity)
 
 
 def build(cfg) -> System:
@@ -274,23 +222,15 @@ def build(cfg) -> System:
         held[_fixed_sites(cfg, topo, ("fixed", "driven"))] = True
         x0, residual = relax(args, x0, np.flatnonzero((inv_mass > 0) & ~held))
     fold_initial_state(args, x0)
-    meta = {
-        "omega_ref": 1.0,
-        "ends": topo.ends,
-        "longitudinal_field": "u",
-        "neighbour_pairs": topo.bonds,
-        "groups": topo.groups,
-        "initial_m": x0 * sc.length_m,
-        "relax_residual": residual,
-        "k_ref_n_per_m": sc.stiffness,
-        "c0_m_s": sc.velocity,
-    }
-    if topo.grid_shape is not None:
-        meta["grid_shape"] = topo.grid_shape
-    if cfg.friction is not None:
-        meta["friction"] = friction_arrays(cfg.friction, vals["friction.force_n"], sc)
+    nx_ny = topo.grid_shape  # (nx, ny), site = i + nx j
+    friction = None if cfg.friction is None else friction_arrays(cfg.friction, vals["friction.force_n"], sc)
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=sc, mass=mass, inv_mass=inv_mass,
-        force=mass_force, energy=mass_energy, args=args, q0=np.zeros(n), v0=np.zeros(n),
-        spacing_m=cfg.spacing_m, site_coords=topo.coords, reference=mass_reference, meta=meta,
+        args=args, q0=np.zeros(n), v0=np.zeros(n),
+        spacing_m=cfg.spacing_m, site_coords=topo.coords,
+        ends=topo.ends, longitudinal_field="u", omega_ref=1.0,
+        grid_shape=None if nx_ny is None else (nx_ny[1], nx_ny[0]),
+        neighbour_pairs=topo.bonds, site_groups=topo.groups,
+        friction=friction,
+        initial_displacement_m=x0 * sc.length_m, relax_residual=residual if cfg.relax else None,
     )

@@ -4,7 +4,7 @@ Constant loads are a linear potential E_load = −Σ_k f_k q_k (so they stay on 
 and the energy stays conserved); applied strain holds the end units at ∓ε L/2 along the axis.
 ``relax`` minimises the energy with the compiled force (FIRE, a damped-dynamics minimiser that
 moves continuously, so it cannot jump across a unit) and stores the equilibrium as the initial
-state ``q0`` and as ``meta['rest_state']``.
+state ``q0`` and as ``System.predeformation``.
 """
 
 from __future__ import annotations
@@ -12,75 +12,29 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.models.base import System
-from flexmm.models.hinge import chain_energy, chain_force, chain_reference
+from flexmm.models.base import Predeformation, System
+from flexmm.models.hinge import ChainArgs
+from flexmm.models.kernels import model_force
+from flexmm.models.loads import LoadedChainArgs
 
 #: sign of the inward normal of an end, along its axis
 INWARD = {"left": 1.0, "bottom": 1.0, "right": -1.0, "top": -1.0}
 
 
-def empty_loads() -> tuple:
-    """Load arguments with no loads: (dof (0,), value (0,))."""
-    return (np.zeros(0, np.int64), np.zeros(0))
-
-
-@jit
-def load_terms(q, loads, out, want_force):
-    """Add the constant forces to ``out`` (if ``want_force``); return E_load = −Σ f q."""
-    dof, val = loads
-    e = 0.0
-    for k in range(dof.shape[0]):
-        e -= val[k] * q[dof[k]]
-        if want_force:
-            out[dof[k]] += val[k]
-    return e
-
-
-def load_reference(q: np.ndarray, loads: tuple) -> tuple[float, np.ndarray]:
-    dof, val = loads
-    f = np.zeros_like(q)
-    np.add.at(f, dof, val)
-    return -float(np.dot(val, q[dof])), f
-
-
-@jit
-def chain_loaded_force(q, args, out):
-    """Chain forces (hinge.chain_force on ``args[0]``) plus constant loads ``args[1]``."""
-    chain_force(q, args[0], out)
-    load_terms(q, args[1], out, True)
-
-
-@jit
-def chain_loaded_energy(q, args):
-    return chain_energy(q, args[0]) + load_terms(q, args[1], np.empty(0), False)
-
-
-def chain_loaded_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
-    e, f = chain_reference(q, args[0])
-    el, fl = load_reference(q, args[1])
-    return e + el, f + fl
-
-
 def attach_loads(system: System, dof: np.ndarray, val: np.ndarray) -> None:
-    """Put constant loads into a system's energy: its load slot, or the loaded chain kernels."""
+    """Put constant loads into a system's energy: its ``loads`` slot, or a loaded chain."""
     loads = (np.asarray(dof, np.int64), np.asarray(val, float))
-    slot = system.meta.get("load_slot")
-    if slot is not None:
-        args = list(system.args)
-        args[slot] = loads
-        system.args = tuple(args)
-    elif system.force is chain_force:
-        system.force, system.energy = chain_loaded_force, chain_loaded_energy
-        system.reference = chain_loaded_reference
-        system.args = (system.args, loads)
+    if "loads" in system.args._fields:
+        system.args = system.args._replace(loads=loads)
+    elif isinstance(system.args, ChainArgs):
+        system.args = LoadedChainArgs(system.args, loads)
     else:
         raise NotImplementedError(f"model {system.model!r} takes no constant loads")
 
 
 def _strained(system: System, cfg, guess: np.ndarray) -> dict[int, float]:
     """Held DOFs (index -> value) of the applied strains; also seeds ``guess`` affinely."""
-    n, meta = system.n_sites, system.meta
-    fields = meta.get("axis_fields", {"x": meta["longitudinal_field"]})
+    n, fields = system.n_sites, system.axis_fields
     held = {}
     for axis, eps, ends in (("x", cfg.strain_x, ("left", "right")), ("y", cfg.strain_y, ("bottom", "top"))):
         if eps is None:
@@ -92,13 +46,13 @@ def _strained(system: System, cfg, guess: np.ndarray) -> dict[int, float]:
         k = system.field_index(fields[axis]) * n
         guess[k : k + n] += target
         for end in ends:
-            for s in meta["ends"][end]:
+            for s in system.ends[end]:
                 held[k + s] = target[s]
     return held
 
 
-@jit(cache=False)  # takes the model's force kernel as an argument (see flexmm._jit)
-def fire_relax(force, args, q, free, dt0, dt_max, tol, max_steps):
+@jit
+def fire_relax(args, q, free, dt0, dt_max, tol, max_steps):
     """FIRE minimisation (Bitzek et al., PRL 97, 170201, 2006) of the energy behind ``force``.
 
     Moves only DOFs with ``free[k] > 0`` (unit masses); stops when max |F| over them < ``tol``.
@@ -110,7 +64,7 @@ def fire_relax(force, args, q, free, dt0, dt_max, tol, max_steps):
     dt, alpha, n_pos = dt0, 0.1, 0
     resid = np.inf
     for step in range(max_steps):
-        force(q, args, f)
+        model_force(q, args, f)
         power, vv, ff, resid = 0.0, 0.0, 0.0, 0.0
         for k in range(n):
             if free[k] > 0.0:
@@ -157,21 +111,21 @@ def _stiffest(system: System, q: np.ndarray, free: np.ndarray, iters: int = 30) 
     return abs(lam)
 
 
-def relax(system: System, cfg) -> dict:
-    """Minimise the energy under ``cfg`` (a ``Predeform``); update q0, inv_mass, args, meta.
+def relax(system: System, cfg) -> Predeformation:
+    """Minimise the energy under ``cfg`` (a ``Predeform``); update q0, inv_mass, args, predeformation.
 
     Raises ValueError if the minimiser does not reach ``cfg.gradient_tolerance`` (e.g. a load
     with nothing to hold the lattice).
     """
-    n, meta = system.n_sites, system.meta
+    n = system.n_sites
     q = system.q0.copy()
-    rot = system.field_index(meta["rotation_field"]) * n
+    rot = system.field_index(system.rotation_field) * n
     q[rot : rot + n] += np.where(system.inv_mass[rot : rot + n] > 0, cfg.theta_guess_rad, 0.0)
     held = _strained(system, cfg, q)
     dof, val = [], []
     for load in cfg.loads:
-        sites = meta["ends"][load.end]
-        field = meta.get("end_fields", {}).get(load.end, meta["longitudinal_field"])
+        sites = system.ends[load.end]
+        field = system.end_field(load.end)
         k = system.field_index(field) * n
         f = INWARD[load.end] * load.force_n / system.scales.force / len(sites)
         dof += [k + s for s in sites]
@@ -184,7 +138,7 @@ def relax(system: System, cfg) -> dict:
     free[list(held)] = False
     mask = free.astype(float)
     lam = max(_stiffest(system, q, mask), 1e-12)
-    steps, resid = fire_relax(system.force, system.args, q, mask, 0.1 / np.sqrt(lam), 0.5 / np.sqrt(lam),
+    steps, resid = fire_relax(system.args, q, mask, 0.1 / np.sqrt(lam), 0.5 / np.sqrt(lam),
                               cfg.gradient_tolerance, cfg.max_steps)
     if not resid <= cfg.gradient_tolerance:
         raise ValueError(f"predeformation did not converge: max residual force {resid:.3g} "
@@ -192,7 +146,6 @@ def relax(system: System, cfg) -> dict:
                          "strained end?")
     system.q0 = q
     system.inv_mass[list(held)] = 0.0
-    info = {"residual": float(resid), "steps": int(steps), "energy": float(system.energy(q, system.args))}
-    meta["rest_state"] = q.copy()
-    meta["predeform"] = info
-    return info
+    system.predeformation = Predeformation(rest_state=q.copy(), residual=float(resid), steps=int(steps),
+                                           energy=float(system.energy(q, system.args)))
+    return system.predeformation

@@ -7,22 +7,21 @@ K_θ = k_θ/(k_l a²), α² = J/(m a²) and speeds are in units of c0 = a sqrt(k
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 
 import numpy as np
 
 from flexmm.config.lattice import RotatingSquaresChain
 from flexmm.models import predeform, variation
-from flexmm.models.base import FieldSpec, System
+from flexmm.models.base import FieldSpec, RotatingSquaresND, System
 from flexmm.models.hinge import (
+    ChainArgs,
     H_KL,
     H_REST,
     N_HINGE_PARAMS,
     N_SITE_PARAMS,
     S_KG,
     S_KR,
-    chain_energy,
-    chain_force,
-    chain_reference,
 )
 from flexmm.units import Scales
 
@@ -65,7 +64,7 @@ def chain_tables(
     sprm[:, 0] = theta0
     sprm[:, 1] = n_lateral * (1.0 if lateral_stretch else 0.0) * 0.5
     sprm[:, 2] = 2.0 * n_lateral * np.broadcast_to(np.asarray(Ktheta, float), (n - 1,)).mean()
-    return ha, hb, hprm, sprm, np.zeros(n), np.zeros(n)
+    return ChainArgs(ha, hb, hprm, sprm, np.zeros(n), np.zeros(n))
 
 
 def varied_tables(cfg: RotatingSquaresChain) -> tuple[tuple, np.ndarray, np.ndarray]:
@@ -120,24 +119,18 @@ def build(cfg: RotatingSquaresChain) -> System:
         scales=scales,
         mass=mass,
         inv_mass=inv_mass,
-        force=chain_force,
-        energy=chain_energy,
         args=args,
         q0=np.zeros(2 * n),
         v0=np.zeros(2 * n),
         spacing_m=spacing,
         site_coords={"x": x},
-        reference=chain_reference,
-        meta={
-            **nd,
-            "theta0": cfg.theta0_rad,
-            "n_v": cfg.n_lateral,
-            "s_v": int(cfg.lateral_stretch),
-            "omega_ref": 1.0,
-            "ends": {"left": [0], "right": [n - 1]},
-            "longitudinal_field": "u",
-            "rotation_field": "theta",
-        },
+        ends={"left": [0], "right": [n - 1]},
+        longitudinal_field="u",
+        rotation_field="theta",
+        omega_ref=1.0,
+        rotating_squares=RotatingSquaresND(
+            theta0=cfg.theta0_rad, n_v=cfg.n_lateral, s_v=int(cfg.lateral_stretch), **nd
+        ),
     )
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
@@ -147,16 +140,16 @@ def build(cfg: RotatingSquaresChain) -> System:
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
     """Overwrite q0, v0 with the exact continuum vector soliton (PHYSICS.md §1.3).
 
-    On a predeformed chain (``meta['rest_state']``) this is the prestressed soliton of
+    On a predeformed chain (``system.rest_state``) this is the prestressed soliton of
     flexmm.theory.prestressed about the rest rotation θ_s at ``center``, written as the
     displacement from the rest state (the caller adds the rest state).
     """
     from flexmm.theory.prestressed import prestressed_chain, soliton_window
     from flexmm.theory.rotating import RotatingChainND, soliton_exists, soliton_initial_state
 
-    m, n = system.meta, system.n_sites
-    p = RotatingChainND(m["theta0"], m["Ks"], m["Ktheta"], m["alpha2"], m["n_v"], m["s_v"])
-    rest = m.get("rest_state")
+    n = system.n_sites
+    p = RotatingChainND(**asdict(system.rotating_squares))
+    rest = system.rest_state
     if rest is not None:
         theta = rest[n : 2 * n]
         near = theta[max(center - 10, 0) : center + 11]

@@ -17,19 +17,19 @@ dipoles, joints, loads).
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
 
 import numpy as np
 
-from flexmm._jit import jit
-from flexmm._trig import sincos
 from flexmm.config.rigid import RotatingSquaresSheet
 from flexmm.models import predeform, variation
-from flexmm.models.base import FieldSpec, System
+from flexmm.models.base import FieldSpec, RotatingSquaresND, System
 from flexmm.models.hinge import (H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN,
-                                 N_HINGE_PARAMS, hinge_law)
-from flexmm.models.linkage import empty_joints, joint_reference, joint_terms
-from flexmm.models.magnets import MU0_OVER_4PI, dipole_reference, dipole_terms, empty_dipoles, face_magnets
-from flexmm.models.predeform import empty_loads, load_reference, load_terms
+                                 N_HINGE_PARAMS)
+from flexmm.models.joints import empty_joints
+from flexmm.models.magnets import MU0_OVER_4PI, empty_dipoles, face_magnets
+from flexmm.models.loads import empty_loads
+from flexmm.models.sheet_kernels import SheetArgs
 from flexmm.units import Scales
 
 FIELDS = (
@@ -40,104 +40,6 @@ FIELDS = (
 COORD_ATTRS = {"row": ("1", "row index of the unit"), "col": ("1", "column index of the unit")}
 
 
-# ---------------------------------------------------------------- kernels
-@jit
-def _angles(q, theta0, cs, sn):
-    """cos/sin of θ0 + θ per site into the scratch ``cs``, ``sn`` (N,).
-
-    Two simple loops over a view from 0 so that both vectorise (``_trig.sincos``); with
-    libm's scalar sin/cos this pass cost as much as the hinge loop (benchmarks/).
-    """
-    n = theta0.shape[0]
-    th = q[2 * n : 3 * n]
-    for i in range(n):
-        cs[i] = theta0[i] + th[i]
-    for i in range(n):
-        s, c = sincos(cs[i])
-        cs[i] = c
-        sn[i] = s
-
-
-@jit
-def _hinges(q, args, out, want_force):
-    ha, hb, hax, hprm, theta0, cs, sn = args[:7]
-    n = theta0.shape[0]
-    total = 0.0
-    for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
-        if hax[h] == 0:
-            la, lb, sa, sb = a, b, n + a, n + b
-        else:
-            la, lb, sa, sb = n + a, n + b, a, b
-        e, fl, fs, gA, gB = hinge_law(
-            q[lb] - q[la], q[sb] - q[sa], q[2 * n + a], q[2 * n + b], cs[a], sn[a], cs[b], sn[b], hprm[h]
-        )
-        total += e
-        if want_force:
-            out[la] += fl
-            out[lb] -= fl
-            out[sa] += fs
-            out[sb] -= fs
-            out[2 * n + a] -= gA
-            out[2 * n + b] -= gB
-    return total
-
-
-@jit
-def sheet_force(q, args, out):
-    """Generalised forces −∂E/∂q of the sheet (hinges + dipoles + joints + loads) into ``out``."""
-    theta0, cs, sn = args[4], args[5], args[6]
-    for k in range(out.shape[0]):
-        out[k] = 0.0
-    _angles(q, theta0, cs, sn)
-    _hinges(q, args, out, True)
-    dipole_terms(q, args[7], out, True)
-    joint_terms(q, theta0.shape[0], args[8], out, True)
-    load_terms(q, args[9], out, True)
-
-
-@jit
-def sheet_energy(q, args):
-    """Potential energy of the sheet (same arguments as ``sheet_force``)."""
-    theta0, cs, sn = args[4], args[5], args[6]
-    _angles(q, theta0, cs, sn)
-    dummy = np.empty(0)
-    return (_hinges(q, args, dummy, False) + dipole_terms(q, args[7], dummy, False)
-            + joint_terms(q, theta0.shape[0], args[8], dummy, False) + load_terms(q, args[9], dummy, False))
-
-
-def sheet_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
-    """Numpy version of the sheet energy and forces (vectorised over hinges), for the tests."""
-    ha, hb, hax, hprm, theta0 = args[:5]
-    n = theta0.size
-    u, v, th = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
-    c, s = np.cos(theta0 + th), np.sin(theta0 + th)
-    horiz = hax == 0
-    dl = np.where(horiz, u[hb] - u[ha], v[hb] - v[ha])
-    ds = np.where(horiz, v[hb] - v[ha], u[hb] - u[ha])
-    p = hprm.T
-    el = dl + p[H_REST] - (p[H_HALF_A] * c[ha] + p[H_HALF_B] * c[hb])
-    es = ds + p[H_SIGN] * (p[H_HALF_B] * s[hb] - p[H_HALF_A] * s[ha])
-    ep = th[ha] + th[hb]
-    energy = 0.5 * float(np.sum(p[H_KL] * el**2 + p[H_KS] * es**2 + p[H_KT] * ep**2))
-    fl, fs, fp = p[H_KL] * el, p[H_KS] * es, p[H_KT] * ep
-    f = np.zeros_like(q)
-    la, lb = np.where(horiz, ha, n + ha), np.where(horiz, hb, n + hb)
-    sa, sb = np.where(horiz, n + ha, ha), np.where(horiz, n + hb, hb)
-    np.add.at(f, la, fl)
-    np.add.at(f, lb, -fl)
-    np.add.at(f, sa, fs)
-    np.add.at(f, sb, -fs)
-    np.add.at(f, 2 * n + ha, -(fl * p[H_HALF_A] * s[ha] - fs * p[H_SIGN] * p[H_HALF_A] * c[ha] + fp))
-    np.add.at(f, 2 * n + hb, -(fl * p[H_HALF_B] * s[hb] + fs * p[H_SIGN] * p[H_HALF_B] * c[hb] + fp))
-    for e_f in (dipole_reference(q, args[7]), joint_reference(q, n, args[8]), load_reference(q, args[9])):
-        energy += e_f[0]
-        f += e_f[1]
-    return energy, f
-
-
-# ---------------------------------------------------------------- geometry
 def checkerboard(n_rows: int, n_cols: int) -> np.ndarray:
     """σ = (−1)^(row+col) per site, shape (n_rows·n_cols,)."""
     r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
@@ -232,7 +134,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
         s = strength * (sigma if mg.polarity == "attract" else np.ones(n))
         kc = 10.0 if mg.contact_stiffness_n_per_m is None else mg.contact_stiffness_n_per_m / kl
         dip = (pab, off, pos, dirs, theta0, sigma, s, np.array([2.0 * mg.recess_m / a, kc]))
-    args = (ha, hb, hax, hprm, theta0, np.zeros(n), np.zeros(n), dip, empty_joints(), empty_loads())
+    args = SheetArgs(ha, hb, hax, hprm, theta0, np.zeros(n), np.zeros(n), dip, empty_joints(), empty_loads())
     mass = np.concatenate([site_v["mass_kg"], site_v["mass_kg"], site_v["inertia_kg_m2"] / a**2]) / m
     inv_mass = 1.0 / mass
     ends = edge_sites(nr, nc)
@@ -244,26 +146,22 @@ def build(cfg: RotatingSquaresSheet) -> System:
     spacing = h * a
     system = System(
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=scales, mass=mass, inv_mass=inv_mass,
-        force=sheet_force, energy=sheet_energy, args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
+        args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
         spacing_m=spacing,
         site_coords={"x": col * spacing, "y": row * spacing, "row": row, "col": col},
-        reference=sheet_reference,
-        meta={
-            "theta0": cfg.theta0_rad,
-            "Ks": cfg.k_shear_n_per_m / kl,
-            "Ktheta": cfg.k_rot_n_m_per_rad / (kl * a * a),
-            "alpha2": J / (m * a * a),
-            "n_rows": nr, "n_cols": nc,
-            "omega_ref": 1.0,
-            "ends": ends,
-            "end_fields": {"left": "u", "right": "u", "bottom": "v", "top": "v"},
-            "axis_fields": {"x": "u", "y": "v"},
-            "longitudinal_field": "u",
-            "rotation_field": "theta",
-            "site_coord_attrs": COORD_ATTRS,
-            "load_slot": 9,
-            "neighbour_pairs": np.stack([ha[horiz], hb[horiz]], 1),
-        },
+        ends=ends,
+        longitudinal_field="u",
+        rotation_field="theta",
+        axis_fields={"x": "u", "y": "v"},
+        end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
+        omega_ref=1.0,
+        grid_shape=(nr, nc),
+        site_coord_attrs=COORD_ATTRS,
+        neighbour_pairs=np.stack([ha[horiz], hb[horiz]], 1),
+        rotating_squares=RotatingSquaresND(
+            theta0=cfg.theta0_rad, Ks=cfg.k_shear_n_per_m / kl, Ktheta=cfg.k_rot_n_m_per_rad / (kl * a * a),
+            alpha2=J / (m * a * a), n_v=2, s_v=1,
+        ),
     )
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
@@ -278,9 +176,8 @@ def launch_soliton(system: System, amplitude: float, center: int, direction: int
     """
     from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
 
-    m = system.meta
-    p = RotatingChainND(m["theta0"], m["Ks"], m["Ktheta"], m["alpha2"], 2, 1)
-    nr, nc, n = m["n_rows"], m["n_cols"], system.n_sites
+    p = RotatingChainND(**asdict(system.rotating_squares))  # n_v = 2, s_v = 1
+    (nr, nc), n = system.grid_shape, system.n_sites
     U, T, dU, dT = soliton_initial_state(p, amplitude, nc, center, direction)
     for k, (vals, rates) in enumerate(((U, dU), (np.zeros(nc), np.zeros(nc)), (T, dT))):
         system.q0[k * n : (k + 1) * n] += np.tile(vals, nr)

@@ -174,7 +174,7 @@ def _mass_front(scene) -> ContinuumPrediction:
     if vis is None:
         gamma = 0.0
     elif vis.damping_ratio is not None:
-        gamma = 2.0 * vis.damping_ratio * system.meta.get("omega_ref", 1.0)
+        gamma = 2.0 * vis.damping_ratio * system.omega_ref
     else:
         gamma = vis.coefficient_n_s_per_m * sc.time_s / sc.mass_kg
     K = lat.bond.k_n_per_m * sc.time_s**2 / sc.mass_kg
@@ -206,7 +206,7 @@ PLATEAU_SITES = 40  # passed sites whose peak θ must agree for the pulse to cou
 PLATEAU_SPREAD = 0.02
 
 
-def _plateau(peaks: np.ndarray) -> float | None:
+def plateau(peaks: np.ndarray) -> float | None:
     """Median of the last PLATEAU_SITES peaks if they agree within PLATEAU_SPREAD, else None."""
     if peaks.size < PLATEAU_SITES + 5:
         return None
@@ -215,65 +215,6 @@ def _plateau(peaks: np.ndarray) -> float | None:
     half = PLATEAU_SITES // 2
     drift = abs(np.median(tail[half:]) - np.median(tail[:half]))
     return med if drift <= PLATEAU_SPREAD * abs(med) else None
-
-
-def formation_pilot(scene, log=None):
-    """Discrete run until the θ pulse has formed; (prediction at its amplitude, pilot record).
-
-    Advances the scene in short chunks keeping each site's largest |θ| so far. The pulse is the
-    largest |θ| feature; sites it has passed (behind its current peak) carry its peak amplitude.
-    Once the last ``PLATEAU_SITES`` passed sites agree (median of their halves within
-    ``PLATEAU_SPREAD``), the amplitude is their median and the continuum soliton of that
-    amplitude, placed at the pulse's current position, replaces the rest of the run.
-    """
-    import time
-
-    from flexmm.assemble import build_problem
-    from flexmm.integrators import INTEGRATORS
-    from flexmm.integrators.common import apply_prescribed
-
-    problem = build_problem(scene)
-    s, spec = problem.system, INTEGRATORS[scene.solver.integrator]
-    n, k = s.n_sites, s.field_index("theta") * s.n_sites
-    q, v = s.q0.copy(), s.v0.copy()
-    from flexmm.plan.accuracy import new_acc
-
-    f, acc = np.zeros_like(q), new_acc(spec, q.size)
-    terms = problem.terms_tuple()
-    apply_prescribed(q, v, 0.0, *terms[4:])
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
-    spec.advance(s.force, s.args, q.copy(), v.copy(), f.copy(), s.inv_mass, problem.damp, terms, 0.0,
-                 problem.dt, 0, acc.copy())  # compile before timing
-    steps = max(1, int(problem.duration / problem.dt / PILOT_CHUNKS))
-    h = problem.dt
-    hi, lo = q[k : k + n].copy(), q[k : k + n].copy()
-    exc = scene.excitation
-    direction = -1 if getattr(exc, "end", "left") == "right" else 1
-    t, n_steps, amp, t0 = 0.0, 0, None, time.perf_counter()
-    while t < 0.5 * problem.duration:
-        t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, steps, acc)
-        n_steps += steps
-        th = q[k : k + n]
-        np.maximum(hi, th, out=hi)
-        np.minimum(lo, th, out=lo)
-        pos = int(np.argmax(np.abs(th)))
-        top = np.abs(hi if th[pos] > 0 else lo)  # peaks of the current pulse's polarity
-        passed = top[: max(pos - 3, 0)] if direction == 1 else top[min(pos + 4, n) :][::-1]
-        weak = np.flatnonzero(passed < 0.6 * abs(th[pos]))
-        amp = _plateau(passed[weak[-1] + 1 :] if weak.size else passed)
-        if amp is not None:
-            break
-    wall = time.perf_counter() - t0
-    if amp is None:
-        raise NoContinuum(f"no θ pulse formed within half the duration ({t * s.scales.time_s:.3g} s)")
-    amp *= float(np.sign(th[pos]))
-    ts = s.scales.time_s
-    pred = rotating_soliton(scene.lattice, amp)
-    centre = pos - direction * pred.speed_m_s * t * ts / pred.spacing_m
-    pred = rotating_soliton(scene.lattice, amp, centre, direction)
-    pred.notes.append(f"amplitude {amp:.4g} rad from a formation pilot of {t * ts:.3g} s "
-                      f"({n_steps} steps, {wall:.3g} s)")
-    return pred, {"n_steps": n_steps, "wall_s": wall, "duration_s": t * ts}
 
 
 PREDICTORS: dict[str, Callable] = {
@@ -295,67 +236,6 @@ def predict_from_measurement(scene, amplitude: float) -> ContinuumPrediction:
     if scene.lattice.kind == "rotating_squares_chain":
         return rotating_soliton(scene.lattice, amplitude)
     return predict(scene)
-
-
-def run_continuum(scene, pred: ContinuumPrediction, run_dir, *, extra_attrs: dict | None = None,
-                  log: Callable[[str], None] | None = None):
-    """Write ``run_dir/dataset.nc`` sampling the continuum wave at the output frames (no discrete run).
-
-    Same layout as a discrete run (time, site, rest positions, the predicted fields), energies
-    omitted; returns a controller ``RunResult`` with zero steps.
-    """
-    import time
-    from pathlib import Path
-
-    from flexmm.controller import RunResult
-    from flexmm.io.dataset import DatasetWriter
-    from flexmm.io.provenance import provenance_attrs
-    from flexmm.models import MODELS
-
-    t0 = time.perf_counter()
-    pilot = None
-    if pred is None:
-        pred, pilot = formation_pilot(scene, log)
-    setup = time.perf_counter() - t0 - (pilot["wall_s"] if pilot else 0.0)
-    system = MODELS[scene.lattice.kind].build(scene.lattice)
-    out = scene.output
-    duration = scene.solver.duration_s
-    every = out.every_s or duration / (out.n_frames - 1)
-    times = np.append(np.arange(0.0, duration - 1e-9 * every, every), duration)
-    sites = np.arange(0, system.n_sites, out.site_stride)
-    x = np.asarray(system.site_coords["x"], float)[sites]
-    probe = pred.sample(x, 0.0)
-    units = {f.name: f for f in system.fields}
-    site_vars = {}
-    for name in probe:
-        base = name[:-4] if name.endswith("_dot") else name
-        if out.fields is not None and base not in out.fields or (name.endswith("_dot") and not out.velocities):
-            continue
-        kind = units[base].kind
-        unit = {"length": "m", "angle": "rad"}[kind] + ("/s" if name.endswith("_dot") else "")
-        site_vars[name] = (unit, ("rate of " if name.endswith("_dot") else "") + units[base].long_name
-                           + " (continuum prediction)")
-    coords = {k: (np.asarray(v)[sites], "m", f"rest {k} position") for k, v in system.site_coords.items()
-              if k in ("x", "y")}
-    writer = DatasetWriter(Path(run_dir) / "dataset.nc", sites.size, site_vars, {}, coords)
-    for t in times:
-        vals = pred.sample(x, float(t))
-        writer.append(float(t), {k: vals[k] for k in site_vars}, {})
-    wall = time.perf_counter() - t0 - setup  # pilot solve + sampling; build and compile apart
-    lines = [f"continuum: {pred.summary()}", *[f"continuum: {n}" for n in pred.notes],
-             f"continuum: {times.size} frames sampled in {wall:.3f} s"
-             + (f" (including the pilot's solve, {pilot['wall_s']:.3g} s)" if pilot else ", no discrete run")]
-    for line in lines:
-        if log:
-            log(line)
-    attrs = {**provenance_attrs(scene), "title": scene.name, "description": scene.description,
-             "model": system.model, "integrator": "none (continuum)", "status": "finished",
-             "status_reason": "", "wall_time_s": wall, "compile_time_s": 0.0, "n_steps": 0,
-             "spacing_m": system.spacing_m, "log": "\n".join(lines), **(extra_attrs or {})}
-    path = writer.close(attrs)
-    n_steps = pilot["n_steps"] if pilot else 0
-    return RunResult("finished", "", path, n_steps, times.size, duration, 0.0, 0.0, setup, wall, lines,
-                     n_units=system.n_sites)
 
 
 def alongside(ds, field: str, amplitude: float, fwhm_sites: float, speed_m_s: float) -> str | None:

@@ -24,8 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm._blas import single_blas_thread
+from flexmm.integrators.common import Terms
 from flexmm.models.base import System
 from flexmm.stability import hessian_operator
+from flexmm.errors import PlanError
 
 MARGIN = 0.10
 PAD = 20
@@ -52,14 +55,6 @@ class Dispersion:
         return float(np.max(np.abs(self.group))) if self.group.size else 0.0
 
 
-def _grid(system: System) -> tuple[np.ndarray, np.ndarray]:
-    """Integer site indices (ix, iy) from the rest coordinates (iy = 0 for chains)."""
-    h = system.spacing_m
-    x = np.asarray(system.site_coords.get("x", np.arange(system.n_sites) * h), float)
-    y = np.asarray(system.site_coords.get("y", np.zeros(system.n_sites)), float)
-    return np.rint((x - x.min()) / h).astype(np.int64), np.rint((y - y.min()) / h).astype(np.int64)
-
-
 def _probe_cell(ix: np.ndarray, iy: np.ndarray) -> list[int]:
     """Sites of a 2 (×2) cell near the middle of the lattice, one per parity class."""
     two_d = iy.max() > 0
@@ -70,37 +65,23 @@ def _probe_cell(ix: np.ndarray, iy: np.ndarray) -> list[int]:
         for dx in (0, 1):
             hit = np.flatnonzero((ix == cx + dx) & (iy == cy + dy))
             if hit.size == 0:
-                raise ValueError("lattice too small to probe its dispersion (need 2 sites per direction)")
+                raise PlanError("lattice too small to probe its dispersion (need 2 sites per direction)")
             cell.append(int(hit[0]))
     return cell
 
 
 def rest_state(system: System) -> np.ndarray | None:
     """The state the lattice is linearised about: a predeformed equilibrium, else None (q = 0)."""
-    rest = system.meta.get("rest_state")
+    rest = system.rest_state
     return None if rest is None else np.concatenate([rest, system.q0[rest.size:]])
 
 
-def built_system(scene) -> tuple[System, dict]:
-    """The scene's system with its excitation and imperfection applied (no step-size analysis)."""
-    from flexmm.assemble import apply_excitation, apply_friction, apply_imperfection
-    from flexmm.integrators.common import empty_terms
-    from flexmm.models import MODELS
-
-    system = MODELS[scene.lattice.kind].build(scene.lattice)
-    terms = empty_terms()
-    apply_imperfection(system, scene)
-    apply_excitation(system, scene, terms)
-    apply_friction(system, terms)
-    return system, terms
-
-
-def bloch_dispersion(system: System, terms: dict, q_ref: np.ndarray | None = None,
+def bloch_dispersion(system: System, terms: Terms, q_ref: np.ndarray | None = None,
                      n_k: int = 257, n_ky: int = 9) -> Dispersion:
     """Linear dispersion along x of a built system about ``q_ref`` (default: its rest state)."""
     n, nf = system.n_sites, len(system.fields)
     q_ref = rest_state(system) if q_ref is None else q_ref
-    ix, iy = _grid(system)
+    ix, iy = system.site_grid()
     two_d = iy.max() > 0
     cell = _probe_cell(ix, iy)
     cls = (ix % 2) + (2 * (iy % 2) if two_d else 0)
@@ -122,18 +103,18 @@ def bloch_dispersion(system: System, terms: dict, q_ref: np.ndarray | None = Non
     kys = np.linspace(0.0, math.pi, n_ky) if two_d else np.zeros(1)
     omega_all, group, lam_min, lam_max = [], [], 0.0, 0.0
     for ky in kys:
-        om = np.empty((n_k, nb))
-        for a, kx in enumerate(k):
-            mat = np.zeros((nb, nb), complex)
-            for ci, (c, f, g, j, val) in enumerate(cols):
-                col_idx = cell.index(c) * nf + f
-                row_idx = cls[j] * nf + g
-                phase = np.exp(1j * (kx * (ix[j] - ix[c]) + ky * (iy[j] - iy[c])))
-                np.add.at(mat[:, col_idx], row_idx, val * phase)
-            mat = 0.5 * (mat + mat.conj().T)
-            lam = np.linalg.eigvalsh(w[:, None] * mat * w[None, :])
-            lam_min, lam_max = min(lam_min, lam[0]), max(lam_max, lam[-1])
-            om[a] = np.sqrt(np.clip(lam, 0.0, None))
+        mat = np.zeros((n_k, nb, nb), complex)
+        for c, f, g, j, val in cols:
+            col_idx = cell.index(c) * nf + f
+            row_idx = cls[j] * nf + g
+            phase = np.exp(1j * (np.outer(k, ix[j] - ix[c]) + ky * (iy[j] - iy[c])))  # (n_k, hits)
+            for r in np.unique(row_idx):
+                mat[:, r, col_idx] += (phase[:, row_idx == r] * val[row_idx == r]).sum(axis=1)
+        mat = 0.5 * (mat + np.conj(np.swapaxes(mat, 1, 2)))
+        with single_blas_thread():  # n_k small dense eigenproblems: BLAS threads only cost
+            lam = np.linalg.eigvalsh(w[None, :, None] * mat * w[None, None, :])
+        lam_min, lam_max = min(lam_min, lam[:, 0].min()), max(lam_max, lam[:, -1].max())
+        om = np.sqrt(np.clip(lam, 0.0, None))
         omega_all.append(om)
         group.append(np.diff(om, axis=0) / np.diff(k)[:, None])
     grp = np.max(np.abs(np.stack(group)), axis=0)
@@ -160,16 +141,14 @@ def strained_state(system: System, strain: float) -> np.ndarray:
     """Uniform longitudinal strain ``strain`` (> 0 compression) about rest, as a state vector."""
     rest = rest_state(system)
     q = np.zeros(system.ndof) if rest is None else rest.copy()
-    field = system.meta.get("longitudinal_field")
-    if field is None:
-        return q
+    field = system.longitudinal_field
     x = np.asarray(system.site_coords.get("x", np.arange(system.n_sites) * system.spacing_m), float)
     k = system.field_index(field) * system.n_sites
     q[k : k + system.n_sites] += -strain * (x - x.mean()) / system.scales.length_m
     return q
 
 
-def max_signal_speed(system: System, terms: dict, velocity: float = 0.0) -> tuple[float, float]:
+def max_signal_speed(system: System, terms: Terms, velocity: float = 0.0) -> tuple[float, float]:
     """Fastest linear group speed (sites per unit time) and the strain it was evaluated at.
 
     At rest, and — when the excitation imposes a velocity ``velocity`` (nondimensional) — about
@@ -255,13 +234,13 @@ def _sources(scene, ix: np.ndarray) -> list[int] | None:
     return src or None
 
 
-def wave_reach(scene, system: System, terms: dict, duration: float) -> Reach:
+def wave_reach(scene, system: System, terms: Terms, duration: float) -> Reach:
     """Reach of the waves of ``scene`` in ``duration`` (nondimensional) on ``system``.
 
     Every source (the excited end or soliton centre, rotation seeds) starts waves; the kept
     range covers the light cones of all of them, so the cut lies where nothing ever moves.
     """
-    ix, _ = _grid(system)
+    ix, _ = system.site_grid()
     n_x = int(ix.max()) + 1
     c, strain = max_signal_speed(system, terms, excitation_velocity(scene, system))
     reach = c * duration
@@ -289,7 +268,7 @@ def trim_scene(scene, keep: tuple[int, int]):
 
     key = length_key(scene.lattice)
     if key is None:
-        raise ValueError(f"cannot trim lattice kind {scene.lattice.kind!r}: no length field")
+        raise PlanError(f"cannot trim lattice kind {scene.lattice.kind!r}: no length field")
     lo, hi = keep
     data = scene.model_dump(mode="json")
     n_x = getattr(scene.lattice, key)
@@ -323,27 +302,3 @@ def trim_scene(scene, keep: tuple[int, int]):
         else:
             layer["end"] = "both" if len(ends) == 2 else ends.pop()
     return scene_from_dict(data, source="<plan: trimmed>")
-
-
-def absorbing_damping(system: System, layer) -> np.ndarray:
-    """Extra per-DOF damping coefficients (nondimensional, (ndof,)) of an absorbing layer.
-
-    ζ(d) = max_ratio (d/n)^power on units at depth d = n − (distance to the end in sites),
-    γ = 2 ζ ω_ref, c = γ m for every lattice DOF of the unit (config/absorbing.py).
-    """
-    ix, _ = _grid(system)
-    n_x = int(ix.max()) + 1
-    if layer.n_units >= n_x:
-        raise ValueError(f"damping.absorbing.n_units = {layer.n_units} must be below the {n_x} units along x")
-    zeta = np.zeros(system.n_sites)
-    ends = ("left", "right") if layer.end == "both" else (layer.end,)
-    for end in ends:
-        dist = ix if end == "left" else (n_x - 1 - ix)
-        depth = np.clip(layer.n_units - dist, 0, None) / layer.n_units
-        zeta = np.maximum(zeta, layer.max_ratio * depth**layer.power)
-    out = np.zeros(system.ndof)
-    w_ref = system.meta.get("omega_ref", 1.0)
-    for f in range(len(system.fields)):
-        sl = slice(f * system.n_sites, (f + 1) * system.n_sites)
-        out[sl] = 2.0 * zeta * w_ref * system.mass[sl]
-    return out

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from flexmm.errors import PlanError
 
 FRAMES_PER_PASSAGE = 10
 SITES_PER_WIDTH = 8
@@ -34,7 +35,7 @@ def parse_analysis(spec: str | None) -> AnalysisRequest | None:
         return None
     kind, _, fld = spec.strip().partition(":")
     if kind not in KINDS:
-        raise ValueError(f"unknown analysis {kind!r}; valid: {', '.join(KINDS)}")
+        raise PlanError(f"unknown analysis {kind!r}; valid: {', '.join(KINDS)}")
     return None if kind == "none" else AnalysisRequest(kind, fld or None)
 
 

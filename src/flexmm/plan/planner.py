@@ -6,14 +6,17 @@ behind it. Fidelities:
 
 - ``auto`` (``flexmm run``, ``flexmm plan``): every reduction that keeps the answer — a planar
   sheet as its chain, a lattice trimmed to the reach of its waves, output pruned to the
-  requested analysis; ``solver.accuracy`` picks integrator and dt;
+  requested analysis; ``solver.accuracy`` asks for pilots to pick integrator and dt;
 - ``full``: the scene as declared (warnings say what is wasted); accuracy still honoured;
 - ``chain``: as ``auto`` but a planar sheet runs as the n_lateral = 2 chain of PHYSICS.md
   (approximate, see ``dimension``) instead of the exact 2-row strip;
 - ``continuum``: no discrete run; the continuum wave is sampled (only where the theory fixes it).
 
-The planned scene is explicit (sizes, dt, integrator set; ``solver.accuracy`` cleared), so the
-config recorded with a run reproduces it exactly.
+Planning is pure: it builds the lattice to linearise it (the domain step) but never advances
+time or writes. What needs a run — the accuracy pilots, a continuum formation pilot — happens in
+``flexmm.prepare`` and ``flexmm.continuum_run``; the run reuses the plan's build
+(``Plan.built_for``). The scene that finally runs is explicit (sizes, dt, integrator set;
+``solver.accuracy`` cleared), so the config recorded with a run reproduces it exactly.
 """
 
 from __future__ import annotations
@@ -23,17 +26,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexmm.plan import accuracy as acc_mod
+from flexmm.errors import PlanError
 from flexmm.plan.continuum import ContinuumPrediction, NeedsAmplitude, NoContinuum, predict
 from flexmm.plan.dimension import reduce_dimension
-from flexmm.plan.domain import TRIM_WASTE, built_system, length_key, trim_scene, wave_reach
+from flexmm.assemble import build_system
+from flexmm.plan.domain import TRIM_WASTE, length_key, trim_scene, wave_reach
 from flexmm.plan.output import AnalysisRequest, output_plan, saved_fraction
 
 FIDELITIES = ("auto", "full", "chain", "continuum")
-
-
-class PlanError(ValueError):
-    """A plan that cannot be made as asked (a user error; the CLI exits with status 2)."""
 
 
 @dataclass
@@ -53,10 +53,10 @@ class Plan:
     fidelity: str
     steps: list[PlanStep]
     prediction: ContinuumPrediction | None = None
-    choice: acc_mod.Choice | None = None
+    choice: object | None = None  # accuracy.Choice, once ``flexmm.prepare`` has chosen
     accuracy: float | None = None
     plan_s: float = 0.0
-    problem: object | None = None  # the built Problem of ``scene`` when planning made it already
+    built: tuple | None = None  # (scene, system, terms) the domain step built (``built_for``)
 
     @property
     def skip_discrete(self) -> bool:
@@ -85,25 +85,21 @@ class Plan:
             a.update({k: (int(v) if isinstance(v, bool) else v) for k, v in s.attrs.items() if v is not None})
         return a
 
-    def finisher(self, problem):
-        """Callback for ``run_problem(on_finish=...)``: the step-doubling accuracy check."""
-        if self.accuracy is None or self.choice is None:
+    def built_for(self, scene) -> tuple | None:
+        """The (system, terms) planning built, if ``scene`` builds to the same system, else None.
+
+        The domain step builds the lattice with its excitation and imperfection applied; when
+        later steps changed only the output (or nothing), the run reuses that build.
+        """
+        if self.built is None:
             return None
-
-        def on_finish(q, v, h, say) -> dict:
-            chk = acc_mod.check(problem, self.choice.integrator, h, problem.duration, q, self.choice.order)
-            ok = chk.estimate <= self.accuracy
-            say(f"accuracy check ({chk.method}, dt {chk.companion_dt * problem.system.scales.time_s:.4g} s): "
-                f"estimated error {chk.estimate:.3g} {'meets' if ok else 'MISSES'} the requested {self.accuracy:g}")
-            return {"accuracy_requested": self.accuracy, "accuracy_estimate": chk.estimate,
-                    "accuracy_met": int(ok), "accuracy_check": chk.method,
-                    "accuracy_check_dt_s": chk.companion_dt * problem.system.scales.time_s,
-                    "accuracy_check_wall_s": chk.wall_s}
-
-        return on_finish
+        src = self.built[0]
+        same = all(getattr(scene, k) == getattr(src, k) for k in ("lattice", "excitation", "imperfection"))
+        return self.built[1:] if same else None
 
 
-def _replace(scene, section: str, **values):
+def replace_section(scene, section: str, **values):
+    """A copy of ``scene`` with ``values`` set in one section (validated again)."""
     from flexmm.config import scene_from_dict
 
     data = scene.model_dump(mode="json")
@@ -135,7 +131,13 @@ def _trimmable(scene) -> str | None:
 
 
 def _domain(scene, fidelity: str):
-    system, terms = built_system(scene)
+    system, terms = build_system(scene)
+    built = (scene, system, terms)
+    scene, step = _reach(scene, fidelity, system, terms)
+    return scene, step, built
+
+
+def _reach(scene, fidelity: str, system, terms):
     sc = system.scales
     duration = scene.solver.duration_s / sc.time_s
     try:
@@ -204,43 +206,16 @@ def _output(scene, fidelity: str, request: AnalysisRequest | None, pred: Continu
         return scene, PlanStep("output", "kept", notes)
     frac = saved_fraction(scene, upd, fields)
     notes[-1 if len(notes) == 1 else 0] += f" ({100 * frac:.0f} % of the declared output)"
-    return _replace(scene, "output", **upd), PlanStep("output", "pruned", notes, {"plan_output_fraction": frac})
+    return replace_section(scene, "output", **upd), PlanStep("output", "pruned", notes, {"plan_output_fraction": frac})
 
 
-def _accuracy(scene, integrator_set: bool):
-    """(planned scene, choice, step, problem of the planned scene or None)."""
-    from flexmm.assemble import build_problem
-
+def _accuracy(scene):
+    """The accuracy step as planned: pilots choose integrator and dt at run time (``flexmm.prepare``)."""
     target = scene.solver.accuracy
     if scene.solver.dt_s is not None:
         raise PlanError("solver.accuracy chooses dt: remove solver.dt_s (or solver.accuracy)")
-    problem = build_problem(scene)
-    only = scene.solver.integrator if integrator_set else None
-    try:
-        choice = acc_mod.choose(problem, target, only)
-    except ValueError as exc:
-        raise PlanError(f"solver.accuracy: {exc}") from None
-    ts = problem.system.scales.time_s
-    planned = _replace(scene, "solver", integrator=choice.integrator, dt_s=choice.dt * ts, accuracy=None)
-    rows = "; ".join(f"{r['integrator']}: dt {r['dt'] * ts:.3g} s, {r['cost']:.3g} force evals"
-                     for r in choice.table)
-    note = (f"accuracy {target:g}: {choice.integrator} with dt = {choice.dt * ts:.4g} s "
-            f"(predicted error {choice.predicted_error:.2g}, pilot over {choice.pilot_time * ts:.3g} s) — {rows}")
-    notes = [note]
-    row = next(r for r in choice.table if r["integrator"] == choice.integrator)
-    if not choice.reachable:
-        notes.append(f"WARNING: accuracy {target:g} looks out of reach ({row['why']}; pilot errors grow "
-                     f"like t^{row['growth']:.1f}: the dynamics amplify perturbations); the run uses the "
-                     "step above and the check after it reports the error reached")
-    elif row["uncertain"]:
-        notes.append(f"prediction uncertain: {row['uncertain']}; the check after the run reports the error reached")
-    attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
-             "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable)}
-    if choice.integrator == scene.solver.integrator:  # same method: the built problem only changes dt
-        problem.scene, problem.dt, problem.notes = planned, choice.dt, []
-    else:
-        problem = None
-    return planned, choice, PlanStep("accuracy", "chosen", notes, attrs), problem
+    return PlanStep("accuracy", "pending", [f"accuracy {target:g}: integrator and dt chosen by pilot runs "
+                                            "before the run (flexmm.prepare)"])
 
 
 def make_plan(scene, fidelity: str = "auto", analysis: AnalysisRequest | None = None) -> Plan:
@@ -251,18 +226,16 @@ def make_plan(scene, fidelity: str = "auto", analysis: AnalysisRequest | None = 
     steps = []
     cur, st = _dimension(scene, fidelity)
     steps.append(st)
-    cur, st = _domain(cur, fidelity)
+    cur, st, built = _domain(cur, fidelity)
     steps.append(st)
     pred, st = _continuum(cur, fidelity)
     steps.append(st)
     if fidelity == "continuum":
-        return Plan(scene, cur, fidelity, steps, pred, plan_s=time.perf_counter() - t0)
+        return Plan(scene, cur, fidelity, steps, pred, plan_s=time.perf_counter() - t0, built=built)
     cur, st = _output(cur, fidelity, analysis, pred, scene.output.model_fields_set)
     steps.append(st)
-    choice = problem = None
     if cur.solver.accuracy is not None:
-        cur, choice, st, problem = _accuracy(cur, "integrator" in scene.solver.model_fields_set)
-        steps.append(st)
-    plan = Plan(scene, cur, fidelity, steps, pred, choice, scene.solver.accuracy, problem=problem)
+        steps.append(_accuracy(cur))
+    plan = Plan(scene, cur, fidelity, steps, pred, None, scene.solver.accuracy, built=built)
     plan.plan_s = time.perf_counter() - t0
     return plan

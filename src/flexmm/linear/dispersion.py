@@ -19,6 +19,7 @@ import math
 import numpy as np
 from scipy.linalg import eigh
 
+from flexmm._blas import single_blas_thread
 from flexmm.integrators.common import empty_terms
 from flexmm.stability import hessian_operator
 
@@ -67,10 +68,11 @@ def bloch_frequencies(system, q, cell_sites: int = 1, reach: int = 2, q_ref=None
     m = np.arange(-reach, reach + 1)
     qa = np.atleast_1d(np.asarray(q, dtype=float))
     out = np.empty(qa.shape + (K.shape[1],))
-    for idx, qq in np.ndenumerate(qa):
-        D = np.tensordot(np.exp(1j * qq * m), K, axes=(0, 0))
-        lam = eigh(0.5 * (D + D.conj().T), M, eigvals_only=True)
-        out[idx] = np.where(lam >= -1e-10 * max(1.0, np.max(np.abs(lam))), np.sqrt(np.abs(lam)), np.nan)
+    with single_blas_thread():  # small dense eigenproblems: BLAS threads only add overhead
+        for idx, qq in np.ndenumerate(qa):
+            D = np.tensordot(np.exp(1j * qq * m), K, axes=(0, 0))
+            lam = eigh(0.5 * (D + D.conj().T), M, eigvals_only=True)
+            out[idx] = np.where(lam >= -1e-10 * max(1.0, np.max(np.abs(lam))), np.sqrt(np.abs(lam)), np.nan)
     return out.reshape(np.shape(q) + (K.shape[1],))
 
 

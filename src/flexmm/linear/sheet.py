@@ -21,6 +21,7 @@ import math
 import numpy as np
 from scipy.linalg import eigh
 
+from flexmm._blas import single_blas_thread
 from flexmm.config.rigid import RotatingSquaresSheet
 from flexmm.integrators.common import empty_terms
 from flexmm.stability import hessian_operator
@@ -80,9 +81,10 @@ def bloch_frequencies(lat: RotatingSquaresSheet, kvec: np.ndarray) -> np.ndarray
     data = bloch_matrices(lat)
     kv = np.asarray(kvec, float)
     out = np.empty(kv.shape[:-1] + (6,))
-    for idx in np.ndindex(kv.shape[:-1]):
-        lam = eigh(_bloch_matrix(data, kv[idx]), np.diag(data[3]), eigvals_only=True)
-        out[idx] = np.sqrt(np.clip(lam, 0.0, None))
+    with single_blas_thread():  # 6 × 6 eigenproblems: BLAS threads only add overhead
+        for idx in np.ndindex(kv.shape[:-1]):
+            lam = eigh(_bloch_matrix(data, kv[idx]), np.diag(data[3]), eigvals_only=True)
+            out[idx] = np.sqrt(np.clip(lam, 0.0, None))
     return out
 
 
@@ -93,7 +95,8 @@ def acoustic_modes(lat: RotatingSquaresSheet, phi: float, k: float = 1e-3) -> li
     direction, folded into [−90, 90) (0: longitudinal, −90: transverse).
     """
     data = bloch_matrices(lat)
-    lam, vec = eigh(_bloch_matrix(data, np.array([k * math.cos(phi), k * math.sin(phi)])), np.diag(data[3]))
+    with single_blas_thread():
+        lam, vec = eigh(_bloch_matrix(data, np.array([k * math.cos(phi), k * math.sin(phi)])), np.diag(data[3]))
     out = []
     for j in range(2):
         uv = vec[[0, 1], j] + vec[[3, 4], j]       # both units move alike at long wavelength

@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexmm.integrators import INTEGRATORS
-from flexmm.integrators.common import apply_prescribed
+from flexmm.integrators.stepper import make_stepper
+from flexmm.errors import PlanError
 
 SAFETY = 0.3
 CAP = 0.8  # largest step as a fraction of the linear stability limit
@@ -58,12 +59,6 @@ def force_evals(spec) -> float | None:
     return FORCE_EVALS.get(spec.name)
 
 
-def new_acc(spec, ndof: int) -> np.ndarray:
-    """The accumulator the integrator's kernel writes (energy budget and counters)."""
-    make = getattr(spec, "new_acc", None)
-    return make(ndof) if make is not None else np.zeros(2)
-
-
 def allowed_integrators() -> tuple[str, ...] | None:
     """Integrator names the scene schema accepts (None: any registered name)."""
     from typing import get_args
@@ -76,7 +71,7 @@ def allowed_integrators() -> tuple[str, ...] | None:
 
 def candidates(problem, only: str | None = None) -> list:
     """Registered explicit fixed-step methods usable for this problem (damping needs support)."""
-    damped = bool(np.any(problem.damp > 0) or problem.terms["dash_c"].size)
+    damped = bool(np.any(problem.damp > 0) or problem.terms.dash_c.size)
     allowed = allowed_integrators()
     out = []
     for name, spec in INTEGRATORS.items():
@@ -102,28 +97,23 @@ def integrate(problem, spec, h: float, t_end: float, n_samples: int = 32, checkp
     times (n_fields,), and the number of steps. With ``checkpoints`` (fractions of ``t_end``),
     returns (states, peaks, steps) instead: the states q at those times.
     """
-    s = problem.system
-    q, v = s.q0.copy(), s.v0.copy()
-    f = np.zeros_like(q)
-    acc = new_acc(spec, q.size)
-    terms = problem.terms_tuple()
-    apply_prescribed(q, v, 0.0, *terms[4:])
-    spec.init(s.force, s.args, q, v, 0.0, f, terms)
     n_steps = max(1, int(math.ceil(t_end / h - 1e-9)))
-    h = t_end / n_steps
-    peaks = _peaks(s, q)
+    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False)
     marks = sorted({*np.linspace(0, n_steps, min(n_samples, n_steps) + 1).round().astype(int)[1:],
                     *(int(round(c * n_steps)) for c in checkpoints)})
-    states, t, done = {}, 0.0, 0
-    for k in marks:
-        if k > done:
-            t = spec.advance(s.force, s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, int(k - done), acc)
-            done = k
-        peaks = np.maximum(peaks, _peaks(s, q))
-        states[k] = q.copy()
+    chunks = [k - j for j, k in zip([0, *marks[:-1]], marks) if k > j]
+    peaks = _peaks(st.system, st.q)
+    states = {}
+
+    def sample(s) -> None:
+        nonlocal peaks
+        peaks = np.maximum(peaks, _peaks(s.system, s.q))
+        states[int(round(s.t / s.h))] = s.q.copy()
+
+    st.run(chunks, sample)
     if checkpoints:
         return [states[int(round(c * n_steps))] for c in checkpoints], peaks, n_steps
-    return q, v, peaks, n_steps
+    return st.q, st.v, peaks, n_steps
 
 
 def _peaks(system, q) -> np.ndarray:
@@ -160,7 +150,7 @@ class Choice:
 
 def _drive_end(problem) -> float:
     """Time after which prescribed/applied drives are smooth (end of pulses, ramps)."""
-    prm, shape = problem.terms["drv_prm"], problem.terms["drv_shape"]
+    prm, shape = problem.terms.drv_prm, problem.terms.drv_shape
     end = 0.0
     for row, sh in zip(prm, shape):
         if sh in (0, 1):
@@ -227,7 +217,7 @@ def _step_for(accuracy: float, err1: float, h1: float, p: int, h_stab: float, T:
 def choose(problem, accuracy: float, only: str | None = None) -> Choice:
     """Cheapest (integrator, dt) expected to meet ``accuracy`` (see module docstring)."""
     if problem.omega_max <= 0:
-        raise ValueError("cannot choose a step: the system has no linear frequency (ω_max = 0)")
+        raise PlanError("cannot choose a step: the system has no linear frequency (ω_max = 0)")
     T = problem.duration
     rows, best = [], None
     for spec in candidates(problem, only):
@@ -258,7 +248,7 @@ def choose(problem, accuracy: float, only: str | None = None) -> Choice:
         if better:
             best, best_row = Choice(spec.name, h, rows[-1]["predicted_error"], cost, t_p, order=p), rows[-1]
     if best is None:
-        raise ValueError("no registered integrator can be costed for this scene")
+        raise PlanError("no registered integrator can be costed for this scene")
     best.table = rows
     best.reachable = best_row["reachable"]
     return best

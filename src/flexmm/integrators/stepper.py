@@ -1,0 +1,175 @@
+"""The one object that advances a built problem in time: ``Stepper``, made by ``make_stepper``.
+
+A Stepper owns the state (q, v, the total force f, t, the accumulator), picks the compiled
+``advance`` for the method, the model's argument type and the thread count
+(``parallel.advance_kernel``), compiles it on copies before the clock starts (``warm_up``),
+counts work (``ledger``), and checks every frame for a blow-up (non-finite state, or runaway
+energy: ``runaway.RunawayGuard``). ``run(chunks, on_frame)`` is flexmm's only time loop: the
+controller (frames to a dataset), the in-memory runner, the accuracy and formation pilots, the
+benchmarks and the tests all call it, and observers see the stepper at each frame.
+
+    stepper = make_stepper(problem, h=problem.dt)
+    outcome = stepper.run([100] * 10, on_frame=lambda s: print(s.t, s.energies()))
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+import numpy as np
+
+from flexmm.integrators import INTEGRATORS, IntegratorSpec
+from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
+from flexmm.integrators.parallel import advance_kernel, choose_threads
+from flexmm.integrators.runaway import RunawayGuard
+from flexmm.models.kernels import model_energy
+
+#: relative tolerance of adaptive integrators when none is given
+DEFAULT_RTOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a ``Stepper.run`` ended: ``status`` ('finished', 'failed', 'interrupted'), ``reason``
+    ('non-finite state', 'runaway energy', ...), and ``t_good``, the last time whose state
+    passed the checks (nondimensional; the stepper's own ``t`` is where it stopped)."""
+
+    status: str
+    reason: str
+    t_good: float
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "finished"
+
+
+class Stepper:
+    """State and compiled kernel of one (problem, integrator, step) — see the module docstring.
+
+    Attributes: ``q``, ``v`` (ndof,) the state, ``f`` (ndof,) the total force, ``t`` the time,
+    ``h`` the step (the frame interval for an adaptive method, which picks its own steps),
+    ``acc`` the accumulator and ``ledger`` its named view, ``kernel`` the compiled advance and
+    ``threads`` it uses, ``compile_s``,
+    ``wall_s`` and ``cpu_s`` spent advancing (compile excluded).
+    """
+
+    def __init__(self, spec: IntegratorSpec, system, terms: Terms, damp: np.ndarray, h: float, *,
+                 threads: int = 1, q0: np.ndarray | None = None, v0: np.ndarray | None = None,
+                 t0: float = 0.0, rtol: float | None = None, atol: float | None = None,
+                 max_step: float | None = None, check_energy: bool = True):
+        self.spec, self.system, self.terms, self.damp = spec, system, terms, damp
+        self.args = system.args
+        self.h = float(h)
+        self.adaptive = spec.adaptive and rtol is not None
+        self.acc = spec.new_acc(system.ndof, rtol=rtol, atol=atol, max_step=max_step)
+        self.ledger = Accumulators(self.acc)
+        self.kernel, self.threads = advance_kernel(spec, system.args, system.inv_mass, damp, terms, threads)
+        self.q = np.array(system.q0 if q0 is None else q0, float)
+        self.v = np.array(system.v0 if v0 is None else v0, float)
+        self.f = np.zeros_like(self.q)
+        self.t = float(t0)
+        self.check_energy = check_energy
+        self.compile_s = self.wall_s = self.cpu_s = 0.0
+        self._warm = False
+        apply_prescribed(self.q, self.v, self.t, *terms.drives)
+        spec.init(self.args, self.q, self.v, self.t, self.f, terms)
+        self.last_energies: tuple[float, float] | None = self.energies()  # of the last checked state
+        self.guard = RunawayGuard(system, terms, sum(self.last_energies))
+
+    # -- one call into compiled code -------------------------------------------------------
+    def warm_up(self) -> float:
+        """Compile (or load from numba's cache) the advance kernel on copies; returns seconds."""
+        if not self._warm:
+            t0 = time.perf_counter()
+            self.kernel(self.args, self.q.copy(), self.v.copy(), self.f.copy(), self.system.inv_mass,
+                          self.damp, self.terms, self.t, self.h, 1, self.acc.copy())
+            self.compile_s = time.perf_counter() - t0
+            self._warm = True
+        return self.compile_s
+
+    def advance(self, nsteps: int) -> None:
+        """Advance ``nsteps`` steps of size h (adaptive: to t + nsteps·h) in place."""
+        self.warm_up()
+        w0, c0 = time.perf_counter(), time.process_time()
+        self.t = self.kernel(self.args, self.q, self.v, self.f, self.system.inv_mass, self.damp,
+                               self.terms, self.t, self.h, int(nsteps), self.acc)
+        self.wall_s += time.perf_counter() - w0
+        self.cpu_s += time.process_time() - c0
+
+    # -- observations ------------------------------------------------------------------------
+    @property
+    def steps(self) -> int:
+        """Steps taken so far (accepted steps of an adaptive method)."""
+        return self.ledger.steps
+
+    def energies(self) -> tuple[float, float]:
+        """(kinetic, potential + contact) energy of the current state (nondimensional)."""
+        s, terms = self.system, self.terms
+        pot = model_energy(self.q, self.args) + contact_energy(self.q, terms.con_ij, terms.con_prm)
+        return s.kinetic_energy(self.v), float(pot)
+
+    def failure(self) -> str | None:
+        """Why the current state is not trustworthy (non-finite, runaway energy), or None."""
+        if not (np.isfinite(self.q).all() and np.isfinite(self.v).all()):
+            return "non-finite state"
+        self.last_energies = None
+        if self.check_energy:
+            self.last_energies = self.energies()
+            e = sum(self.last_energies)
+            if self.guard.runaway(e, self.ledger.work):
+                return "runaway energy"
+            self.guard.record(self.steps, e)
+        return None
+
+    # -- the time loop ---------------------------------------------------------------------
+    def run(self, chunks: Iterable[int], on_frame: Callable[[Stepper], bool | None] | None = None) -> Outcome:
+        """Advance chunk after chunk of steps; after each, check the state and call ``on_frame``.
+
+        Stops at the first failed check ('failed', the state is then past ``t_good``), on
+        Ctrl-C ('interrupted'), or when ``on_frame`` returns True (an observer that has seen
+        enough, 'finished').
+        """
+        t_good = self.t
+        try:
+            for nsteps in chunks:
+                self.advance(nsteps)
+                why = self.failure()
+                if why is not None:
+                    return Outcome("failed", why, t_good)
+                t_good = self.t
+                if on_frame is not None and on_frame(self):
+                    break
+        except KeyboardInterrupt:
+            return Outcome("interrupted", f"interrupted by the user at t = {self.t:.6g}", t_good)
+        return Outcome("finished", "", t_good)
+
+
+def frame_chunks(t_end: float, h: float, n_frames: int) -> tuple[float, list[int]]:
+    """(h', steps per frame): whole steps h' ≤ h between n_frames − 1 uniform frame intervals."""
+    interval = t_end / max(n_frames - 1, 1)
+    per = max(1, math.ceil(interval / h - 1e-9))
+    return interval / per, [per] * max(n_frames - 1, 1)
+
+
+def make_stepper(problem, integrator: str | IntegratorSpec | None = None, *, h: float | None = None,
+                 rtol: float | None = None, atol: float | None = None, max_step: float | None = None,
+                 threads: int | None = None, q0: np.ndarray | None = None, v0: np.ndarray | None = None,
+                 check_energy: bool = True, warm: bool = True) -> Stepper:
+    """The Stepper of a built problem (``assemble.Problem``).
+
+    ``integrator`` defaults to the scene's; ``h`` to the problem's dt (for an adaptive method
+    with ``rtol``, h is the interval between calls); ``threads`` None chooses by size
+    (``parallel.choose_threads``). ``warm`` compiles before returning, so timings exclude it.
+    """
+    spec = (INTEGRATORS[problem.scene.solver.integrator] if integrator is None
+            else INTEGRATORS[integrator] if isinstance(integrator, str) else integrator)
+    s = problem.system
+    stepper = Stepper(spec, s, problem.terms, problem.damp, problem.dt if h is None else h,
+                      threads=choose_threads(s.n_sites, threads), q0=q0, v0=v0, rtol=rtol,
+                      atol=atol, max_step=max_step, check_energy=check_energy)
+    if warm:
+        stepper.warm_up()
+    return stepper

@@ -1,0 +1,88 @@
+"""Compiled once per machine: a second process loads every integrator loop from numba's cache.
+
+Each case runs a fresh interpreter twice on an empty cache directory (NUMBA_CACHE_DIR): the
+first compiles and saves, the second must load the stepper's advance kernel from the cache
+(no cache miss) and produce bit-identical states. Also: an unwritable cache location falls
+back to a temporary one, then to no caching, with a note that says so.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+SCRIPT = r"""
+import json, sys, warnings
+import numpy as np
+from flexmm.assemble import build_problem
+from flexmm.config import scene_from_dict
+from flexmm.integrators.stepper import make_stepper
+import flexmm._jit as J
+
+integrator = sys.argv[1]
+lat = {"kind": "rotating_squares_chain", "n_units": 12, "a_m": 0.016, "k_long_n_per_m": 71690.0,
+       "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3,
+       "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+scene = scene_from_dict({"name": "t", "lattice": lat, "excitation": {"kind": "impact", "end": "left",
+                         "velocity_m_s": 1.0, "angular_velocity_rad_s": 50.0},
+                         "solver": {"duration_s": 1e-3, "integrator": integrator}})
+st = make_stepper(build_problem(scene), threads=1)
+st.advance(50)
+stats = st.kernel.stats
+print(json.dumps({"hits": sum(stats.cache_hits.values()), "misses": sum(stats.cache_misses.values()),
+                  "q": st.q.tolist(), "v": st.v.tolist(), "cache_dir": str(J.CACHE_DIR),
+                  "compile_s": st.compile_s}))
+"""
+
+
+def _run(integrator: str, env: dict) -> dict:
+    out = subprocess.run([sys.executable, "-c", SCRIPT, integrator], env=env, capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return {**json.loads(out.stdout.strip().splitlines()[-1]), "stderr": out.stderr}
+
+
+@pytest.mark.parametrize("integrator", ["velocity_verlet", pytest.param("pefrl", marks=pytest.mark.slow)])
+def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator, tmp_path) -> None:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    cold = _run(integrator, env)
+    warm = _run(integrator, env)
+    assert cold["misses"] >= 1 and cold["cache_dir"] == str(tmp_path / "cache")
+    assert warm["misses"] == 0 and warm["hits"] >= 1
+    assert warm["q"] == cold["q"] and warm["v"] == cold["v"]  # bit for bit
+    assert warm["compile_s"] < cold["compile_s"]
+    print(f"{integrator}: compile {cold['compile_s']:.2f} s cold, {warm['compile_s']:.3f} s from cache")
+
+
+def test_unwritable_cache_location_falls_back_then_turns_caching_off(tmp_path, monkeypatch) -> None:
+    import tempfile
+
+    from flexmm import _jit
+
+    blocked = tmp_path / "file"
+    blocked.write_text("not a directory")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(blocked / "cache"))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    where, note = _jit._choose_cache_dir()
+    assert str(where).startswith(str(tmp_path / "tmp")) and "is not writable" in note and "cached in" in note
+    monkeypatch.setattr(tempfile, "tempdir", str(blocked))
+    where, note = _jit._choose_cache_dir()
+    assert where is None and "not cached" in note and "NUMBA_CACHE_DIR" in note
+
+
+def test_default_cache_directory_is_keyed_by_the_kernel_sources(tmp_path, monkeypatch) -> None:
+    from flexmm import _jit
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    old = tmp_path / "flexmm" / "numba" / "0000"
+    old.mkdir(parents=True)
+    os.utime(old, (0, 0))  # unused for decades: pruned
+    where, note = _jit._choose_cache_dir()
+    assert where == tmp_path / "flexmm" / "numba" / _jit.source_key() and note == ""
+    assert not old.exists()
