@@ -14,7 +14,7 @@ import pytest
 from flexmm.config import scene_from_dict
 from flexmm.models import MODELS
 
-# configs/lego_vector_soliton.yaml, as a dict (LEGO parameters of PHYSICS.md §1.1).
+# configs/lego_vector_soliton.yaml, as a dict (LEGO parameters of docs/physics.md §1.1).
 LEGO_LATTICE = {
     "kind": "rotating_squares_chain",
     "n_units": 200,
@@ -80,7 +80,7 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
                 {"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 5e-4, "end": 2e-3},
             ]),
             "translation_invariant": True,
-            # PHYSICS.md §1.1 has no rest offset in the shear spring: with θ0 varying along a
+            # The hinge law of docs/physics.md §1.1 has no rest offset in the shear spring: with θ0 varying along a
             # chain whose centres stay on the axis (v suppressed), Δy ≠ 0 at q = 0.
             "not_at_rest": "a θ0 gradient leaves the hinge shear springs pre-stressed at q = 0",
         },
@@ -90,7 +90,7 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
             "lattice": dict(_SHEET, n_rows=3, n_cols=4, theta0_rad=0.15),
             "translation_invariant": True,
         },
-        "pla-ligament-2x3": {  # Bordiga et al. 2024 PLA squares (PHYSICS.md §1.1), with a ligament
+        "pla-ligament-2x3": {  # Bordiga et al. 2024 PLA squares (docs/physics.md §1.1), with a ligament
             "lattice": dict(_SHEET, n_rows=2, n_cols=3, a_m=0.015, theta0_rad=-0.2, ligament_length_m=0.002,
                             k_long_n_per_m=1.2e5, k_shear_n_per_m=1190.0, k_rot_n_m_per_rad=1.5e-3,
                             mass_kg=None, inertia_kg_m2=None, areal_density_kg_m2=6.18),

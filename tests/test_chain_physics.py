@@ -1,4 +1,4 @@
-"""The rotating-squares chain end to end against physics: linear sound speed (PHYSICS.md §1.4),
+"""The rotating-squares chain end to end against physics: linear sound speed (docs/physics.md §1.4),
 the vector soliton of the continuum theory (§1.3), and blow-up handling.
 """
 
@@ -25,7 +25,7 @@ STIFF = {"k_shear_n_per_m": 0.5 * 71690.0, "k_rot_n_m_per_rad": 0.02 * 71690.0 *
 
 
 def long_wave_speed_m_s(lat: dict) -> float:
-    """Small-q limit of the lower branch of PHYSICS.md §1.4, in m/s.
+    """Small-q limit of the lower branch of docs/physics.md §1.4, in m/s.
 
     K(q) → [[q², −i s0 q], [i s0 q, R(0)]] gives Ω² = q² (1 − s0²/R(0)) + O(q⁴) (in sites and
     units of sqrt(k_l/m)), R(0) = s0² + 4Kθ + n_v (s_v s0²/2 + 2Kθ); one site is a cos θ0.

@@ -1,9 +1,9 @@
 """Compiled model kernels against oracles: −∇E by finite differences, the numpy reference,
-translation invariance and the rest state (STYLE.md principle 6).
+translation invariance and the rest state.
 
 Every kind in ``flexmm.models.MODELS`` is checked with the examples of
 ``tests/conftest.py::EXAMPLE_LATTICES``; the rotating-squares chain is also checked against
-its energy written out from PHYSICS.md §1.1 (independent of ``flexmm.models.hinge``).
+its energy written out from docs/physics.md §1.1 (independent of ``flexmm.models.hinge``).
 """
 
 from __future__ import annotations
@@ -99,9 +99,9 @@ def test_rest_state_has_zero_energy_and_force(example_lattice, scene_dict, make_
     assert np.max(np.abs(forces(system, q))) < 1e-14
 
 
-# ------------------------------------------------------- rotating chain vs PHYSICS.md §1.1
-def physics_md_energy(cfg, u_m: np.ndarray, theta: np.ndarray) -> float:
-    """Total energy (J) of the chain of PHYSICS.md §1.1 with uniform θ0, written from the text.
+# ------------------------------------------------------- rotating chain vs docs/physics.md §1.1
+def documented_chain_energy(cfg, u_m: np.ndarray, theta: np.ndarray) -> float:
+    """Total energy (J) of the chain of docs/physics.md §1.1 with uniform θ0, written from the text.
 
     E = Σ_hinges ½k_l Δx² + ½k_s Δy² + ½k_θ Δφ² + Σ_units n_v [s_v k_l a² G²/4 + k_θ θ²],
     Δx = u_{i+1} − u_i + a cosθ0 − (a/2)[cos(θ0+θ_i) + cos(θ0+θ_{i+1})],
@@ -120,7 +120,7 @@ def physics_md_energy(cfg, u_m: np.ndarray, theta: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize("name", ["lego-theta0-nv1", "sheet-wave-nv2-sv", "single-row-stiff"])
-def test_chain_energy_matches_physics_md(name, example_lattices, scene_dict, make_scene):
+def test_chain_energy_matches_the_documented_energy(name, example_lattices, scene_dict, make_scene):
     scene = make_scene(scene_dict(example_lattices["rotating_squares_chain"][name]["lattice"]))
     cfg = scene.lattice
     system = MODELS[cfg.kind].build(cfg)
@@ -130,5 +130,5 @@ def test_chain_energy_matches_physics_md(name, example_lattices, scene_dict, mak
         q = random_state(system, rng)
         u_m = q[system.dof("u", 0) : system.dof("u", 0) + n] * sc.coordinate("length")
         theta = q[system.dof("theta", 0) : system.dof("theta", 0) + n]
-        expected = physics_md_energy(cfg, u_m, theta)
+        expected = documented_chain_energy(cfg, u_m, theta)
         assert system.energy(q, system.args) * sc.energy == pytest.approx(expected, rel=1e-12)

@@ -1,4 +1,4 @@
-"""Time integrators on the nonlinear rotating-squares chain (PHYSICS.md §3).
+"""Time integrators on the nonlinear rotating-squares chain (docs/physics.md §3).
 
 Oracles: the declared order of accuracy (measured against a much finer step, and the finest
 step against scipy's DOP853), bounded energy error without drift for symplectic schemes,

@@ -1,4 +1,4 @@
-"""Make the README's analysis figures from LEGO-chain runs (PHYSICS.md §1.1, §1.3).
+"""Make the README's analysis figures from LEGO-chain runs (docs/physics.md §1.1, §1.3).
 
     .venv/bin/python docs/figures/make_analysis_figures.py [WORK_DIR]
 

@@ -107,7 +107,7 @@ def run_continuum(scene, pred: ContinuumPrediction, run_dir, *, extra_attrs: dic
                            + " (continuum prediction)")
     coords = {k: (np.asarray(v)[sites], "m", f"rest {k} position") for k, v in system.site_coords.items()
               if k in ("x", "y")}
-    writer = DatasetWriter(Path(run_dir) / "dataset.nc", sites.size, site_vars, {}, coords)
+    writer = DatasetWriter(Path(run_dir) / "dataset.nc", sites.size, site_vars, {}, coords, times.size)
     for t in times:
         vals = pred.sample(x, float(t))
         writer.append(float(t), {k: vals[k] for k in site_vars}, {})

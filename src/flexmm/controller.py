@@ -65,7 +65,7 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None) -> 
 class _Observer:
     """Turns the nondimensional state into SI frames for the writer."""
 
-    def __init__(self, problem: Problem, writer_path: Path):
+    def __init__(self, problem: Problem, writer_path: Path, n_frames: int | None = None):
         sys_, out = problem.system, problem.scene.output
         self.sys = sys_
         self.sites = np.arange(0, sys_.n_sites, out.site_stride)
@@ -102,7 +102,7 @@ class _Observer:
                 coords[f.name + REST_SUFFIX] = (rest[k * sys_.n_sites + self.sites] * sc.coordinate(f.kind),
                                                 UNITS[f.kind][0], f"{f.long_name} in the predeformed rest state")
         self.site_vars, self.time_vars = site_vars, time_vars
-        self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords)
+        self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames)
         self.sc = sc
 
     def frame(self, st: Stepper) -> None:
@@ -168,8 +168,8 @@ def run_problem(
         h, chunks = schedule(problem.duration, frame_dt, scene.output.n_frames, every)
     else:
         h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, every)
-    obs = _Observer(problem, run_dir / "dataset.nc")
     n_frames = len(chunks) + 1
+    obs = _Observer(problem, run_dir / "dataset.nc", n_frames)
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
     steps = (f"adaptive steps (rtol {scene.solver.rtol or DEFAULT_RTOL:g})" if spec.adaptive
              else f"{sum(chunks)} steps of {h * sc.time_s:.4g} s")

@@ -1,4 +1,4 @@
-"""Largest linear frequency ω_max of a built system and the step-size limits it sets (PHYSICS.md §3).
+"""Largest linear frequency ω_max of a built system and the step-size limits it sets (docs/physics.md §3).
 
 ω_max² is the largest eigenvalue of M^{-1/2} K M^{-1/2} over the free DOFs, with K the
 Hessian of the energy at a reference state (rest by default), obtained from central

@@ -1,8 +1,8 @@
-"""Real LEGO-chain runs analysed against the continuum theory (PHYSICS.md §1.3), marked slow.
+"""Real LEGO-chain runs analysed against the continuum theory (docs/physics.md §1.3), marked slow.
 
 The exact speed law holds where the continuum applies: the pulse is several sites wide and
 slower than the minimum phase speed of the rotational branch (faster discrete pulses resonate
-with rotational waves and radiate, PHYSICS.md §1.3). Measured numbers are in the test ids.
+with rotational waves and radiate, docs/physics.md §1.3). Measured numbers are in the test ids.
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def test_shipped_scene_is_analysed(tmp_path):
 
 
 def test_shaker_sweep_finds_the_longitudinal_cutoff(tmp_path, lego_config):
-    """θ0 = 0: u is a linear chain below its cut-off 1268 Hz and evanescent above (PHYSICS.md §1.4)."""
+    """θ0 = 0: u is a linear chain below its cut-off 1268 Hz and evanescent above (docs/physics.md §1.4)."""
     runs = []
     for f in (400.0, 1000.0, 1500.0, 2500.0):
         cfg = copy.deepcopy(lego_config)

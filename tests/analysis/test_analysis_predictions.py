@@ -1,6 +1,6 @@
 """Theory registry: predictions read from a run's config, checked on synthetic runs built from
 the same theory (so measured = predicted up to the extraction error), and the generic Bloch
-dispersion against the closed form of PHYSICS.md §1.4."""
+dispersion against the closed form of docs/physics.md §1.4."""
 
 from __future__ import annotations
 

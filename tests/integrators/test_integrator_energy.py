@@ -1,5 +1,5 @@
 """Long runs without damping: symplectic methods keep the energy bounded with no drift; the
-others drift, but no more than their accuracy allows (PHYSICS.md §3, JAX-MD-style invariants).
+others drift, but no more than their accuracy allows (docs/physics.md §3, JAX-MD-style invariants).
 
 The nonlinear 16-unit LEGO chain of the order test. A symplectic method conserves a modified
 energy, so E − E0 oscillates with amplitude O((hω)^p) and its mean does not move: the mean

@@ -1,4 +1,4 @@
-"""Every registered integrator converges at its declared order (PHYSICS.md §3; diffrax-style).
+"""Every registered integrator converges at its declared order (docs/physics.md §3; diffrax-style).
 
 On the nonlinear LEGO chain (|θ| up to 0.4 rad), with each kind of external term of
 integrators.common: none, viscous damping, dashpots, a harmonic force drive with damping, a

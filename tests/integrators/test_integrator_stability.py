@@ -1,4 +1,4 @@
-"""Stability limits on the linear chain: measured blow-up step vs predicted (PHYSICS.md §3).
+"""Stability limits on the linear chain: measured blow-up step vs predicted (docs/physics.md §3).
 
 The LEGO chain's fastest mode alone, at amplitude 1e-6 (linear dynamics), is run for 1/g steps
 at each trial step; a trial is unstable if it blows up or its fitted amplitude growth exceeds

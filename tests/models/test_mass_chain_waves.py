@@ -1,4 +1,4 @@
-"""Mass chains against the closed forms of PHYSICS.md §2 (flexmm.theory.chains).
+"""Mass chains against the closed forms of docs/physics.md §2 (flexmm.theory.chains).
 
 Bistable damped fronts (speed and the energy law K = m v Δφ/(2ηa), 1 %), sech² solitary waves of
 the softening chain (v − c0 within 2 %), the exact Toda soliton, and Nesterenko's speed–force

@@ -1,4 +1,4 @@
-"""A planar vector soliton in the 2D sheet equals the chain with n_v = 2, s_v = 1 (PHYSICS.md §1.2).
+"""A planar vector soliton in the 2D sheet equals the chain with n_v = 2, s_v = 1 (docs/physics.md §1.2).
 
 Both are launched with the same exact chain soliton and integrated with the same step; speed and
 amplitude must agree within 1 %. The sheet keeps its transverse displacement v free: the shear
@@ -57,7 +57,7 @@ def test_planar_sheet_soliton_equals_chain_nv2_sv1(tmp_path):
     c_sheet, a_sheet = peak_track(*sheet)
     assert c_sheet == pytest.approx(c_chain, rel=0.01)
     assert a_sheet == pytest.approx(a_chain, rel=0.01)
-    # and both carry the launched soliton: speed law of PHYSICS.md §1.3 (sites per time unit)
+    # and both carry the launched soliton: speed law of docs/physics.md §1.3 (sites per time unit)
     theory = float(soliton_speed(RotatingChainND(0.0, KS, KT, ALPHA2, 2, 1), AMPLITUDE))
     assert c_chain == pytest.approx(theory, rel=0.01)
     assert a_chain == pytest.approx(AMPLITUDE, rel=0.02)

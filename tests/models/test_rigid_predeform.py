@@ -2,7 +2,7 @@
 
 Oracles: the rotating mechanism (uniaxial strain closes the sheet isotropically, Poisson ratio −1,
 θ from cos(θ0+θ) = (1+ε) cos θ0), the buckling law of a compressed chain (F a sin θ = (4+2n_v) k_θ θ,
-PHYSICS.md §1.2: F_c = 4k_θ/a for n_v = 0), and energy conservation of the loaded dynamics.
+docs/physics.md §1.2: F_c = 4k_θ/a for n_v = 0), and energy conservation of the loaded dynamics.
 """
 
 import math

@@ -117,7 +117,7 @@ def test_scene_interface_reflects_and_transmits(tmp_path):
 
 def test_scene_gradient_follows_the_local_speed_law(tmp_path):
     """The soliton climbs the k_θ gradient adiabatically: its transit time from unit 100 to 230
-    equals ∫ dx / c(A(x); local k_θ) with the measured amplitude A(x) (PHYSICS.md §1.3 speed law);
+    equals ∫ dx / c(A(x); local k_θ) with the measured amplitude A(x) (docs/physics.md §1.3 speed law);
     pointwise the speed lags the local law and overshoots it by up to ≈ 15 %."""
     scene, ds, _ = run("lego_stiffness_gradient", tmp_path)
     theta, t = ds["theta"].values, ds["time"].values / LEGO_T

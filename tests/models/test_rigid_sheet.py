@@ -1,4 +1,4 @@
-"""The 2D rotating-squares sheet (PHYSICS.md §1.2): geometry, the rotating mechanism, the planar
+"""The 2D rotating-squares sheet (docs/physics.md §1.2): geometry, the rotating mechanism, the planar
 reduction to the chain, ends and dataset coordinates.
 
 Kernel oracles (−∇E, numpy reference, Σ F = 0) run on the sheet examples of tests/conftest.py via

@@ -1,4 +1,4 @@
-"""Tests for flexmm.theory.chains (PHYSICS.md §2) against ODE residuals and discrete simulations."""
+"""Tests for flexmm.theory.chains (docs/physics.md §2) against ODE residuals and discrete simulations."""
 import math
 import os
 

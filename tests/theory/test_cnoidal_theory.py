@@ -1,8 +1,8 @@
 """flexmm.theory.cnoidal against independent oracles.
 
-Oracles: the first integral theta'^2 = P(theta) by finite differences, PHYSICS.md's dn/cn/sn
-formulas (flexmm.theory.rotating.cnoidal_wave), the small-amplitude sinusoid, the exact discrete
-linear dispersion (PHYSICS.md §1.4) and the Taylor expansion of the reduced hinge force.
+Oracles: the first integral theta'^2 = P(theta) by finite differences, the dn/cn/sn
+formulas of docs/physics.md §1.3 (flexmm.theory.rotating.cnoidal_wave), the small-amplitude sinusoid, the exact discrete
+linear dispersion (docs/physics.md §1.4) and the Taylor expansion of the reduced hinge force.
 """
 import math
 
@@ -45,8 +45,8 @@ def test_profile_satisfies_first_integral(C, crest, kind):
 
 
 @pytest.mark.parametrize("kind,c,m", [("dn", 0.15, 0.6), ("cn", 0.15, 0.8), ("sn", 0.5, 0.4)])
-def test_matches_physics_md_dn_cn_sn(kind, c, m):
-    """Same wave as PHYSICS.md's formulas; the sn^2 parameter is theirs after a Landen transformation."""
+def test_matches_documented_dn_cn_sn(kind, c, m):
+    """Same wave as the formulas of docs/physics.md §1.3; the sn^2 parameter is theirs after a Landen transformation."""
     C1, _, C3 = rt.continuum_coefficients(LEGO, c)
     _, lam = rt.cnoidal_wave(LEGO, c, m, kind, np.zeros(1))
     P = math.sqrt(-2 * C1 / C3 * {"dn": 1 / (2 - m), "cn": m / (2 * m - 1), "sn": m / (1 + m)}[kind])

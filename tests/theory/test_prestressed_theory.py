@@ -1,6 +1,6 @@
 """flexmm.theory.prestressed and the prestress terms of flexmm.theory.rotating, against independent oracles.
 
-Oracles: the energy of a periodic ring of the loaded chain written here from PHYSICS.md §1.1 (its
+Oracles: the energy of a periodic ring of the loaded chain written here from docs/physics.md §1.1 (its
 compression held by the ring's closure), finite differences, the numerical Hessian of that ring,
 and a short simulation of the discrete equations (test_rotating_theory.simulate).
 """

@@ -1,8 +1,8 @@
-"""Tests for flexmm.theory.rotating against independent oracles (PHYSICS.md §1).
+"""Tests for flexmm.theory.rotating against independent oracles (docs/physics.md §1).
 
-Oracles: the ODEs themselves (finite differences), closed forms quoted in PHYSICS.md, Taylor
+Oracles: the ODEs themselves (finite differences), closed forms quoted in docs/physics.md, Taylor
 expansions, the exact discrete linear dispersion, a numerical Hessian of the discrete chain, and
-short simulations of the discrete equations of motion written here from PHYSICS.md §1.1.
+short simulations of the discrete equations of motion written here from docs/physics.md §1.1.
 """
 import math
 
@@ -52,7 +52,7 @@ def d2(f, h):
 
 
 def forces(p, U, th, periodic=False):
-    """Nondimensional accelerations (U_TT, alpha2 theta_TT) of PHYSICS.md §1.1."""
+    """Nondimensional accelerations (U_TT, alpha2 theta_TT) of docs/physics.md §1.1."""
     if periodic:
         Ur, Ul, Tr, Tl = np.roll(U, -1), np.roll(U, 1), np.roll(th, -1), np.roll(th, 1)
     else:  # pulse far from the ends: zero strain / zero rotation ghosts
@@ -69,7 +69,7 @@ def forces(p, U, th, periodic=False):
 
 
 def simulate(p, state, T, n_out=11, onsite=None):
-    """Integrate the chain of PHYSICS.md §1.1 (plus an on-site torque -onsite(theta), if given)."""
+    """Integrate the chain of docs/physics.md §1.1 (plus an on-site torque -onsite(theta), if given)."""
     N = state.U.size
 
     def rhs(t, y):
@@ -93,7 +93,7 @@ def random_params(draw, theta0_zero=False):
 
 
 # ---------------------------------------------------------------- parameters
-def test_lego_and_from_si_agree_with_physics_md_values():
+def test_lego_and_from_si_agree_with_the_documented_values():
     a, kl, m = 0.016, 71690.0, 4.52e-3
     p = RotatingChainND.from_si(a, 0.0, kl, 1.851e-2 * kl, 1.534e-4 / 4 * kl * a**2, m,
                                 m * a**2 / (4 * 1.815**2), n_v=1, s_v=0)
@@ -251,19 +251,19 @@ def test_amplitude_gap_theta0_zero(p):
     assert rt.rotational_cutoff_speed(p) == pytest.approx(c_theta, rel=1e-12)
     Amin = rt.amplitude_gap(p)
     assert rt.soliton_speed(p, Amin) == pytest.approx(c_theta, rel=1e-10)
-    assert rt.soliton_exists(p, 1.001 * Amin, "physics_md")
-    assert not rt.soliton_exists(p, 0.999 * Amin, "physics_md")
+    assert rt.soliton_exists(p, 1.001 * Amin, "constant")
+    assert not rt.soliton_exists(p, 0.999 * Amin, "constant")
     assert rt.amplitude_gap(p, -1) == pytest.approx(Amin, rel=1e-12)
 
 
 def test_no_gap_and_opposite_polarity_gap():
     assert rt.amplitude_gap(NOGAP) == 0.0
-    assert rt.soliton_exists(NOGAP, 1e-3, "physics_md")
+    assert rt.soliton_exists(NOGAP, 1e-3, "constant")
     assert rt.amplitude_gap(PRE, +1) == 0.0
     Amin = rt.amplitude_gap(PRE, -1)
     assert Amin > 2 * PRE.theta0
-    assert rt.soliton_exists(PRE, -1.001 * Amin, "physics_md")
-    assert not rt.soliton_exists(PRE, -0.999 * Amin, "physics_md")
+    assert rt.soliton_exists(PRE, -1.001 * Amin, "constant")
+    assert not rt.soliton_exists(PRE, -0.999 * Amin, "constant")
 
 
 def test_long_wave_speed_is_lower_branch_slope():
@@ -282,8 +282,8 @@ def _profile_grid(p, A, gradient, half_width=25.0, n=20001):
 
 
 @pytest.mark.parametrize("p,A", [(GAP, 0.56), (LEGO, 0.3), (PRE, 0.5), (PRE, -1.5), (SHEET, 0.8)])
-def test_exact_soliton_physics_md_solves_full_ode(p, A):
-    c, z, h, th, Up = _profile_grid(p, A, "physics_md")
+def test_exact_soliton_constant_gradient_solves_full_ode(p, A):
+    c, z, h, th, Up = _profile_grid(p, A, "constant")
     S, D = S_of(p, c), D_phys(p, c)  # S from c: checks the speed law as well
     rhs = -(S * G(p, th) * np.sin(p.theta0 + th) + gam(p) * th) / D
     assert np.abs(d2(th, h) - rhs[2:-2]).max() < 1e-6 * np.abs(rhs).max()
@@ -329,7 +329,7 @@ def test_full_gradient_reproduces_discrete_tail_decay(p):
         kappa = optimize.brentq(det, ks[i], ks[i + 1], xtol=1e-16)
         C1 = rt.continuum_coefficients(p, c, "full")[0]
         assert C1 * p.eta**2 == pytest.approx(kappa**2, rel=kappa**2)  # O(kappa^2) relative error
-        C1_md = rt.continuum_coefficients(p, c, "physics_md")[0]  # PHYSICS.md D(c): wrong tail
+        C1_md = rt.continuum_coefficients(p, c, "constant")[0]  # constant D(c): wrong tail
         assert abs(C1_md * p.eta**2 / kappa**2 - 1) > 0.05
 
 
@@ -337,7 +337,7 @@ def test_exact_soliton_tail_and_small_amplitude_limit():
     p = NOGAP
     errs = []
     for A in (0.1, 0.05):
-        c, z, h, th, _ = _profile_grid(p, A, "physics_md")
+        c, z, h, th, _ = _profile_grid(p, A, "constant")
         errs.append(np.abs(th - rt.soliton_profile(p, c, z)).max() / A)
         C1 = rt.continuum_coefficients(p, c)[0]
         far = z > 10 / math.sqrt(C1)
@@ -405,9 +405,9 @@ def test_discrete_chain_propagates_initial_soliton(p, A):
     assert shape_err < 0.06
 
 
-def test_full_gradient_beats_physics_md_for_predeformed_chain():
+def test_full_gradient_beats_constant_for_predeformed_chain():
     _, err_full = _track(PRE, 0.5, "full")
-    _, err_md = _track(PRE, 0.5, "physics_md")
+    _, err_md = _track(PRE, 0.5, "constant")
     assert err_full < 0.25 * err_md
 
 

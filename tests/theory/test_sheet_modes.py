@@ -20,7 +20,7 @@ def _lattice(theta0: float):
 @pytest.mark.parametrize("theta0", [0.0, 0.35])
 def test_longitudinal_mode_along_x_is_the_planar_chain(theta0):
     """Along x the fast mode is longitudinal with the long-wave speed of the chain with n_v = 2,
-    s_v = 1 (PHYSICS.md §1.2 and §1.4: a planar wave in a wide sheet), the slow one transverse."""
+    s_v = 1 (docs/physics.md §1.2 and §1.4: a planar wave in a wide sheet), the slow one transverse."""
     lat = _lattice(theta0)
     kl, a = lat.k_long_n_per_m, lat.a_m
     chain = RotatingChainND(theta0, lat.k_shear_n_per_m / kl, lat.k_rot_n_m_per_rad / (kl * a * a),

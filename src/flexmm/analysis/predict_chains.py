@@ -1,4 +1,4 @@
-"""Predictions for chains of masses (PHYSICS.md §2), registered for ``mass_chain`` in ``compare``.
+"""Predictions for chains of masses (docs/physics.md §2), registered for ``mass_chain`` in ``compare``.
 
 The relation functions take a measurement plus SI parameters and return Comparison rows; the
 ``pulse``/``front``/``analysis`` entry points read the parameters from the run's MassChain config
@@ -87,7 +87,7 @@ MULTISTABLE = ("bistable_cubic", "phi4", "raney2016", "sine")
 def _chain(ctx):
     lat = ctx.scene().lattice
     if lat.kind != "mass_chain" or lat.variation or lat.bond2 is not None:
-        raise ValueError("relations of PHYSICS.md §2 need a uniform nearest-neighbour chain")
+        raise ValueError("relations of docs/physics.md §2 need a uniform nearest-neighbour chain")
     return lat
 
 

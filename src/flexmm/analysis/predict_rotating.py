@@ -1,4 +1,4 @@
-"""Predictions for the rotating-squares chain (PHYSICS.md §1.3, §1.4) from a run's config.
+"""Predictions for the rotating-squares chain (docs/physics.md §1.3, §1.4) from a run's config.
 
 Nondimensional theory (flexmm.theory.rotating) is converted with the model's own scales:
 lengths in units of a (X = x/a), speeds in c0 = a sqrt(k_l/m), frequencies in sqrt(k_l/m).
@@ -25,7 +25,7 @@ def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
     """(nondimensional parameters, length unit a [m], time unit sqrt(m/k_l) [s]) of the run.
 
     A chain gives its own n_v, s_v. A sheet periodic across the rows carries planar waves, which
-    are the chain with n_v = 2, s_v = 1 (PHYSICS.md §1.2); other sheets: ValueError.
+    are the chain with n_v = 2, s_v = 1 (docs/physics.md §1.2); other sheets: ValueError.
     """
     if "rot" not in ctx.cache:
         lat = ctx.scene().lattice
@@ -73,7 +73,7 @@ def soliton_rows(ctx, A: float, p_meas) -> list:
     """Speed, width and FWHM rows for a θ soliton of amplitude A."""
     p, a, T = params(ctx)
     c = float(rt.soliton_speed(p, A))
-    W = rt.soliton_width(p, c, "full" if p.theta_s else "physics_md")  # PHYSICS.md's D(c) fails prestressed
+    W = rt.soliton_width(p, c, "full" if p.theta_s else "constant")  # constant D(c) fails prestressed
     fw = _fwhm_exact(p, A)
     width_q = "width W (sech fit)" if p.theta0 == 0 else "width W (§1.3 fit)"
     width_m = p_meas.width_sech_m if p.theta0 == 0 else p_meas.width_kg_m

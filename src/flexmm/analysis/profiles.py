@@ -2,8 +2,8 @@
 
 Shapes (z = (x − x0)/W):
 
-- ``sech``:  A sech z — the rotating-chain soliton at θ0 = 0 (PHYSICS.md §1.3);
-- ``sech2``: A sech² z — softening-chain and KdV-like solitary waves (PHYSICS.md §2);
+- ``sech``:  A sech z — the rotating-chain soliton at θ0 = 0 (docs/physics.md §1.3);
+- ``sech2``: A sech² z — softening-chain and KdV-like solitary waves (docs/physics.md §2);
 - ``kg``:    A/(b + (1 − b) cosh z), b < 1 — the §1.3 profile 1/(D1 + D2 cosh z) written with its
   peak A = 1/(D1 + D2) and b = D1 A, so that b = 0 is sech.
 

@@ -58,7 +58,7 @@ def front_dataset(*, n_sites: int = 200, spacing_m: float = 1.0, jump: float = 1
                   speed_m_s: float = 1.0, width_m: float = 3.0, x0_m: float = -10.0,
                   arrest_m: float | None = None, duration_s: float = 150.0, n_frames: int = 301,
                   noise: float = 0.0, seed: int = 0) -> xr.Dataset:
-    """u = (L/2)(1 − tanh((x − X(t))/w)) (PHYSICS.md §2), X(t) = x0 + v t, stopping at ``arrest_m``;
+    """u = (L/2)(1 − tanh((x − X(t))/w)) (docs/physics.md §2), X(t) = x0 + v t, stopping at ``arrest_m``;
     displacement from the initial state (start the front outside the chain, x0 < −2w, for a
     chain that is uniform at t = 0)."""
     time = np.linspace(0.0, duration_s, n_frames)

@@ -20,7 +20,7 @@ class Striker(Strict):
 
 
 class Impact(Strict):
-    """Initial velocity on the end unit, or a striker mass hitting it (PHYSICS.md §1)."""
+    """Initial velocity on the end unit, or a striker mass hitting it (docs/physics.md §1)."""
 
     kind: Literal["impact"]
     velocity_m_s: Finite = Field(description="impact velocity, positive into the lattice")
@@ -90,7 +90,7 @@ class BoundaryDisplacement(EndDrive):
 
 
 class Soliton(Strict):
-    """Start from the exact continuum vector soliton (PHYSICS.md §1.3) at a given site."""
+    """Start from the exact continuum vector soliton (docs/physics.md §1.3) at a given site."""
 
     kind: Literal["soliton"]
     amplitude_rad: Finite = Field(description="peak staggered rotation A (sign = polarity)")

@@ -15,7 +15,7 @@ EndCondition = Literal["free", "fixed", "driven"]
 
 
 class RotatingSquaresChain(RigidOptions):
-    """1D chain of rigid squares joined by hinges (PHYSICS.md §1.1), DOFs u and θ per unit."""
+    """1D chain of rigid squares joined by hinges (docs/physics.md §1.1), DOFs u and θ per unit."""
 
     kind: Literal["rotating_squares_chain"]
     #: per-site coordinates of the built model, in state order (models.rotating_chain.FIELDS)

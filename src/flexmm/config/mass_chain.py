@@ -1,4 +1,4 @@
-"""Lattice configs of chains of masses (PHYSICS.md §2): laws, variations, chain/network/grid.
+"""Lattice configs of chains of masses (docs/physics.md §2): laws, variations, chain/network/grid.
 
 A site has one displacement x (m). Bonds (nearest and optional second neighbours) and on-site
 terms each follow one *law* (discriminated on ``law``); any numeric law field, the site mass,

@@ -1,4 +1,4 @@
-"""Config blocks of the rigid-unit lattices (PHYSICS.md §1): sheet, linkage and their options.
+"""Config blocks of the rigid-unit lattices (docs/physics.md §1): sheet, linkage and their options.
 
 Options shared by the rotating-squares chain and sheet:
 
@@ -128,7 +128,7 @@ class Predeform(Strict):
 class Magnets(Strict):
     """One point dipole at the middle of each face of every unit, fixed in the unit.
 
-    A unit's hinge points are its corners (PHYSICS.md §1.2), so its faces join neighbouring
+    A unit's hinge points are its corners (docs/physics.md §1.2), so its faces join neighbouring
     corners; the dipole sits ``recess_m`` inside the face, along the face normal. ``attract``:
     units with σ = +1 point their dipoles out, σ = −1 in, so facing magnets attract as the gap
     closes (open, clockwise and counter-clockwise states: tristable units); ``repel``: all out.
@@ -153,7 +153,7 @@ class RigidOptions(Strict):
 
 # ---------------------------------------------------------------- lattices
 class RotatingSquaresSheet(RigidOptions):
-    """2D lattice of rigid squares joined at their corners (PHYSICS.md §1.2), u, v, θ per unit.
+    """2D lattice of rigid squares joined at their corners (docs/physics.md §1.2), u, v, θ per unit.
 
     Site = row · n_cols + col; column 0 is the left edge, row 0 the bottom edge. Units are the
     squares of the checkerboard σ = (−1)^(row+col). Hinges are zero-length springs (k_l along
@@ -226,7 +226,7 @@ class BistableLinkage(Strict):
     """Deployable linkage: rigid crosses (two bars welded at their middles) pinned tip to tip.
 
     Two rows of n_cols crosses (site = row · n_cols + col); unit k (u, v, θ) has its bars at ±σ_k(θ0 + θ_k) to the axes
-    (σ the checkerboard, PHYSICS.md §1.2), so the soft mode is the counter-rotation of the units
+    (σ the checkerboard, docs/physics.md §1.2), so the soft mode is the counter-rotation of the units
     (scissor-like). Every pin carries a double well in the joint angle ψ = θ_a + θ_b,
     V′(ψ) = k ψ (ψ − βψ*)(ψ − ψ*): wells at ψ = 0 (bars at θ0) and ψ* = 2(θ_deployed − θ0),
     barrier at βψ*, released energy per joint ΔE = k ψ*⁴ (1 − 2β)/12 (0 < β < ½). Pins are stiff

@@ -1,4 +1,4 @@
-"""Dormand–Prince 5(4), adaptive, with dense output at the save times (PHYSICS.md §3).
+"""Dormand–Prince 5(4), adaptive, with dense output at the save times (docs/physics.md §3).
 
 Same first-order form as ``rk4`` (y = (q, v) plus the two ledger integrals). Seven stages,
 first-same-as-last (six force evaluations per accepted step), 5th-order solution, embedded

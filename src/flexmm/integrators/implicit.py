@@ -1,4 +1,4 @@
-"""Implicit midpoint rule with a matrix-free Newton–Krylov solve (PHYSICS.md §3).
+"""Implicit midpoint rule with a matrix-free Newton–Krylov solve (docs/physics.md §3).
 
 For q' = v, M v' = F(q, v, t) − C v, one step of size h is
 

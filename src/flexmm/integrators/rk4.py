@@ -1,4 +1,4 @@
-"""Classical fourth-order Runge–Kutta on the first-order form y = (q, v) (PHYSICS.md §3).
+"""Classical fourth-order Runge–Kutta on the first-order form y = (q, v) (docs/physics.md §3).
 
     q' = v,   v' = a(q, v, t) = M⁻¹ (F(q, v, t) − c v)
 

@@ -1,4 +1,4 @@
-"""Symplectic splittings of drifts and kicks, with damping by exact flows (PHYSICS.md §3).
+"""Symplectic splittings of drifts and kicks, with damping by exact flows (docs/physics.md §3).
 
 ``make_splitting_advance(kicks, drifts)`` compiles the ``advance`` of any splitting given its
 coefficients (PEFRL below; Blanes–Moan's 6th-order method, ``composition``).

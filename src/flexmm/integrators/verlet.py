@@ -1,4 +1,4 @@
-"""Velocity Verlet with semi-implicit linear damping (PHYSICS.md §3).
+"""Velocity Verlet with semi-implicit linear damping (docs/physics.md §3).
 
 With on-site damping c_k (rate γ_k = c_k/m_k) one step of size h reads
 

@@ -7,7 +7,7 @@ K_m the block coupling that cell to the cell m periods away,
 
     D(q) = Σ_m K_m e^{i q m},    D(q) x = ω² M x,
 
-where q is the phase per cell and M the cell's diagonal mass matrix (PHYSICS.md §1.4 is the
+where q is the phase per cell and M the cell's diagonal mass matrix (docs/physics.md §1.4 is the
 closed form of this for the rotating-squares chain). Everything is in the model's
 nondimensional units (frequency unit 1/scales.time_s).
 """

@@ -1,4 +1,4 @@
-"""Linear plane waves of the 2D rotating-squares sheet (PHYSICS.md §1.2), from its Hessian.
+"""Linear plane waves of the 2D rotating-squares sheet (docs/physics.md §1.2), from its Hessian.
 
 The sheet's primitive cell holds two units (the checkerboard σ = ±1). With K the Hessian of the
 energy at rest (central differences of the compiled force, flexmm.stability.hessian_operator) of a

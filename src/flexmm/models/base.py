@@ -56,7 +56,7 @@ class Predeformation:
 
 @dataclass(frozen=True)
 class RotatingSquaresND:
-    """Nondimensional parameters of the uniform rotating-squares lattice (PHYSICS.md §1.1).
+    """Nondimensional parameters of the uniform rotating-squares lattice (docs/physics.md §1.1).
 
     The arguments of ``flexmm.theory.rotating.RotatingChainND``, for soliton launchers and checks.
     """

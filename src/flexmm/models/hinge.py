@@ -1,4 +1,4 @@
-"""Hinge energy between rigid rotating units, with its exact gradient (PHYSICS.md §1).
+"""Hinge energy between rigid rotating units, with its exact gradient (docs/physics.md §1).
 
 A hinge joins the hinge point of unit A to that of unit B with three linear springs,
 
@@ -13,7 +13,7 @@ h = a/2 the centre-to-hinge distance, r = h_A cos θ0_A + h_B cos θ0_B the rest
 staggered rotations, so every hinge has the same law. The same function serves chains, sheets,
 gradients and defects: only the connectivity and parameter arrays change.
 
-The lateral hinges of a chain (n_v per unit, PHYSICS.md §1.1) are an on-site term
+The lateral hinges of a chain (n_v per unit, docs/physics.md §1.1) are an on-site term
 E_v = ½ k_g (cos θ0 − cos(θ0+θ))² + ½ k_r θ² with k_g = n_v s_v k_l a²/2, k_r = 2 n_v k_θ.
 """
 

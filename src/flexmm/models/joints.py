@@ -1,4 +1,4 @@
-"""Bistable joints between neighbouring units (the linkage's, PHYSICS.md §2): kernels.
+"""Bistable joints between neighbouring units (the linkage's, docs/physics.md §2): kernels.
 
 ``joints`` = (a (J,), b (J,), prm (J, 3)); each joint's energy depends on the relative rotation
 of its two units (``joint_law``).

@@ -1,4 +1,4 @@
-"""Scalar energy laws E(z) for bonds and on-site terms of chains of masses (PHYSICS.md §2).
+"""Scalar energy laws E(z) for bonds and on-site terms of chains of masses (docs/physics.md §2).
 
 One compiled function, ``law(code, z, prm, tab) -> (E, dE/dz)``, evaluates every law with its
 exact derivative. A bond between sites i and j feeds it the elongation z = x_j − x_i + s, an

@@ -1,7 +1,7 @@
 """1D bistable linkage: rigid bars pinned tip to tip, every pin a bistable rotational spring.
 
 Each unit is a rigid cross (two bars of length L welded at their middles, the rigid unit of the
-rotating-squares family with its four tips as hinge points, PHYSICS.md §1.2); units form a strip
+rotating-squares family with its four tips as hinge points, docs/physics.md §1.2); units form a strip
 of two rows, pinned tip to tip, so the only soft mode is the counter-rotation of the units — a
 scissor-like deployable linkage (a single row of pinned bars would fold like a chain instead).
 The strip is a two-row ``rotating_sheet`` whose hinges are stiff pins (k_l = k_s = k_pin, k_θ = 0)

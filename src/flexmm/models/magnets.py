@@ -1,4 +1,4 @@
-"""Point dipoles fixed in rigid units: pair energies between neighbouring units (PHYSICS.md §1.2).
+"""Point dipoles fixed in rigid units: pair energies between neighbouring units (docs/physics.md §1.2).
 
 Magnet k of unit i sits at X_i + R(φ_i) p_k with moment s_i R(φ_i) d_k (φ_i = σ_i(θ0_i + θ_i),
 p_k, d_k in the unit's body frame, s_i the signed moment). Between units a and b,

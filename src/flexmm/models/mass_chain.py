@@ -1,4 +1,4 @@
-"""Chains (networks, grids) of point masses with nonlinear bonds and on-site potentials (PHYSICS.md §2).
+"""Chains (networks, grids) of point masses with nonlinear bonds and on-site potentials (docs/physics.md §2).
 
     m_i ẍ_i = Σ_bonds ± T(x_j − x_i + s_b) − Σ_terms V′(x_i + s_t)  [− friction − damping]
 

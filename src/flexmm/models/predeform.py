@@ -1,4 +1,4 @@
-"""Static equilibrium of a rigid-unit lattice under applied strain or load (PHYSICS.md §1.2).
+"""Static equilibrium of a rigid-unit lattice under applied strain or load (docs/physics.md §1.2).
 
 Constant loads are a linear potential E_load = −Σ_k f_k q_k (so they stay on during the dynamics
 and the energy stays conserved); applied strain holds the end units at ∓ε L/2 along the axis.

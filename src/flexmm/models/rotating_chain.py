@@ -1,4 +1,4 @@
-"""Build the rotating-squares chain (PHYSICS.md §1.1) from its config.
+"""Build the rotating-squares chain (docs/physics.md §1.1) from its config.
 
 Nondimensionalisation: length a, time sqrt(m/k_l), mass m, so k_l = 1, K_s = k_s/k_l,
 K_θ = k_θ/(k_l a²), α² = J/(m a²) and speeds are in units of c0 = a sqrt(k_l/m).
@@ -32,7 +32,7 @@ FIELDS = (
 
 
 def nondimensional(cfg: RotatingSquaresChain) -> dict[str, float]:
-    """K_s, K_θ, α² of PHYSICS.md §1.1 from the SI config."""
+    """K_s, K_θ, α² of docs/physics.md §1.1 from the SI config."""
     return {
         "Ks": cfg.k_shear_n_per_m / cfg.k_long_n_per_m,
         "Ktheta": cfg.k_rot_n_m_per_rad / (cfg.k_long_n_per_m * cfg.a_m**2),
@@ -138,7 +138,7 @@ def build(cfg: RotatingSquaresChain) -> System:
 
 
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
-    """Overwrite q0, v0 with the exact continuum vector soliton (PHYSICS.md §1.3).
+    """Overwrite q0, v0 with the exact continuum vector soliton (docs/physics.md §1.3).
 
     On a predeformed chain (``system.rest_state``) this is the prestressed soliton of
     flexmm.theory.prestressed about the rest rotation θ_s at ``center``, written as the

@@ -1,4 +1,4 @@
-"""2D lattice of rotating squares (PHYSICS.md §1.2): u, v, θ per unit, the hinge law of hinge.py.
+"""2D lattice of rotating squares (docs/physics.md §1.2): u, v, θ per unit, the hinge law of hinge.py.
 
 Site s = row · n_cols + col, rest position (col h, row h), h = a cos θ0 + ℓ (ℓ: ligament
 length, 0 for zero-length springs). State (nondimensional, length a, time sqrt(m/k_l), mass m):
@@ -171,7 +171,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
     """Add a planar vector soliton (chain theory with n_v = 2, s_v = 1) centred on column ``center``.
 
-    Every row gets the chain profile of PHYSICS.md §1.3 (v = 0): exact for a sheet periodic in y,
+    Every row gets the chain profile of docs/physics.md §1.3 (v = 0): exact for a sheet periodic in y,
     the natural launch for a wide sheet.
     """
     from flexmm.theory.rotating import RotatingChainND, soliton_initial_state

@@ -4,10 +4,10 @@ Where a pulse spans many units (FWHM ≥ ``MIN_SITES``) the long-wave theory of 
 predicts its speed and profile:
 
 - rotating-squares chain (and a sheet run as its planar chain): the exact vector soliton
-  (PHYSICS.md §1.3) — speed c(A) from the exact speed law, profile from the first integral;
+  (docs/physics.md §1.3) — speed c(A) from the exact speed law, profile from the first integral;
   the amplitude A is given by a ``soliton`` excitation, else it must be measured;
 - chain of masses with a linear bond and a cubic bistable on-site term, damped: the steady
-  transition front u = (L/2)(1 − tanh((x − x0 − vt)/w)) (PHYSICS.md §2), fully determined.
+  transition front u = (L/2)(1 − tanh((x − x0 − vt)/w)) (docs/physics.md §2), fully determined.
 
 A prediction is *complete* when the scene fixes every parameter of the travelling wave (then
 ``--fidelity continuum`` replaces the discrete run by sampling the profile); otherwise the
@@ -133,7 +133,7 @@ def rotating_soliton(lat, amplitude_rad: float, center_site: float = 0.0, direct
         return {"u": direction * f["U"] * a, "theta": f["th"], "u_dot": -c * direction * f["up"] * a / ts,
                 "theta_dot": -c * f["dth"] / ts}
 
-    return ContinuumPrediction("vector soliton (PHYSICS.md §1.3, exact speed law)", "theta",
+    return ContinuumPrediction("vector soliton (docs/physics.md §1.3, exact speed law)", "theta",
                                c * a / ts, amplitude_rad, "rad", _fwhm(p, amplitude_rad) * a, h,
                                complete, sample)
 
@@ -193,7 +193,7 @@ def _mass_front(scene) -> ContinuumPrediction:
         xi = travel * (np.asarray(x_m, float) - x_start) / a - fr.v * t_s / ts
         return {"u": fr.profile(xi) * a, "u_dot": -fr.v * fr.slope(xi) * a / ts}
 
-    pred = ContinuumPrediction("steady transition front (PHYSICS.md §2, phase-plane shooting)", "u",
+    pred = ContinuumPrediction("steady transition front (docs/physics.md §2, phase-plane shooting)", "u",
                                fr.v * a / ts, (fr.behind - fr.ahead) * a, "m", fr.width_10_90 * a,
                                lat.spacing_m, True, sample)
     pred.notes.append("width is the 10-90 % distance; the front starts at the excited end at t = 0 "

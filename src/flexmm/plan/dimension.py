@@ -1,4 +1,4 @@
-"""Run a planar wave in a sheet on the smallest lattice that carries it (PHYSICS.md §1.2).
+"""Run a planar wave in a sheet on the smallest lattice that carries it (docs/physics.md §1.2).
 
 When every unit of a column starts and is driven alike and the sheet is periodic across the
 wave (bottom/top periodic), the motion keeps that symmetry up to the checkerboard: u and θ are
@@ -8,7 +8,7 @@ the rows, and two reductions follow:
 
 - ``strip`` (exact, the default): the same sheet with 2 rows, periodic across — identical to
   the full sheet to rounding, n_rows/2 times cheaper;
-- ``chain``: the rotating-squares chain with n_lateral = 2, lateral_stretch = true (PHYSICS.md),
+- ``chain``: the rotating-squares chain with n_lateral = 2, lateral_stretch = true (docs/physics.md §1.2),
   which suppresses v. It is exact only as K_s → 0: the staggered v relaxes the shear hinges, so
   with stiff shear (K_s ~ 0.2) the chain's θ pulse differs at first order; with K_s ~ 0.02 the
   rotational band shifts by ~0.5 %. ``flexmm compare --fidelity full,chain`` measures it.

@@ -1,4 +1,4 @@
-"""Continuum transition front of a damped chain of masses with any on-site law (PHYSICS.md §2).
+"""Continuum transition front of a damped chain of masses with any on-site law (docs/physics.md §2).
 
 Nondimensional (length a, time sqrt(m/k_ref), as the model): with a linear bond of stiffness K,
 on-site force V′(u) and on-site damping rate γ, a front u(ξ), ξ = x − vt, obeys
@@ -9,7 +9,7 @@ and joins the well it leaves behind (ξ → −∞) to the well ahead (ξ → +�
 of this flow; in the phase plane p = u′(u), dp/du = (V′(u) − γ v p)/((K − v²) p), the branch
 leaving the well behind and the one reaching the well ahead must meet at the barrier: v is the
 root of their mismatch there (brentq), and u(ξ) follows from ξ = ∫ du/p. For the cubic law this
-is PHYSICS.md's closed form (tests check it); V′ comes from the model's own force kernel on a
+is the closed form of docs/physics.md §2 (tests check it); V′ comes from the model's own force kernel on a
 uniform state, so the measured Raney energy, tables or polynomials work alike.
 """
 

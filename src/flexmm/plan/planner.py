@@ -8,7 +8,7 @@ behind it. Fidelities:
   sheet as its chain, a lattice trimmed to the reach of its waves, output pruned to the
   requested analysis; ``solver.accuracy`` asks for pilots to pick integrator and dt;
 - ``full``: the scene as declared (warnings say what is wasted); accuracy still honoured;
-- ``chain``: as ``auto`` but a planar sheet runs as the n_lateral = 2 chain of PHYSICS.md
+- ``chain``: as ``auto`` but a planar sheet runs as the n_lateral = 2 chain (docs/physics.md §1.2)
   (approximate, see ``dimension``) instead of the exact 2-row strip;
 - ``continuum``: no discrete run; the continuum wave is sampled (only where the theory fixes it).
 

@@ -3,7 +3,7 @@
 ``speed_at`` evaluates ``flexmm.analysis.compare.THEORY[kind].speed_curve`` (NaN where the model
 has no speed law or no pulse of that amplitude exists); ``reference_lines`` adds model-specific
 thresholds worth drawing: for the rotating-squares chain, the amplitude gap A_min of each
-polarity (PHYSICS.md §1.3, ``flexmm.theory.rotating.amplitude_gap``).
+polarity (docs/physics.md §1.3, ``flexmm.theory.rotating.amplitude_gap``).
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Analytical theory for flexmm: closed forms and reduced ODEs used to seed and check simulations.
 
-Pure numpy/scipy and nondimensional (PHYSICS.md §1.1 scales for the rotating-squares chain).
-`rotating` covers the rotating-squares chain (PHYSICS.md §1.3, §1.4), `prestressed` the chain held
+Pure numpy/scipy and nondimensional (docs/physics.md §1.1 scales for the rotating-squares chain).
+`rotating` covers the rotating-squares chain (docs/physics.md §1.3, §1.4), `prestressed` the chain held
 rotated by an end load, `cnoidal` periodic (cnoidal) waves and the driven wave of a chain; `chains`
-covers chains of masses with nonlinear springs and on-site potentials (PHYSICS.md §2).
+covers chains of masses with nonlinear springs and on-site potentials (docs/physics.md §2).
 """
 from flexmm.theory.chains import (
     BistableFront,

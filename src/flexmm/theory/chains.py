@@ -1,4 +1,4 @@
-"""Analytical travelling waves in chains of point masses (PHYSICS.md §2).
+"""Analytical travelling waves in chains of point masses (docs/physics.md §2).
 
 Chain: m x''_i = F(x_{i+1} - x_i) - F(x_i - x_{i-1}) - V'(x_i) - eta x'_i. Functions take plain floats
 in any consistent unit system (a: spacing, m: mass, k: linear coupling stiffness); array arguments
@@ -38,7 +38,7 @@ def bistable_front(alpha: float, beta: float, L: float, k: float, m: float, a: f
                    eta: float) -> BistableFront:
     """Front of the chain with on-site force V'(u) = alpha u (u - beta L)(u - L), 0 < beta < 1/2 (§2).
 
-    Continuum travelling wave (ka^2 - mv^2) u'' + eta v u' - V'(u) = 0 gives (derived, PHYSICS.md §2):
+    Continuum travelling wave (ka^2 - mv^2) u'' + eta v u' - V'(u) = 0 gives (derived, docs/physics.md §2):
     dphi = V(0) - V(L) = alpha L^4 (1 - 2 beta)/12, v = c0/sqrt(1 + 2 eta^2/(m alpha L^2 (1 - 2beta)^2)),
     w = sqrt(8 (k a^2 - m v^2)/(alpha L^2)), c0 = a sqrt(k/m). The front converts u = 0 (ahead) into
     u = L (behind). Without damping the continuum front degenerates (v = c0, w = 0). Discrete fronts
@@ -55,7 +55,7 @@ def bistable_front(alpha: float, beta: float, L: float, k: float, m: float, a: f
 
 
 def bistable_front_profile(x, t, L: float, v: float, w: float):
-    """u(x, t) = (L/2)(1 - tanh((x - v t)/w)) (PHYSICS.md §2); broadcast shape of x and t."""
+    """u(x, t) = (L/2)(1 - tanh((x - v t)/w)) (docs/physics.md §2); broadcast shape of x and t."""
     return 0.5 * L * (1 - np.tanh((np.asarray(x, dtype=float) - v * np.asarray(t, dtype=float)) / w))
 
 
@@ -93,7 +93,7 @@ class SechWave:
 
 
 def softening_solitary_wave(k1: float, k2: float, Dm: float, m: float = 1.0, a: float = 1.0) -> SechWave:
-    """Long-wave solitary wave D = Dm sech^2((n - vt/a)/W) for T(D) = k1 D + k2 D^2 (PHYSICS.md §2).
+    """Long-wave solitary wave D = Dm sech^2((n - vt/a)/W) for T(D) = k1 D + k2 D^2 (docs/physics.md §2).
 
     From the Boussinesq limit m D_tt = a^2 [T(D) + (1/12) T(D)_nn]_nn (n in sites): travelling waves obey
     (k1/12) D'' = (m v^2/a^2 - k1) D - k2 D^2, giving v = c0 sqrt(1 + 2 k2 Dm/(3 k1)), c0 = a sqrt(k1/m),
@@ -116,7 +116,7 @@ def softening_profile(n, t, Dm: float, v: float, W: float, a: float = 1.0):
 
 # ---------------------------------------------------------------- Hertzian chain (Nesterenko)
 def nesterenko_speed(A: float, m: float, D: float, xi_m: float) -> float:
-    """Solitary-wave speed V = (2/sqrt 5) c xi_m^(1/4), c^2 = A D^(5/2)/m (Nesterenko; PHYSICS.md §2).
+    """Solitary-wave speed V = (2/sqrt 5) c xi_m^(1/4), c^2 = A D^(5/2)/m (Nesterenko; docs/physics.md §2).
 
     A: Hertz constant in F = A delta^(3/2); D: bead diameter; xi_m: peak strain (overlap/D).
     """
@@ -165,7 +165,7 @@ def toda_speed(a: float, b: float, m: float, kappa: float) -> float:
 
 # ---------------------------------------------------------------- linear chain
 def linear_chain_dispersion(k: float, m: float, q, k_onsite: float = 0.0):
-    """omega(q) = sqrt((k_onsite + 4 k sin^2(q/2))/m), q the phase per site (q a) (PHYSICS.md §2); shape of q."""
+    """omega(q) = sqrt((k_onsite + 4 k sin^2(q/2))/m), q the phase per site (q a) (docs/physics.md §2); shape of q."""
     return np.sqrt((k_onsite + 4 * k * np.sin(np.asarray(q, dtype=float) / 2) ** 2) / m)
 
 

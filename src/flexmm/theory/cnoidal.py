@@ -1,4 +1,4 @@
-"""Cnoidal (periodic travelling) waves of theta'' = C0 + C1 theta + C2 theta^2 + C3 theta^3 (PHYSICS.md §1.3).
+"""Cnoidal (periodic travelling) waves of theta'' = C0 + C1 theta + C2 theta^2 + C3 theta^3 (docs/physics.md §1.3).
 
 The first integral theta'^2 = P(theta) = C3 theta^4/2 + 2 C2 theta^3/3 + C1 theta^2 + 2 C0 theta + E is a
 quartic; a periodic wave oscillates between two adjacent real roots lo < hi with P > 0 between them,
@@ -8,18 +8,18 @@ With a = C3/2 and the other two roots r3, r4:
 - a < 0, r3, r4 real and below lo (reflect theta -> -theta when both lie above hi): with
   e1 = hi > e2 = lo > e3 > e4, m = (e1-e2)(e3-e4)/((e1-e3)(e2-e4)), u = sqrt(-a (e1-e3)(e2-e4)) zeta/2,
   theta = [e2 (e1-e3) - e3 (e1-e2) sn^2 u]/[(e1-e3) - (e1-e2) sn^2 u], wavelength 2K(m)/(du/dzeta).
-  PHYSICS.md's dn wave (C0 = C2 = 0, C1 > 0, C3 < 0) is this case.
+  The dn wave of docs/physics.md §1.3 (C0 = C2 = 0, C1 > 0, C3 < 0) is this case.
 - a < 0, r3,4 = b +- i d: A^2 = (hi-b)^2 + d^2, B^2 = (lo-b)^2 + d^2, m = [(hi-lo)^2 - (A-B)^2]/(4AB),
   u = sqrt(-a A B) zeta, theta = [(lo A + hi B) + (lo A - hi B) cn u]/[(A+B) + (A-B) cn u],
-  wavelength 4K(m)/sqrt(-a A B). PHYSICS.md's cn wave.
+  wavelength 4K(m)/sqrt(-a A B). The cn wave of docs/physics.md §1.3.
 - a > 0, roots e1 > hi = e2 > lo = e3 > e4: m = (e2-e3)(e1-e4)/((e1-e3)(e2-e4)),
   u = sqrt(a (e1-e3)(e2-e4)) zeta/2, theta = [e3 (e2-e4) - e4 (e2-e3) sn^2 u]/[(e2-e4) - (e2-e3) sn^2 u],
-  wavelength 2K(m)/(du/dzeta). PHYSICS.md's sn wave.
+  wavelength 2K(m)/(du/dzeta). The sn wave of docs/physics.md §1.3.
 
 m -> 0 is a sinusoid (phonon); m -> 1 a train of solitons (or kinks) separated by ever longer flats.
 m is the parameter of the sn^2 (resp. cn) form above: the KdV cnoidal parameter (e1-e2)/(e1-e3) when
-C3 -> 0 (e4 -> -inf), PHYSICS.md's m for its cn wave, and PHYSICS.md's m after a Landen transformation
-for its dn wave, ((1 - sqrt(1-m))/(1 + sqrt(1-m)))^2, and sn wave, 4 sqrt(m)/(1 + sqrt(m))^2.
+C3 -> 0 (e4 -> -inf), the m of docs/physics.md §1.3 for its cn wave, and that m after a Landen
+transformation for its dn wave, ((1 - sqrt(1-m))/(1 + sqrt(1-m)))^2, and sn wave, 4 sqrt(m)/(1 + sqrt(m))^2.
 Profiles are returned with the crest at zeta = 0. Pure numpy/scipy; the rotating-chain application
 (a driven wave at given frequency, with the mean-force condition) is driven_wave below.
 """
@@ -181,7 +181,7 @@ def wave_coefficients(p, c: float, mean_stretch: float) -> tuple[float, float, f
     fixes K = -c^2 G-bar/eta and w = sigma (G - G-bar), sigma = c^2/(c^2 - eta^2). The reduced
     potential gains -sigma G-bar G(theta); with G = s0 theta + eta theta^2/2 - s0 theta^3/6 + ... and
     D = D_full(0) (flexmm.theory.rotating) this adds, with k = sigma G-bar, k s0/D, k eta/D,
-    -k s0/(2D) and -k eta/(6D) to C0..C3 (C0 = 0 and PHYSICS.md's C1..C3 at G-bar = 0).
+    -k s0/(2D) and -k eta/(6D) to C0..C3 (C0 = 0 and the C1..C3 of docs/physics.md §1.3 at G-bar = 0).
     """
     from flexmm.theory import rotating as rt
 

@@ -1,4 +1,4 @@
-"""Rotating-squares chain held rotated by an end load: the prestressed theory (derived; PHYSICS.md §1.1).
+"""Rotating-squares chain held rotated by an end load: the prestressed theory (derived; docs/physics.md §1.1).
 
 Deng et al. PRE 98, 053001 (2018) compress the chain statically before the dynamics; the loads stay
 on. Derivation (nondimensional, k_l = a = 1, f = F/(k_l a) the compressive end force, gamma =
@@ -9,7 +9,7 @@ on. Derivation (nondimensional, k_l = a = 1, f = F/(k_l a) the compressive end f
 
        f_eff sin(theta0 + theta_s) = gamma theta_s,    f_eff = f - h G_theta0(theta_s)
 
-   (static_rotation solves it; it is the "F a sin theta = (4 + 2 n_v) k_theta theta" of PHYSICS.md
+   (static_rotation solves it; it is the "F a sin theta = (4 + 2 n_v) k_theta theta" of docs/physics.md
    §1.2 for theta0 = 0, s_v = 0).
 2. Write theta = theta_s + phi, u = u_s + u~ with t0' = theta0 + theta_s. Each hinge's stretch is
    Delta x = -f + [u~_{i+1} - u~_i + cos t0' - (cos(t0' + phi_i) + cos(t0' + phi_{i+1}))/2], its shear

@@ -1,13 +1,13 @@
-"""Analytical theory of the rotating-squares chain (PHYSICS.md §1.1, §1.3, §1.4).
+"""Analytical theory of the rotating-squares chain (docs/physics.md §1.1, §1.3, §1.4).
 
-Everything is nondimensional (PHYSICS.md §1.1): U = u/a, T = t sqrt(k_l/m), positions X = x/a,
+Everything is nondimensional (docs/physics.md §1.1): U = u/a, T = t sqrt(k_l/m), positions X = x/a,
 speeds in units of c0 = a sqrt(k_l/m). Site n sits at X_n = n cos(theta0) (spacing h = a cos theta0),
 so a speed c in X units is c / cos(theta0) sites per unit T. Travelling coordinate zeta = X - cT.
 
-Gradient models: 'physics_md' uses the constant D(c) of PHYSICS.md §1.3 (the Klein-Gordon C1..C3);
+Gradient models: 'constant' uses the commonly quoted constant D(c) (the Klein-Gordon C1..C3, docs/physics.md §1.3);
 'full' (default for exact profiles) keeps the theta dependence of the gradient coefficient derived in
 exact_soliton. Both give the same exact speed law; 'full' agrees with the discrete chain far better
-(and, unlike PHYSICS.md's D(c), with the exact linear dispersion when theta0 != 0).
+(and, unlike the constant D(c), with the exact linear dispersion when theta0 != 0).
 
 A chain held in a rotated state by an external load (theta_s != 0, see flexmm.theory.prestressed for
 the derivation) is the stress-free chain of rest angle theta0 plus the on-site potential
@@ -26,7 +26,7 @@ from scipy import integrate, optimize, special
 
 @dataclass(frozen=True)
 class RotatingChainND:
-    """Nondimensional rotating-squares chain parameters (PHYSICS.md §1.1).
+    """Nondimensional rotating-squares chain parameters (docs/physics.md §1.1).
 
     theta0: rest angle [rad]; Ks = k_s/k_l; Ktheta = k_theta/(k_l a^2); alpha2 = J/(m a^2);
     n_v: lateral hinges per unit (0, 1, 2); s_v: 1 if lateral contraction is blocked.
@@ -70,17 +70,17 @@ class RotatingChainND:
 
     @property
     def gamma(self) -> float:
-        """gamma = (4 + 2 n_v) Ktheta (PHYSICS.md §1.3)."""
+        """gamma = (4 + 2 n_v) Ktheta (docs/physics.md §1.3)."""
         return (4 + 2 * self.n_v) * self.Ktheta
 
     @property
     def gradient_stiffness(self) -> float:
-        """Lambda = (Ks eta^2 - s0^2 - 4 Ktheta)/4: linear gradient stiffness per site^2 (PHYSICS.md D(c))."""
+        """Lambda = (Ks eta^2 - s0^2 - 4 Ktheta)/4: linear gradient stiffness per site^2 (constant D(c), docs/physics.md §1.3)."""
         return (self.Ks * self.eta**2 - self.s0**2 - 4 * self.Ktheta) / 4
 
 
 def lego_parameters(theta0: float = 0.0, n_v: int = 1, s_v: int = 0) -> RotatingChainND:
-    """LEGO chain of Deng et al. 2017/2018 (PHYSICS.md §1.1), nondimensional.
+    """LEGO chain of Deng et al. 2017/2018 (docs/physics.md §1.1), nondimensional.
 
     Ks = 1.851e-2, Ktheta = 1.534e-4/4, alpha2 = 1/(4 * 1.815^2). The default n_v = 1, s_v = 0
     reproduces Deng 2017's torsional term k_theta(theta_{i+1} + 4 theta_i + theta_{i-1}).
@@ -96,7 +96,7 @@ def _g(p: RotatingChainND, theta):
 
 
 def hinge_stretch(p: RotatingChainND, theta):
-    """G(theta) = cos(theta0) - cos(theta0 + theta) (PHYSICS.md §1.3); same shape as theta."""
+    """G(theta) = cos(theta0) - cos(theta0 + theta) (docs/physics.md §1.3); same shape as theta."""
     return np.asarray(theta, dtype=float) * _g(p, theta)
 
 
@@ -116,11 +116,11 @@ def _prestress(p: RotatingChainND, theta):
     return w2, k * (1 - np.sin(p.theta0 + th) / p.s0)
 
 
-def continuum_coefficients(p: RotatingChainND, c: float, gradient: str = "physics_md"):
-    """(C1, C2, C3) of theta'' = C1 theta + C2 theta^2 + C3 theta^3 at speed c (PHYSICS.md §1.3).
+def continuum_coefficients(p: RotatingChainND, c: float, gradient: str = "constant"):
+    """(C1, C2, C3) of theta'' = C1 theta + C2 theta^2 + C3 theta^3 at speed c (docs/physics.md §1.3).
 
     C1 = -(gamma + S s0^2)/D, C2 = -(3/2) S s0 eta/D, C3 = -S(eta^2/2 - 2 s0^2/3)/D with
-    S = c^2/(c^2 - eta^2) + n_v s_v/2 and D = D(c) of PHYSICS.md; gradient='full' uses D = D_full(0)
+    S = c^2/(c^2 - eta^2) + n_v s_v/2 and D = the constant D(c) of docs/physics.md §1.3; gradient='full' uses D = D_full(0)
     from gradient_coefficient instead (correct linear tail for theta0 != 0). A prestress adds the
     Taylor terms of W' = k[-(eta/s0) theta + theta^2/2 + (eta/s0) theta^3/6], k = gamma theta_s:
     -k eta/s0, k/2 and k eta/(6 s0) to the brackets of C1, C2 and C3.
@@ -136,8 +136,8 @@ def continuum_coefficients(p: RotatingChainND, c: float, gradient: str = "physic
             -(S * (p.eta**2 / 2 - 2 * p.s0**2 / 3) + k * r / 6) / D)
 
 
-def soliton_width(p: RotatingChainND, c: float, gradient: str = "physics_md") -> float:
-    """W = 1/sqrt(C1) in X units (PHYSICS.md §1.3); ValueError when C1 <= 0 (no localized pulse)."""
+def soliton_width(p: RotatingChainND, c: float, gradient: str = "constant") -> float:
+    """W = 1/sqrt(C1) in X units (docs/physics.md §1.3); ValueError when C1 <= 0 (no localized pulse)."""
     C1 = continuum_coefficients(p, c, gradient)[0]
     if not C1 > 0:
         raise ValueError(f"no soliton at c = {c}: C1 = {C1:.3g} <= 0 (tails do not decay)")
@@ -145,7 +145,7 @@ def soliton_width(p: RotatingChainND, c: float, gradient: str = "physics_md") ->
 
 
 def soliton_profile(p: RotatingChainND, c: float, zeta, branch: int = +1):
-    """Cubic-truncation soliton theta = 1/(D1 +- D2 cosh(zeta/W)) (PHYSICS.md §1.3); shape of zeta.
+    """Cubic-truncation soliton theta = 1/(D1 +- D2 cosh(zeta/W)) (docs/physics.md §1.3); shape of zeta.
 
     A branch is regular iff sign(D1 +- D2) = +-1 (the denominator never vanishes); otherwise
     ValueError. For theta0 = 0 this is +-A sech(zeta/W), A^2 = -2 C1/C3.
@@ -238,17 +238,17 @@ def soliton_amplitude(p: RotatingChainND, c: float, sign: int = +1, branch: str 
 def gradient_coefficient(p: RotatingChainND, c: float, theta, gradient: str = "full"):
     """D(theta) and dD/dtheta in the travelling-wave Lagrangian D(theta) theta'^2/2 - V(theta); shape of theta.
 
-    'physics_md': constant D(c) = alpha2 c^2 - (eta^2/4)(Ks eta^2 - s0^2 - 4 Ktheta) (PHYSICS.md §1.3).
+    'constant': constant D(c) = alpha2 c^2 - (eta^2/4)(Ks eta^2 - s0^2 - 4 Ktheta) (docs/physics.md §1.3).
     'full' (derived in exact_soliton): D(theta) = alpha2 c^2 + eta^2 [a_s sin^2(theta0+theta)
     - (Ks/4) cos^2(theta0+theta) + Ktheta], a_s = sigma/4 + c^2 eta^2/(12 (c^2-eta^2)^2), sigma = c^2/(c^2-eta^2).
     The two agree at theta0 = theta = 0; for theta0 != 0 only 'full' reproduces the tail decay rate
-    given by the exact discrete dispersion (PHYSICS.md §1.4) as c -> long_wave_speed.
+    given by the exact discrete dispersion (docs/physics.md §1.4) as c -> long_wave_speed.
     """
     th = np.asarray(theta, dtype=float)
-    if gradient == "physics_md":
+    if gradient == "constant":
         return np.full_like(th, p.alpha2 * c * c - p.eta**2 * p.gradient_stiffness), np.zeros_like(th)
     if gradient != "full":
-        raise ValueError(f"gradient must be 'full' or 'physics_md', got {gradient!r}")
+        raise ValueError(f"gradient must be 'full' or 'constant', got {gradient!r}")
     e2, d = p.eta**2, c * c - p.eta**2
     a_s = c * c / (4 * d) + c * c * e2 / (12 * d * d)
     ang = p.theta0 + th
@@ -363,7 +363,7 @@ def _exact(p: RotatingChainND, A: float, zeta, gradient: str):
 def exact_soliton(p: RotatingChainND, A: float, zeta, gradient: str = "full"):
     """Soliton of the non-truncated continuum first integral: returns (theta, U'), each shaped like zeta.
 
-    Derivation (PHYSICS.md §1.1; sites n, X = n eta, sigma = c^2/(c^2 - eta^2)): expanding every hinge
+    Derivation (docs/physics.md §1.1; sites n, X = n eta, sigma = c^2/(c^2 - eta^2)): expanding every hinge
     about its midpoint to second order in gradients, the energy per site is (U'+G)^2/2
     + (U'+G)(G''/8 + U'''/24) + (Ks/8)[(sin(theta0+theta))']^2 + 2 Ktheta theta^2 - Ktheta theta'^2/2
     + n_v (s_v G^2/4 + Ktheta theta^2). In a travelling wave U' is slaved, U' = eta G/(c^2 - eta^2); as
@@ -374,8 +374,8 @@ def exact_soliton(p: RotatingChainND, A: float, zeta, gradient: str = "full"):
         theta'^2 = f(theta) = -(S G(theta)^2 + gamma theta^2)/D(theta).
 
     The turning point f(A) = 0 fixes S = -gamma A^2/G(A)^2: the exact law c^2 = eta^2 Q/(1+Q), for
-    either D. With gradient='physics_md' (constant D) the Euler-Lagrange equation D theta'' = -S G G'
-    - gamma theta expands to PHYSICS.md's C1, C2, C3. Solved by integrating D theta'' = -V' - D' theta'^2/2
+    either D. With gradient='constant' (constant D) the Euler-Lagrange equation D theta'' = -S G G'
+    - gamma theta expands to the C1, C2, C3 of docs/physics.md §1.3. Solved by integrating D theta'' = -V' - D' theta'^2/2
     from (A, 0) to theta = A/2, then psi = ln(theta/A), psi' = -sqrt(f)/|theta| (stable in the tail);
     theta is even in zeta. ValueError when soliton_exists(p, A, gradient) is False; note that 'full'
     admits no near-sonic pulses (c -> cos theta0), where the slaving of U' and hence the expansion fail.
@@ -402,7 +402,7 @@ def soliton_initial_state(p: RotatingChainND, A: float, n_sites: int, center: fl
 
 
 def cnoidal_wave(p: RotatingChainND, c: float, m: float, kind: str, zeta):
-    """Cnoidal wave of theta'' = C1 theta + C3 theta^3 (theta0 = 0, PHYSICS.md §1.3): (theta, wavelength).
+    """Cnoidal wave of theta'' = C1 theta + C3 theta^3 (theta0 = 0, docs/physics.md §1.3): (theta, wavelength).
 
     'dn': P dn(kz|m), k^2 = C1/(2-m), P^2 = -2C1/(C3(2-m)), wavelength 2K(m)/k  (C1 > 0, C3 < 0);
     'cn': P cn(kz|m), k^2 = C1/(2m-1), P^2 = -2mC1/((2m-1)C3), wavelength 4K/k  (C1 > 0, C3 < 0, m > 1/2);
@@ -444,7 +444,7 @@ def _kq(p: RotatingChainND, q):
 
 
 def dispersion_chain(p: RotatingChainND, q):
-    """Linear branches (Omega_lower, Omega_upper) of K(q) x = Omega^2 diag(1, alpha2) x (PHYSICS.md §1.4).
+    """Linear branches (Omega_lower, Omega_upper) of K(q) x = Omega^2 diag(1, alpha2) x (docs/physics.md §1.4).
 
     K = [[4 sin^2(q/2), -i s0 sin q], [i s0 sin q, R(q)]]; q is the phase per site. The 2x2
     generalized eigenproblem is solved in closed form. Both outputs have the shape of q.
@@ -458,7 +458,7 @@ def dispersion_chain(p: RotatingChainND, q):
 
 
 def dispersion_rotational(p: RotatingChainND, q):
-    """Frequency of the predominantly rotational branch at each q (PHYSICS.md §1.4); shape of q.
+    """Frequency of the predominantly rotational branch at each q (docs/physics.md §1.4); shape of q.
 
     Per q, takes the branch whose eigenvector has the larger rotational kinetic fraction
     alpha2 |Theta|^2/(|U|^2 + alpha2 |Theta|^2); at theta0 = 0 this is exactly Omega_theta.
@@ -490,7 +490,7 @@ def _extremum(fun, a: float, b: float, maximize: bool, n: int = 4097) -> float:
 
 
 def omega_max_chain(p: RotatingChainND) -> float:
-    """Highest linear frequency max_q Omega_upper(q), q in [0, pi] (PHYSICS.md §1.4)."""
+    """Highest linear frequency max_q Omega_upper(q), q in [0, pi] (docs/physics.md §1.4)."""
     return _extremum(lambda q: dispersion_chain(p, q)[1], 0.0, math.pi, maximize=True)
 
 
@@ -508,7 +508,7 @@ class BandEdges(NamedTuple):
 
 
 def band_edges(p: RotatingChainND) -> BandEdges:
-    """Band edges of the two branches over q in [0, pi] (PHYSICS.md §1.4)."""
+    """Band edges of the two branches over q in [0, pi] (docs/physics.md §1.4)."""
     return BandEdges(_extremum(lambda q: dispersion_chain(p, q)[0], 0.0, math.pi, True),
                      _extremum(lambda q: dispersion_chain(p, q)[1], 0.0, math.pi, False),
                      omega_max_chain(p))

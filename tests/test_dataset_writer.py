@@ -1,0 +1,45 @@
+"""The streaming dataset writer: declared frame count (fixed time dimension), early stops, units.
+
+Oracle: what was appended is what is read back (values, order, units), whatever the number of
+frames written against the number declared; no temporary file is left beside the result.
+"""
+
+from __future__ import annotations
+
+import h5netcdf
+import numpy as np
+import pytest
+
+from flexmm.io.dataset import DatasetWriter, open_run
+
+
+@pytest.mark.parametrize("declared, written", [(6, 6), (6, 4), (6, 0), (None, 5)])
+def test_frames_read_back_as_written(tmp_path, declared, written) -> None:
+    path = tmp_path / "dataset.nc"
+    w = DatasetWriter(path, 3, {"u": ("m", "displacement")}, {"energy": ("J", "total energy")},
+                      {"x": (np.array([0.0, 0.5, 1.0]), "m", "rest x position")}, n_frames=declared)
+    rng = np.random.default_rng(written)
+    frames = [(0.1 * k, rng.standard_normal(3), float(rng.standard_normal())) for k in range(written)]
+    for t, u, e in frames:
+        w.append(t, {"u": u}, {"energy": e})
+    w.close({"status": "finished" if written == declared else "failed"})
+    ds = open_run(tmp_path)
+    assert ds.sizes["time"] == written and ds.sizes["site"] == 3
+    if written:
+        np.testing.assert_array_equal(ds["time"].values, [f[0] for f in frames])
+        np.testing.assert_array_equal(ds["u"].values, np.stack([f[1] for f in frames]))
+        np.testing.assert_array_equal(ds["energy"].values, [f[2] for f in frames])
+    assert ds["u"].attrs["units"] == "m" and ds["energy"].attrs["units"] == "J" and ds["x"].attrs["units"] == "m"
+    assert ds.attrs["status"] in ("finished", "failed")
+    with h5netcdf.File(path, "r") as f:  # a declared count gives a fixed (fast to open) time dimension
+        assert f.dimensions["time"].isunlimited() == (declared is None or written == 0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dataset.nc"]
+
+
+def test_more_frames_than_declared_is_an_error(tmp_path) -> None:
+    w = DatasetWriter(tmp_path / "d.nc", 1, {"u": ("m", "u")}, {}, {}, n_frames=1)
+    w.append(0.0, {"u": [1.0]}, {})
+    with pytest.raises(ValueError, match="more frames"):
+        w.append(1.0, {"u": [2.0]}, {})
+        w.flush()
+    w.abort()
