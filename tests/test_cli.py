@@ -140,9 +140,10 @@ def test_unstable_dt_exits_2_and_forced_blow_up_exits_1(short_lego, tmp_path):
     result = invoke("run", short_lego, "--out", tmp_path / "f", "--fidelity", "full", "--set", "solver.dt_s=1e-3",
                     "--set", "output.n_frames=2", "--force")
     assert result.exit_code == 1 and "failed" in result.output
-    ds = xr.open_dataset(tmp_path / "f" / "dataset.nc", engine="h5netcdf")
+    assert not (tmp_path / "f").exists()  # a failed run is kept aside, never where a finished one goes
+    ds = xr.open_dataset(tmp_path / "f.failed" / "dataset.nc", engine="h5netcdf")
     assert ds.attrs["status"] == "failed" and np.isfinite(ds.u.values).all()
-    assert {p.name for p in (tmp_path / "f").iterdir()} == RUN_FILES
+    assert {p.name for p in (tmp_path / "f.failed").iterdir()} == RUN_FILES
 
 
 def test_lego_fixture_matches_shipped_config(lego_config, make_scene):

@@ -10,39 +10,67 @@ from flexmm.config import Scene, load_scene
 from flexmm.controller import RunResult, run_problem
 from flexmm.io.atomic import write_text_atomic
 from flexmm.io.provenance import config_text
+from flexmm.io.rundir import RunDirectory
+
+
+class _InPlace:
+    """``RunDirectory``'s interface for writing straight into a directory the caller owns."""
+
+    def __init__(self, out: Path):
+        self.stage = out
+
+    def __enter__(self) -> _InPlace:
+        self.stage.mkdir(parents=True, exist_ok=True)
+        return self
+
+    def commit(self, status: str) -> Path:
+        return self.stage
+
+    def __exit__(self, *exc) -> None:
+        pass
 
 
 def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
-    """Where a scene's outputs go: ``<output.directory>/<name>`` unless ``root`` is given."""
-    return Path(root) if root is not None else Path(scene.output.directory) / scene.name
+    """Where a scene's outputs go: ``<output.directory>/<name>`` unless ``root`` is given (``~`` expanded)."""
+    return (Path(root) if root is not None else Path(scene.output.directory) / scene.name).expanduser()
 
 
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
-              analysis: str | None = None) -> RunResult:
-    """Plan, build (once) and integrate a scene; write dataset.nc, config.yaml and run.log in its run dir.
+              analysis: str | None = None, force_limits: bool = False, atomic: bool = True) -> RunResult:
+    """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
     ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
     declared; the CLI uses 'auto'); the plan is logged and stored in the dataset attrs, and
-    config.yaml holds the scene that actually ran.
+    config.yaml holds the scene that actually ran. The outputs are written in a private staging
+    directory and committed with one rename (``io.rundir.RunDirectory``): a finished run becomes
+    ``run_dir``; a failed or interrupted one goes to ``run_dir.failed`` / ``run_dir.interrupted``
+    and never replaces a finished result. ``result.path`` is the committed dataset. A run of
+    more steps than FLEXMM_MAX_STEPS is refused (``plan.cost.ResourceError``) unless
+    ``force_limits``. ``atomic=False`` writes straight into ``run_dir`` for a caller that owns
+    the directory and publishes its own markers (sweep points).
     """
     from flexmm.continuum_run import run_continuum
     from flexmm.plan import make_plan
+    from flexmm.plan.cost import check_steps
     from flexmm.plan.output import parse_analysis
     from flexmm.prepare import accuracy_check, prepare
 
     out = run_dir_for(scene, run_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    plan = make_plan(scene, fidelity, parse_analysis(analysis))
-    if plan.skip_discrete:
-        result = run_continuum(plan.scene, plan.prediction, out, extra_attrs=plan.attrs(), log=log)
-    else:
-        problem = prepare(plan)
-        result = run_problem(problem, out, progress=progress, log=log, extra_attrs=plan.attrs(),
-                             on_finish=accuracy_check(plan, problem))
-    scene = plan.scene
-    write_text_atomic(out / "config.yaml", config_text(scene))
-    write_text_atomic(out / "run.log", "\n".join(result.log) + "\n")
+    with (RunDirectory(out) if atomic else _InPlace(out)) as rd:
+        plan = make_plan(scene, fidelity, parse_analysis(analysis))
+        if plan.skip_discrete:
+            result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=plan.attrs(), log=log)
+        else:
+            problem = prepare(plan)
+            check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
+                        problem.system.n_sites, force_limits)
+            result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),
+                                 on_finish=accuracy_check(plan, problem))
+        write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
+        write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
+        where = rd.commit(result.status)
+    result.path = where / "dataset.nc"
     return result
 
 

@@ -7,6 +7,8 @@ blow-up checks, progress reporting and the dataset writer; kernels only see arra
 from __future__ import annotations
 
 import math
+import signal
+import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -20,6 +22,10 @@ from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
 from flexmm.io.dataset import REST_SUFFIX, DatasetWriter, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
+
+#: seconds between progress lines when stderr is not a terminal (logs, batch jobs)
+PROGRESS_EVERY_S = 10.0
+
 
 @dataclass
 class RunResult:
@@ -40,6 +46,13 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.status == "finished"
+
+    @property
+    def signal(self) -> int | None:
+        """The signal that interrupted the run (``signal.SIGINT``/``SIGTERM``), else None."""
+        if self.status != "interrupted":
+            return None
+        return int(signal.SIGTERM) if "SIGTERM" in self.reason else int(signal.SIGINT)
 
     @property
     def unit_steps_per_s(self) -> float:
@@ -185,11 +198,24 @@ def run_problem(
     compile_s = stepper.warm_up()
     obs.frame(stepper)
     prog = _progress(len(chunks), progress)
+    write_error: list[tuple[float, OSError]] = []
+    last_line = [_time.monotonic()]
 
-    def on_frame(st: Stepper) -> None:
-        obs.frame(st)
+    def on_frame(st: Stepper) -> bool:
+        try:
+            obs.frame(st)
+        except OSError as exc:  # disk full, quota, I/O error: stop, keep the frames written
+            write_error.append((st.t, exc))
+            return True
         if prog:
             prog.advance(prog.task_ids[0])
+        elif log is not None and _time.monotonic() - last_line[0] >= PROGRESS_EVERY_S:
+            last_line[0] = _time.monotonic()
+            frac = st.t / problem.duration
+            eta = st.wall_s * (1 - frac) / frac if frac > 0 else float("nan")
+            log(f"progress: t = {st.t * sc.time_s:.4g} s of {problem.duration * sc.time_s:.4g} s "
+                f"({100 * frac:.1f} %), {st.steps} steps, {st.wall_s:.0f} s elapsed, ~{eta:.0f} s left")
+        return False
 
     try:
         outcome = stepper.run(chunks, on_frame)
@@ -204,8 +230,16 @@ def run_problem(
                   f"({outcome.reason}) with dt = {h * sc.time_s:.4g} s; "
                   f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
                   f"last good time {outcome.t_good * sc.time_s:.6g} s kept")
+    if write_error:
+        t_bad, exc = write_error[0]
+        status = "failed"
+        w = obs.writer
+        kept = "no frames are kept" if w.t_written is None else (
+            f"the {w.n_written} frames written before it (to t = {w.t_written:.6g} s) are kept")
+        reason = f"writing frames failed at t = {t_bad * sc.time_s:.6g} s ({exc.strerror or exc}); {kept}"
     elif status == "interrupted":
-        reason = f"interrupted by the user at t = {t * sc.time_s:.6g} s"
+        reason = (f"interrupted by {outcome.reason} at t = {t * sc.time_s:.6g} s; frames up to "
+                  f"{outcome.t_good * sc.time_s:.6g} s kept")
     wall = stepper.wall_s
     mups = n_steps * s.n_sites / wall / 1e6 if wall > 0 else float("nan")
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")

@@ -57,8 +57,28 @@ def dataset_path(path: str | Path) -> Path:
     nc = p / "dataset.nc" if p.is_dir() else p
     if not nc.is_file():
         what = "no dataset.nc in" if p.is_dir() else "no such run directory or file:"
-        raise RunNotFound(f"{what} {p}")
+        partial = [q for q in (p.with_name(f"{p.name}.interrupted"), p.with_name(f"{p.name}.failed"))
+                   if (q / "dataset.nc").is_file()]
+        hint = f" (an unfinished run is in {partial[0]})" if partial else ""
+        raise RunNotFound(f"{what} {p}{hint}")
     return nc
+
+
+def run_status(path: str | Path) -> tuple[str, str]:
+    """(status, reason) a run's dataset records ('finished', 'failed', 'interrupted'); RunNotFound
+    if it cannot be read. Reads the attributes only (fast)."""
+    import h5py
+
+    nc = dataset_path(path)
+    try:
+        with h5py.File(nc, "r") as f:
+            attrs = f.attrs
+            status = attrs.get("status", "finished")
+            reason = attrs.get("status_reason", "")
+    except (OSError, ValueError) as exc:
+        raise RunNotFound(f"cannot read {nc}: not a readable flexmm dataset ({exc})") from None
+    as_str = lambda v: v.decode() if isinstance(v, bytes) else str(v)  # noqa: E731
+    return as_str(status), as_str(reason)
 
 
 def open_dataset(path: str | Path):

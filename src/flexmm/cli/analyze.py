@@ -131,8 +131,14 @@ def analyze(
                                  help="Where figures over several runs go (default: their common parent)."),
     save: bool = typer.Option(True, "--save/--no-save", help="Write analysis.nc beside each run."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
+    allow_partial: bool = typer.Option(False, "--allow-partial",
+                                       help="Also measure failed or interrupted runs (flagged; exit 1)."),
 ) -> None:
-    """Measure pulses, fronts or driven response of runs and compare with theory."""
+    """Measure pulses, fronts or driven response of runs and compare with theory.
+
+    Failed and interrupted runs are not measured unless --allow-partial; either way the exit
+    status is then 1.
+    """
     from rich.console import Console
 
     from flexmm.analysis import dataset as out_ds
@@ -157,10 +163,21 @@ def analyze(
     runs = [r for r in runs if r not in sweeps]
     if not runs:
         return
-    for r in runs:
-        report.dataset_path(r)  # RunNotFound (a user error) before any run is analysed
+    status = {r: report.run_status(r) for r in runs}  # RunNotFound (a user error) before any work
     results, errors = [], []
     for r in runs:
+        state, why = status[r]
+        if state != "finished":
+            note = f"{state} run ({why or 'no reason recorded'})"
+            if not allow_partial:
+                msg = f"{note}: not measured (--allow-partial measures it anyway)"
+                if quiet:
+                    typer.echo(f"{r}: {msg}", err=True)
+                console.print(f"[bold red]{r}[/]: {msg}")
+                errors.append({"run": str(r), "error": msg})
+                continue
+            console.print(f"[bold yellow]{r}: PARTIAL[/] {note}: measured on the frames it kept")
+            errors.append({"run": str(r), "error": f"partial: {note}"})
         try:
             res = report.analyze_run(r, field_spec=field, kind=analysis, row=row,
                                      threshold_fraction=threshold, jump=jump)

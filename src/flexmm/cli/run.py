@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 import typer
 
 from flexmm.cli.common import (
@@ -14,12 +16,19 @@ def run(
     config: str = typer.Argument(..., help="Scene YAML file."),
     overrides: list[str] = OverrideOption,
     out: str = typer.Option(None, "--out", "-o", help="Run directory (default output.directory/name)."),
-    force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit."),
+    force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit or the run "
+                                                       "exceeds the memory, output, disk or step limits."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path (no label)."),
     fidelity: str = FidelityOption,
     analysis: str = AnalysisOption,
 ) -> None:
-    """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units)."""
+    """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
+
+    Outputs are committed together when the run ends: a finished run replaces runs/<name>; a
+    failed or interrupted one (Ctrl-C: exit 130, SIGTERM: exit 143) is kept in
+    runs/<name>.failed or runs/<name>.interrupted.
+    """
+    from flexmm._signals import exit_status, signal_of, stop_on_signals
     from flexmm.api import run_dir_for, run_scene
 
     ov = list(overrides or [])
@@ -29,13 +38,27 @@ def run(
     scene = load_or_exit(config, ov)
     run_dir = check_output_dir(run_dir_for(scene, out))
     log = None if quiet else (lambda m: typer.echo(m, err=True))
-    with writing(run_dir):
-        result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
-                           fidelity=fidelity, analysis=analysis)
+    from flexmm.plan.cost import EXACT_SITES, enforce
+
+    # memory, output and disk before anything is built (steps too for a large lattice, from a small
+    # copy; a small scene's steps are checked once planning has built it)
+    big = scene.lattice.n_sites > EXACT_SITES
+    for line in enforce(scene, run_dir, force, step=big).lines():  # ResourceError unless --force
+        if log and big:
+            log(line)
+    with writing(run_dir), stop_on_signals():
+        try:
+            result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
+                               fidelity=fidelity, analysis=analysis, force_limits=force)
+        except KeyboardInterrupt as exc:  # before the time loop started: nothing was written
+            sig = signal_of(exc)
+            typer.echo(f"interrupted by {signal.Signals(sig).name} before the run started: nothing written",
+                       err=True)
+            raise typer.Exit(exit_status(sig)) from None
     typer.echo(result.path if quiet else f"dataset: {result.path}")
     if not result.ok:
         typer.echo(f"status: {result.status}: {result.reason}", err=True)
-        raise typer.Exit(EXIT_FAILED_RUN)
+        raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
     if quiet:
         return
     _print_leading_pulse(result.path)

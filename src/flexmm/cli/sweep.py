@@ -83,6 +83,7 @@ def sweep(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths written (sweep dataset, figure)."),
 ) -> None:
     """Run every point of a sweep (skipping finished ones) and combine them into SWEEP_DIR/sweep.nc."""
+    from flexmm.io.rundir import exclusive
     from flexmm.sweep.combine import write_combined
     from flexmm.sweep.execute import execute, prepare
     from flexmm.sweep.execute import reanalyse as measure_again
@@ -92,49 +93,50 @@ def sweep(
     sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
     base = sw.base_scene()
     sweep_dir = check_output_dir(Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name)
-    plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
-    say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
-    n_distinct = len(plan.states)
-    say(f"sweep {sw.name}: {sw.n_points} points ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
-        f"{plan.count('finished')} finished, {plan.count('failed')} failed before, {len(plan.tasks)} to run"
-        + (f" ({n_distinct} distinct configs)" if n_distinct != sw.n_points else "") + f" -> {sweep_dir}")
-    if dry_run:
-        for p in plan.points:
-            typer.echo(f"{p.hash[:12]}  {plan.states[p.hash]:8s}  {p.label}")
-        return
-    if reanalyse:
-        say(f"re-measured {measure_again(plan)} finished points")
-    bar = _Bar(len(plan.tasks), enabled=stderr_is_tty() and not quiet, lines=not quiet)
-    try:
-        report = execute(plan, workers=workers, batch_size=batch_size, scheduler=scheduler,
-                         local_dask=local_dask, on_outcome=bar)
-    except KeyboardInterrupt:
-        typer.echo("interrupted; rerun the same command to resume", err=True)
-        raise typer.Exit(EXIT_INTERRUPTED) from None
-    finally:
-        bar.stop()
-    for msg in report.errors:
-        typer.echo(f"error: {msg}", err=True)
-    say(f"{report.n_finished} finished ({report.n_run} run now, {report.n_cached} already done), "
-        f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}")
-    if report.interrupted:
-        typer.echo(f"interrupted: {report.n_finished} of {report.n_points} points finished; "
-                   "rerun the same command to resume", err=True)
-        raise typer.Exit(EXIT_INTERRUPTED)
-    if report.n_pending:
-        raise typer.Exit(EXIT_FAILED_RUN)
-    with writing(sweep_dir):
-        path = write_combined(plan)
-    typer.echo(path if quiet else f"sweep dataset: {path}")
-    if plot:
-        from flexmm.sweep.plot import plot_sweep
+    with exclusive(Path(sweep_dir) / ".sweep.lock", f"sweep directory {sweep_dir}"):  # one sweep per directory
+        plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
+        say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
+        n_distinct = len(plan.states)
+        say(f"sweep {sw.name}: {sw.n_points} points ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
+            f"{plan.count('finished')} finished, {plan.count('failed')} failed before, {len(plan.tasks)} to run"
+            + (f" ({n_distinct} distinct configs)" if n_distinct != sw.n_points else "") + f" -> {sweep_dir}")
+        if dry_run:
+            for p in plan.points:
+                typer.echo(f"{p.hash[:12]}  {plan.states[p.hash]:8s}  {p.label}")
+            return
+        if reanalyse:
+            say(f"re-measured {measure_again(plan)} finished points")
+        bar = _Bar(len(plan.tasks), enabled=stderr_is_tty() and not quiet, lines=not quiet)
+        try:
+            report = execute(plan, workers=workers, batch_size=batch_size, scheduler=scheduler,
+                             local_dask=local_dask, on_outcome=bar)
+        except KeyboardInterrupt:
+            typer.echo("interrupted; rerun the same command to resume", err=True)
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        finally:
+            bar.stop()
+        for msg in report.errors:
+            typer.echo(f"error: {msg}", err=True)
+        say(f"{report.n_finished} finished ({report.n_run} run now, {report.n_cached} already done), "
+            f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}")
+        if report.interrupted:
+            typer.echo(f"interrupted: {report.n_finished} of {report.n_points} points finished; "
+                       "rerun the same command to resume", err=True)
+            raise typer.Exit(EXIT_INTERRUPTED)
+        if report.n_pending:
+            raise typer.Exit(EXIT_FAILED_RUN)
+        with writing(sweep_dir):
+            path = write_combined(plan)
+        typer.echo(path if quiet else f"sweep dataset: {path}")
+        if plot:
+            from flexmm.sweep.plot import plot_sweep
 
-        with writing(plot):
-            figure = plot_sweep(sweep_dir, plot)
-        typer.echo(figure if quiet else f"figure: {figure}")
-    if report.n_failed:
-        _list_failed(plan)
-        raise typer.Exit(EXIT_FAILED_RUN)
+            with writing(plot):
+                figure = plot_sweep(sweep_dir, plot)
+            typer.echo(figure if quiet else f"figure: {figure}")
+        if report.n_failed:
+            _list_failed(plan)
+            raise typer.Exit(EXIT_FAILED_RUN)
 
 
 def _list_failed(plan) -> None:

@@ -20,6 +20,15 @@ class RotatingSquaresChain(RigidOptions):
     kind: Literal["rotating_squares_chain"]
     #: per-site coordinates of the built model, in state order (models.rotating_chain.FIELDS)
     FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "theta")
+
+    @property
+    def n_sites(self) -> int:
+        """Number of units."""
+        return self.n_units
+
+    def small_copy(self, n: int):
+        """The same lattice with at most ``n`` units (for cheap estimates; not validated)."""
+        return self.model_copy(update={"n_units": min(self.n_units, n), "variation": [], "predeform": None})
     n_units: int = Field(ge=2, le=20_000_000, description="number of rigid units")
     a_m: Positive = Field(description="hinge-to-hinge size of a unit (m)")
     theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad)")

@@ -96,15 +96,48 @@ def _duplicate_keys(node: yaml.Node, path: Path_ = ()) -> list[tuple[Path_, int,
     return out
 
 
+#: a scene file larger than this, or expanding (through YAML aliases) to more values, is refused
+MAX_CONFIG_BYTES = 1_000_000
+MAX_CONFIG_NODES = 200_000
+
+
+def _expanded_size(node: yaml.Node | None, memo: dict[int, int]) -> int:
+    """Number of values ``node`` stands for once aliases are expanded (linear time: memoised per
+    node, so a 'billion laughs' file is measured, not expanded)."""
+    if node is None:
+        return 0
+    key = id(node)
+    if key not in memo:
+        memo[key] = 1  # a cycle counts once
+        if isinstance(node, yaml.MappingNode):
+            memo[key] = 1 + sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
+        elif isinstance(node, yaml.SequenceNode):
+            memo[key] = 1 + sum(_expanded_size(v, memo) for v in node.value)
+    return memo[key]
+
+
 def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
     """Parse a YAML file into a dict plus a key-path -> line map; ConfigError on failure."""
     src = str(path)
     try:
-        text = Path(path).read_text()
+        raw = Path(path).read_bytes()
     except OSError as exc:
         raise ConfigError([ConfigIssue(src, None, "", f"cannot read file: {exc.strerror}")]) from None
+    if len(raw) > MAX_CONFIG_BYTES:
+        raise ConfigError([ConfigIssue(src, None, "", f"file of {len(raw):,} bytes; a scene config is at most "
+                                                      f"{MAX_CONFIG_BYTES:,} (is this the right file?)")])
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise ConfigError([ConfigIssue(src, line, "", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
+                                                      f"offset {exc.start}); save the file as UTF-8")]) from None
     try:
         node = yaml.compose(text, Loader=_Loader)
+        size = _expanded_size(node, {})
+        if size > MAX_CONFIG_NODES:
+            raise ConfigError([ConfigIssue(src, None, "", f"the YAML expands to {size:.3g} values through its "
+                                                          f"aliases (limit {MAX_CONFIG_NODES:,}): refusing it")])
         data = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
@@ -269,11 +302,16 @@ def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
     return ConfigIssue(where, line, dotted, text)
 
 
-def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<config>") -> Scene:
-    """Validate a plain dict as a Scene, converting pydantic errors into a ConfigError."""
+def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<config>",
+                    base_dir: str | Path | None = None) -> Scene:
+    """Validate a plain dict as a Scene, converting pydantic errors into a ConfigError.
+
+    ``base_dir``: the directory relative data-file paths in the scene are relative to (the
+    config file's; None: the working directory).
+    """
     lines = lines or {}
     try:
-        return Scene.model_validate(data)
+        return Scene.model_validate(data, context={"base_dir": base_dir} if base_dir is not None else None)
     except ValidationError as exc:
         raise ConfigError([_issue(e, data, lines, source) for e in exc.errors()]) from None
 
@@ -283,4 +321,4 @@ def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
     data, lines = read_yaml(path)
     if overrides:
         apply_overrides(data, parse_overrides(overrides), lines, str(path))
-    return scene_from_dict(data, lines=lines, source=str(path))
+    return scene_from_dict(data, lines=lines, source=str(path), base_dir=Path(path).resolve().parent)

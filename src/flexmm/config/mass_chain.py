@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import ClassVar, Annotated, Literal, Union
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from flexmm.config.base import Finite, NonNegative, Positive, Strict, exactly_one
 
@@ -137,13 +137,23 @@ class Tabulated(_Law):
     """Force–displacement curve (force = dE/dz) through a C² cubic spline, integrated exactly.
 
     Either inline lists or a CSV with two numeric columns (displacement m, force N; a header
-    line and '#' comments are allowed). Relative paths are relative to the working directory.
+    line and '#' comments are allowed). A relative path is relative to the directory of the
+    config file that names it (``load_scene``), else to the working directory; it is stored
+    resolved, so the resolved config names the file that was read.
     """
 
     law: Literal["table"]
     csv: str | None = None
     displacement_m: list[Finite] | None = None
     force_n: list[Finite] | None = None
+
+    @field_validator("csv")
+    @classmethod
+    def _relative_to_config(cls, value: str | None, info: ValidationInfo) -> str | None:
+        base = (info.context or {}).get("base_dir")
+        if value is None or base is None or Path(value).expanduser().is_absolute():
+            return value if value is None else str(Path(value).expanduser())
+        return str((Path(base) / value).resolve())
 
     @model_validator(mode="after")
     def _source(self):
@@ -279,6 +289,14 @@ class MassChain(_MassLattice):
         0.0, description="compressive force on both free ends (holds a precompression)"
     )
 
+    @property
+    def n_sites(self) -> int:
+        return self.n_units
+
+    def small_copy(self, n: int):
+        """The same chain with at most ``n`` sites (for cheap estimates; not validated)."""
+        return self.model_copy(update={"n_units": min(self.n_units, n), "variation": []})
+
 
 class Branch(Strict):
     """A chain segment of a network; its ends attach to junctions or are free."""
@@ -334,6 +352,16 @@ class MassNetwork(_MassLattice):
     def n_units(self) -> int:
         return sum(b.n_units for b in self.branches) + len(self.junctions)
 
+    @property
+    def n_sites(self) -> int:
+        return self.n_units
+
+    def small_copy(self, n: int):
+        """Each branch cut to at most ``n`` // branches sites (for cheap estimates; not validated)."""
+        per = max(2, n // len(self.branches))
+        return self.model_copy(update={"branches": [b.model_copy(update={"n_units": min(b.n_units, per)})
+                                                    for b in self.branches], "variation": []})
+
 
 class MassGrid(_MassLattice):
     """nx × ny sites on a square grid (site = i + nx·j), horizontal and vertical bonds.
@@ -351,6 +379,15 @@ class MassGrid(_MassLattice):
     @property
     def n_units(self) -> int:
         return self.nx * self.ny
+
+    @property
+    def n_sites(self) -> int:
+        return self.nx * self.ny
+
+    def small_copy(self, n: int):
+        """The same grid cut to at most about ``n`` sites (for cheap estimates; not validated)."""
+        side = max(2, int(n**0.5))
+        return self.model_copy(update={"nx": min(self.nx, side), "ny": min(self.ny, side), "variation": []})
 
 
 MASS_LATTICES = (MassChain, MassNetwork, MassGrid)

@@ -166,6 +166,17 @@ class RotatingSquaresSheet(RigidOptions):
     kind: Literal["rotating_squares_sheet"]
     #: per-site coordinates of the built model, in state order (models.rotating_sheet.FIELDS)
     FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
+
+    @property
+    def n_sites(self) -> int:
+        """Number of units (n_rows × n_cols)."""
+        return self.n_rows * self.n_cols
+
+    def small_copy(self, n: int):
+        """The same sheet cut to at most about ``n`` units (for cheap estimates; not validated)."""
+        side = max(2, int(n**0.5))
+        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side),
+                                       "skew_cols": 0, "variation": [], "predeform": None})
     n_rows: int = Field(ge=1, le=100_000)
     n_cols: int = Field(ge=2, le=100_000)
     a_m: Positive = Field(description="hinge-to-hinge size (diagonal) of a unit (m)")
@@ -236,6 +247,16 @@ class BistableLinkage(Strict):
     kind: Literal["bistable_linkage"]
     #: per-site coordinates of the built model, in state order (models.rotating_sheet.FIELDS)
     FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
+
+    @property
+    def n_sites(self) -> int:
+        """Number of crosses (two rows)."""
+        return 2 * self.n_cols
+
+    def small_copy(self, n: int):
+        """The same linkage with at most ``n`` crosses (for cheap estimates; not validated)."""
+        return self.model_copy(update={"n_cols": min(self.n_cols, max(2, n // 2))})
+
     n_cols: int = Field(ge=2, le=1_000_000, description="units (crosses) per row; two rows")
     bar_length_m: Positive
     theta0_rad: float = Field(gt=0, lt=math.pi / 2, description="bar angle of the initial (folded) state")

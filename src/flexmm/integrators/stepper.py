@@ -15,12 +15,14 @@ benchmarks and the tests all call it, and observers see the stepper at each fram
 from __future__ import annotations
 
 import math
+import signal
 import time
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
 import numpy as np
 
+from flexmm._signals import signal_of
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
 from flexmm.integrators.parallel import advance_kernel, choose_threads
@@ -129,8 +131,8 @@ class Stepper:
         """Advance chunk after chunk of steps; after each, check the state and call ``on_frame``.
 
         Stops at the first failed check ('failed', the state is then past ``t_good``), on
-        Ctrl-C ('interrupted'), or when ``on_frame`` returns True (an observer that has seen
-        enough, 'finished').
+        Ctrl-C or SIGTERM ('interrupted', reason 'SIGINT'/'SIGTERM'), or when ``on_frame``
+        returns True (an observer that has seen enough, 'finished').
         """
         t_good = self.t
         try:
@@ -142,8 +144,8 @@ class Stepper:
                 t_good = self.t
                 if on_frame is not None and on_frame(self):
                     break
-        except KeyboardInterrupt:
-            return Outcome("interrupted", f"interrupted by the user at t = {self.t:.6g}", t_good)
+        except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM under _signals.stop_on_signals
+            return Outcome("interrupted", signal.Signals(signal_of(exc)).name, t_good)
         return Outcome("finished", "", t_good)
 
 

@@ -63,6 +63,7 @@ class DatasetWriter:
             v = self.file.create_variable(name, ("time",), "f8", chunks=chunk_1d)
             v.attrs.update(units=units, long_name=long_name)
         self.n_written = 0
+        self.t_written: float | None = None  # time of the last frame on disk (s)
         self._buf: list[tuple[float, dict, dict]] = []
         self._buf_frames = max(1, BUFFER_BYTES // (8 * max(1, n_site * len(self.site_names))))
 
@@ -87,23 +88,34 @@ class DatasetWriter:
         for name in self.time_names:
             f.variables[name][i0 : i0 + k] = [b[2][name] for b in self._buf]
         self.n_written += k
+        self.t_written = self._buf[-1][0]
         self._buf.clear()
 
     def close(self, attrs: dict) -> Path:
         """Flush, stamp global attributes, and atomically move the file into place."""
-        self.flush()
+        try:
+            self.flush()
+        except OSError:  # the disk is full (or failing): the frames still buffered are lost
+            self._buf.clear()
         self.file.attrs.update({k: v for k, v in attrs.items() if v is not None})
+        self.file.attrs["n_frames_written"] = self.n_written
         self.file.close()
         if self.n_frames is not None and self.n_written < self.n_frames:
-            self._cut()
+            cut = self.tmp.with_name(self.tmp.name + ".cut")
+            try:
+                self._cut(cut)
+            except OSError:  # no room to rewrite: keep the full-size file; n_frames_written says
+                cut.unlink(missing_ok=True)
+            else:
+                self.tmp.unlink()
+                self.tmp = cut
         os.replace(self.tmp, self.path)
         return self.path
 
-    def _cut(self) -> None:
-        """Rewrite the temporary file with only the frames written (a run that stopped early)."""
-        src_path, self.tmp = self.tmp, self.tmp.with_name(self.tmp.name + ".cut")
+    def _cut(self, dst_path: Path) -> None:
+        """Copy the temporary file to ``dst_path`` with only the frames written (an early stop)."""
         n, step = self.n_written, max(1, BUFFER_BYTES // (8 * max(1, self.n_site)))
-        with h5netcdf.File(src_path, "r") as src, h5netcdf.File(self.tmp, "w") as dst:
+        with h5netcdf.File(self.tmp, "r") as src, h5netcdf.File(dst_path, "w") as dst:
             dst.dimensions = {"time": n, "site": self.n_site}
             dst.attrs.update(dict(src.attrs))
             for name, var in src.variables.items():
@@ -116,7 +128,6 @@ class DatasetWriter:
                     continue
                 for i in range(0, n, step):
                     out[i : min(i + step, n)] = var[i : min(i + step, n)]
-        src_path.unlink()
 
     def abort(self) -> None:
         """Drop the temporary file (nothing is published)."""

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from flexmm.errors import UsageError
 from flexmm.io.provenance import resolved_config
 from flexmm.sweep.spec import Point, SweepSpec, spec_summary
 from flexmm.sweep.store import FAILED, FINISHED, PENDING, SweepStore, write_json_atomic
@@ -35,6 +36,9 @@ BATCHES_PER_WORKER = 3
 
 Outcome = dict
 OnOutcome = Callable[[Outcome], None]
+
+#: how long to wait for a Dask scheduler before saying it cannot be reached
+SCHEDULER_TIMEOUT_S = 10.0
 
 
 @dataclass
@@ -237,11 +241,18 @@ def _collect(fut, batch, record: OnOutcome, errors: list[str]) -> None:
 
 
 def _run_dask(tasks, scheduler, n_workers, batch_size, processes, record: OnOutcome, errors: list[str]) -> bool:
-    from distributed import Client, LocalCluster, as_completed
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise UsageError("Dask sweeps need dask.distributed: pip install 'flexmm[dask]'") from None
 
     cluster = None
     if scheduler:
-        client = Client(scheduler)
+        try:
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
+        except (OSError, TimeoutError) as exc:
+            raise UsageError(f"cannot reach the Dask scheduler at {scheduler} within "
+                             f"{SCHEDULER_TIMEOUT_S:g} s ({type(exc).__name__}: {exc})") from None
         n = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
     else:
         with one_thread_environment():  # inherited by the worker processes spawned here
@@ -275,10 +286,14 @@ def run_sweep(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = Fa
     """
     from flexmm.sweep.combine import write_combined
 
-    plan = prepare(spec, sweep_dir, retry_failed=retry_failed)
-    report = execute(plan, **options)
-    if not report.interrupted and report.n_pending == 0:
-        report.result_path = write_combined(plan)
+    from flexmm.io.rundir import exclusive
+
+    root = Path(sweep_dir).expanduser()
+    with exclusive(root / ".sweep.lock", f"sweep directory {root}"):  # one sweep per directory
+        plan = prepare(spec, root, retry_failed=retry_failed)
+        report = execute(plan, **options)
+        if not report.interrupted and report.n_pending == 0:
+            report.result_path = write_combined(plan)
     return report
 
 

@@ -34,9 +34,35 @@ class Task:
 
 
 def init_worker() -> None:
-    """Process initialiser: one numba/BLAS thread; Ctrl-C is only honoured inside a batch."""
+    """Process initialiser: one numba/BLAS thread; Ctrl-C is only honoured inside a batch; the
+    worker dies with the sweep that spawned it (``die_with_parent``)."""
     pin_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent()
+
+
+def die_with_parent(poll_s: float = 1.0) -> None:
+    """End this process when its parent does (a ``kill -9`` of the sweep must not leave workers
+    running and writing points): the kernel's parent-death signal on Linux, and a watchdog
+    thread that notices being re-parented, everywhere."""
+    parent = os.getppid()
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+    def watch() -> None:
+        while True:
+            time.sleep(poll_s)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    if os.getppid() != parent:  # the parent died before the signal was armed
+        os._exit(1)
+    threading.Thread(target=watch, name="flexmm-parent-watch", daemon=True).start()
 
 
 def pin_threads() -> None:
@@ -112,6 +138,7 @@ def run_point(task: Task) -> dict:
         info["wall_s"] = time.perf_counter() - t0
         with _sigint_blocked():
             if marker is not None:
+                (d / (ERROR if marker == DONE else DONE)).unlink(missing_ok=True)  # never both
                 write_json_atomic(d / marker, info)
             published = info
     except KeyboardInterrupt:
@@ -172,7 +199,7 @@ def _run(task: Task, d: Path):
     scene = scene_from_dict(task.config, source=f"sweep point {task.config_hash[:12]}")
     if config_hash(scene) != task.config_hash:
         raise RuntimeError("config hash changed on the worker (flexmm versions differ?)")
-    return run_scene(scene, run_dir=d)
+    return run_scene(scene, run_dir=d, atomic=False)  # the point's markers publish it (module docstring)
 
 
 def _observe(path: Path, options: dict) -> dict:

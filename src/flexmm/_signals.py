@@ -1,0 +1,48 @@
+"""SIGTERM stops a run the way Ctrl-C does: cleanly, keeping what is good.
+
+Batch schedulers and ``timeout`` send SIGTERM; Python's default is to die on the spot, losing
+every frame. Inside ``stop_on_signals()`` (installed by the CLI in the main thread) SIGTERM
+raises ``Terminated``, a ``KeyboardInterrupt``, so every loop that already stops cleanly on
+Ctrl-C (the ``Stepper``, sweeps) stops on SIGTERM too. ``exit_status`` gives the shell's
+convention, 128 + the signal number: 130 for SIGINT, 143 for SIGTERM.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+class Terminated(KeyboardInterrupt):
+    """Raised by the SIGTERM handler of ``stop_on_signals``."""
+
+    signum = signal.SIGTERM
+
+
+def signal_of(exc: BaseException) -> int:
+    """The signal behind an interruption: SIGTERM for ``Terminated``, else SIGINT."""
+    return int(getattr(exc, "signum", signal.SIGINT))
+
+
+def exit_status(signum: int) -> int:
+    """128 + signal number (130 after SIGINT, 143 after SIGTERM)."""
+    return 128 + int(signum)
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated()
+
+
+@contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """SIGTERM raises ``Terminated`` inside the block (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
