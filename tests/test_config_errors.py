@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import textwrap
+from pathlib import Path
 
 import pytest
 import yaml
@@ -237,9 +238,14 @@ def get(d, path):
     return d
 
 
+CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+SHIPPED_DATA = {c.stem: yaml.safe_load(c.read_text()) for c in CONFIGS}
+
+
 @st.composite
-def mutated(draw):
-    d = copy.deepcopy(VALID)
+def mutated(draw, bases=None):
+    """A config with 1–3 random mutations: ``VALID``, or one of ``bases`` (name -> dict)."""
+    d = copy.deepcopy(VALID if bases is None else bases[draw(st.sampled_from(sorted(bases)))])
     for _ in range(draw(st.integers(1, 3))):
         op = draw(st.sampled_from(["delete", "retype", "junk", "known", "known"]))
         if op == "junk":
@@ -284,3 +290,31 @@ def test_cli_validate_never_prints_a_traceback(tmp_path_factory, data):
     assert "Traceback" not in result.output
     assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
     assert ("error" if result.exit_code else "ok") in result.output
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated(SHIPPED_DATA))
+def test_every_shipped_config_mutated_validates_or_raises_config_error(data):
+    """The schema fuzz over all 31 shipped scenes, not one base config."""
+    try:
+        scene_from_dict(copy.deepcopy(data), base_dir=Path(__file__).resolve().parents[1] / "configs")
+    except ConfigError as exc:
+        assert exc.issues and all(str(i) for i in exc.issues)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(mutated(SHIPPED_DATA))
+def test_mutated_shipped_configs_that_validate_build_or_raise_a_user_error(data):
+    """Run-time paths: what validates is built (its cost estimated: the scene itself when small,
+    a small copy when large) or refused with a FlexmmError — never another exception."""
+    from flexmm.errors import FlexmmError
+    from flexmm.plan.cost import check, estimate
+
+    try:
+        scene = scene_from_dict(copy.deepcopy(data), base_dir=Path(__file__).resolve().parents[1] / "configs")
+    except ConfigError:
+        return
+    try:
+        check(estimate(scene))
+    except FlexmmError as exc:
+        assert str(exc)

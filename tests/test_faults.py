@@ -201,3 +201,79 @@ def test_unreachable_scheduler_is_a_message_within_seconds(tmp_path) -> None:
                  "--scheduler", "tcp://127.0.0.1:9")
     assert res.returncode == 2 and "cannot reach the Dask scheduler" in res.stderr, res.stderr
     assert "Traceback" not in res.stderr and time.monotonic() - t0 < 30
+
+
+def _random_signal_rounds(tmp_path: Path, seed: int, rounds: int) -> None:
+    import random
+
+    rng = random.Random(seed)
+    out = tmp_path / "demo"
+    assert flexmm("run", DEMO, "--out", out, "-q", *SHORT).returncode == 0
+    reference = open_run(out)["theta"].values
+    for _ in range(rounds):
+        sig = rng.choice([signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
+        proc = start("run", DEMO, "--out", out, *LONG)
+        time.sleep(rng.uniform(0.0, 3.0))  # imports, planning, compile or the time loop
+        proc.send_signal(sig)
+        proc.communicate(timeout=120)
+        kept = open_run(out)
+        assert kept.attrs["status"] == "finished"
+        np.testing.assert_array_equal(kept["theta"].values, reference)
+        partial = tmp_path / "demo.interrupted"
+        if partial.exists():
+            assert open_run(partial).attrs["status"] == "interrupted"
+    assert flexmm("run", DEMO, "--out", out, "-q", *SHORT).returncode == 0
+    assert leftovers(tmp_path) == [] and not (tmp_path / "demo.failed").exists()
+
+
+def test_random_signals_during_reruns_never_lose_or_fake_a_result(tmp_path) -> None:
+    """SIGINT, SIGTERM or SIGKILL at a random moment of a rerun: the finished result survives bit
+    for bit, a partial one is only ever under .interrupted, and the next run cleans up."""
+    _random_signal_rounds(tmp_path, 0, 3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", range(1, 6))
+def test_random_signals_during_reruns_many_seeds(tmp_path, seed) -> None:
+    _random_signal_rounds(tmp_path, seed, 4)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+def test_a_sweep_stopped_at_a_random_moment_resumes_to_a_true_summary(tmp_path, sig) -> None:
+    import random
+
+    from flexmm.sweep.store import dataset_status
+
+    sweep = tmp_path / "sw"
+    vary = ["--vary", "excitation.velocity_m_s=0.5:3:6", "--set", "solver.duration_s=2", "--workers", "2"]
+    proc = start("sweep", DEMO, "--out", sweep, *vary)
+    time.sleep(random.Random(int(sig)).uniform(3.0, 6.0))
+    proc.send_signal(sig)
+    proc.communicate(timeout=120)
+    done_before = {d.name: (d / "done.json").stat().st_mtime for d in (sweep / "points").glob("*")
+                   if (d / "done.json").exists()}
+    res = flexmm("sweep", DEMO, "--out", sweep, *vary)
+    assert res.returncode == 0, res.stderr
+    assert "6 finished" in res.stderr and "0 failed" in res.stderr and (sweep / "sweep.nc").exists()
+    points = list((sweep / "points").glob("*"))
+    assert len(points) == 6
+    for d in points:
+        assert (d / "done.json").exists() and not (d / "error.json").exists()
+        assert dataset_status(d / "dataset.nc") == "finished"
+        if d.name in done_before:  # finished before the stop: not run again
+            assert (d / "done.json").stat().st_mtime == done_before[d.name]
+
+
+def test_progress_lines_outside_a_terminal(tmp_path, monkeypatch) -> None:
+    """A batch job's log shows where a run is (a line every PROGRESS_EVERY_S; 0 here: every frame)."""
+    import flexmm.controller as controller
+    from flexmm.api import run_scene
+    from flexmm.config import load_scene
+
+    monkeypatch.setattr(controller, "PROGRESS_EVERY_S", 0.0)
+    lines: list[str] = []
+    scene = load_scene(DEMO, ["solver.duration_s=0.02", "output.n_frames=5"])
+    assert run_scene(scene, run_dir=tmp_path / "r", log=lines.append, progress=False).ok
+    progress = [ln for ln in lines if ln.startswith("progress:")]
+    assert len(progress) == 4 and "100.0 %" in progress[-1] and "steps" in progress[0]
+    assert not any(ln.startswith("progress:") for ln in (tmp_path / "r" / "run.log").read_text().splitlines())

@@ -306,7 +306,12 @@ def absorbing_damping(system: System, layer) -> np.ndarray:
 
 def build_system(scene: Scene) -> tuple[System, Terms]:
     """The scene's system with its imperfection, excitation and friction applied (no dt analysis)."""
-    system = MODELS[scene.lattice.kind].build(scene.lattice)
+    try:
+        system = MODELS[scene.lattice.kind].build(scene.lattice)
+    except SceneError:
+        raise
+    except ValueError as err:  # the lattice cannot be built as described (e.g. unbalanced loads)
+        raise SceneError(f"lattice: {err}") from None
     terms = empty_terms()._asdict()
     apply_imperfection(system, scene)
     apply_excitation(system, scene, terms)
@@ -322,9 +327,16 @@ def build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> Pr
     """
     try:
         return _build_problem(scene, built)
+    except FlexmmError:
+        raise
     except (ArithmeticError, np.linalg.LinAlgError) as err:  # e.g. a_m = 1e-300 with mass_kg = 1e300
         raise SceneError(f"the scene's parameters are out of floating-point range "
                          f"({type(err).__name__}: {err})") from None
+    except ValueError as err:
+        if "inf" not in str(err) and "NaN" not in str(err):
+            raise
+        raise SceneError(f"the scene's parameters are out of floating-point range (non-finite "
+                         f"stiffness or frequency: {err})") from None
 
 
 def check_velocity_forces(spec, damp: np.ndarray, terms: Terms, friction_rate: float) -> None:
