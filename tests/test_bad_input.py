@@ -47,9 +47,11 @@ def test_yaml_alias_bomb_is_refused_at_once(tmp_path) -> None:
     assert time.monotonic() - t0 < 10
 
 
-def test_output_directory_that_is_a_file(tmp_path) -> None:
+def test_output_directory_that_is_a_file_or_cannot_be_written(tmp_path) -> None:
     user_error(flexmm("validate", DEMO, "--set", "output.directory=/etc/passwd"), "/etc/passwd")
     user_error(flexmm("run", DEMO, "--set", "output.directory=/etc/passwd"), "/etc/passwd")
+    for target in ("/proc/flexmm-x", "/sys/flexmm-x"):  # writable by permissions, not in fact
+        user_error(flexmm("run", DEMO, "--out", target), "cannot create output directory")
 
 
 def test_data_files_are_relative_to_the_config_and_home_is_expanded(tmp_path) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -113,7 +114,7 @@ def check_output_dir(path: str | Path) -> Path:
     """An output directory that exists or can be created, checked before any work is done.
 
     ``OutputError`` if the path is an existing file, a parent is a file, or the nearest existing
-    directory is not writable. Nothing is created.
+    directory is not writable (tried with a temporary directory, removed at once).
     """
     p = Path(path)
     if p.exists() and not p.is_dir():
@@ -125,6 +126,11 @@ def check_output_dir(path: str | Path) -> Path:
         raise OutputError(f"cannot create output directory {p}: {probe} is not a directory")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise OutputError(f"cannot create output directory {p}: {probe} is not writable")
+    try:  # permissions are not enough (/proc, /sys, read-only mounts): try it
+        tempfile.TemporaryDirectory(dir=probe, prefix=".flexmm-probe-").cleanup()
+    except OSError as exc:
+        raise OutputError(f"cannot create output directory {p}: cannot write in {probe} "
+                          f"({exc.strerror or exc})") from None
     return p
 
 
