@@ -19,7 +19,8 @@ def plan(
     analysis: str = AnalysisOption,
     show_config: bool = typer.Option(False, "--show-config", help="Also print the planned scene as YAML."),
 ) -> None:
-    """Plan a scene: domain reach and trimming, planar chain, continuum, output, integrator and dt."""
+    """Plan a scene: domain reach and trimming, planar chain, continuum, output, integrator and dt,
+    and what the planned run would cost (steps, memory, output size; flexmm.plan.cost)."""
     from flexmm.errors import FlexmmError
     from flexmm.io.provenance import config_text
     from flexmm.plan import PlanError, make_plan
@@ -38,5 +39,11 @@ def plan(
         prepare(p)  # the accuracy pilots choose integrator and dt (they run; nothing is written)
     for line in p.lines():
         typer.echo(line)
+    if not p.skip_discrete:
+        from flexmm.plan.cost import check, estimate
+
+        cost = estimate(p.scene)  # the planned scene: what a run would cost
+        for line in cost.lines() + [f"cost: WARNING: {w}" for w in check(cost)]:
+            typer.echo(line)
     if show_config:
         typer.echo(config_text(p.scene))
