@@ -277,3 +277,14 @@ def test_progress_lines_outside_a_terminal(tmp_path, monkeypatch) -> None:
     progress = [ln for ln in lines if ln.startswith("progress:")]
     assert len(progress) == 4 and "100.0 %" in progress[-1] and "steps" in progress[0]
     assert not any(ln.startswith("progress:") for ln in (tmp_path / "r" / "run.log").read_text().splitlines())
+
+
+def test_a_directory_that_is_not_a_run_directory_is_never_replaced(tmp_path) -> None:
+    """`--out runs` (the parent of runs) must not swap away every other run."""
+    other = tmp_path / "runs" / "other_scene"
+    other.mkdir(parents=True)
+    (other / "dataset.nc").write_bytes(b"keep me")
+    (tmp_path / "runs" / "notes.txt").write_text("mine")
+    res = flexmm("run", DEMO, "--out", tmp_path / "runs", *SHORT)
+    assert res.returncode == 2 and "not a flexmm run directory" in res.stderr, res.stderr
+    assert (other / "dataset.nc").read_bytes() == b"keep me" and (tmp_path / "runs" / "notes.txt").exists()

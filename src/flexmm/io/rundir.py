@@ -6,7 +6,9 @@ directory is refused instead of interleaving its files with the first. ``commit(
 
 - ``finished``: the staging directory *becomes* ``<name>`` in one step — swapped with an
   existing ``<name>`` by ``renameat2(RENAME_EXCHANGE)`` (Linux), then the old contents (an
-  earlier result, its analysis and figures) are removed; a plain rename if there is none;
+  earlier result, its analysis and figures) are removed; a plain rename if there is none. A
+  ``<name>`` that holds anything a run directory would not (subdirectories, other files: ``--out
+  runs`` instead of ``--out runs/x``) is refused before the run, never replaced;
 - ``failed`` / ``interrupted``: the partial result goes to ``<name>.<status>`` (replacing an
   older partial of the same kind); a finished ``<name>`` is never touched, and nothing partial
   sits where a finished result is expected.
@@ -110,6 +112,17 @@ def exclusive(lock_path: Path, what: str):
         os.close(fd)
 
 
+#: what a run directory may hold (a run's outputs, its analysis and figures): anything else means
+#: the path is not a run directory, and replacing it could destroy unrelated files
+RUN_FILE_SUFFIXES = (".nc", ".yaml", ".log", ".json", ".csv", ".png", ".svg", ".pdf", ".gif", ".mp4", ".lock", ".tmp")
+
+
+def foreign_contents(directory: Path) -> list[str]:
+    """Entries of ``directory`` that a flexmm run directory would not hold (subdirectories, other files)."""
+    return sorted(p.name for p in directory.iterdir()
+                  if p.is_dir() or not p.name.endswith(RUN_FILE_SUFFIXES))
+
+
 class RunDirectory:
     """Lock ``final``, give a staging directory to write in, commit it (module docstring)."""
 
@@ -123,6 +136,12 @@ class RunDirectory:
         self._lock = exclusive(self.lock_path, f"run directory {self.final}")
 
     def __enter__(self) -> RunDirectory:
+        if self.final.is_dir():
+            foreign = foreign_contents(self.final)
+            if foreign:
+                shown = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "")
+                raise OutputError(f"{self.final} exists and is not a flexmm run directory (it holds {shown}); "
+                                  "a finished run replaces its run directory: choose a new or empty one")
         self._lock.__enter__()
         clean_stale(self.parent)
         if self.final.is_dir():
