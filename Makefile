@@ -15,11 +15,14 @@ SWEEPS    := $(wildcard sweeps/*.yaml)
 RUN_OUT   := $(patsubst configs/%.yaml,runs/%/dataset.nc,$(CONFIGS))
 SWEEP_OUT := $(patsubst sweeps/%.yaml,runs/sweeps/%/sweep.nc,$(SWEEPS))
 FIGURES   := $(patsubst sweeps/%.yaml,runs/figures/%.png,$(SWEEPS))
+# `make gallery`: one short movie per scene (GALLERY_EXT=mp4 for MP4s; needs ffmpeg)
+GALLERY_EXT ?= gif
+GALLERY   := $(patsubst configs/%.yaml,runs/gallery/%.$(GALLERY_EXT),$(CONFIGS))
 # worker processes per sweep: one per core, or one when make itself runs jobs in parallel (-jN)
 SWEEP_WORKERS ?= $(if $(filter -j%,$(MAKEFLAGS)),1,0)
 
 .DELETE_ON_ERROR:
-.PHONY: install demo test test-slow bench clean reproduce figures
+.PHONY: install demo test test-slow bench clean reproduce figures gallery
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +53,11 @@ figures: $(FIGURES)
 
 runs/figures/%.png: runs/sweeps/%/sweep.nc
 	$(BIN)/python -m flexmm.sweep.plot runs/sweeps/$* $@
+
+gallery: $(GALLERY)
+
+runs/gallery/%.$(GALLERY_EXT): runs/%/dataset.nc
+	$(BIN)/flexmm render runs/$* --out $@ --max-frames 120 --width 720 --spacetime --quiet
 
 bench: $(STAMP)
 	@if [ -f benchmarks/run.py ]; then $(BIN)/python benchmarks/run.py; \

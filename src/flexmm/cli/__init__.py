@@ -20,6 +20,7 @@ from flexmm.cli import analyze as _analyze
 from flexmm.cli import bench as _bench
 from flexmm.cli import compare as _compare
 from flexmm.cli import plan as _plan
+from flexmm.cli import render as _render
 from flexmm.cli import run as _run
 from flexmm.cli import schema as _schema
 from flexmm.cli import stability as _stability
@@ -61,6 +62,7 @@ for _name, _func in (
     ("compare", _compare.compare),
     ("stability", _stability.stability),
     ("bench", _bench.bench),
+    ("render", _render.render),
 ):
     app.command(_name, cls=UserErrorCommand)(_func)
 

@@ -1,0 +1,224 @@
+"""``render_run``: one frame of a run as PNG/SVG, or a range of frames as an animated GIF or MP4.
+
+Everything comes from the dataset (fields, coordinates, status) and the lattice parameters of its
+stored config; no model is rebuilt. Frames are streamed from the file, a block at a time.
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from flexmm.errors import FlexmmError, OutputError, UsageError
+from flexmm.io.atomic import atomic_target
+from flexmm.render.colour import Colouring, make_colouring
+from flexmm.render.figure import Frame
+from flexmm.render.movie import MOVIE_SUFFIXES, ffmpeg_or_error, open_movie
+from flexmm.render.source import RunSource
+from flexmm.render.structure import make_structure
+from flexmm.render.view import describe, make_spacetime, palette_colours, view_extent
+
+STILL_SUFFIXES = (".png", ".svg")
+#: frames sampled to fix colour limits, the view and the wells
+N_SAMPLES = 24
+
+
+@dataclass
+class RenderOptions:
+    """What ``flexmm render`` asks for (SI times; None: the default)."""
+
+    out: Path | None = None
+    time_s: float | None = None
+    start_s: float | None = None
+    stop_s: float | None = None
+    every: int | None = None
+    max_frames: int = 400
+    fps: float = 20.0
+    color: str | None = None
+    clim: tuple[float, float] | None = None
+    exaggerate: float = 1.0
+    shape: str | None = None
+    sites: tuple[int, int] | None = None
+    spacetime: bool = False
+    row: int | None = None
+    width: int = 960
+
+
+def output_kind(opts: RenderOptions, run_dir: Path) -> tuple[Path, bool]:
+    """(output path, still?) from --out and --time; UsageError for an unknown suffix or a conflict."""
+    still_default = opts.time_s is not None
+    out = opts.out if opts.out is not None else run_dir / ("render.png" if still_default else "render.gif")
+    suffix = out.suffix.lower()
+    if suffix not in STILL_SUFFIXES + MOVIE_SUFFIXES:
+        raise UsageError(f"--out {out}: unknown output suffix {suffix or '(none)'!r}; use .png or .svg for "
+                         "one frame, .gif or .mp4 for a movie")
+    still = suffix in STILL_SUFFIXES
+    if not still and opts.time_s is not None:
+        raise UsageError(f"--time picks one frame: write it as .png or .svg (a movie takes --start/--stop), "
+                         f"not {suffix}")
+    if still and (opts.start_s is not None or opts.stop_s is not None or opts.every is not None):
+        raise UsageError("--start, --stop and --every choose a movie's frames: write .gif or .mp4, "
+                         "or pick one frame with --time")
+    return out, still
+
+
+def check_options(opts: RenderOptions) -> None:
+    """UsageError for option values out of range."""
+    if not (math.isfinite(opts.exaggerate) and opts.exaggerate > 0):
+        raise UsageError(f"--exaggerate must be a positive number, got {opts.exaggerate:g}")
+    if not (math.isfinite(opts.fps) and 0 < opts.fps <= 100):
+        raise UsageError(f"--fps must be in (0, 100], got {opts.fps:g}")
+    if opts.every is not None and opts.every < 1:
+        raise UsageError(f"--every must be ≥ 1, got {opts.every}")
+    if opts.max_frames < 1:
+        raise UsageError(f"--max-frames must be ≥ 1, got {opts.max_frames}")
+    if not 320 <= opts.width <= 4000:
+        raise UsageError(f"--width must be between 320 and 4000 pixels, got {opts.width}")
+    if opts.clim is not None and not opts.clim[1] > opts.clim[0]:
+        raise UsageError(f"--clim needs LOW < HIGH, got {opts.clim[0]:g}:{opts.clim[1]:g}")
+    if opts.shape is not None and opts.shape not in ("square", "cross", "bars"):
+        raise UsageError(f"--shape must be square, cross or bars, got {opts.shape!r}")
+
+
+def load_lattice(src: RunSource):
+    """The validated lattice config stored in the dataset; UsageError if there is none."""
+    import yaml
+
+    from flexmm.config import scene_from_dict
+
+    text = src.config_text
+    if not text:
+        raise UsageError(f"{src.path} has no stored config (attribute 'config'): cannot draw its structure")
+    try:
+        return scene_from_dict(yaml.safe_load(text), source=f"{src.path} (stored config)").lattice
+    except FlexmmError as exc:
+        raise UsageError(f"the config stored in {src.path} does not validate any more: {exc}") from None
+
+
+def frame_indices(src: RunSource, opts: RenderOptions, still: bool) -> np.ndarray:
+    """The frames to draw: one (--time, default the last) or a window thinned to --every/--max-frames."""
+    if still:
+        return np.array([src.index_at(opts.time_s) if opts.time_s is not None else src.time.size - 1])
+    idx = src.window(opts.start_s, opts.stop_s)
+    every = opts.every or max(1, math.ceil(idx.size / opts.max_frames))
+    return idx[::every]
+
+
+@dataclass
+class Picture:
+    """A prepared render: the open run, its structure and colouring, the figure, the frames to draw."""
+
+    src: RunSource
+    structure: object
+    colouring: Colouring
+    fig: Frame
+    indices: np.ndarray
+    needed: list[str]
+
+    def draw(self, t_s: float, frame: dict) -> None:
+        """Move the figure to one frame of the run."""
+        s = self.structure
+        self.fig.update(t_s, s.draw(frame), _colours(self.colouring, frame), s.colour_repeats())
+
+
+def prepare(src: RunSource, opts: RenderOptions, still: bool) -> Picture:
+    """Structure, colouring (limits from sampled frames), view and figure of a render."""
+    lattice = load_lattice(src)
+    structure = make_structure(src, lattice, opts.shape, opts.exaggerate)
+    src.require(structure.fields)
+    indices = frame_indices(src, opts, still)
+    take = np.unique(np.linspace(0, indices.size - 1, min(N_SAMPLES, indices.size)).round().astype(int))
+    names = list(dict.fromkeys(structure.fields + [f for f in ("u_dot", "v_dot", "theta_dot") if f in src.fields]))
+    samples = [f for _, _, f in src.frames(indices[take], names)]
+    colouring = make_colouring(opts.color, src, structure, [f["u"] for f in samples])
+    needed = list(dict.fromkeys(structure.fields + colouring.fields))
+    src.require(needed)
+    if colouring.values is not None:
+        colouring.set_limits([colouring.values(f) for f in samples], opts.clim)
+    extent = view_extent(structure, [structure.draw(f) for f in samples], opts.sites)
+    spacetime = None
+    if opts.spacetime:
+        st_idx = indices if not still else np.arange(src.time.size)
+        spacetime = make_spacetime(src, structure, colouring, st_idx, opts.row, needed)
+    title, subtitle = describe(src, lattice, structure, opts.exaggerate)
+    fig = Frame(drawing=structure.draw(samples[0]), extent=extent, colouring=colouring, title=title,
+                subtitle=subtitle, status=src.status_line(), t_max_s=float(src.time[-1]), width=opts.width,
+                frame_step_s=_step(src.time[indices] if indices.size > 1 else src.time),
+                spacetime=spacetime, animated=not still)
+    return Picture(src, structure, colouring, fig, indices, needed)
+
+
+def still_figure(run: str | Path, opts: RenderOptions) -> Picture:
+    """The picture of one frame (--time, default the last), drawn but not saved (tests, notebooks)."""
+    check_options(opts)
+    with RunSource(run) as src:
+        pic = prepare(src, opts, still=True)
+        i = int(pic.indices[0])
+        pic.draw(float(src.time[i]), next(src.frames([i], pic.needed))[2])
+    return pic
+
+
+def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] | None = None) -> Path:
+    """Draw a run (one frame or a movie) and return the path written."""
+    check_options(opts)
+    with RunSource(run) as src:
+        out, still = output_kind(opts, src.path.parent)
+        if out.suffix.lower() == ".mp4":
+            ffmpeg_or_error()
+        pic = prepare(src, opts, still)
+        _mkdir(out)
+        t0 = _time.perf_counter()
+        if still:
+            i = int(pic.indices[0])
+            pic.draw(float(src.time[i]), next(src.frames([i], pic.needed))[2])
+            with atomic_target(out) as tmp:
+                try:
+                    pic.fig.save(tmp, out.suffix.lower()[1:])
+                except OSError as exc:
+                    raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from None
+            if log:
+                log(f"wrote {out} (t = {src.time[i]:.6g} s)")
+            return out
+        if out.suffix.lower() == ".gif":
+            pic.fig.crisp()
+        writer = open_movie(out, opts.fps, palette_colours(pic.colouring))
+        try:
+            for _, t, frame in src.frames(pic.indices, pic.needed):
+                pic.draw(t, frame)
+                writer.write(pic.fig.rgb())
+            path = writer.close()
+        except OSError as exc:
+            writer.abort()
+            raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from None
+        except BaseException:
+            writer.abort()
+            raise
+        wall = _time.perf_counter() - t0
+        n = pic.indices.size
+        if log:
+            log(f"wrote {path}: {n} frames, t = {src.time[pic.indices[0]]:.6g} s to "
+                f"{src.time[pic.indices[-1]]:.6g} s, {wall:.1f} s ({n / max(wall, 1e-9):.1f} frames/s)")
+        return path
+
+
+def _step(t: np.ndarray) -> float:
+    return float(np.median(np.diff(t))) if t.size > 1 else 0.0
+
+
+def _colours(colouring: Colouring, frame: dict):
+    return None if colouring.values is None else colouring.values(frame)
+
+
+def _mkdir(out: Path) -> None:
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {out.parent}: {exc.strerror or exc}") from None
+
+
+__all__ = ["Picture", "RenderOptions", "prepare", "render_run", "still_figure"]

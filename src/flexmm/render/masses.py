@@ -1,0 +1,287 @@
+"""Chains, networks and grids of masses from a run's stored config: layout, parameters, energies.
+
+Sites and bonds follow ``flexmm.models.mass_topology`` (chain: sites in a row; network: branches
+in order, then junctions, bonds along each branch; grid: site i + nx·j, horizontal bonds, then
+vertical). The dataset's ``u`` is the displacement from the initial state; a site's drawn
+position is its rest point plus u along its branch direction (x for chains and grids).
+
+A network has no 2D coordinates of its own; ``network_layout`` places the junctions on a line
+and fans the free branches out from them (inputs to the left, outputs to the right).
+
+The on-site coordinate of a site (for wells and energies) is its initial position plus u; the
+initial position is the config's ``initial_displacement_m`` (after variations) relaxed to the
+nearest energy minimum, as the model does (``mass_relax.relaxed_initial``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import pairwise
+
+import numpy as np
+
+from flexmm.render.laws import barriers, law_energy_j
+from flexmm.render.mass_relax import relaxed_initial
+
+
+@dataclass
+class MassParams:
+    """A mass lattice in SI: rest positions (N, 2), the direction u moves each site (N, 2),
+    bonds (B, 2), per-element values (``values``), laws and on-site terms."""
+
+    kind: str
+    spacing_m: float
+    rest_xy: np.ndarray
+    direction: np.ndarray
+    bonds: np.ndarray
+    bonds2: np.ndarray
+    values: dict[str, np.ndarray]
+    lattice: object
+    onsite_terms: list = field(default_factory=list)  # (law, sites (k,), values {name: (k,)})
+    grid_shape: tuple[int, int] | None = None  # (nx, ny)
+    beads: bool = False
+    #: initial (relaxed) site coordinates (m); u is measured from them
+    x0: np.ndarray | None = None
+
+    @property
+    def n_sites(self) -> int:
+        """Number of sites."""
+        return self.rest_xy.shape[0]
+
+
+def _chain_topology(n: int):
+    i = np.arange(n - 1, dtype=np.int64)
+    return np.stack([i, i + 1], 1), np.stack([i[:-1], i[:-1] + 2], 1) if n > 2 else np.zeros((0, 2), np.int64)
+
+
+def second_neighbours(n: int, bonds: np.ndarray) -> np.ndarray:
+    """(i, k) for every path i → j → k of two oriented bonds (models.mass_topology's order)."""
+    inc = [[] for _ in range(n)]
+    out = [[] for _ in range(n)]
+    for i, j in bonds:
+        out[i].append(int(j))
+        inc[j].append(int(i))
+    return np.array([(i, k) for j in range(n) for i in inc[j] for k in out[j]], np.int64).reshape(-1, 2)
+
+
+def network_groups(lat) -> dict[str, list[int]]:
+    """Sites of each branch and junction (branches in order, then junctions)."""
+    groups, start = {}, 0
+    for b in lat.branches:
+        groups[b.name] = list(range(start, start + b.n_units))
+        start += b.n_units
+    for j in lat.junctions:
+        groups[j.name] = [start]
+        start += 1
+    return groups
+
+
+def _fan(count: int, spread_deg: float = 50.0) -> np.ndarray:
+    """Directions (count, 2) fanned symmetrically about +x."""
+    if count <= 1:
+        return np.array([[1.0, 0.0]] * count)
+    ang = np.radians(np.linspace(spread_deg / 2, -spread_deg / 2, count))
+    return np.stack([np.cos(ang), np.sin(ang)], 1)
+
+
+def network_layout(lat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rest_xy (N, 2), direction (N, 2), bonds (B, 2)) of a mass network, in metres.
+
+    Junctions sit on the x axis in order of first appearance, (n + 1) spacings apart along the
+    branches that join them; branches with a free start fan in from the left of their end
+    junction, branches with a free end fan out to the right of their start junction, and
+    branches without junctions are stacked below.
+    """
+    a = lat.spacing_m
+    groups = network_groups(lat)
+    n = sum(len(s) for s in groups.values())
+    xy, dirs = np.zeros((n, 2)), np.tile([1.0, 0.0], (n, 1))
+    jpos: dict[str, np.ndarray] = {}
+    for b in lat.branches:  # place junctions along junction-to-junction branches
+        for name in (b.start, b.end):
+            if name is not None and name not in jpos:
+                other = b.end if name == b.start else b.start
+                base = jpos.get(other)
+                if base is None:
+                    jpos[name] = np.array([max((p[0] for p in jpos.values()), default=-a) + a, 0.0])
+                else:
+                    sign = 1.0 if name == b.end else -1.0
+                    jpos[name] = base + sign * np.array([(b.n_units + 1) * a, 0.0])
+    fan_in = {j: [b for b in lat.branches if b.end == j and b.start is None] for j in jpos}
+    fan_out = {j: [b for b in lat.branches if b.start == j and b.end is None] for j in jpos}
+    row = 0
+    for b in lat.branches:
+        s = np.asarray(groups[b.name])
+        x = (np.arange(s.size) + (1 if b.start else 0)) * a
+        if b.start and b.end:
+            d = jpos[b.end] - jpos[b.start]
+            length = np.hypot(*d)
+            u = d / length if length > 0 else np.array([1.0, 0.0])
+            origin, x = jpos[b.start], x * (length / ((s.size + 1) * a) if length > 0 else 1.0)
+        elif b.end:
+            u = _fan(len(fan_in[b.end]))[fan_in[b.end].index(b)]
+            origin = jpos[b.end] - s.size * a * u
+        elif b.start:
+            u = _fan(len(fan_out[b.start]))[fan_out[b.start].index(b)]
+            origin = jpos[b.start]
+        else:
+            row += 1
+            u, origin = np.array([1.0, 0.0]), np.array([0.0, -3.0 * a * row])
+        xy[s] = origin + x[:, None] * u
+        dirs[s] = u
+    for j in lat.junctions:
+        xy[groups[j.name][0]] = jpos.get(j.name, np.zeros(2))
+    bonds = []
+    for b in lat.branches:
+        path = ([groups[b.start][0]] if b.start else []) + groups[b.name] + ([groups[b.end][0]] if b.end else [])
+        bonds += list(pairwise(path))
+    return xy, dirs, np.array(bonds, np.int64).reshape(-1, 2)
+
+
+def _grid(nx: int, ny: int, a: float):
+    idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
+    h = np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1)
+    v = np.stack([idx[:-1, :].ravel(), idx[1:, :].ravel()], 1)
+    d1 = np.stack([idx[:-1, :-1].ravel(), idx[1:, 1:].ravel()], 1)
+    d2 = np.stack([idx[:-1, 1:].ravel(), idx[1:, :-1].ravel()], 1)
+    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny))
+    xy = np.stack([ii.ravel() * a, jj.ravel() * a], 1).astype(float)
+    return xy, np.concatenate([h, v]), np.concatenate([d1, d2])
+
+
+def _numeric(law) -> list[tuple[str, float]]:
+    return [(k, v) for k, v in law if isinstance(v, float) and not isinstance(v, bool)]
+
+
+def _vary(values: dict, var, grid_shape) -> None:
+    """One Gradient, RandomVariation or Defects config on ``values[var.target]`` (models' rules)."""
+    a = values[var.target]
+    n = a.size
+    if var.kind == "gradient":
+        first = 0 if var.first is None else var.first
+        last = n - 1 if var.last is None else var.last
+        a[first : last + 1] = np.linspace(var.start, var.end, last - first + 1)
+    elif var.kind == "random":
+        rng = np.random.default_rng(var.seed)
+        eps = (rng.normal(0.0, var.relative_std, n) if var.distribution == "normal"
+               else rng.uniform(-1.0, 1.0, n) * var.relative_std * np.sqrt(3.0))
+        a *= 1.0 + eps
+    else:
+        idx = list(var.sites)
+        if var.box is not None:
+            nx = grid_shape[0]
+            i0, i1, j0, j1 = var.box
+            idx += [i + nx * j for j in range(j0, j1 + 1) for i in range(i0, i1 + 1)]
+        idx = np.unique(np.asarray(idx, np.int64))
+        a[idx] = var.value if var.value is not None else a[idx] * var.factor
+
+
+def mass_params(lat) -> MassParams:
+    """The MassParams of a mass_chain, mass_network or mass_grid config."""
+    a = lat.spacing_m
+    grid_shape = None
+    if lat.kind == "mass_chain":
+        n = lat.n_units
+        bonds, bonds2 = _chain_topology(n)
+        xy, dirs = np.stack([np.arange(n) * a, np.zeros(n)], 1), np.tile([1.0, 0.0], (n, 1))
+    elif lat.kind == "mass_network":
+        xy, dirs, bonds = network_layout(lat)
+        n = xy.shape[0]
+        bonds2 = second_neighbours(n, bonds)
+    elif lat.kind == "mass_grid":
+        n, grid_shape = lat.nx * lat.ny, (lat.nx, lat.ny)
+        xy, bonds, bonds2 = _grid(lat.nx, lat.ny, a)
+        dirs = np.tile([1.0, 0.0], (n, 1))
+    else:
+        raise ValueError(f"not a mass lattice: {lat.kind!r}")
+    vals = {"mass_kg": np.full(n, lat.mass_kg), "initial_displacement_m": np.full(n, lat.initial_displacement_m)}
+    if lat.friction is not None:
+        vals["friction.force_n"] = np.full(n, lat.friction.force_n)
+    sizes = {"bond": len(bonds), "bond2": len(bonds2)}
+    for prefix, law in [("bond", lat.bond), ("bond2", lat.bond2)] + [(f"onsite.{k}", l) for k, l in enumerate(lat.onsite)]:
+        if law is not None:
+            for name, value in _numeric(law):
+                vals[f"{prefix}.{name}"] = np.full(sizes.get(prefix, n), value)
+    for var in lat.variation:
+        _vary(vals, var, grid_shape)
+    groups = network_groups(lat) if lat.kind == "mass_network" else {}
+    for j in getattr(lat, "junctions", []):
+        if j.mass_kg is not None:
+            vals["mass_kg"][groups[j.name][0]] = j.mass_kg
+    replaced = [groups[j.name][0] for j in getattr(lat, "junctions", []) if j.onsite is not None]
+    sites = np.setdiff1d(np.arange(n), replaced)
+    terms = [(law, sites, {name: vals[f"onsite.{k}.{name}"][sites] for name, _ in _numeric(law)})
+             for k, law in enumerate(lat.onsite)]
+    for j in getattr(lat, "junctions", []):
+        for law in j.onsite or []:
+            terms.append((law, np.array([groups[j.name][0]]), {nm: np.array([v]) for nm, v in _numeric(law)}))
+    p = MassParams(lat.kind, a, xy, dirs, bonds, bonds2, vals, lat, terms, grid_shape, beads=lat.bond.law == "hertz")
+    p.x0 = relaxed_initial(p)
+    return p
+
+
+def _bond_values(p: MassParams, prefix: str, law) -> dict[str, np.ndarray]:
+    return {name: p.values[f"{prefix}.{name}"] for name, _ in _numeric(law)}
+
+
+def site_energy_j(p: MassParams, u: np.ndarray, u_dot: np.ndarray | None) -> np.ndarray:
+    """Energy per site (J): kinetic, on-site terms and half of each bond it belongs to.
+
+    ``u`` (and ``u_dot``) per site in metres (m/s); loads (static_load_n) and friction are not
+    stored energy and are left out.
+    """
+    x0 = p.x0
+    e = np.zeros(p.n_sites) if u_dot is None else 0.5 * p.values["mass_kg"] * u_dot**2
+    pos = x0 + u
+    for law, sites, vals in p.onsite_terms:
+        e[sites] += law_energy_j(law, vals, pos[sites])
+    lat = p.lattice
+    for prefix, law, bonds in (("bond", lat.bond, p.bonds), ("bond2", lat.bond2, p.bonds2)):
+        if law is None or not len(bonds):
+            continue
+        eb = law_energy_j(law, _bond_values(p, prefix, law), pos[bonds[:, 1]] - pos[bonds[:, 0]])
+        e += 0.5 * (np.bincount(bonds[:, 0], eb, p.n_sites) + np.bincount(bonds[:, 1], eb, p.n_sites))
+    return e
+
+
+def onsite_barriers(p: MassParams, lo: float, hi: float) -> np.ndarray | None:
+    """(N, m) barrier positions (m, +inf padded) of every site's on-site landscape on [lo, hi];
+    None if no site has a barrier there (no multistable on-site term)."""
+    if not p.onsite_terms:
+        return None
+    key = np.zeros((p.n_sites, 0))
+    cols = []
+    for t, (law, sites, vals) in enumerate(p.onsite_terms):
+        for name in sorted(vals):
+            col = np.full(p.n_sites, np.nan)
+            col[sites] = vals[name]
+            cols.append(col)
+        mark = np.zeros(p.n_sites)
+        mark[sites] = t + 1
+        cols.append(mark)
+    key = np.stack(cols, 1) if cols else key
+    rows, inverse = np.unique(np.nan_to_num(key, nan=-1e300), axis=0, return_inverse=True)
+    reps = np.array([np.flatnonzero(inverse.ravel() == r)[0] for r in range(rows.shape[0])])
+
+    def energy(z):  # (g, 1) -> (g, k): the landscape of each representative site
+        out = np.zeros((z.shape[0], reps.size))
+        for law, sites, vals in p.onsite_terms:
+            where = {int(s): i for i, s in enumerate(sites)}
+            for r, site in enumerate(reps):
+                if int(site) in where:
+                    i = where[int(site)]
+                    out[:, r] += law_energy_j(law, {k: v[i] for k, v in vals.items()}, z[:, 0])
+        return out
+
+    b = barriers(energy, lo, hi)
+    if b.shape[1] == 0:
+        return None
+    return b[inverse.ravel()]
+
+
+def well_index(pos: np.ndarray, site_barriers: np.ndarray) -> np.ndarray:
+    """Well of each site: the number of its barriers below its on-site coordinate."""
+    return np.sum(pos[:, None] > site_barriers, axis=1).astype(float)
+
+
+__all__ = ["MassParams", "mass_params", "network_layout", "onsite_barriers", "site_energy_j", "well_index"]

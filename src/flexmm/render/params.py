@@ -1,0 +1,211 @@
+"""Per-unit and per-hinge parameters of the rigid-unit lattices, from a run's stored config alone.
+
+The render layer does not rebuild models (docs/architecture.md, layers); what it needs of a lattice
+— rest rotations θ0 per unit, masses and inertias, hinge stiffnesses, the hinge list — is computed
+here from the validated lattice config, following the builders' conventions (site = row · n_cols +
+col, hinges horizontal first then vertical, variations applied in order with the same seeds).
+``tests/render/test_params.py`` checks every array against the built model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SITE_TARGETS = ("theta0_rad", "mass_kg", "inertia_kg_m2")
+HINGE_TARGETS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad")
+
+
+@dataclass
+class RigidParams:
+    """A rigid-unit lattice in SI: units (N,), hinges (H,) and how to draw them.
+
+    ``half_m``: centre-to-hinge distance (a/2 or L/2); ``sigma`` the checkerboard sign;
+    ``hinge_a/b`` the units a hinge joins, ``hinge_axis`` 0 horizontal (right corner of A to
+    left corner of B) or 1 vertical (top of A to bottom of B), ``hinge_wrap`` True for the
+    periodic wraps (not drawn); ``ligament_m`` the hinge points' rest separation.
+    """
+
+    kind: str
+    n_rows: int
+    n_cols: int
+    half_m: float
+    theta0_rad: np.ndarray
+    sigma: np.ndarray
+    mass_kg: np.ndarray
+    inertia_kg_m2: np.ndarray
+    hinge_a: np.ndarray
+    hinge_b: np.ndarray
+    hinge_axis: np.ndarray
+    hinge_wrap: np.ndarray
+    k_long_n_per_m: np.ndarray
+    k_shear_n_per_m: np.ndarray
+    k_rot_n_m_per_rad: np.ndarray
+    ligament_m: float = 0.0
+    n_lateral: int = 0
+    lateral_stretch: bool = False
+    #: bistable joints of the linkage: (k J, β, ψ* rad), or None
+    joint: tuple[float, float, float] | None = None
+    #: face magnets of a sheet: (recess_m, polarity) or None
+    magnets: tuple[float, str] | None = None
+
+    @property
+    def n_units(self) -> int:
+        """Number of units."""
+        return self.theta0_rad.size
+
+
+def _ramp(v, idx: np.ndarray, size: int) -> np.ndarray:
+    first = v.first or 0
+    last = size - 1 if v.last is None else v.last
+    return v.start + (v.end - v.start) * np.clip((idx - first) / (last - first), 0.0, 1.0)
+
+
+def _apply(v, values, idx_units, size, key, touches) -> np.ndarray:
+    """One variation (gradient, interface, random, defects) on one array (models.variation rules)."""
+    if v.kind == "gradient":
+        return sum(_ramp(v, i, size) for i in idx_units) / len(idx_units)
+    if v.kind == "interface":
+        w = sum((i >= v.position).astype(float) for i in idx_units) / len(idx_units)
+        return values * (1.0 - w) + v.value * w
+    if v.kind == "random":
+        rng = np.random.default_rng([v.seed, key])
+        eps = rng.normal(0.0, v.std if v.std is not None else v.relative_std, values.size)
+        return values + eps if v.std is not None else values * (1.0 + eps)
+    out = values.copy()
+    mask = touches(np.asarray(v.sites))
+    out[mask] = v.value if v.value is not None else values[mask] * v.factor
+    return out
+
+
+def varied(base: dict, variations, col, row, ha, hb) -> tuple[dict, dict]:
+    """Per-unit and per-hinge arrays of every target after the config's variations (SI)."""
+    n, nh = col.size, ha.size
+    sites = {k: np.full(n, float(base[k])) for k in SITE_TARGETS}
+    hinges = {k: np.full(nh, float(base[k])) for k in HINGE_TARGETS}
+    for key, v in enumerate(variations):
+        axis = row if getattr(v, "axis", "x") == "y" else col
+        size = int(axis.max()) + 1
+        if v.target in SITE_TARGETS:
+            sites[v.target] = _apply(v, sites[v.target], (axis,), size, key, lambda s: np.isin(np.arange(n), s))
+        else:
+            hinges[v.target] = _apply(v, hinges[v.target], (axis[ha], axis[hb]), size, key,
+                                      lambda s: np.isin(ha, s) | np.isin(hb, s))
+    return sites, hinges
+
+
+def sheet_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, skew: int = 0):
+    """(a, b, axis, wrap) of a sheet's hinges: horizontal, then vertical, then the wraps' order
+    of the builder (horizontal wraps after the horizontal hinges, vertical after the vertical)."""
+    site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
+    a_h, b_h = site[:, :-1].ravel(), site[:, 1:].ravel()
+    w_h = np.zeros(a_h.size, bool)
+    a_v, b_v = site[:-1, :].ravel(), site[1:, :].ravel()
+    w_v = np.zeros(a_v.size, bool)
+    if periodic_x:
+        a_h, b_h = np.concatenate([a_h, site[:, -1]]), np.concatenate([b_h, site[:, 0]])
+        w_h = np.concatenate([w_h, np.ones(n_rows, bool)])
+    if periodic_y:
+        cols = np.arange(n_cols) + skew
+        keep = slice(None) if periodic_x else (cols >= 0) & (cols < n_cols)
+        top, bottom = site[-1, :][keep], site[0, cols % n_cols][keep]
+        a_v, b_v = np.concatenate([a_v, top]), np.concatenate([b_v, bottom])
+        w_v = np.concatenate([w_v, np.ones(top.size, bool)])
+    a = np.concatenate([a_h, a_v]).astype(np.int64)
+    b = np.concatenate([b_h, b_v]).astype(np.int64)
+    axis = np.concatenate([np.zeros(a_h.size, np.int64), np.ones(a_v.size, np.int64)])
+    return a, b, axis, np.concatenate([w_h, w_v])
+
+
+def checkerboard(n_rows: int, n_cols: int) -> np.ndarray:
+    """σ = (−1)^(row+col) per site."""
+    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
+    return np.where((r + c) % 2 == 0, 1.0, -1.0)
+
+
+def rigid_params(lat) -> RigidParams:
+    """The RigidParams of a rotating_squares_chain, rotating_squares_sheet or bistable_linkage config."""
+    if lat.kind == "rotating_squares_chain":
+        return _chain(lat)
+    if lat.kind == "rotating_squares_sheet":
+        return _sheet(lat)
+    if lat.kind == "bistable_linkage":
+        return _linkage(lat)
+    raise ValueError(f"not a rigid-unit lattice: {lat.kind!r}")
+
+
+def _base(lat, mass: float, inertia: float) -> dict:
+    return {"theta0_rad": lat.theta0_rad, "mass_kg": mass, "inertia_kg_m2": inertia,
+            "k_long_n_per_m": lat.k_long_n_per_m, "k_shear_n_per_m": lat.k_shear_n_per_m,
+            "k_rot_n_m_per_rad": lat.k_rot_n_m_per_rad}
+
+
+def _chain(lat) -> RigidParams:
+    n = lat.n_units
+    ha = np.arange(n - 1, dtype=np.int64)
+    sites, hinges = varied(_base(lat, lat.mass_kg, lat.inertia_kg_m2), lat.variation,
+                           np.arange(n), np.zeros(n, np.int64), ha, ha + 1)
+    return RigidParams(
+        lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], np.where(np.arange(n) % 2 == 0, 1.0, -1.0),
+        sites["mass_kg"], sites["inertia_kg_m2"], ha, ha + 1, np.zeros(n - 1, np.int64),
+        np.zeros(n - 1, bool), hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
+        hinges["k_rot_n_m_per_rad"], n_lateral=lat.n_lateral, lateral_stretch=lat.lateral_stretch)
+
+
+def _sheet(lat) -> RigidParams:
+    nr, nc = lat.n_rows, lat.n_cols
+    ha, hb, axis, wrap = sheet_hinges(nr, nc, lat.left == "periodic", lat.bottom == "periodic", lat.skew_cols)
+    row, col = np.divmod(np.arange(nr * nc), nc)
+    sites, hinges = varied(_base(lat, lat.unit_mass_kg, lat.unit_inertia_kg_m2), lat.variation, col, row, ha, hb)
+    magnets = None if lat.magnets is None else (lat.magnets.recess_m, lat.magnets.polarity)
+    return RigidParams(
+        lat.kind, nr, nc, lat.a_m / 2, sites["theta0_rad"], checkerboard(nr, nc), sites["mass_kg"],
+        sites["inertia_kg_m2"], ha, hb, axis, wrap, hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
+        hinges["k_rot_n_m_per_rad"], ligament_m=lat.ligament_length_m, magnets=magnets)
+
+
+def joint_stiffness_j(released_energy_j: float, switch_rad: float, beta: float) -> float:
+    """k (J) of the linkage's double well from its released energy ΔE = k ψ*⁴ (1 − 2β)/12."""
+    return 12.0 * released_energy_j / (switch_rad**4 * (1.0 - 2.0 * beta))
+
+
+def _linkage(lat) -> RigidParams:
+    nc, L, m = lat.n_cols, lat.bar_length_m, lat.mass_kg
+    n = 2 * nc
+    J = lat.inertia_kg_m2 if lat.inertia_kg_m2 is not None else m * L * L / 12
+    ha, hb, axis, wrap = sheet_hinges(2, nc, False, False)
+    switch = 2.0 * (lat.theta_deployed_rad - lat.theta0_rad)
+    k = joint_stiffness_j(lat.released_energy_j, switch, lat.barrier_fraction)
+    nh = ha.size
+    return RigidParams(
+        lat.kind, 2, nc, L / 2, np.full(n, lat.theta0_rad), checkerboard(2, nc), np.full(n, m), np.full(n, J),
+        ha, hb, axis, wrap, np.full(nh, lat.k_pin_n_per_m), np.full(nh, lat.k_pin_n_per_m), np.zeros(nh),
+        joint=(k, lat.barrier_fraction, switch))
+
+
+def joint_energy_j(psi, joint: tuple[float, float, float]):
+    """Double-well energy of a linkage joint, V(ψ) = k [ψ⁴/4 − (1+β)ψ*ψ³/3 + βψ*²ψ²/2] (J)."""
+    k, beta, s = joint
+    return k * (psi**4 / 4 - (1 + beta) * s * psi**3 / 3 + beta * s * s * psi**2 / 2)
+
+
+def lateral_energy_j(p: RigidParams, theta) -> np.ndarray:
+    """Energy of a chain unit's lateral hinges (docs/physics.md §1.1), shape like ``theta``.
+
+    E_v = n_v [¼ s_v k_l a² (cos θ0 − cos(θ0+θ))² + k_θ θ²], with the unit's mean k_l, k_θ of its
+    chain hinges (the builder's convention).
+    """
+    if p.n_lateral == 0:
+        return np.zeros_like(theta)
+    n = p.n_units
+    deg = np.bincount(p.hinge_a, minlength=n) + np.bincount(p.hinge_b, minlength=n)
+    kl = (np.bincount(p.hinge_a, p.k_long_n_per_m, n) + np.bincount(p.hinge_b, p.k_long_n_per_m, n)) / deg
+    kt = (np.bincount(p.hinge_a, p.k_rot_n_m_per_rad, n) + np.bincount(p.hinge_b, p.k_rot_n_m_per_rad, n)) / deg
+    a = 2 * p.half_m
+    g = np.cos(p.theta0_rad) - np.cos(p.theta0_rad + theta)
+    return p.n_lateral * (0.25 * float(p.lateral_stretch) * kl * a * a * g * g + kt * theta * theta)
+
+
+__all__ = ["RigidParams", "checkerboard", "joint_energy_j", "joint_stiffness_j", "lateral_energy_j",
+           "rigid_params", "sheet_hinges", "varied"]
