@@ -238,7 +238,7 @@ def test_random_signals_during_reruns_many_seeds(tmp_path, seed) -> None:
     _random_signal_rounds(tmp_path, seed, 4)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+@pytest.mark.parametrize("sig", [pytest.param(signal.SIGINT, marks=pytest.mark.slow), signal.SIGKILL])
 def test_a_sweep_stopped_at_a_random_moment_resumes_to_a_true_summary(tmp_path, sig) -> None:
     import random
 
