@@ -2,7 +2,7 @@
 
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
-                                              #              | sheet | workprecision
+                                              #              | sheet | workprecision | render
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum over repeats after a compile warm-up; thread/process CPU time is
@@ -318,8 +318,38 @@ def sweep_overhead(points: tuple[int, int] = (2, 10), repeats: int = 3) -> dict:
 
 
 
+def render(repeats: int = 3, n_frames: int = 400) -> list[dict]:
+    """``flexmm render`` speed on the 2D target (issue 20): 400 frames of the 40 x 20 sheet in < 30 s.
+
+    The sheet of benchmarks/configs/sheet_pulse.yaml is run once with ``n_frames`` frames; the whole
+    ``flexmm render`` process (start-up included) then writes a GIF (and an MP4 if ffmpeg is on
+    PATH), without and with the space–time diagram. Frames per second from the minimum and the
+    median wall time of ``repeats`` runs after a warm-up; the load average is printed with each row.
+    """
+    import shutil
+
+    run_dir = RESULTS / "render_run"
+    if not (run_dir / "dataset.nc").exists():
+        subprocess.run([FLEXMM, "run", str(ROOT / "configs" / "sheet_pulse.yaml"), "--quiet", "--fidelity", "full",
+                        "--out", str(run_dir), "--set", f"output.n_frames={n_frames}"], check=True,
+                       capture_output=True)
+    rows = []
+    for suffix in (".gif", ".mp4") if shutil.which("ffmpeg") else (".gif",):
+        for extra in ([], ["--spacetime"]):
+            out = RESULTS / f"render{suffix}"
+            cmd = [FLEXMM, "render", str(run_dir), "--out", str(out), "--quiet", *extra]
+            name = f"render 40x20 sheet, {n_frames} frames {suffix} {' '.join(extra)}".rstrip()
+            row = _repeat(name, cmd, repeats)
+            row.update(frames=n_frames, fps_best=n_frames / row["wall_min_s"], fps_median=n_frames / row["wall_median_s"],
+                       output_MB=out.stat().st_size / 1e6 if out.exists() else None)
+            print(f"    -> {row['fps_best']:.1f} frames/s (min wall), {row['fps_median']:.1f} frames/s (median); "
+                  f"{row['output_MB']:.1f} MB; target: {n_frames} frames < 30 s")
+            rows.append(row)
+    return rows
+
+
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
-            "workprecision": workprecision}
+            "workprecision": workprecision, "render": render}
 
 
 def main(argv: list[str]) -> None:
