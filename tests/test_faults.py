@@ -194,6 +194,7 @@ def test_two_sweeps_on_one_directory_do_not_mix(tmp_path) -> None:
         assert not ((d / "done.json").exists() and (d / "error.json").exists())
 
 
+@pytest.mark.slow  # waits out the 10 s connection timeout
 def test_unreachable_scheduler_is_a_message_within_seconds(tmp_path) -> None:
     pytest.importorskip("distributed")
     t0 = time.monotonic()
