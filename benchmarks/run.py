@@ -2,12 +2,14 @@
 
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
+                                              #              | roofline | sheet_throughput | contention
                                               #              | sheet | workprecision | render
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
-Every timing is the minimum over repeats after a compile warm-up; thread/process CPU time is
-printed next to wall time because the machine may be shared (CPU time excludes time spent
-descheduled). Results go to benchmarks/results/<section>.json (git-ignored).
+Every timing is the minimum and the median over repeats after a compile warm-up, with the load
+average; thread/process CPU time is printed next to wall time because the machine may be shared
+(CPU time excludes time spent descheduled). Results go to benchmarks/results/<section>.json
+(git-ignored).
 """
 
 from __future__ import annotations
@@ -51,6 +53,19 @@ def _grade(system) -> None:
     system.args[3][:, S_KR] *= 1.0 + 1e-3 * np.linspace(-1.0, 1.0, system.n_sites)
 
 
+def _grade_all(system) -> None:
+    """Vary every parameter of the hinges and sites by ±0.1 % along the chain (rest length and
+    angle, half sizes, all stiffnesses): the fused kernel then streams nine parameter columns."""
+    from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, S_KG, S_KR, S_THETA0
+
+    x = 1e-3 * np.linspace(-1.0, 1.0, system.n_sites)
+    for k in (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT):
+        system.args[2][:, k] *= 1.0 + x[:-1]
+    system.args[3][:, S_THETA0] += x
+    for k in (S_KG, S_KR):
+        system.args[3][:, k] *= 1.0 + x
+
+
 def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: int) -> dict:
     from flexmm.integrators.stepper import Stepper
 
@@ -71,10 +86,17 @@ def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: 
             "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__}
 
 
-def throughput(sizes=(1_000, 100_000, 1_000_000), threads=(1, 2), repeats: int = 7,
-               graded_sizes=(100_000, 1_000_000)) -> list[dict]:
+def _load() -> str:
+    """The load averages (1, 5, 15 min), printed with every timing: the machine may be shared."""
+    return "load {:.2f} {:.2f} {:.2f}".format(*os.getloadavg())
+
+
+def throughput(sizes=(1_000, 100_000, 1_000_000, 10_000_000), threads=(1, 2), repeats: int = 7,
+               graded_sizes=(100_000, 1_000_000, 10_000_000)) -> list[dict]:
     """Unit-steps per second of velocity Verlet on the LEGO chain (compile excluded); uniform
-    chains for ``sizes``, graded ones (``_grade``) for ``graded_sizes``."""
+    chains for ``sizes``, graded ones (``_grade``) for ``graded_sizes``. Each call advances
+    max(20, 3e7/N) steps, so the per-call preparation of the fused kernel (``roofline`` prints
+    it) is included."""
     import numba
 
     from flexmm.integrators import INTEGRATORS
@@ -91,14 +113,17 @@ def throughput(sizes=(1_000, 100_000, 1_000_000), threads=(1, 2), repeats: int =
                 continue
             row = {"chain": chain, **_time_advance(spec, system, terms, damp, th, max(20, int(3e7 / n)), repeats)}
             rate = row["M_unit_steps_per_s"]
-            print(f"N = {n:>9,d} {chain:7s} threads {row['threads']}: {rate:7.1f} M unit-steps/s (wall, min of "
-                  f"{repeats}; median {rate * row['wall_min_s'] / row['wall_median_s']:.1f}); per CPU-second x "
-                  f"threads {row['M_unit_steps_per_cpu_s']:.1f} ({row['kernel']})")
+            row["M_unit_steps_per_s_median"] = rate * row["wall_min_s"] / row["wall_median_s"]
+            row["load"] = os.getloadavg()
+            print(f"N = {n:>10,d} {chain:7s} threads {row['threads']}: {rate:7.1f} M unit-steps/s (wall, min of "
+                  f"{repeats}; median {row['M_unit_steps_per_s_median']:.1f}); per CPU-second x "
+                  f"threads {row['M_unit_steps_per_cpu_s']:.1f} ({row['kernel']}; {_load()})")
             out.append(row)
+        del system
     for n, chain in cases:
         rate = {r["threads"]: r["M_unit_steps_per_s"] for r in out if (r["n_units"], r["chain"]) == (n, chain)}
         if 1 in rate and 2 in rate:
-            print(f"N = {n:>9,d} {chain:7s}: two threads / one thread = {rate[2] / rate[1]:.2f}x")
+            print(f"N = {n:>10,d} {chain:7s}: two threads / one thread = {rate[2] / rate[1]:.2f}x")
     return out
 
 
@@ -155,6 +180,268 @@ def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) 
         if 1 in r and 2 in r:
             print(f"triad {n:>11,d}: two threads / one thread = {r[2] / r[1]:.2f}x")
     return out
+
+
+def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float]:
+    """(best, median) GB/s of the triad, one thread, on three arrays of ``nbytes`` in all: the
+    bandwidth of the memory level a working set of that size lives in."""
+    import numba
+
+    n = max(4096, int(nbytes / 24))
+    triad = _triad_kernel()
+    numba.set_num_threads(1)
+    a, b, c = np.zeros(n), np.ones(n), np.ones(n)
+    triad(a, b, c, 0.5, 16)
+    walls = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        triad(a, b, c, 0.5, 16)
+        walls.append(time.perf_counter() - t0)
+    return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9
+
+
+#: flops per unit-step of the fused chain kernel, counted from its loops (no FMA: a multiply and
+#: an add are two): sincos 40, θ0 + θ 1, lateral hinges 1 (5 with lateral stretch), the hinge
+#: to the right 27, the site's two hinges 3, kicks and drift 10
+CHAIN_FLOPS = 82
+#: flops per unit-step of velocity Verlet on the sheet: sincos 40, θ0 + θ 1, two hinges 2 × 30,
+#: the sites' sums 12, kicks and drift 15
+SHEET_FLOPS = 128
+
+
+def _sheet_bytes(system) -> float:
+    """Bytes per unit-step the fused sheet kernel (``verlet.sheet_verlet_advance``) moves when
+    nothing stays in cache from one step to the next, counted from its sweep: q and v read and
+    written 96, F and cos/sin written (and read for ownership) 80, θ0 8; the two hinges' shear
+    signs 16 when all hinges share their other parameters (``uniform_hinges``), else their
+    table rows 112; the kicks 24 unless each field's masses are equal."""
+    from flexmm.models.sheet_kernels import uniform_hinges
+
+    uni = uniform_hinges(system.args.hinge_prm)
+    n = system.n_sites
+    kicks = system.inv_mass.reshape(3, n)
+    same = all(np.all(row == row[0]) for row in kicks)
+    return 96.0 + 80.0 + 8.0 + (16.0 if uni[0] == uni[0] else 112.0) + (0.0 if same else 24.0)
+
+
+def _chain_bytes(system, damp, h: float = 0.1) -> float:
+    """Bytes per unit-step the fused chain kernel moves: q and v read and written (64), plus 8
+    for each parameter or kick column it streams where that column varies (the per-call tables
+    of ``verlet_chain._prepare``; a uniform chain streams none)."""
+    from flexmm.integrators.verlet_chain import BLOCK, _is_damped, _prepare
+
+    n = system.n_sites
+    tables = _prepare(system.args, system.inv_mass, damp, h, _is_damped(system.inv_mass, damp))
+    flag = tables[3]
+    sizes = np.minimum(BLOCK, n - BLOCK * np.arange(flag.shape[0]))
+    return 64.0 + 8.0 * float((flag.sum(axis=1) * sizes).sum()) / n
+
+
+def _prepare_s(system, damp, repeats: int = 5) -> float:
+    """Seconds per call of the fused kernel's per-call preparation (``verlet_chain._prepare``)."""
+    from flexmm.integrators.verlet_chain import _is_damped, _prepare
+
+    damped = _is_damped(system.inv_mass, damp)
+    _prepare(system.args, system.inv_mass, damp, 0.1, damped)
+    walls = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        _prepare(system.args, system.inv_mass, damp, 0.1, damped)
+        walls.append(time.perf_counter() - t0)
+    return min(walls)
+
+
+def _sheet(n_rows: int, n_cols: int):
+    """The sheet of configs/sheet_pulse.yaml (force pulse on its left column) at another size,
+    built without the ω_max solve."""
+    from flexmm.assemble import apply_excitation, damping_arrays
+    from flexmm.config import load_scene
+    from flexmm.integrators.common import Terms, empty_terms
+    from flexmm.models import MODELS
+
+    scene = load_scene(ROOT / "configs" / "sheet_pulse.yaml", [f"lattice.n_rows={n_rows}", f"lattice.n_cols={n_cols}"])
+    system = MODELS[scene.lattice.kind].build(scene.lattice)
+    terms = empty_terms()._asdict()
+    apply_excitation(system, scene, terms)
+    damp = damping_arrays(system, scene, terms)
+    return system, Terms(**terms), damp
+
+
+SHEET_SIZES = ((20, 40), (100, 100), (316, 316), (1000, 1000))
+
+
+def _sheet_rate(n_rows: int, n_cols: int, repeats: int) -> dict:
+    """Velocity Verlet (``verlet_advance`` with ``sheet_force``) on one thread, and the force alone."""
+    from flexmm.integrators import INTEGRATORS
+
+    system, terms, damp = _sheet(n_rows, n_cols)
+    n = system.n_sites
+    rng = np.random.default_rng(0)
+    system.q0[:] = 0.01 * rng.standard_normal(system.ndof)  # a generic state (no sincos shortcut)
+    row = _time_advance(INTEGRATORS["velocity_verlet"], system, terms, damp, 1, max(20, int(3e6 / n)), repeats)
+    out = np.zeros(system.ndof)
+    force = system.force
+    force(system.q0, system.args, out)
+    reps = max(3, int(1e6 / n))
+    walls = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            force(system.q0, system.args, out)
+        walls.append((time.perf_counter() - t0) / reps)
+    row.update(rows=n_rows, cols=n_cols, bytes_per_unit_step=_sheet_bytes(system),
+               force_ns_per_unit=min(walls) / n * 1e9,
+               force_ns_per_unit_median=float(np.median(walls)) / n * 1e9,
+               M_unit_steps_per_s_median=row["M_unit_steps_per_s"] * row["wall_min_s"] / row["wall_median_s"])
+    return row
+
+
+def sheet_throughput(sizes=SHEET_SIZES, repeats: int = 7) -> list[dict]:
+    """Unit-steps per second of velocity Verlet on the rotating-squares sheet (one thread; the
+    force pulse of configs/sheet_pulse.yaml on the left column, a random initial state), and
+    ns per unit of one force evaluation (called from Python, so the dispatch is included)."""
+    out = []
+    for r, c in sizes:
+        row = _sheet_rate(r, c, repeats)
+        print(f"sheet {r}x{c} ({row['n_units']:,d} units): {row['M_unit_steps_per_s']:6.1f} M unit-steps/s "
+              f"(min of {repeats}; median {row['M_unit_steps_per_s_median']:.1f}); force "
+              f"{row['force_ns_per_unit']:.2f} ns/unit (median {row['force_ns_per_unit_median']:.2f}) ({_load()})")
+        out.append(row)
+    return out
+
+
+def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=SHEET_SIZES,
+             repeats: int = 5) -> list[dict]:
+    """Bytes and flops per unit-step, achieved GB/s and GFLOP/s, against the triad bandwidth of
+    a working set of the same size (one thread): the memory roof is that bandwidth over the
+    bytes per unit-step. Chains (uniform; graded: k_r varies, so its column is streamed; all
+    graded: nine columns streamed, ``_grade_all``) with the fused Verlet kernel, and the sheet
+    stepper. The fused kernel's per-call preparation is
+    printed in steps of the same chain (it is included in the rates: max(20, 3e7/N) steps per call)."""
+    from flexmm.integrators import INTEGRATORS
+
+    spec = INTEGRATORS["velocity_verlet"]
+    out = []
+
+    def report(what, n, rate, rate_med, nbytes, flops, extra=""):
+        bw, bw_med = _triad_gbs(nbytes * n)
+        roof = bw * 1e9 / nbytes / 1e6
+        row = {"what": what, "n_units": n, "M_unit_steps_per_s": rate, "M_unit_steps_per_s_median": rate_med,
+               "bytes_per_unit_step": nbytes, "flops_per_unit_step": flops, "triad_GB_s": bw,
+               "triad_GB_s_median": bw_med, "memory_roof_M_per_s": roof, "fraction_of_roof": rate / roof,
+               "load": os.getloadavg()}
+        print(f"{what:18s} N = {n:>10,d}: {rate:6.1f} M/s (median {rate_med:6.1f}); {nbytes:5.0f} B, {flops} flop per "
+              f"unit-step -> {rate * nbytes / 1e3:5.1f} GB/s, {rate * flops / 1e3:5.1f} GFLOP/s; triad {bw:5.1f} GB/s "
+              f"(median {bw_med:.1f}) -> roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it{extra} ({_load()})")
+        out.append(row)
+
+    for n in sizes:
+        for chain in ("uniform", "graded", "all graded"):
+            system, terms, damp = _chain(n)
+            if chain == "graded":
+                _grade(system)
+            elif chain == "all graded":
+                _grade_all(system)
+            steps = max(20, int(3e7 / n))
+            row = _time_advance(spec, system, terms, damp, 1, steps, repeats)
+            rate = row["M_unit_steps_per_s"]
+            prep = _prepare_s(system, damp)
+            step_s = row["wall_min_s"] / steps
+            report(f"chain {chain}", n, rate, rate * row["wall_min_s"] / row["wall_median_s"],
+                   _chain_bytes(system, damp), CHAIN_FLOPS,
+                   f"; preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
+            del system
+    for r, c in sheet_sizes:
+        row = _sheet_rate(r, c, repeats)
+        report("sheet Verlet", row["n_units"], row["M_unit_steps_per_s"], row["M_unit_steps_per_s_median"],
+               row["bytes_per_unit_step"], SHEET_FLOPS)
+    return out
+
+
+def _busy_loop() -> subprocess.Popen:
+    """A competing process: one core's worth of busy loop."""
+    return subprocess.Popen([sys.executable, "-c", "while True: pass"])
+
+
+def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
+    """One thread against two on the fused chain kernel, on an idle machine and beside a busy
+    loop (another process holding a core): advances of the two steppers alternate, minimum and
+    median of ``repeats`` each. Also what ``parallel.choose_threads`` picks in each case."""
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.parallel import choose_threads
+    from flexmm.integrators.stepper import Stepper
+
+    spec = INTEGRATORS["velocity_verlet"]
+    out = []
+    for n in sizes:
+        system, terms, damp = _chain(n)
+        steppers = {th: Stepper(spec, system, terms, damp, 0.1, threads=th, check_energy=False) for th in (1, 2)}
+        for st in steppers.values():
+            st.warm_up()
+        steps = max(20, int(3e7 / n))
+        for loaded in (False, True):
+            busy = _busy_loop() if loaded else None
+            try:
+                time.sleep(0.5)
+                auto = choose_threads(n)
+                rates = {1: [], 2: []}
+                for _ in range(repeats):
+                    for th, st in steppers.items():
+                        w0 = st.wall_s
+                        st.advance(steps)
+                        rates[th].append(n * steps / (st.wall_s - w0) / 1e6)
+                load = _load()
+            finally:
+                if busy is not None:
+                    busy.kill()
+                    busy.wait()
+            med = {th: float(np.median(r)) for th, r in rates.items()}
+            row = {"n_units": n, "competing_process": loaded, "auto_threads": auto,
+                   **{f"threads{th}_best": max(r) for th, r in rates.items()},
+                   **{f"threads{th}_median": m for th, m in med.items()},
+                   "median_ratio": med[2] / med[1], "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
+            print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'idle machine      '}: one thread "
+                  f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median; two threads {max(rates[2]):6.1f} best, "
+                  f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; choose_threads -> {auto} ({load})")
+            out.append(row)
+        del system, steppers
+    out.append(_kinetic_contention())
+    return out
+
+
+def _kinetic_contention(rows: int = 60, cols: int = 80, repeats: int = 41) -> dict:
+    """The per-frame kinetic energy of a 14 400-DOF sheet: ``System.kinetic_energy`` (compiled,
+    one thread) against ``np.dot`` (OpenBLAS, its threads), idle and beside a busy loop; median
+    and worst of ``repeats`` calls in ms."""
+    system, _, _ = _sheet(rows, cols)
+    v = np.random.default_rng(1).standard_normal(system.ndof)
+    mass = system.mass
+    row = {"dofs": system.ndof}
+    for loaded in (False, True):
+        tag = "busy" if loaded else "idle"
+        busy = _busy_loop() if loaded else None
+        try:
+            time.sleep(0.5 if loaded else 0.0)
+            for name, fn in (("compiled", lambda: system.kinetic_energy(v)),
+                             ("np.dot", lambda: 0.5 * float(np.dot(mass, v * v)))):
+                fn()
+                walls = []
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    fn()
+                    walls.append(time.perf_counter() - t0)
+                row[f"{name}_{tag}_median_ms"] = 1e3 * float(np.median(walls))
+                row[f"{name}_{tag}_worst_ms"] = 1e3 * max(walls)
+            load = _load()
+        finally:
+            if busy is not None:
+                busy.kill()
+                busy.wait()
+        print(f"kinetic energy, {system.ndof:,d} DOFs, {'beside a busy loop' if loaded else 'idle machine'}: "
+              f"System.kinetic_energy median {row[f'compiled_{tag}_median_ms']:.3f} ms (worst "
+              f"{row[f'compiled_{tag}_worst_ms']:.3f}); np.dot median {row[f'np.dot_{tag}_median_ms']:.3f} ms "
+              f"(worst {row[f'np.dot_{tag}_worst_ms']:.3f}) ({load})")
+    return row
 
 
 def memory(n_units: int = 1_000_000, duration_s: float = 0.01, n_frames: int = 11) -> dict:
@@ -349,6 +636,7 @@ def render(repeats: int = 3, n_frames: int = 400) -> list[dict]:
 
 
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
+            "sheet_throughput": sheet_throughput, "roofline": roofline, "contention": contention,
             "workprecision": workprecision, "render": render}
 
 

@@ -1,5 +1,6 @@
 """The vectorised sincos, the threaded chain kernels and velocity Verlet fused with the chain
-force give the serial, unfused results."""
+force give the serial, unfused results: bit for bit (trajectories, forces), the energy ledger's
+dissipation to rounding (it is summed in another order)."""
 
 from __future__ import annotations
 
@@ -16,9 +17,11 @@ from flexmm.integrators.stepper import make_stepper
 from flexmm.models.hinge import ChainArgs
 from flexmm.models.sheet_kernels import SheetArgs
 from flexmm.integrators.verlet import verlet_advance
-from flexmm.integrators.verlet_chain import (_cached_tables, fusable, chain_verlet_advance,
-                                             chain_verlet_advance_parallel)
-from flexmm.models.hinge import H_KS, S_KR, chain_force, chain_force_parallel, chain_reference
+from flexmm.integrators.common import ACC_DISSIPATED, ACC_WORK
+from flexmm.integrators.verlet_chain import (C_KR, C_KS, RANGE_MIN, TIME_BLOCK, _is_damped, _n_ranges, _prepare,
+                                             chain_verlet_advance, chain_verlet_advance_parallel, fusable)
+from flexmm.models.hinge import (BLOCK, H_KL, H_KS, H_REST, S_KR, S_THETA0, chain_energy, chain_force,
+                                 chain_force_parallel, chain_reference)
 
 
 @jit
@@ -52,7 +55,7 @@ def test_parallel_chain_force_equals_serial() -> None:
     chain_force(q, s.args, a)
     numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
     chain_force_parallel(q, s.args, b)
-    np.testing.assert_allclose(b, a, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(b, a)
 
 
 @pytest.mark.parametrize("variant", ["undamped", "drive+damping"])
@@ -73,47 +76,116 @@ def test_parallel_verlet_equals_serial(variant) -> None:
     np.testing.assert_allclose(out[1][2][:2], out[0][2][:2], rtol=1e-12)
 
 
-def test_chain_force_over_several_cache_blocks_matches_reference() -> None:
-    """5000 units: three cache blocks, so the carried and recomputed block-edge hinges are used."""
-    s = chain_problem(5_000, theta0_rad=0.2, n_lateral=2, lateral_stretch=True).system
+def _grade(s, how: str) -> None:
+    """'graded': shear and lateral torsion vary along the whole chain; 'patch': a stiffer stretch
+    and a rest-angle defect in a few blocks only (the other blocks stay uniform)."""
+    if how == "graded":
+        s.args[2][:, H_KS] *= np.linspace(0.5, 1.5, s.n_sites - 1)
+        s.args[3][:, S_KR] *= np.linspace(1.5, 0.5, s.n_sites)
+    elif how == "patch":
+        s.args[2][BLOCK + 100 : BLOCK + 300, H_KL] *= 1.3
+        s.args[3][3 * BLOCK - 5, S_THETA0] += 0.01
+        s.args[2][3 * BLOCK - 6 : 3 * BLOCK - 4, H_REST] *= 1.001
+
+
+@pytest.mark.parametrize("how", ["uniform", "graded", "patch"])
+def test_chain_force_and_energy_over_several_blocks_match_reference(how) -> None:
+    """Several blocks (the carried block-edge hinges), uniform blocks read as scalars and
+    non-uniform ones as columns: forces and energy against the numpy reference."""
+    s = chain_problem(4 * BLOCK + 77, theta0_rad=0.2, n_lateral=2, lateral_stretch=True).system
+    _grade(s, how)
     q = 0.1 * np.random.default_rng(4).standard_normal(s.ndof)
     f = np.zeros(s.ndof)
     chain_force(q, s.args, f)
-    _, f_ref = chain_reference(q, s.args)
+    e_ref, f_ref = chain_reference(q, s.args)
     np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-13 * np.max(np.abs(f_ref)))
+    assert chain_energy(q, s.args) == pytest.approx(e_ref, rel=1e-13)
+    ha, hb, hprm, *rest = s.args
+    shuffled = ChainArgs(ha[::-1].copy(), hb[::-1].copy(), hprm[::-1].copy(), *rest)  # the general path
+    g = np.zeros(s.ndof)
+    chain_force(q, shuffled, g)
+    np.testing.assert_allclose(g, f, rtol=0, atol=1e-13 * np.max(np.abs(f_ref)))
+    assert chain_energy(q, shuffled) == pytest.approx(e_ref, rel=1e-13)
 
 
-def _advance(advance, problem, q0, v0, steps):
+def test_kinetic_energy_is_the_weighted_sum() -> None:
+    s = chain_problem(1001).system
+    v = np.random.default_rng(1).standard_normal(s.ndof)
+    assert s.kinetic_energy(v) == pytest.approx(0.5 * float(np.dot(s.mass, v * v)), rel=1e-14)
+
+
+def _advance(advance, problem, q0, v0, steps, calls=1):
     s, terms = problem.system, problem.terms
     q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), INTEGRATORS["velocity_verlet"].new_acc(s.ndof)
     INTEGRATORS["velocity_verlet"].init(s.args, q, v, 0.0, f, terms)
-    t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, 0.0, 0.1, steps, acc)
+    t = 0.0
+    for _ in range(calls):
+        t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, t, 0.1, steps, acc)
     return q, v, f, t, acc
 
 
+VARIANTS = ["undamped", "viscous", "shaker+viscous", "prescribed"]
+
+
 @pytest.mark.parametrize("threads", [1, 2])
-@pytest.mark.parametrize("chain", ["uniform", "graded"])
-def test_fused_chain_verlet_equals_unfused(threads, chain) -> None:
-    """Fused sweep (several cache blocks and thread ranges) = verlet_advance + chain_force, with
-    the cached parameter tables of a uniform chain and with the chain's own (graded) tables."""
-    problem = chain_problem(20_000, theta0_rad=0.2, n_lateral=2, lateral_stretch=True, right="fixed")
+@pytest.mark.parametrize("chain", ["uniform", "graded", "patch"])
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_fused_chain_verlet_equals_unfused(threads, chain, variant) -> None:
+    """Fused sweep (several blocks, 5 ranges, 45 steps = a time block of 32 and a shorter one)
+    = verlet_advance + chain_force, bit for bit, on uniform chains (scalar parameters), graded
+    ones (columns) and ones graded in a few blocks; with damping, an applied force and a
+    prescribed displacement. The ledger's applied work is the same sum; the dissipation is
+    summed by range and block (rounding)."""
+    problem = chain_problem(5 * RANGE_MIN + 1234, variant=variant, theta0_rad=0.2, n_lateral=2,
+                            lateral_stretch=True, right="fixed")
     s = problem.system
+    assert _n_ranges(s.n_sites) == 5
     assert fusable(s.args, s.q0, s.inv_mass, problem.damp, problem.terms)
-    assert _cached_tables(s.args[2], s.args[3])[0].shape[0] > 0
-    if chain == "graded":
-        s.args[2][:, H_KS] *= np.linspace(0.5, 1.5, s.n_sites - 1)
-        s.args[3][:, S_KR] *= np.linspace(1.5, 0.5, s.n_sites)
-        assert _cached_tables(s.args[2], s.args[3])[0].shape[0] == 0
+    _grade(s, chain)
+    tables = _prepare(s.args, s.inv_mass, problem.damp, 0.1, _is_damped(s.inv_mass, problem.damp))
+    if chain == "uniform":
+        assert tables[5][1:-1].all()  # the end blocks hold the fixed and the driven site
+    elif chain == "graded":
+        assert not tables[5].any() and tables[2][C_KS] >= 0 and tables[2][C_KR] >= 0
+    else:
+        assert not tables[5][1] and not tables[5][2] and tables[5][4:-1].all()
     rng = np.random.default_rng(5)
     q0, v0 = 0.05 * rng.standard_normal(s.ndof), 0.05 * rng.standard_normal(s.ndof)
-    ref = _advance(verlet_advance, problem, q0, v0, 20)
+    ref = _advance(verlet_advance, problem, q0, v0, 45)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     fused = chain_verlet_advance if threads == 1 else chain_verlet_advance_parallel
-    out = _advance(fused, problem, q0, v0, 20)
+    out = _advance(fused, problem, q0, v0, 45)
     for a, b in zip(out[:3], ref[:3]):
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
+        np.testing.assert_array_equal(a, b)
     assert out[3] == ref[3]
-    np.testing.assert_array_equal(out[4], ref[4])  # ledger and counters
+    acc, acc_ref = out[4], ref[4]
+    assert acc[ACC_WORK] == acc_ref[ACC_WORK]
+    assert acc[ACC_DISSIPATED] == pytest.approx(acc_ref[ACC_DISSIPATED], rel=1e-13, abs=0)
+    np.testing.assert_array_equal(acc[ACC_WORK + 1 :], acc_ref[ACC_WORK + 1 :])  # counters
+    assert (acc_ref[ACC_DISSIPATED] != 0.0) == ("viscous" in variant)
+    assert (acc_ref[ACC_WORK] != 0.0) == ("shaker" in variant)
+
+
+@pytest.mark.parametrize("variant", ["undamped", "shaker+viscous"])
+def test_threaded_fused_verlet_is_bit_identical_to_serial(variant) -> None:
+    """Same ranges and sums on one thread and on two, ledger included, whatever the calls:
+    one of 100 steps, or 7 of 13 (shorter time blocks and halos)."""
+    problem = chain_problem(3 * RANGE_MIN + 5, variant=variant, theta0_rad=0.1, n_lateral=1)
+    s = problem.system
+    rng = np.random.default_rng(6)
+    q0, v0 = 0.05 * rng.standard_normal(s.ndof), 0.05 * rng.standard_normal(s.ndof)
+    serial = _advance(chain_verlet_advance, problem, q0, v0, 100)
+    numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+    for steps, calls in ((100, 1), (13, 7)):
+        out = _advance(chain_verlet_advance_parallel, problem, q0, v0, steps, calls)
+        if calls == 1:
+            for a, b in zip(out, serial):
+                np.testing.assert_array_equal(a, b)
+        else:
+            ser = _advance(chain_verlet_advance, problem, q0, v0, steps, calls)
+            for a, b in zip(out, ser):
+                np.testing.assert_array_equal(a, b)
+    assert TIME_BLOCK < 100
 
 
 def test_kernels_pick_the_fused_verlet_only_where_it_applies() -> None:
@@ -127,7 +199,11 @@ def test_kernels_pick_the_fused_verlet_only_where_it_applies() -> None:
     assert fusable(s.args, s.q0, s.inv_mass, undamped.damp, undamped.terms)
     assert pick(spec, undamped) is chain_verlet_advance
     assert pick(INTEGRATORS["pefrl"], undamped) is INTEGRATORS["pefrl"].advance
-    for variant in ("viscous", "drive+damping", "prescribed"):
+    for variant in ("viscous", "prescribed", "shaker+viscous"):  # on-site damping, drives: fused
+        p = chain_problem(50, variant=variant)
+        assert fusable(p.system.args, p.system.q0, p.system.inv_mass, p.damp, p.terms), variant
+        assert pick(spec, p) is chain_verlet_advance, variant
+    for variant in ("dashpot", "drive+damping"):  # velocity-dependent forces between DOFs: not
         p = chain_problem(50, variant=variant)
         assert not fusable(p.system.args, p.system.q0, p.system.inv_mass, p.damp, p.terms), variant
         assert pick(spec, p) is spec.advance, variant
@@ -136,3 +212,57 @@ def test_kernels_pick_the_fused_verlet_only_where_it_applies() -> None:
     assert not fusable(shuffled, s.q0, s.inv_mass, undamped.damp, undamped.terms)
     sheet = SheetArgs(*([np.zeros(0)] * 10))
     assert not fusable(sheet, s.q0, s.inv_mass, undamped.damp, undamped.terms)
+
+
+def test_adaptive_threads_gives_the_same_bits_and_follows_the_faster_count(monkeypatch) -> None:
+    """The threaded fused advance runs on two threads or on the serial kernel, whichever was
+    faster lately (on one when other processes hold the cores); either way the state is the
+    serial kernel's, bit for bit."""
+    from flexmm.integrators import parallel
+    from flexmm.integrators.parallel import AdaptiveThreads
+
+    monkeypatch.setattr(parallel, "others_running", lambda: 0)  # an idle machine
+
+    problem = chain_problem(3 * RANGE_MIN + 5, theta0_rad=0.1, n_lateral=1)
+    s = problem.system
+    rng = np.random.default_rng(8)
+    q0, v0 = 0.05 * rng.standard_normal(s.ndof), 0.05 * rng.standard_normal(s.ndof)
+    adaptive = AdaptiveThreads(chain_verlet_advance, chain_verlet_advance_parallel, 2)
+    adaptive.MIN_TIMED_S = 0.0  # time every call
+    adaptive.MIN_TIMED_STEPS = 1
+    out = _advance(adaptive, problem, q0, v0, 7, calls=12)
+    ref = _advance(chain_verlet_advance, problem, q0, v0, 7, calls=12)
+    for a, b in zip(out, ref):
+        np.testing.assert_array_equal(a, b)
+    assert adaptive.counts[1] >= 1 and adaptive.counts[2] >= 1  # both were tried
+    assert adaptive.__name__ == "chain_verlet_advance_parallel"
+    adaptive.rates[1].extend([1.0] * 5)  # one thread measured slower: two threads but every 8th call
+    adaptive.rates[2].extend([2.0] * 5)
+    picks = []
+    for _ in range(16):
+        picks.append(adaptive.choice())
+        adaptive._timed += 1
+    assert picks.count(2) == 14 and picks.count(1) == 2
+    monkeypatch.setattr(parallel, "others_running", lambda: 1)  # another process holds a core
+    adaptive.cpus = 2
+    assert adaptive.choice() == 1
+    monkeypatch.undo()
+    assert parallel.others_running() >= 0
+
+
+def test_thread_choice_counts_free_cpus(monkeypatch) -> None:
+    from flexmm.integrators import parallel
+
+    assert parallel.choose_threads(10) == 1
+    assert parallel.choose_threads(10, requested=2) == min(2, parallel.available_threads())
+    monkeypatch.setattr(parallel, "available_threads", lambda: 2)
+    monkeypatch.setattr(parallel, "free_cpus", lambda window_s=0.02: 1)  # another process holds a core
+    assert parallel.choose_threads(parallel.PARALLEL_MIN_SITES) == 1
+    assert parallel.choose_threads(parallel.PARALLEL_MIN_SITES, requested=2) == 2  # asked for: given
+    monkeypatch.setattr(parallel, "free_cpus", lambda window_s=0.02: 2)
+    assert parallel.choose_threads(parallel.PARALLEL_MIN_SITES) == 2
+    monkeypatch.undo()
+    assert 1 <= parallel.free_cpus(0.001) <= len(parallel._cpus())
+    import os
+
+    assert os.environ.get("OMP_WAIT_POLICY")  # idle OpenMP threads sleep (parallel's docstring)

@@ -4,54 +4,210 @@ Numba parallel loops pay only when a step has enough work to hide the fork/join 
 parallel region (a few µs): ``PARALLEL_MIN_SITES`` (≈ 1e5 units, benchmarks/) is where two
 threads start to win on the chain. Below it, or for methods without a threaded variant,
 everything runs on one thread.
+
+On a shared machine three rules keep threads from hurting (``python benchmarks/run.py
+contention``, N = 1e5 and 1e6 on 2 cores beside a busy-loop process):
+
+- Idle threads sleep instead of spinning: ``OMP_WAIT_POLICY=PASSIVE`` unless the user set it
+  (read once, when numba starts its OpenMP threads, so it is set on import here). A spinning
+  thread that has finished its share holds a core that the thread still working needs when
+  another process has the other core: the fused two-thread chain kernel's median was
+  0.6–0.7× one thread's with spinning, 0.85–1.04× with passive waiting. Cost on an idle
+  machine: a wake-up per parallel region, nothing for the fused chain kernel (one region per
+  ``verlet_chain.TIME_BLOCK`` steps), ≈ 10 % for threaded kernels with several regions a step.
+- The automatic choice counts the cores that are actually free (``free_cpus``: /proc/stat over
+  20 ms), so a run started beside a busy process uses one thread.
+- The fused chain kernel gives the same bits on any number of threads, so its threaded advance
+  (``AdaptiveThreads``) runs a call on one thread while other processes hold the cores, and
+  otherwise on whichever thread count has been faster lately: 0.98–1.05× one thread's median
+  beside a busy loop (the per-step-barrier kernel before it: 0.55× at N = 1e5, 0.11× when
+  the machine was busier still).
 """
 
 from __future__ import annotations
 
 import os
-from typing import Callable
+import time
+from collections import deque
+from collections.abc import Callable
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before numba loads its OpenMP layer
 
 import numba
 import numpy as np
 
+from flexmm.integrators.verlet import sheet_fusable, sheet_verlet_advance
 from flexmm.integrators.verlet_chain import chain_verlet_advance, chain_verlet_advance_parallel, fusable
 from flexmm.models.hinge import ChainArgs
+from flexmm.models.sheet_kernels import SheetArgs
 
-#: (integrator name, model args type) -> (serial, threaded) advance fused with that model's force
-FUSED: dict[tuple[str, type], tuple[Callable, Callable]] = {
-    ("velocity_verlet", ChainArgs): (chain_verlet_advance, chain_verlet_advance_parallel),
+#: (integrator name, model args type) -> (serial, threaded or None, applies) advance fused with
+#: that model's force, and the test whether a scene allows it
+FUSED: dict[tuple[str, type], tuple[Callable, Callable | None, Callable]] = {
+    ("velocity_verlet", ChainArgs): (chain_verlet_advance, chain_verlet_advance_parallel, fusable),
+    ("velocity_verlet", SheetArgs): (sheet_verlet_advance, None, sheet_fusable),
 }
 PARALLEL_MIN_SITES = 100_000
+#: a CPU busier than this over the sampling window (other processes) is not counted as free
+BUSY_FRACTION = 0.5
+#: sampling window of ``free_cpus``
+FREE_WINDOW_S = 0.02
+
+
+def _cpus() -> list[int]:
+    try:
+        return sorted(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return list(range(os.cpu_count() or 1))
 
 
 def available_threads() -> int:
     """Threads numba may use (NUMBA_NUM_THREADS, capped by the CPUs this process may run on)."""
+    return max(1, min(numba.config.NUMBA_NUM_THREADS, len(_cpus())))
+
+
+def _cpu_times() -> dict[int, tuple[int, int]] | None:
+    """Per CPU (busy, total) jiffies from /proc/stat, or None where it cannot be read."""
     try:
-        cpus = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        cpus = os.cpu_count() or 1
-    return max(1, min(numba.config.NUMBA_NUM_THREADS, cpus))
+        with open("/proc/stat") as fh:
+            out = {}
+            for line in fh:
+                if line.startswith("cpu") and line[3:4].isdigit():
+                    name, *vals = line.split()
+                    v = [int(x) for x in vals[:8]]
+                    idle = v[3] + v[4]  # idle + iowait
+                    out[int(name[3:])] = (sum(v) - idle, sum(v))
+            return out
+    except (OSError, ValueError):
+        return None
+
+
+def free_cpus(window_s: float = FREE_WINDOW_S) -> int:
+    """CPUs of this process's affinity set that other work left free over the last ``window_s``.
+
+    This process sleeps while it samples, so its own CPU counts as free. Falls back to the
+    CPUs less the 1-minute load average where /proc/stat is not available.
+    """
+    cpus = _cpus()
+    a = _cpu_times()
+    if a is None:
+        return max(1, len(cpus) - round(os.getloadavg()[0]))
+    time.sleep(window_s)
+    b = _cpu_times() or a
+    free = 0
+    for c in cpus:
+        if c in a and c in b:
+            total = b[c][1] - a[c][1]
+            free += total <= 0 or (b[c][0] - a[c][0]) / total < BUSY_FRACTION
+    return max(1, free)
+
+
+def others_running() -> int:
+    """Runnable tasks of other processes right now (/proc/loadavg, less the caller; 0 where it
+    cannot be read). Our own idle threads sleep (``OMP_WAIT_POLICY=PASSIVE``), so they do not count."""
+    try:
+        with open("/proc/loadavg") as fh:
+            return max(0, int(fh.read().split()[3].split("/")[0]) - 1)
+    except (OSError, ValueError, IndexError):
+        return 0
 
 
 def choose_threads(n_sites: int, requested: int | None = None) -> int:
-    """``requested`` if given, else all available threads for ≥ PARALLEL_MIN_SITES units, else 1."""
+    """``requested`` if given (capped by ``available_threads``); else, for ≥ PARALLEL_MIN_SITES
+    units, the available threads on CPUs that are actually free (``free_cpus``), else 1."""
     if requested is not None:
         return max(1, min(requested, available_threads()))
-    return available_threads() if n_sites >= PARALLEL_MIN_SITES else 1
+    if n_sites < PARALLEL_MIN_SITES or available_threads() == 1:
+        return 1
+    return max(1, min(available_threads(), free_cpus()))
+
+
+class AdaptiveThreads:
+    """A threaded advance whose results do not depend on the thread count (the fused chain
+    kernel): each call runs the threaded kernel on ``threads`` threads or the serial one,
+    whichever was faster on recent calls.
+
+    A call runs on one thread when other processes hold the cores the threads would need
+    (``others_running``, read before each call: two threads on two cores then only wait for
+    each other). Otherwise calls of at least ``MIN_TIMED_STEPS`` steps and ``MIN_TIMED_S``
+    seconds are timed (steps per second, by thread count, the last ``WINDOW``; not the one-step
+    compile warm-up): the first two go to the threads, the next to one thread, then each call
+    uses the faster median, and every ``EXPLORE``-th timed call the other count, so a change of
+    load is seen within a few calls. Same signature and results as the kernel; ``counts``
+    tallies the calls.
+    """
+
+    MIN_TIMED_S = 2e-3
+    MIN_TIMED_STEPS = 8
+    WINDOW = 5
+    EXPLORE = 8
+
+    def __init__(self, serial: Callable, kernel: Callable, threads: int):
+        self.serial, self.kernel, self.threads = serial, kernel, threads
+        self.cpus = len(_cpus())
+        self.__name__ = getattr(kernel, "__name__", "advance")
+        self.rates: dict[int, deque] = {1: deque(maxlen=self.WINDOW), threads: deque(maxlen=self.WINDOW)}
+        self.counts = {1: 0, threads: 0}
+        self._timed = 0
+        self._compiled = False
+
+    def choice(self) -> int:
+        """The thread count for the next call."""
+        if others_running() > self.cpus - self.threads:
+            return 1
+        many, one = self.rates[self.threads], self.rates[1]
+        if len(many) < 2:
+            return self.threads
+        if not one:
+            return 1
+        best = self.threads if float(np.median(many)) >= float(np.median(one)) else 1
+        if self._timed % self.EXPLORE == self.EXPLORE - 1:
+            return 1 if best == self.threads else self.threads
+        return best
+
+    def __call__(self, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+        if not self._compiled:  # both kernels on the first call (the stepper's warm-up)
+            call = (args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+            for kernel in (self.serial, self.kernel):
+                if hasattr(kernel, "compile"):
+                    kernel.compile(tuple(numba.typeof(a) for a in call))
+            self._compiled = True
+        k = self.choice()
+        t0 = time.perf_counter()
+        if k == 1:
+            t = self.serial(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+        else:
+            numba.set_num_threads(k)
+            t = self.kernel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+        wall = time.perf_counter() - t0
+        self.counts[k] += 1
+        if wall >= self.MIN_TIMED_S and nsteps >= self.MIN_TIMED_STEPS:
+            self.rates[k].append(nsteps / wall)
+            self._timed += 1
+        return t
+
+    def __getattr__(self, name):  # the kernel's own attributes (numba's ``stats``, ...)
+        return getattr(self.kernel, name)
 
 
 def advance_kernel(spec, args, minv: np.ndarray, damp: np.ndarray, terms, threads: int) -> tuple[Callable, int]:
     """(advance, threads actually used) of ``spec`` for a model with arguments ``args``.
 
     Uses the method's stepper fused with the model's force where ``FUSED`` has one and the
-    scene allows it (``verlet_chain.fusable``: same results, less memory traffic); falls back
-    to the serial kernel (and 1 thread) when the method has no threaded variant. Sets numba's
-    thread count when threads > 1.
+    scene allows it (``verlet_chain.fusable``, ``verlet.sheet_fusable``: same results, less
+    memory traffic), threaded through ``AdaptiveThreads`` where the fused kernel has a threaded
+    variant (else on one thread); falls back to the serial kernel (and 1 thread) when the
+    method has no threaded variant. Sets numba's thread count when threads > 1.
     """
     fused = FUSED.get((spec.name, type(args)))
-    if fused is not None and not fusable(args, np.empty(minv.shape[0]), minv, damp, terms):
+    if fused is not None and not fused[2](args, np.empty(minv.shape[0]), minv, damp, terms):
         fused = None
+    if fused is not None:
+        if threads > 1 and fused[1] is not None:
+            numba.set_num_threads(threads)
+            return AdaptiveThreads(fused[0], fused[1], threads), threads
+        return fused[0], 1
     if threads > 1 and spec.advance_parallel is not None:
         numba.set_num_threads(threads)
-        return (fused[1] if fused else spec.advance_parallel), threads
-    return (fused[0] if fused else spec.advance), 1
+        return spec.advance_parallel, threads
+    return spec.advance, 1

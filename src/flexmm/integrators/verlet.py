@@ -26,18 +26,24 @@ import numpy as np
 
 from flexmm._jit import jit, prange
 from flexmm.models.kernels import model_force, model_force_parallel
+from flexmm.models.hinge import H_SIGN, param
+from flexmm.models.sheet_kernels import (SheetArgs, grid_layout, grid_scratch, grid_x, grid_x_params, grid_y,
+                                         sheet_angles, uniform_hinges)
 from flexmm.integrators.common import (
     ACC_DISSIPATED,
     ACC_WORK,
     ACC_FEVALS,
     ACC_STEPS,
-    applied_power,
+    MODE_FORCE,
+    MODE_FRICTION,
+    _friction,
     apply_prescribed,
     damping_power,
     dashpot_power,
-    external_forces,
     has_velocity_terms,
     total_force,
+    velocity_forces,
+    waveform,
 )
 
 #: DOFs per block of the parallel passes (blocks are shared out among the threads)
@@ -115,19 +121,66 @@ def _onsite_power(v, cd):
     return s
 
 
+# Drives: each applied force's waveform is evaluated once per step (at the step's end time; the
+# next step's start-time power reuses it) instead of three times as ``common.external_forces``
+# and ``common.applied_power`` would; the sums and their order are theirs, so the results are too.
+
+
 @jit
-def _external(q, v, t, f, terms, kick, post, f_model, v_pred, vdep):
-    """Add external terms to the model force in ``f``; velocity terms at the predicted v'."""
+def _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g):
+    """Values at t of the applied forces (mode 1) into g (the other entries untouched)."""
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_FORCE:
+            g[d], _ = waveform(drv_shape[d], drv_prm[d], t)
+
+
+@jit
+def _applied_power(v, g, drv_dof, drv_mode, drv_prm):
+    """``common.applied_power`` with the applied forces' values g."""
+    power = 0.0
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_FORCE:
+            power += g[d] * v[drv_dof[d]]
+        elif drv_mode[d] == MODE_FRICTION:
+            vel = v[drv_dof[d]]
+            power += _friction(drv_prm[d], vel) * vel
+    return power
+
+
+@jit
+def _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode):
+    """``common.position_forces`` with the applied forces' values g."""
+    for c in range(con_ij.shape[0]):
+        i = con_ij[c, 0]
+        j = con_ij[c, 1]
+        d = con_prm[c, 2]
+        overlap = d * (q[i] - q[j])
+        if overlap > 0.0:
+            fc = con_prm[c, 0] * overlap ** con_prm[c, 1]
+            f[i] -= d * fc
+            f[j] += d * fc
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_FORCE:
+            f[drv_dof[d]] += g[d]
+
+
+@jit
+def _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep):
+    """Add external terms to the model force in ``f`` (``common.external_forces`` with the
+    applied forces' values g); velocity terms at the predicted v'. Returns the applied power."""
     con_ij, con_prm, dash_ij, dash_c = terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c
-    drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    drv_dof, drv_mode, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_prm
     if vdep:
         f_model[:] = f
-    power = external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm)
+    _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode)
+    velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
+    power = _applied_power(v, g, drv_dof, drv_mode, drv_prm)
     if vdep:  # re-evaluate velocity-dependent forces at the predicted v'
         for k in range(q.shape[0]):
             v_pred[k] = (v[k] + kick[k] * f[k]) * post[k]
             f[k] = f_model[k]
-        external_forces(q, v_pred, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm)
+        _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode)
+        velocity_forces(v_pred, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
     return power
 
 
@@ -156,15 +209,18 @@ def verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     dissipative = damped or dash_ij.shape[0] > 0
     f_model = np.empty(n if vdep else 0)
     v_pred = np.empty(n if vdep else 0)
+    g = np.zeros(drv_dof.shape[0])  # applied forces at t
+    _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
     _start(q, v, f, kick, pre, h, damped)
     for s in range(nsteps):
-        power0 = applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)  # with v½ at t
+        power0 = _applied_power(v, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         model_force(q, args, f)
+        _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
         power = 0.0
         if external:
-            power = _external(q, v, t, f, terms, kick, post, f_model, v_pred, vdep)
+            power = _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep)
         if dissipative:
             acc[ACC_DISSIPATED] += h * damping_power(v, cd, dash_ij, dash_c)
         acc[ACC_WORK] += 0.5 * h * (power0 + power)
@@ -194,17 +250,20 @@ def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
     nb = max(1, min(n // BLOCK, 16))
     f_model = np.empty(n if vdep else 0)
     v_pred = np.empty(n if vdep else 0)
+    g = np.zeros(drv_dof.shape[0])  # applied forces at t
+    _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
     for b in prange(nb):
         lo, hi = b * n // nb, (b + 1) * n // nb
         _start(q[lo:hi], v[lo:hi], f[lo:hi], kick[lo:hi], pre[lo:hi], h, damped)
     for s in range(nsteps):
-        power0 = applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+        power0 = _applied_power(v, g, drv_dof, drv_mode, drv_prm)
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         model_force_parallel(q, args, f)
+        _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
         power = 0.0
         if external:
-            power = _external(q, v, t, f, terms, kick, post, f_model, v_pred, vdep)
+            power = _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep)
         if damped:
             diss = 0.0
             for b in prange(nb):
@@ -221,5 +280,166 @@ def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
                 _end(v[lo:hi], f[lo:hi], kick[lo:hi], post[lo:hi], damped)
             else:
                 _end_start(q[lo:hi], v[lo:hi], f[lo:hi], kick[lo:hi], pre[lo:hi], post[lo:hi], h, damped)
+    _count(acc, nsteps)
+    return t
+
+
+# ---------------------------------------------------------------- fused with the sheet force
+#: drives (prescribed displacements, applied forces) the fused sheet kernel accepts
+SHEET_MAX_DRIVES = 4096
+
+
+def sheet_fusable(args, q: np.ndarray, minv: np.ndarray, damp: np.ndarray, terms) -> bool:
+    """Whether ``sheet_verlet_advance`` applies (checked once in Python when a stepper is made):
+    a sheet whose hinges are the builder's grid without wraps, only hinge forces (no magnets,
+    joints or loads), 3N DOFs, on-site damping and drives that prescribe a displacement or
+    apply a force, but no contacts, dashpots or ground friction."""
+    if not isinstance(args, SheetArgs):
+        return False
+    n = args.theta0.shape[0]
+    if q.shape[0] != 3 * n or args.dipoles[0].shape[0] + args.joints[0].shape[0] + args.loads[0].shape[0] > 0:
+        return False
+    if terms.con_ij.shape[0] + terms.dash_ij.shape[0] > 0 or terms.drv_dof.shape[0] > SHEET_MAX_DRIVES:
+        return False
+    if np.any((terms.drv_mode != 0) & (terms.drv_mode != MODE_FORCE)) or np.any(terms.drv_dof >= 3 * n):
+        return False
+    nc, x1, y0, y1 = grid_layout(args.hinge_a, args.hinge_b, args.hinge_axis, n)
+    return nc > 0 and x1 == y0 and y1 == args.hinge_a.shape[0]
+
+
+@jit
+def _kick_field(q, v, f, kick, h, last):
+    """``_end_start`` (``_end`` the last step) without damping, ``kick`` a column or a scalar
+    (``hinge.param``: a field of equal masses streams no kicks)."""
+    if last:
+        for k in range(q.shape[0]):
+            v[k] += param(kick, k) * f[k]
+    else:
+        for k in range(q.shape[0]):
+            v[k] += 2.0 * param(kick, k) * f[k]
+            q[k] += h * v[k]
+
+
+@jit
+def _sheet_sites_step(q, v, f, kick, pre, post, cd, h, n, lo, hi, last, damped, drv_dof, drv_mode, g, fkick):
+    """Sites lo..hi−1 whose forces are complete: applied forces added (in drive order, as
+    ``_position_forces``), damping power (v½), then the kicks and drift of ``verlet_advance``
+    (``_end_start``; the last step ``_end``); ``fkick``: each field's kick if its masses are equal
+    (and no damping), else nan. Returns the damping power."""
+    for d in range(drv_dof.shape[0]):
+        k = drv_dof[d]
+        if drv_mode[d] == MODE_FORCE and lo <= k % n < hi:
+            f[k] += g[d]
+    diss = 0.0
+    for fld in range(3):
+        a, b = fld * n + lo, fld * n + hi
+        if damped:
+            diss += _onsite_power(v[a:b], cd[a:b])
+        if fkick[fld] == fkick[fld]:
+            _kick_field(q[a:b], v[a:b], f[a:b], fkick[fld], h, last)
+        elif last:
+            _end(v[a:b], f[a:b], kick[a:b], post[a:b], damped)
+        else:
+            _end_start(q[a:b], v[a:b], f[a:b], kick[a:b], pre[a:b], post[a:b], h, damped)
+    return diss
+
+
+@jit
+def _field_kicks(kick, n, damped):
+    """Each field's kick if all its DOFs have the same one (and no damping), else nan."""
+    out = np.full(3, np.nan)
+    if not damped:
+        for fld in range(3):
+            same = True
+            k0 = kick[fld * n]
+            for k in range(fld * n, (fld + 1) * n):
+                same &= kick[k] == k0
+            if same:
+                out[fld] = k0
+    return out
+
+
+@jit
+def _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, uni, xsig):
+    """``grid_x`` with the shared parameters (``uni``, if not nan) or the columns."""
+    if xsig.shape[0] > 0:
+        return grid_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, uni, xsig)
+    return grid_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry)
+
+
+@jit
+def _sheet_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig):
+    """``grid_y`` with the shared parameters (``uni``, if not nan) or the columns."""
+    if ysig.shape[0] > 0:
+        grid_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig)
+    else:
+        grid_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w)
+
+
+@jit
+def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``verlet_advance`` for ``sheet_kernels.sheet_force`` (same arguments and results), fused.
+
+    Each step is one sweep over blocks of sites: the angles and the horizontal hinges
+    (``grid_x``) run a row ahead of the block's vertical hinges (``grid_y``); then the block's
+    sites have all their forces and are kicked and drifted at once, while in cache. So the state
+    streams through memory once per step (force + Verlet: about four times), and the layout is
+    checked once per call, not per step. Bit-identical to ``verlet_advance`` but for the
+    dissipation sum (summed by blocks). Only where ``sheet_fusable`` holds (the caller checks).
+    """
+    if nsteps <= 0:
+        return t
+    drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    ha, hb, hax, hprm, theta0, cs, sn = args[:7]
+    n = theta0.shape[0]
+    nc, _, y0, y1 = grid_layout(ha, hb, hax, n)
+    kick, pre, post, cd, damped = _factors(minv, damp, h)
+    w, pf = grid_scratch(n)
+    nb = pf.shape[0] // 7
+    ny = y1 - y0
+    uni = uniform_hinges(hprm)  # once per call: shared parameters, or every column streamed
+    if uni[0] == uni[0]:
+        xprm = np.empty(0)
+        xsig = grid_x_params(hprm, n, nc)[H_SIGN::7].copy()
+        ysig = hprm[y0:y1, H_SIGN].copy()
+    else:
+        xprm = grid_x_params(hprm, n, nc)
+        xsig = ysig = np.empty(0)
+    fkick = _field_kicks(kick, n, damped)
+    g = np.zeros(drv_dof.shape[0])  # applied forces at t
+    _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
+    _start(q, v, f, kick, pre, h, damped)
+    for s in range(nsteps):
+        last = s == nsteps - 1
+        power0 = _applied_power(v, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
+        t += h
+        apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+        _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
+        power = _applied_power(v, g, drv_dof, drv_mode, drv_prm)
+        # one sweep: angles and horizontal hinges run ahead (to a row past the vertical block),
+        # then the block's vertical hinges, then its sites (all forces in) are kicked and drifted
+        carry = (0.0, 0.0, 0.0, 0.0)
+        xs = 0  # horizontal hinges done on sites < xs, angles on sites ≤ xs
+        sheet_angles(q, theta0, cs, sn, 0, 1)
+        diss = 0.0
+        done = 0
+        for s0 in range(0, ny, nb):
+            m = min(nb, ny - s0)
+            x1 = min(n, s0 + m + nc)
+            sheet_angles(q, theta0, cs, sn, xs + 1, min(n, x1 + 1))
+            carry = _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, xs, x1, carry, uni, xsig)
+            xs = x1
+            _sheet_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig)
+            diss += _sheet_sites_step(q, v, f, kick, pre, post, cd, h, n, s0, s0 + m, last, damped, drv_dof,
+                                      drv_mode, g, fkick)
+            done = s0 + m
+        if xs < n:
+            sheet_angles(q, theta0, cs, sn, xs + 1, n)
+            _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, xs, n, carry, uni, xsig)
+        diss += _sheet_sites_step(q, v, f, kick, pre, post, cd, h, n, done, n, last, damped, drv_dof, drv_mode, g,
+                                  fkick)
+        if damped:
+            acc[ACC_DISSIPATED] += h * diss
+        acc[ACC_WORK] += 0.5 * h * (power0 + power)
     _count(acc, nsteps)
     return t

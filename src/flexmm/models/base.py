@@ -200,7 +200,11 @@ class System:
         raise IndexError(index)
 
     def kinetic_energy(self, v: np.ndarray) -> float:
-        return 0.5 * float(np.dot(self.mass, v * v))
+        """½ Σ m v² (compiled, single-threaded: no BLAS call, whose threads contend on a busy
+        machine, and the same sum in every process)."""
+        from flexmm.models.hinge import weighted_square_sum
+
+        return 0.5 * weighted_square_sum(self.mass, v)
 
     def site_grid(self) -> tuple[np.ndarray, np.ndarray]:
         """Integer site indices (ix, iy) (n_sites,) from the rest coordinates (iy = 0 for chains)."""

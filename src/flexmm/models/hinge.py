@@ -19,12 +19,14 @@ E_v = ½ k_g (cos θ0 − cos(θ0+θ))² + ½ k_r θ² with k_g = n_v s_v k_l a�
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 
-from flexmm._jit import jit, prange
+from numba import types
+from numba.extending import overload
+
+from flexmm._jit import JIT_OPTIONS, NO_JIT, jit, prange
 from flexmm._trig import sincos
 
 # Columns of the per-hinge parameter table.
@@ -33,10 +35,14 @@ N_HINGE_PARAMS = 7
 # Columns of the per-site parameter table (chain).
 S_THETA0, S_KG, S_KR = range(3)
 N_SITE_PARAMS = 3
-#: sites per block of the parallel chain kernel (blocks are shared out among the threads)
-PARALLEL_BLOCK = 4096
-#: sites per cache block of the chain kernel's passes (~ a few arrays of 16 kB each: L1/L2)
-CACHE_BLOCK = 2048
+#: sites per block of the chain kernels' passes (their scratch, ~8 arrays of this length, stays
+#: in L1/L2; the force does not depend on it)
+BLOCK = 4096
+#: sites per range of the threaded chain force at least (ranges are shared out among threads)
+PARALLEL_BLOCK = 8192
+#: rows of the block scratch of ``chain_block_hinges``
+W_COS, W_SIN, W_FT, W_FL, W_GA, W_GB, W_C0, W_X, W_Y = range(9)
+N_W = 9
 
 
 @jit
@@ -62,126 +68,249 @@ def hinge_law(dl, ds, tA, tB, cA, sA, cB, sB, prm):
 
 
 @jit
-def _chain_sites(theta, sprm, cs, sn, out_u, out_t):
-    """Sites of one block: cos/sin of θ0+θ into the scratch, lateral-hinge forces on θ, zero u.
-
-    All arguments are slices over the same sites, so loops start at 0 and vectorise (a loop
-    from a variable start keeps numba's negative-index wraparound and does not); they are
-    split so that each is simple (``_trig.sincos`` is branch-free).
-    """
-    m = theta.shape[0]
-    kg_max = 0.0
-    for i in range(m):
-        cs[i] = sprm[i, S_THETA0] + theta[i]
-        kg_max = max(kg_max, abs(sprm[i, S_KG]))
-    for i in range(m):
-        s, c = sincos(cs[i])
-        cs[i] = c
-        sn[i] = s
-    for i in range(m):
-        out_u[i] = 0.0
-    if kg_max == 0.0:
-        for i in range(m):
-            out_t[i] = -sprm[i, S_KR] * theta[i]
-    else:
-        for i in range(m):
-            _, c0 = sincos(sprm[i, S_THETA0])
-            out_t[i] = -(sprm[i, S_KG] * (c0 - cs[i]) * sn[i] + sprm[i, S_KR] * theta[i])
+def hinge_forces(dl, ds, tA, tB, cA, sA, cB, sB, rest, hA, hB, sig, kl, ks, kt):
+    """``hinge_law``'s (∂E/∂d_l, ∂E/∂d_s, ∂E/∂θ_A, ∂E/∂θ_B) from scalar parameters (same
+    operations: the same results), for loops that vectorise."""
+    el = dl + rest - (hA * cA + hB * cB)
+    es = ds + sig * (hB * sB - hA * sA)
+    fl = kl * el
+    fs = ks * es
+    fp = kt * (tA + tB)
+    return fl, fs, fl * hA * sA - fs * sig * hA * cA + fp, fl * hB * sB + fs * sig * hB * cB + fp
 
 
 @jit
-def _sites_block(q, sprm, cs, sn, out, n, lo, hi):
-    """``_chain_sites`` on sites lo..hi−1, in cache-sized pieces (its loops then stay in L1/L2)."""
-    for a in range(lo, hi, CACHE_BLOCK):
-        b = min(a + CACHE_BLOCK, hi)
-        _chain_sites(q[n + a : n + b], sprm[a:b], cs[a:b], sn[a:b], out[a:b], out[n + a : n + b])
-
-
-@jit
-def _chain_hinge(qu, qt, h, hprm, ca, sa, cb, sb):
-    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of hinge h between sites h and h + 1 (no shear d_s).
-
-    ``qu``, ``qt``: u and θ (or views of them, with ``hprm`` viewed alike); ``ca, sa, cb, sb``:
-    cos/sin of θ0+θ at the two sites.
-    """
-    hA = hprm[h, H_HALF_A]
-    hB = hprm[h, H_HALF_B]
-    sig = hprm[h, H_SIGN]
-    fl = hprm[h, H_KL] * (qu[h + 1] - qu[h] + hprm[h, H_REST] - (hA * ca + hB * cb))
-    fs = hprm[h, H_KS] * sig * (hB * sb - hA * sa)
-    fp = hprm[h, H_KT] * (qt[h] + qt[h + 1])
+def chain_hinge(du, ta, tb, ca, sa, cb, sb, rest, hA, hB, sig, kl, ks, kt):
+    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of a chain hinge (no shear d_s): ``du`` = u_B − u_A,
+    ``ca, sa, cb, sb`` the cos/sin of θ0+θ at its two sites, then its law's parameters."""
+    fl = kl * (du + rest - (hA * ca + hB * cb))
+    fs = ks * sig * (hB * sb - hA * sa)
+    fp = kt * (ta + tb)
     return fl, fl * hA * sa - fs * sig * hA * ca + fp, fl * hB * sb + fs * sig * hB * cb + fp
 
 
-@jit
-def _hinges_span(qu, qt, hprm, cs, sn, ou, ot, ha, hb, first, m, fl_l, gb_l, fl_r, ga_r, right, check):
-    """Hinge forces on m sites starting at site ``first`` (chain order: hinge h joins h, h + 1).
+def param(x, i):
+    """Entry i of a parameter: ``x[i]`` of a column, ``x`` itself if uniform (a float), ``x[i & 1]``
+    of a (even, odd) pair (the alternating shear sign of a uniform chain). In compiled code the
+    type of ``x`` picks the access, so one loop serves uniform and graded chains."""
+    if isinstance(x, tuple):
+        return x[i & 1]
+    if isinstance(x, float):
+        return x
+    return x[i]
 
-    Arrays are views starting at ``first`` (``cs``, ``sn``, ``ou``, ``ot`` may be block scratch).
-    Site-centred: each site takes its left hinge (carried: (fl_l, gb_l) of hinge first−1 on entry)
-    and its right hinge, so there are no scattered writes; the last site's right hinge
-    (fl_r, ga_r) is given by the caller (zeros at the chain's end; ``right``: it exists).
-    With ``check``, returns the number of hinges found out of order (the caller then falls back
-    to the general loop), else 0 without reading ``ha``, ``hb``.
+
+if not NO_JIT:
+
+    @overload(param, jit_options=JIT_OPTIONS)
+    def _param(x, i):
+        if isinstance(x, types.Float):
+            return lambda x, i: x
+        if isinstance(x, types.UniTuple):
+            return lambda x, i: x[0] if (i & 1) == 0 else x[1]
+        return lambda x, i: x[i]
+
+
+# Block passes. Every argument is a view from the block's first site, so loops start at 0;
+# each loop is simple and free of carried scalars, so it vectorises (``_trig.sincos`` is
+# branch-free). Parameters (``param``) are column views of the row-wise tables (strided) in
+# ``chain_force``; contiguous per-call columns, or scalars on a uniform block, in the fused
+# Verlet (integrators/verlet_chain.py).
+
+
+@jit
+def chain_sites(qt, th0, kg, kr, c0, cs, sn, ft, m, with_kg):
+    """cos/sin of θ0+θ into cs, sn and the lateral-hinge force on θ into ft (m sites).
+
+    Without lateral stretch (``with_kg`` False: k_g = 0 on all m sites) only −k_r θ.
     """
-    bad = 0
+    if with_kg:
+        for i in range(m):
+            s, c = sincos(param(th0, i) + qt[i])
+            cs[i] = c
+            sn[i] = s
+            ft[i] = -(param(kg, i) * (param(c0, i) - c) * s + param(kr, i) * qt[i])
+    else:
+        for i in range(m):
+            s, c = sincos(param(th0, i) + qt[i])
+            cs[i] = c
+            sn[i] = s
+            ft[i] = -param(kr, i) * qt[i]
+
+
+@jit
+def chain_hinges(qu, qt, cs, sn, rest, ha, hb, sig, kl, ks, kt, fl, ga, gb, m):
+    """Hinges i ↔ i+1 for i < m − 1 into fl[i], ga[i], gb[i]."""
     for i in range(m - 1):
-        if check:
-            bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
-        fl, ga, gb = _chain_hinge(qu, qt, i, hprm, cs[i], sn[i], cs[i + 1], sn[i + 1])
-        ou[i] = fl - fl_l
-        ot[i] -= gb_l + ga
-        fl_l = fl
-        gb_l = gb
-    i = m - 1
-    if check and right:
-        bad += (ha[i] != first + i) | (hb[i] != first + i + 1)
-    ou[i] = fl_r - fl_l
-    ot[i] -= gb_l + ga_r
-    return bad
+        fl[i], ga[i], gb[i] = chain_hinge(qu[i + 1] - qu[i], qt[i], qt[i + 1], cs[i], sn[i], cs[i + 1], sn[i + 1],
+                                          param(rest, i), param(ha, i), param(hb, i), param(sig, i), param(kl, i),
+                                          param(ks, i), param(kt, i))
 
 
 @jit
-def hinge_at(q, hp, sp, n, i):
-    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of hinge i−1 ↔ i from q; zeros if i is 0 or n (no hinge).
+def chain_site_forces(fl, ga, gb, fu, ft, m):
+    """Forces on m sites from their two hinges (fl[j], ga[j], gb[j]: hinge j−1 ↔ j; ft holds the
+    on-site θ force and gets the hinges')."""
+    for i in range(m):
+        fu[i] = fl[i + 1] - fl[i]
+        ft[i] = ft[i] - (gb[i] + ga[i + 1])
 
-    ``hp``, ``sp``: the hinge and site parameter tables viewed from hinge / site i−1.
+
+@jit
+def chain_block_hinges(qu, qt, prm, w, m, right, ub, tb, th0_next, fl_left, gb_left, with_kg):
+    """Site terms and hinges of m consecutive sites (views from the first site, as qu, qt).
+
+    ``prm`` = (rest, hA, hB, σ, k_l, k_s, k_θ, θ0, k_g, k_r, cos θ0), each a column view from the
+    first site (hinge columns from the hinge to its right) or uniform (``param``); ``w``
+    (N_W, ≥ m + 1) scratch: gets cos/sin, the on-site θ force (row W_FT) and the hinges
+    (rows W_FL, W_GA, W_GB; entry j: hinge j−1 ↔ j, entry 0 = (fl_left, ·, gb_left) the hinge
+    to the left of the first site, entry m the right one: ``right``, a hinge joins the last
+    site to a next site with old state (ub, tb) and rest angle th0_next, else zeros). Reads
+    the state only on the m sites (and the given next site), so a caller may already have
+    moved the sites before. Returns the right hinge's (fl, gb) for the next block.
     """
+    rest, ha, hb, sig, kl, ks, kt, th0, kg, kr, c0 = prm
+    cs, sn, ft, fl, ga, gb = w[W_COS], w[W_SIN], w[W_FT], w[W_FL], w[W_GA], w[W_GB]
+    chain_sites(qt, th0, kg, kr, c0, cs, sn, ft, m, with_kg)
+    chain_hinges(qu, qt, cs, sn, rest, ha, hb, sig, kl, ks, kt, fl[1:], ga[1:], gb[1:], m)
+    fl[0] = fl_left
+    gb[0] = gb_left
+    fr, gar, gbr = 0.0, 0.0, 0.0
+    if right:
+        j = m - 1
+        sb, cb = sincos(th0_next + tb)
+        fr, gar, gbr = chain_hinge(ub - qu[j], qt[j], tb, cs[j], sn[j], cb, sb, param(rest, j), param(ha, j),
+                                   param(hb, j), param(sig, j), param(kl, j), param(ks, j), param(kt, j))
+    fl[m] = fr
+    ga[m] = gar
+    gb[m] = gbr
+    return fr, gbr
+
+
+@jit
+def _chain_ordered(ha, hb, n):
+    """Whether hinge h joins h and h + 1 for every h (the chain's own order)."""
+    if ha.shape[0] != n - 1:
+        return False
+    bad = False
+    for h in range(n - 1):
+        bad |= (ha[h] != h) | (hb[h] != h + 1)
+    return not bad
+
+
+@jit
+def _any_nonzero(x, m):
+    nz = False
+    for i in range(m):
+        nz |= x[i] != 0.0
+    return nz
+
+
+@jit
+def _left_hinge(q, hprm, sprm, n, i):
+    """(fl, gb) of hinge i−1 ↔ i from q; zeros if i is 0 or n."""
     if i <= 0 or i >= n:
-        return 0.0, 0.0, 0.0
-    sa, ca = sincos(sp[0, S_THETA0] + q[n + i - 1])
-    sb, cb = sincos(sp[1, S_THETA0] + q[n + i])
-    return _chain_hinge(q[i - 1 : n], q[n + i - 1 : 2 * n], 0, hp, ca, sa, cb, sb)
+        return 0.0, 0.0
+    h = i - 1
+    sa, ca = sincos(sprm[h, S_THETA0] + q[n + h])
+    sb, cb = sincos(sprm[i, S_THETA0] + q[n + i])
+    fl, _, gb = chain_hinge(q[i] - q[h], q[n + h], q[n + i], ca, sa, cb, sb, hprm[h, H_REST], hprm[h, H_HALF_A],
+                            hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT])
+    return fl, gb
 
 
 @jit
-def chain_block(q, ha, hb, hp, sp, cs, sn, ou, ot, n, a, b, left, right, check):
-    """All forces on sites a..b−1 into ``ou``, ``ot`` (u and θ parts, views from site a).
-
-    ``hp``, ``sp``: parameter tables viewed from site a; ``cs``, ``sn``: scratch from site a;
-    ``left`` = (fl, gb) of hinge a−1 ↔ a, ``right`` = (fl, ga) of hinge b−1 ↔ b (``hinge_at``).
-    Reads q only on sites a..b−1, so a caller may already have moved the neighbouring sites.
-    Returns the out-of-order count (``check``).
-    """
-    _chain_sites(q[n + a : n + b], sp, cs, sn, ou, ot)
-    return _hinges_span(q[a:n], q[n + a : 2 * n], hp, cs, sn, ou, ot, ha[a:], hb[a:], a, b - a,
-                        left[0], left[1], right[0], right[1], b < n, check)
+def _block_columns(hprm, sprm, a, m, nh, cols, with_kg):
+    """The parameters of sites a..a+m−1 as contiguous columns: cols rows 0–6 the hinge table's
+    (nh hinges from a), 7–9 the site table's, 10 cos θ0 (if ``with_kg``): ``chain_block_hinges``'
+    ``prm``. The loops read whole rows (interleaved loads, not gathers)."""
+    hf, sf = hprm[a:].ravel(), sprm[a:].ravel()
+    c0, c1, c2, c3, c4, c5, c6 = cols[0], cols[1], cols[2], cols[3], cols[4], cols[5], cols[6]
+    for i in range(nh):
+        c0[i] = hf[7 * i]
+        c1[i] = hf[7 * i + 1]
+        c2[i] = hf[7 * i + 2]
+        c3[i] = hf[7 * i + 3]
+        c4[i] = hf[7 * i + 4]
+        c5[i] = hf[7 * i + 5]
+        c6[i] = hf[7 * i + 6]
+    d0, d1, d2, cz = cols[7], cols[8], cols[9], cols[10]
+    for i in range(m):
+        d0[i] = sf[3 * i]
+        d1[i] = sf[3 * i + 1]
+        d2[i] = sf[3 * i + 2]
+    if with_kg:
+        for i in range(m):
+            _, cz[i] = sincos(d0[i])
+    return (c0, c1, c2, c3, c4, c5, c6, d0, d1, d2, cz)
 
 
 @jit
-def _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, lo, hi):
-    """All forces on sites lo..hi−1 (chain order), one cache block at a time (site terms and
-    cos/sin, then hinges, with the blocks' boundary hinges from ``hinge_at``). Writes only inside
-    lo..hi−1, so ranges can run on different threads. Returns the count of out-of-order hinges."""
-    bad = 0
-    fl_l, _, gb_l = hinge_at(q, hprm[lo - 1 :], sprm[lo - 1 :], n, lo)
-    for a in range(lo, hi, CACHE_BLOCK):
-        b = min(a + CACHE_BLOCK, hi)
-        fl_r, ga_r, gb_r = hinge_at(q, hprm[b - 1 :], sprm[b - 1 :], n, b)
-        bad += chain_block(q, ha, hb, hprm[a:], sprm[a:], cs[a:], sn[a:], out[a:n], out[n + a : 2 * n], n, a, b,
-                           (fl_l, gb_l), (fl_r, ga_r), True)
-        fl_l, gb_l = fl_r, gb_r
-    return bad
+def _repeats(flat, period, n):
+    """Whether flat[j] = flat[j − period] for period ≤ j < n (stops at the first chunk that differs)."""
+    for a in range(period, n, 512):
+        x, y = flat[a:], flat[a - period :]
+        bad = False
+        for j in range(min(512, n - a)):
+            bad |= x[j] != y[j]
+        if bad:
+            return False
+    return True
+
+
+@jit
+def _uniform_block(hprm, sprm, a, m, nh):
+    """Whether the hinges and sites of a block all have the same parameters (but the shear sign,
+    which may alternate): then ``chain_block_hinges`` gets them as scalars."""
+    if nh < 2 or m < 2:
+        return False
+    for k in range(N_HINGE_PARAMS):
+        if k != H_SIGN and hprm[a, k] != hprm[a + 1, k]:
+            return False
+    for k in range(N_SITE_PARAMS):
+        if sprm[a, k] != sprm[a + 1, k]:
+            return False
+    return (_repeats(hprm[a:].ravel(), 2 * N_HINGE_PARAMS, nh * N_HINGE_PARAMS)
+            and _repeats(sprm[a:].ravel(), N_SITE_PARAMS, m * N_SITE_PARAMS))
+
+
+@jit
+def _chain_range(q, hprm, sprm, out, n, lo, hi, w, cols):
+    """All forces on sites lo..hi−1 of a chain-ordered chain, block by block (writes only there,
+    so ranges can run on different threads). A uniform block reads its parameters as scalars,
+    any other as contiguous copies (``_block_columns``)."""
+    fl, gb = _left_hinge(q, hprm, sprm, n, lo)
+    for a in range(lo, hi, BLOCK):
+        b = min(a + BLOCK, hi)
+        m = b - a
+        nh = min(b, n - 1) - a
+        k = min(b, n - 1)
+        if _uniform_block(hprm, sprm, a, m, nh):
+            _, c0 = sincos(sprm[a, S_THETA0])
+            prm = (hprm[a, H_REST], hprm[a, H_HALF_A], hprm[a, H_HALF_B], (hprm[a, H_SIGN], hprm[a + 1, H_SIGN]),
+                   hprm[a, H_KL], hprm[a, H_KS], hprm[a, H_KT], sprm[a, S_THETA0], sprm[a, S_KG], sprm[a, S_KR], c0)
+            fl, gb = chain_block_hinges(q[a:n], q[n + a : 2 * n], prm, w, m, b < n, q[k], q[n + k],
+                                        sprm[k, S_THETA0], fl, gb, sprm[a, S_KG] != 0.0)
+        else:
+            with_kg = _any_nonzero(sprm[a:, S_KG], m)
+            fl, gb = chain_block_hinges(q[a:n], q[n + a : 2 * n], _block_columns(hprm, sprm, a, m, nh, cols, with_kg),
+                                        w, m, b < n, q[k], q[n + k], sprm[k, S_THETA0], fl, gb, with_kg)
+        ft = out[n + a : 2 * n]
+        for i in range(m):
+            ft[i] = w[W_FT, i]
+        chain_site_forces(w[W_FL], w[W_GA], w[W_GB], out[a:n], ft, m)
+
+
+@jit
+def _chain_sites_all(q, sprm, cs, sn, out, n):
+    """cos/sin of θ0+θ of every site into cs, sn; lateral-hinge forces on θ; zero u forces."""
+    for i in range(n):
+        s, c = sincos(sprm[i, S_THETA0] + q[n + i])
+        _, c0 = sincos(sprm[i, S_THETA0])
+        cs[i] = c
+        sn[i] = s
+        out[i] = 0.0
+        out[n + i] = -(sprm[i, S_KG] * (c0 - c) * s + sprm[i, S_KR] * q[n + i])
 
 
 @jit
@@ -201,7 +330,7 @@ def _chain_hinges_general(q, ha, hb, hprm, cs, sn, out, n):
 
 @jit
 def _chain_fallback(q, ha, hb, hprm, sprm, cs, sn, out, n):
-    _sites_block(q, sprm, cs, sn, out, n, 0, n)
+    _chain_sites_all(q, sprm, cs, sn, out, n)
     _chain_hinges_general(q, ha, hb, hprm, cs, sn, out, n)
 
 
@@ -228,53 +357,115 @@ def chain_force(q, args, out):
     State: ``q[:N]`` = u (units of a), ``q[N:2N]`` = θ. ``args`` = (hinge_a (H,), hinge_b (H,),
     hinge_prm (H, 7), site_prm (N, 3), cos_scratch (N,), sin_scratch (N,)).
     DOFs beyond 2N (if any) are left at zero. Chain-ordered hinges (h joins h and h + 1, as
-    ``rotating_chain.chain_tables`` builds them) take a vectorised site-centred path; any
-    other hinge list the general scattered loop (same result).
+    ``rotating_chain.chain_tables`` builds them) take the vectorised block path
+    (``chain_block``); any other hinge list the general scattered loop (same result).
     """
     ha, hb, hprm, sprm, cs, sn = args
     n = sprm.shape[0]
     for k in range(2 * n, out.shape[0]):
         out[k] = 0.0
-    if ha.shape[0] != n - 1 or _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, 0, n) > 0:
+    if _chain_ordered(ha, hb, n):
+        nb = min(BLOCK, n) + 1  # short chains (called often) allocate no more than they need
+        _chain_range(q, hprm, sprm, out, n, 0, n, np.empty((N_W, nb)), np.empty((11, nb)))
+    else:
         _chain_fallback(q, ha, hb, hprm, sprm, cs, sn, out, n)
 
 
 @jit(parallel=True)
 def chain_force_parallel(q, args, out):
-    """``chain_force`` with the site loops split over numba's threads (worth it for N ≳ 1e5)."""
+    """``chain_force`` with the blocks split over numba's threads (worth it for N ≳ 1e5)."""
     ha, hb, hprm, sprm, cs, sn = args
     n = sprm.shape[0]
     for k in range(2 * n, out.shape[0]):
         out[k] = 0.0
-    n_chunks = max(1, min(n // PARALLEL_BLOCK, 16))  # fixed ranges (not thread count): cacheable
-    bad = 0
-    if ha.shape[0] == n - 1:
+    if _chain_ordered(ha, hb, n):
+        n_chunks = max(1, min(n // PARALLEL_BLOCK, 16))  # fixed ranges (not thread count): cacheable
         for c in prange(n_chunks):
-            bad += _chain_range(q, ha, hb, hprm, sprm, cs, sn, out, n, c * n // n_chunks, (c + 1) * n // n_chunks)
-    if ha.shape[0] != n - 1 or bad > 0:
+            _chain_range(q, hprm, sprm, out, n, c * n // n_chunks, (c + 1) * n // n_chunks,
+                         np.empty((N_W, BLOCK + 1)), np.empty((11, BLOCK + 1)))
+    else:
         _chain_fallback(q, ha, hb, hprm, sprm, cs, sn, out, n)
 
 
 @jit
+def lane_sum(x, m):
+    """Σ x[:m] in a fixed order that vectorises without reassociation (four interleaved partial
+    sums, then (s0 + s1) + (s2 + s3)): bit-identical wherever it was compiled."""
+    s0 = s1 = s2 = s3 = 0.0
+    m4 = m - m % 4
+    for i in range(0, m4, 4):
+        s0 += x[i]
+        s1 += x[i + 1]
+        s2 += x[i + 2]
+        s3 += x[i + 3]
+    for i in range(m4, m):
+        s0 += x[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@jit
+def weighted_square_sum(w, x):
+    """Σ w x² in a fixed order that vectorises (``lane_sum``'s four interleaved partial sums)."""
+    s0 = s1 = s2 = s3 = 0.0
+    n = x.shape[0]
+    n4 = n - n % 4
+    for i in range(0, n4, 4):
+        s0 += w[i] * x[i] * x[i]
+        s1 += w[i + 1] * x[i + 1] * x[i + 1]
+        s2 += w[i + 2] * x[i + 2] * x[i + 2]
+        s3 += w[i + 3] * x[i + 3] * x[i + 3]
+    for i in range(n4, n):
+        s0 += w[i] * x[i] * x[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@jit
 def chain_energy(q, args):
-    """Potential energy of the rotating-squares chain (same arguments as ``chain_force``)."""
+    """Potential energy of the rotating-squares chain (same arguments as ``chain_force``).
+
+    Chain-ordered hinges: per block, site and hinge energies into scratch, summed with
+    ``lane_sum`` (vectorised; a fixed order, so the same result in every process).
+    """
     ha, hb, hprm, sprm, cs, sn = args
     n = sprm.shape[0]
     total = 0.0
-    for i in range(n):
-        t = q[n + i]
-        ang = sprm[i, S_THETA0] + t
-        cs[i] = math.cos(ang)
-        sn[i] = math.sin(ang)
-        g = math.cos(sprm[i, S_THETA0]) - cs[i]
-        total += 0.5 * (sprm[i, S_KG] * g * g + sprm[i, S_KR] * t * t)
-    for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
-        e, _, _, _, _ = hinge_law(
-            q[b] - q[a], 0.0, q[n + a], q[n + b], cs[a], sn[a], cs[b], sn[b], hprm[h]
-        )
-        total += e
+    if not _chain_ordered(ha, hb, n):
+        for i in range(n):
+            t = q[n + i]
+            s, c = sincos(sprm[i, S_THETA0] + t)
+            _, c0 = sincos(sprm[i, S_THETA0])
+            cs[i] = c
+            sn[i] = s
+            g = c0 - c
+            total += 0.5 * (sprm[i, S_KG] * g * g + sprm[i, S_KR] * t * t)
+        for h in range(ha.shape[0]):
+            a = ha[h]
+            b = hb[h]
+            e, _, _, _, _ = hinge_law(q[b] - q[a], 0.0, q[n + a], q[n + b], cs[a], sn[a], cs[b], sn[b], hprm[h])
+            total += e
+        return total
+    w = np.empty((N_W, min(BLOCK, n) + 1))
+    bc, bs, x, y = w[W_COS], w[W_SIN], w[W_X], w[W_Y]
+    for a in range(0, n, BLOCK):
+        b = min(a + BLOCK + 1, n)  # one site more: the hinge to the next block
+        m = b - a
+        qu, qt, th0, kg, kr = q[a:n], q[n + a : 2 * n], sprm[a:, S_THETA0], sprm[a:, S_KG], sprm[a:, S_KR]
+        for i in range(m):
+            s, c = sincos(th0[i] + qt[i])
+            _, c0 = sincos(th0[i])
+            bc[i] = c
+            bs[i] = s
+            g = c0 - c
+            x[i] = 0.5 * (kg[i] * g * g + kr[i] * qt[i] * qt[i])
+        ms = min(m, BLOCK)
+        rest, hA, hB, sig = hprm[a:, H_REST], hprm[a:, H_HALF_A], hprm[a:, H_HALF_B], hprm[a:, H_SIGN]
+        kl, ks, kt = hprm[a:, H_KL], hprm[a:, H_KS], hprm[a:, H_KT]
+        for i in range(m - 1):
+            el = qu[i + 1] - qu[i] + rest[i] - (hA[i] * bc[i] + hB[i] * bc[i + 1])
+            es = sig[i] * (hB[i] * bs[i + 1] - hA[i] * bs[i])
+            ep = qt[i] + qt[i + 1]
+            y[i] = 0.5 * (kl[i] * el * el + ks[i] * es * es + kt[i] * ep * ep)
+        total += lane_sum(x, ms) + lane_sum(y, m - 1)
     return total
 
 
