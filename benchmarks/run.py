@@ -83,7 +83,7 @@ def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: 
             "wall_median_s": float(np.median(walls)), "cpu_min_s": min(cpus),
             "M_unit_steps_per_s": steps * n / min(walls) / 1e6,
             "M_unit_steps_per_cpu_s": steps * n / min(cpus) / 1e6 * used,
-            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__}
+            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__, "walls_s": walls}
 
 
 def _load() -> str:
@@ -635,12 +635,111 @@ def render(repeats: int = 3, n_frames: int = 400) -> list[dict]:
     return rows
 
 
+# ------------------------------------------------------------------ this tree against a baseline
+#: environment variable naming a checkout of the commit to compare with (``compare``)
+BASELINE_ENV = "FLEXMM_BASELINE"
+COMPARE_CASES = ([("uniform", n) for n in (1_000, 100_000, 1_000_000, 10_000_000)]
+                 + [("graded", n) for n in (100_000, 1_000_000, 10_000_000)]
+                 + [("sheet", rc) for rc in SHEET_SIZES])
+
+
+def _case(what: str, size, repeats: int) -> dict:
+    """One contender's timings of one case, in a subprocess whose PYTHONPATH picks the tree: velocity
+    Verlet on one thread (whatever kernel that tree picks); only APIs both trees have."""
+    from flexmm.integrators import INTEGRATORS
+
+    if what == "sheet":
+        system, terms, damp = _sheet(*size)
+        system.q0[:] = 0.01 * np.random.default_rng(0).standard_normal(system.ndof)
+        steps = max(20, int(3e6 / system.n_sites))
+    else:
+        system, terms, damp = _chain(size)
+        if what == "graded":
+            _grade(system)
+        steps = max(20, int(3e7 / size))
+    return _time_advance(INTEGRATORS["velocity_verlet"], system, terms, damp, 1, steps, repeats)
+
+
+def _in_tree(src: Path, *argv: str) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(src))
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), *argv], env=env, capture_output=True,
+                         text=True, check=True, cwd=ROOT.parent)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _forces(path: str) -> dict:
+    """Forces of a graded LEGO chain (every parameter varies, several blocks) and of a 40 × 20
+    sheet at a random state, and the state after 200 Verlet steps of each, into ``path`` (.npz)."""
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.stepper import Stepper
+
+    out = {}
+    for name, (system, terms, damp) in (("chain", _chain(3 * 4096 + 77)), ("sheet", _sheet(20, 40))):
+        if name == "chain":
+            _grade_all(system)
+        rng = np.random.default_rng(11)
+        system.q0[:] = 0.05 * rng.standard_normal(system.ndof)
+        f = np.zeros(system.ndof)
+        system.force(system.q0, system.args, f)
+        st = Stepper(INTEGRATORS["velocity_verlet"], system, terms, damp, 0.05, threads=1, check_energy=False)
+        st.advance(200)
+        out[f"{name}_force"], out[f"{name}_q200"] = f, st.q.copy()
+    np.savez(path, **out)
+    return {"path": path}
+
+
+def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict]:
+    """This tree against a baseline checkout (``$FLEXMM_BASELINE``, e.g. ``git worktree add
+    /tmp/base e769862``), one thread: each case runs in fresh processes of either tree, the two
+    alternating (ABBA over ``rounds``), ``repeats`` timed advances each; best and median of
+    all. Also the forces and a 200-step trajectory of both trees on a graded chain and a sheet
+    (max deviation, relative to the largest force or coordinate)."""
+    base = os.environ.get(BASELINE_ENV)
+    if not base:
+        print(f"compare: set {BASELINE_ENV} to a checkout of the commit to compare with")
+        return []
+    trees = {"this": ROOT.parent / "src", "base": Path(base) / "src"}
+    out = []
+    with __import__("tempfile").TemporaryDirectory() as tmp:
+        res = {tag: dict(np.load(_in_tree(src, "_forces", f"{tmp}/{tag}.npz")["path"])) for tag, src in trees.items()}
+    for key in res["this"]:
+        a, b = res["this"][key], res["base"][key]
+        dev = float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
+        print(f"{key:12s}: max |this - base| / max |base| = {dev:.2e}")
+        out.append({"what": key, "max_rel_deviation": dev})
+    for what, size in cases:
+        rates = {"this": [], "base": []}
+        n = None
+        for rnd in range(rounds if size != 10_000_000 else 1):
+            order = ("this", "base") if rnd % 2 == 0 else ("base", "this")
+            for tag in order:
+                row = _in_tree(trees[tag], "_case", json.dumps([what, size, repeats]))
+                n = row["n_units"]
+                rates[tag] += [row["steps"] * n / w / 1e6 for w in row["walls_s"]]
+                rates[tag + "_kernel"] = row["kernel"]
+        best = {tag: max(rates[tag]) for tag in trees}
+        med = {tag: float(np.median(rates[tag])) for tag in trees}
+        label = f"{what} {size[0]}x{size[1]}" if what == "sheet" else f"{what} N = {size:,d}"
+        print(f"{label:24s} this {best['this']:6.1f} M unit-steps/s best, {med['this']:6.1f} median "
+              f"({rates['this_kernel']}); base {best['base']:6.1f}, {med['base']:6.1f} ({rates['base_kernel']}): "
+              f"{med['this'] / med['base']:.2f}x by medians ({len(rates['this'])} runs each; {_load()})")
+        out.append({"what": what, "size": size, "n_units": n, "best": best, "median": med,
+                    "ratio_median": med["this"] / med["base"], "load": os.getloadavg()})
+    return out
+
+
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
-            "sheet_throughput": sheet_throughput, "roofline": roofline, "contention": contention,
+            "sheet_throughput": sheet_throughput, "roofline": roofline, "contention": contention, "compare": compare,
             "workprecision": workprecision, "render": render}
 
 
 def main(argv: list[str]) -> None:
+    if argv[:1] == ["_case"]:  # a contender of ``compare`` (its last line is the result)
+        print(json.dumps(_case(*json.loads(argv[1]))))
+        return
+    if argv[:1] == ["_forces"]:
+        print(json.dumps(_forces(argv[1])))
+        return
     RESULTS.mkdir(exist_ok=True)
     names = argv or ["startup", "sweep", "throughput", "memory", "sheet"]
     print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs")

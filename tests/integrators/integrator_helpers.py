@@ -60,3 +60,18 @@ def nonlinear_state(n: int) -> tuple[np.ndarray, np.ndarray]:
 def total_energy(problem, q, v) -> float:
     s = problem.system
     return float(s.energy(q, s.args) + s.kinetic_energy(v))
+
+
+def verlet_run(advance, problem, q0, v0, steps: int, h: float, calls: int = 1):
+    """(q, v, f, t, ledger) after ``calls`` calls of a velocity Verlet advance kernel of ``steps``
+    steps each from (q0, v0) at t = 0 (the stepper's init first)."""
+    from flexmm.integrators import INTEGRATORS
+
+    spec = INTEGRATORS["velocity_verlet"]
+    s, terms = problem.system, problem.terms
+    q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), spec.new_acc(s.ndof)
+    spec.init(s.args, q, v, 0.0, f, terms)
+    t = 0.0
+    for _ in range(calls):
+        t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, steps, acc)
+    return q, v, f, t, acc

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from integrator_helpers import verlet_run
+
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
@@ -37,13 +39,7 @@ def sheet_problem(rows=7, cols=9, excitation=None, damping=None, **lattice):
 
 
 def _advance(advance, problem, q0, v0, steps, calls=1):
-    s, terms = problem.system, problem.terms
-    q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), INTEGRATORS["velocity_verlet"].new_acc(s.ndof)
-    INTEGRATORS["velocity_verlet"].init(s.args, q, v, 0.0, f, terms)
-    t = 0.0
-    for _ in range(calls):
-        t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, t, 0.05, steps, acc)
-    return q, v, f, t, acc
+    return verlet_run(advance, problem, q0, v0, steps, 0.05, calls)
 
 
 @pytest.mark.parametrize("shape", [(7, 9), (3, 2 * GRID_BLOCK + 5), (2 * GRID_BLOCK // 40 + 3, 40), (1, 12)])

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
-from integrator_helpers import chain_problem
+from integrator_helpers import chain_problem, verlet_run
 
 from flexmm._jit import jit
 from flexmm._trig import sincos
@@ -115,13 +115,7 @@ def test_kinetic_energy_is_the_weighted_sum() -> None:
 
 
 def _advance(advance, problem, q0, v0, steps, calls=1):
-    s, terms = problem.system, problem.terms
-    q, v, f, acc = q0.copy(), v0.copy(), np.zeros(s.ndof), INTEGRATORS["velocity_verlet"].new_acc(s.ndof)
-    INTEGRATORS["velocity_verlet"].init(s.args, q, v, 0.0, f, terms)
-    t = 0.0
-    for _ in range(calls):
-        t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, t, 0.1, steps, acc)
-    return q, v, f, t, acc
+    return verlet_run(advance, problem, q0, v0, steps, 0.1, calls)
 
 
 VARIANTS = ["undamped", "viscous", "shaker+viscous", "prescribed"]

@@ -116,8 +116,8 @@ def apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm):
 
 
 @jit
-def position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm):
-    """Add the forces that depend on (q, t) only: one-sided contacts and applied forces."""
+def contact_forces(q, f, con_ij, con_prm):
+    """Add the one-sided contact forces."""
     for c in range(con_ij.shape[0]):
         i = con_ij[c, 0]
         j = con_ij[c, 1]
@@ -127,6 +127,12 @@ def position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_
             fc = con_prm[c, 0] * overlap ** con_prm[c, 1]
             f[i] -= d * fc
             f[j] += d * fc
+
+
+@jit
+def position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Add the forces that depend on (q, t) only: one-sided contacts and applied forces."""
+    contact_forces(q, f, con_ij, con_prm)
     for d in range(drv_dof.shape[0]):
         if drv_mode[d] == 1:
             g, _ = waveform(drv_shape[d], drv_prm[d], t)

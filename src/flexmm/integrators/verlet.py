@@ -38,6 +38,7 @@ from flexmm.integrators.common import (
     MODE_FRICTION,
     _friction,
     apply_prescribed,
+    contact_forces,
     damping_power,
     dashpot_power,
     has_velocity_terms,
@@ -150,15 +151,7 @@ def _applied_power(v, g, drv_dof, drv_mode, drv_prm):
 @jit
 def _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode):
     """``common.position_forces`` with the applied forces' values g."""
-    for c in range(con_ij.shape[0]):
-        i = con_ij[c, 0]
-        j = con_ij[c, 1]
-        d = con_prm[c, 2]
-        overlap = d * (q[i] - q[j])
-        if overlap > 0.0:
-            fc = con_prm[c, 0] * overlap ** con_prm[c, 1]
-            f[i] -= d * fc
-            f[j] += d * fc
+    contact_forces(q, f, con_ij, con_prm)
     for d in range(drv_dof.shape[0]):
         if drv_mode[d] == MODE_FORCE:
             f[drv_dof[d]] += g[d]
