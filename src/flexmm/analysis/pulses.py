@@ -3,7 +3,8 @@
 ``measure_pulses`` detects and tracks every pulse of a field (trains, collisions) and measures
 each one (see its docstring; the pieces live in ``detect``, ``arrivals`` and ``widths``).
 
-``leading_pulse`` is the quick measurement ``flexmm run`` prints: arrival time at a site = time
+``leading_pulse`` is a quick single-pulse fit (pilots; ``flexmm run`` prints analyze's
+measurement, ``analysis.summary``): arrival time at a site = time
 of the largest peak of |field(t)| there, refined by a three-point parabola; sites whose largest
 peak is below ``threshold_fraction`` of the 90th percentile, or of the minority polarity, are
 dropped, and so are outliers of the line fit (> 4 median absolute deviations). Speed = inverse
@@ -13,6 +14,7 @@ its standard error. Width = FWHM of |field(x)| at the frame where the pulse is m
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -21,7 +23,7 @@ from scipy.signal import find_peaks, peak_widths
 from flexmm.analysis.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
 from flexmm.analysis.detect import Track, refine_peak, track_peaks
 from flexmm.analysis.profiles import SHAPES
-from flexmm.analysis.widths import fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
+from flexmm.analysis.widths import PEAK_WARNING, fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
 
 
 class PulseNotFound(Exception):
@@ -100,7 +102,9 @@ def leading_pulse(ds, field: str = "theta", *, threshold_fraction: float = 0.5,
     loc, _ = find_peaks(np.concatenate([[0.0], prof, [0.0]]))
     loc = loc - 1
     k = int(loc[np.argmin(np.abs(loc - mid))]) if loc.size else mid
-    widths = peak_widths(prof, [k], rel_height=0.5)[0]
+    with warnings.catch_warnings():  # a flat or one-sample profile: width 0, reported as such
+        warnings.filterwarnings("ignore", PEAK_WARNING, RuntimeWarning)
+        widths = peak_widths(prof, [k], rel_height=0.5)[0]
     spacing = float(np.median(np.diff(x))) if x.size > 1 else 1.0
     units = ds[field].attrs.get("units", "")
     return Pulse(
@@ -208,6 +212,11 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
     pick = frames_inside(pos, t, fwhm, *bounds, others)
     sub = pick[:: max(1, pick.size // 25)]
     fw, fits = frame_fits(view, frames, pos, h, pol, fwhm, sub) if sub.size else (np.nan, {})
+    if not np.isfinite(fw):  # a short run: no frame well inside the fitted stretch; any frame whose
+        # half-maximum lies inside the chain
+        whole = np.flatnonzero((pos - fwhm >= view.x.min()) & (pos + fwhm <= view.x.max()))
+        whole = whole[:: max(1, whole.size // 25)]
+        fw = frame_fits(view, frames, pos, h, pol, fwhm, whole)[0] if whole.size else np.nan
     W = {s: (np.nan, np.nan) for s in SHAPES}
     if pick.size:
         pooled = pooled_fits(view, frames, t, pos, pick, fwhm, lambda xc: pol * np.exp(att0 + att * direction * xc))

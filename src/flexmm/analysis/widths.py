@@ -19,6 +19,8 @@ from scipy.signal import peak_widths
 from flexmm.analysis.profiles import SHAPES, ProfileFit, fit_profile, shape_fwhm
 
 POOLED_FRAMES = 200  # frames pooled into the co-moving width fit
+#: message of scipy's PeakPropertyWarning (a zero width or prominence; scipy does not export the class)
+PEAK_WARNING = "some peaks have a"
 
 
 def _fwhm_at(y: np.ndarray, k: int) -> float:
@@ -28,7 +30,7 @@ def _fwhm_at(y: np.ndarray, k: int) -> float:
     if not 0 < k < y.size - 1:
         return np.nan
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.filterwarnings("ignore", PEAK_WARNING, RuntimeWarning)
         return float(peak_widths(y, [k], rel_height=0.5)[0][0])
 
 
@@ -96,7 +98,9 @@ def temporal_fwhm(view, sites, times, polarity, half_window) -> float:
         y = polarity * view.values[win, i]
         k = int(np.argmax(y))
         if 0 < k < y.size - 1:
-            w, _, left, right = peak_widths(y, [k], rel_height=0.5)
+            with warnings.catch_warnings():  # a peak on a slope: its width is simply not used
+                warnings.filterwarnings("ignore", PEAK_WARNING, RuntimeWarning)
+                w, _, left, right = peak_widths(y, [k], rel_height=0.5)
             if left[0] > 0 and right[0] < y.size - 1:
                 widths.append(w[0] * float(np.median(np.diff(view.time[win]))))
     return float(np.median(widths)) if widths else np.nan

@@ -61,30 +61,31 @@ def run(
         raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
     if quiet:
         return
-    _print_leading_pulse(result.path)
+    _print_summary(result.path, analysis)
 
 
-def _print_leading_pulse(path) -> None:
-    """The quick single-pulse measurement of a finished run, with the continuum's prediction."""
-    from flexmm.analysis import PulseNotFound, leading_pulse
-    from flexmm.analysis.context import RunContext
-    from flexmm.analysis.rest import from_rest, rest_fields
-    from flexmm.io.dataset import open_run
+def _print_summary(path, analysis: str | None = None) -> None:
+    """What ``flexmm analyze`` measures on the run (the same analysis, field and feature), in a
+    few lines: the pulse, front, driven response or wave groups the scene is about, with theory."""
+    from flexmm.analysis import report
+    from flexmm.analysis.summary import principal, summary_lines
+    from flexmm.cli.common import analysis_request
     from flexmm.plan.continuum import alongside
 
-    ds = open_run(path)
-    ds = from_rest(ds, rest_fields(RunContext.from_dataset(ds)))  # a predeformed run: from its rest state
-    field = "theta" if "theta" in ds else next(v for v in ds.data_vars if ds[v].dims == ("time", "site"))
-    try:
-        p = leading_pulse(ds, field)
-    except PulseNotFound as exc:
-        typer.echo(f"no pulse measured: {exc}")
+    request = analysis_request(analysis)
+    if request is not None and request.kind == "energy":
         return
-    typer.echo(
-        f"leading {field} pulse: speed {p.speed_m_s:.4g} ± {p.speed_stderr_m_s:.2g} m/s, "
-        f"amplitude {p.amplitude:.4g} {p.amplitude_units}, width (FWHM) {p.fwhm_m * 1e3:.4g} mm "
-        f"({p.fwhm_sites:.2f} sites), fitted over sites {p.first_site}-{p.last_site}"
-    )
-    line = alongside(ds, field, p.amplitude, p.fwhm_sites, p.speed_m_s)
-    if line:
+    kind = request.kind if request is not None else "auto"
+    try:
+        res = report.analyze_run(path, kind=kind, field_spec=request.field if request else None)
+    except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups) as exc:
+        typer.echo(f"nothing measured: {exc}")
+        return
+    for line in summary_lines(res):
         typer.echo(line)
+    pick = principal(res)
+    if res.kind == "pulse" and pick is not None:
+        p = pick[1]
+        line = alongside(res.ctx.ds, p.field, p.amplitude, p.fwhm_m / res.view.spacing_m, p.speed_m_s)
+        if line:
+            typer.echo(line)

@@ -3,17 +3,16 @@
 What is measured follows ``flexmm.analysis.report.choose_kind`` (travelling pulse, transition
 front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says otherwise:
 
-- pulse on a dataset variable (θ, u, ...): ``leading_pulse`` — arrival-time line fit for the
-  speed, median signed peak for the amplitude, FWHM for the width (fast and robust for the
-  first pulse of an impact or a launched soliton);
-- pulse on a derived field (``strain``, the default without rotations), fronts and driven runs:
-  ``analyze_run`` — the dominant item (largest |amplitude| among pulses tracked over ≥ 10 sites;
-  the front that switched most sites; the fastest group of an oblique plane wave);
+- ``analyze_run`` on the field analyze uses (θ, else the strain of u), and of what it measures
+  the feature ``flexmm run`` prints (``analysis.summary.principal``: the largest |amplitude|
+  among pulses fitted over ≥ 10 sites, the front that switched most sites, the fastest group of
+  an oblique plane wave, the driven response);
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
   predicted speed (fronts), from ``flexmm.analysis.compare.THEORY``.
 
 Options (``analysis:`` block): ``kind`` (auto, pulse, front, driven, modes), ``field``,
-``threshold_fraction``, ``trim_fraction`` (leading_pulse only).
+``threshold_fraction`` (``trim_fraction`` is accepted and unused: the pulse fit leaves out the
+ends by itself).
 """
 
 from __future__ import annotations
@@ -31,7 +30,6 @@ OBSERVABLES = {
     "speed_theory": ("m/s", "theory: speed at the measured amplitude"),
     "transmission": ("1", "driven: far-end over drive amplitude"),
 }
-MIN_TRACK_SITES = 10
 
 
 def _nan_result(kind: str, field: str, units: str, note: str) -> dict:
@@ -42,7 +40,6 @@ def _nan_result(kind: str, field: str, units: str, note: str) -> dict:
 def observe_run(path: str | Path, options: dict | None = None) -> dict:
     """Observables of the run at ``path`` (run directory) as plain floats plus kind/field/note."""
     from flexmm.analysis.compare import RunContext
-    from flexmm.analysis.fields import default_field
     from flexmm.analysis.report import choose_kind
     from flexmm.io.dataset import open_run
 
@@ -51,26 +48,7 @@ def observe_run(path: str | Path, options: dict | None = None) -> dict:
     ctx = RunContext.from_dataset(ds)
     kind = opts.get("kind", "auto")
     kind = choose_kind(ctx) if kind == "auto" else kind
-    field = opts.get("field") or (None if kind != "pulse" else default_field(ds))
-    if kind == "pulse" and field in ds.data_vars:
-        return _leading(ds, ctx, field, opts)
-    return _full(path, kind, field, opts)
-
-
-def _leading(ds, ctx, field: str, opts: dict) -> dict:
-    from flexmm.analysis import PulseNotFound, leading_pulse
-
-    units = ds[field].attrs.get("units", "")
-    kw = {k: opts[k] for k in ("threshold_fraction", "trim_fraction") if k in opts}
-    try:
-        p = leading_pulse(ds, field, **kw)
-    except PulseNotFound as exc:
-        return _nan_result("pulse", field, units, f"no pulse: {exc}")
-    out = _nan_result("pulse", field, units, "")
-    out.update(speed=p.speed_m_s, speed_stderr=p.speed_stderr_m_s, amplitude=p.amplitude,
-               width=p.fwhm_m, n_sites_fitted=float(p.n_sites_fitted),
-               speed_theory=_speed_theory(ctx, units, p.amplitude))
-    return out
+    return _full(path, kind, opts.get("field"), opts)
 
 
 def _speed_theory(ctx, units: str, amplitude: float) -> float:
@@ -82,6 +60,7 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
 def _full(path, kind: str, field: str | None, opts: dict) -> dict:
     from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound, analyze_run
     from flexmm.analysis.oblique import NoWaveGroups
+    from flexmm.analysis.summary import principal
 
     kw = {k: opts[k] for k in ("threshold_fraction",) if k in opts}
     try:
@@ -89,27 +68,20 @@ def _full(path, kind: str, field: str | None, opts: dict) -> dict:
     except (PulseNotFound, FrontNotFound, NotDriven, NoWaveGroups, FieldError) as exc:
         return _nan_result(kind, field or "", "", f"no {kind}: {exc}")
     out = _nan_result(a.kind, a.view.spec, a.view.units, "")
+    item, m = principal(a)  # the feature flexmm run prints and analyze lists
     if a.kind == "pulse":
-        long = [p for p in a.pulses if p.n_sites_fitted >= MIN_TRACK_SITES] or a.pulses
-        p = max(long, key=lambda q: abs(q.amplitude))
-        out.update(speed=p.speed_m_s, speed_stderr=p.speed_stderr_m_s, amplitude=p.amplitude,
-                   width=p.fwhm_m, n_sites_fitted=float(p.n_sites_fitted),
-                   speed_theory=_speed_theory(a.ctx, p.units, p.amplitude))
-        item = f"pulse {p.index}"
+        out.update(speed=m.speed_m_s, speed_stderr=m.speed_stderr_m_s, amplitude=m.amplitude,
+                   width=m.fwhm_m, n_sites_fitted=float(m.n_sites_fitted),
+                   speed_theory=_speed_theory(a.ctx, m.units, m.amplitude))
     elif a.kind == "front":
-        f = max(a.fronts, key=lambda q: q.n_switched)
-        out.update(speed=f.speed_m_s, speed_stderr=f.speed_stderr_m_s, amplitude=f.jump,
-                   width=f.width_10_90_m, n_sites_fitted=float(f.n_switched))
-        item = f"front {f.index}"
-        if f.arrested:
-            out["note"] = f"front arrested after {f.distance_m:.4g} m"
+        out.update(speed=m.speed_m_s, speed_stderr=m.speed_stderr_m_s, amplitude=m.jump,
+                   width=m.width_10_90_m, n_sites_fitted=float(m.n_switched))
+        if m.arrested:
+            out["note"] = f"front arrested after {m.distance_m:.4g} m"
     elif a.kind == "modes":  # oblique plane waves: the fastest group
-        out.update(speed=a.groups[0].speed_m_s)
-        item = "group 1"
+        out.update(speed=m.speed_m_s)
     else:
-        d = a.driven
-        out.update(amplitude=d.amplitude_far, transmission=d.transmission)
-        item = "driven"
+        out.update(amplitude=m.amplitude_far, transmission=m.transmission)
     for c in a.comparisons:
         if c.item == item and c.quantity == "speed" and c.predicted is not None and math.isnan(out["speed_theory"]):
             out["speed_theory"] = float(c.predicted)

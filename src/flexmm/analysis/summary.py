@@ -1,0 +1,123 @@
+"""The headline of a run: which measured feature the scene is about, as a few printable lines.
+
+``principal(res)`` picks, from a ``RunAnalysis``, the feature the scene is about, the same way
+for ``flexmm run``, ``flexmm analyze`` and sweeps:
+
+- pulses: the largest |amplitude| among the pulses fitted over at least ``MIN_TRACK_SITES``
+  sites (all pulses if none is), so a small fast precursor never hides the soliton behind it;
+- fronts: the front that switched the most sites;
+- oblique plane waves: the fastest group; driven runs: the steady response.
+
+``summary_lines(res)`` turns it into text with the theory's prediction where one applies, plus
+one line per collision (``analysis.collisions``).
+"""
+
+from __future__ import annotations
+
+import math
+
+MIN_TRACK_SITES = 10
+
+
+def principal(res):
+    """(item label, measurement) of the feature the run is about, or None if nothing was measured."""
+    if res.kind == "pulse" and res.pulses:
+        long = [p for p in res.pulses if p.n_sites_fitted >= MIN_TRACK_SITES] or res.pulses
+        p = max(long, key=lambda q: (abs(q.amplitude), q.n_sites_fitted))
+        return f"pulse {p.index}", p
+    if res.kind == "front" and res.fronts:
+        f = max(res.fronts, key=lambda q: (q.n_switched, q.distance_m))
+        return f"front {f.index}", f
+    if res.kind == "modes" and res.groups:
+        return "group 1", res.groups[0]
+    if res.kind == "driven" and res.driven is not None:
+        return "driven", res.driven
+    return None
+
+
+def _num(x, digits: int = 4) -> str:
+    return "—" if x is None or not math.isfinite(x) else f"{x:.{digits}g}"
+
+
+def _theory(res, item: str, quantity: str, scale: float = 1.0) -> str:
+    """' (theory P, +d %)' for a compared quantity (P times ``scale``, the printed unit), '' without
+    a prediction."""
+    for c in res.comparisons:
+        if c.item == item and c.quantity == quantity and c.predicted is not None and math.isfinite(c.predicted):
+            rel = c.rel_diff
+            return f" (theory {_num(c.predicted * scale)}" + (f", {100 * rel:+.2f} %)" if rel is not None else ")")
+    return ""
+
+
+WIDTHS = (("width W (sech fit)", "width_sech_m"), ("width W (sech² fit)", "width_sech2_m"),
+          ("width W (§1.3 fit)", "width_kg_m"), ("FWHM", "fwhm_m"))
+
+
+def _width(res, item: str, p) -> tuple[str, float]:
+    """The width the theory predicts (if any), else the sech fit, else the FWHM: (name, m)."""
+    predicted = {c.quantity for c in res.comparisons if c.item == item and c.predicted is not None}
+    finite = [(q, getattr(p, a)) for q, a in WIDTHS if math.isfinite(getattr(p, a))]
+    for q, w in finite:
+        if q in predicted:
+            return q, w
+    return finite[0] if finite else ("FWHM", math.nan)
+
+
+def _pulse_lines(res, item, p) -> list[str]:
+    h = res.view.spacing_m
+    n = len(res.pulses)
+    which = f"{item} of {n}" if n > 1 else item
+    wname, width = _width(res, item, p)
+    units = "" if p.units == "1" else f" {p.units}"
+    lines = [
+        f"{which} in {p.field} ({p.polarity_label}, moving {'right' if p.direction > 0 else 'left'}): "
+        f"speed {_num(p.speed_m_s, 5)} ± {_num(p.speed_stderr_m_s, 2)} m/s{_theory(res, item, 'speed')}, "
+        f"amplitude {_num(p.amplitude)}{units}{_theory(res, item, 'amplitude')}, "
+        f"{wname} {_num(width * 1e3)} mm ({_num(width / h, 3)} sites){_theory(res, item, wname, 1e3)}, "
+        f"fitted over sites {p.first_site:g}-{p.last_site:g}"
+    ]
+    form = getattr(p, "formation_distance_m", math.nan)
+    if math.isfinite(form) and form > 0:
+        lines.append(f"  formation: steady after {_num(form)} m ({_num(form / h, 3)} sites), "
+                     f"{_num(p.formation_time_s)} s")
+    rng = getattr(p, "amplitude_range", math.nan)
+    if getattr(p, "breathing", False):
+        period = getattr(p, "breathing_period_s", math.nan)
+        lines.append(f"  breathing: amplitude {_num(p.amplitude_min)} to {_num(p.amplitude_max)} {p.units} "
+                     f"(range {_num(rng)}), period {_num(period)} s")
+    return lines
+
+
+def _front_lines(res, item, f) -> list[str]:
+    n = len(res.fronts)
+    which = f"{item} of {n}" if n > 1 else item
+    state = "arrested" if f.arrested else "moving"
+    return [
+        f"{which} in {f.field} ({'right' if f.direction > 0 else 'left'}-moving, {state}): "
+        f"speed {_num(f.speed_m_s, 5)} ± {_num(f.speed_stderr_m_s, 2)} m/s{_theory(res, item, 'speed')}, "
+        f"width 10–90 % {_num(f.width_10_90_m * 1e3)} mm ({_num(f.width_10_90_sites, 3)} sites)"
+        f"{_theory(res, item, 'width 10–90 %', 1e3)}, {f.n_switched} sites switched over {_num(f.distance_m)} m"
+    ]
+
+
+def summary_lines(res) -> list[str]:
+    """The run's headline: the principal feature with theory, collisions, and how many others."""
+    pick = principal(res)
+    if pick is None:
+        return [f"nothing measured ({res.kind} analysis of {res.view.spec})"]
+    item, m = pick
+    if res.kind == "pulse":
+        lines = _pulse_lines(res, item, m)
+    elif res.kind == "front":
+        lines = _front_lines(res, item, m)
+    elif res.kind == "modes":
+        lines = [f"{len(res.groups)} wave group(s); fastest: speed {_num(m.speed_m_s)} m/s "
+                 f"({_num(m.speed_c0)} c0), polarisation {_num(m.polarisation_deg, 3)}°, "
+                 f"{_num(100 * m.energy_fraction, 3)} % of the energy"]
+    else:
+        lines = [f"driven at {_num(m.frequency_hz)} Hz in {m.field}: amplitude at drive "
+                 f"{_num(m.amplitude_drive)} {m.units}, at far end {_num(m.amplitude_far)} {m.units}, "
+                 f"transmission {_num(m.transmission)}, decay {_num(m.decay_per_site)} per site"]
+    for c in getattr(res, "collisions", []) or []:
+        lines.append("  " + c.describe())
+    return lines
