@@ -58,6 +58,11 @@ class Raw:
     def axpy(self, a: float, other: Raw) -> Raw:
         return Raw(*(x + a * getattr(other, k) for k, x in self.items()))
 
+    def slope(self, other: Raw, step: float) -> Raw:
+        """(self − other) / step, zero where the two are equal (also equal infinities)."""
+        return Raw(*(np.where(x == getattr(other, k), 0.0, (x - getattr(other, k)) / step)
+                     for k, x in self.items()))
+
 
 def raw_of(system, terms: Terms, damp: np.ndarray) -> Raw:
     """The raw arrays of a built system (copies)."""
