@@ -302,6 +302,12 @@ def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
     return ConfigIssue(where, line, dotted, text)
 
 
+def validation_issues(exc: ValidationError, data: dict, lines: dict, source: str) -> list[ConfigIssue]:
+    """The file:line issues of a pydantic ValidationError of any config read with ``read_yaml``
+    (design and fit specs use it too; key hints for unknown keys are given for scenes)."""
+    return [_issue(e, data, lines, source) for e in exc.errors()]
+
+
 def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<config>",
                     base_dir: str | Path | None = None) -> Scene:
     """Validate a plain dict as a Scene, converting pydantic errors into a ConfigError.

@@ -1,0 +1,247 @@
+"""Exact gradients of trajectory objectives through a velocity-Verlet run (``sweeps``).
+
+The differentiable inputs of a built problem are its *raw* arrays (``Raw``): the model's two
+parameter tables (``kernels.param_tables``), the inverse masses and on-site damping per DOF,
+the contact and drive parameter rows and the initial state. ``Trajectory`` runs a problem with
+velocity Verlet and records (q, v, f) at the observed DOFs every ``stride`` steps;
+``gradient`` returns an objective and its gradient with respect to every raw array by one
+forward run with checkpoints and one reverse sweep; ``sensitivities`` returns the records'
+derivatives along a few raw directions (forward mode, for least-squares Jacobians).
+
+Memory: checkpoints every ``segment`` steps (default ⌈√nsteps⌉) hold (q, v, f); the reverse
+sweep replays one segment at a time, so a run of N steps keeps about 2√N states, plus the
+records.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Callable
+
+import numpy as np
+
+from flexmm.design import sweeps
+from flexmm.design.kernels import adjoint_kernels_of, param_tables, with_tables
+from flexmm.errors import FlexmmError
+from flexmm.integrators.common import MODE_FRICTION, Terms
+
+
+class GradientError(FlexmmError):
+    """A problem whose run cannot be differentiated (an unsupported model or term)."""
+
+
+@dataclass
+class Raw:
+    """The differentiable arrays of a problem (nondimensional): model tables ``t1``, ``t2``,
+    ``minv`` and ``damp`` (ndof,), contact rows ``con`` (C, 3), drive rows ``drv`` (D, 4), the
+    initial state ``q0``, ``v0``. A gradient has the same structure."""
+
+    t1: np.ndarray
+    t2: np.ndarray
+    minv: np.ndarray
+    damp: np.ndarray
+    con: np.ndarray
+    drv: np.ndarray
+    q0: np.ndarray
+    v0: np.ndarray
+
+    def zeros(self) -> Raw:
+        return Raw(*(np.zeros_like(getattr(self, f.name)) for f in fields(self)))
+
+    def items(self):
+        return ((f.name, getattr(self, f.name)) for f in fields(self))
+
+    def dot(self, other: Raw) -> float:
+        return float(sum(np.vdot(a, getattr(other, k)) for k, a in self.items()))
+
+    def axpy(self, a: float, other: Raw) -> Raw:
+        return Raw(*(x + a * getattr(other, k) for k, x in self.items()))
+
+    def slope(self, other: Raw, step: float) -> Raw:
+        """(self − other) / step, zero where the two are equal (also equal infinities)."""
+        return Raw(*(np.where(x == getattr(other, k), 0.0, (x - getattr(other, k)) / step)
+                     for k, x in self.items()))
+
+
+def raw_of(system, terms: Terms, damp: np.ndarray) -> Raw:
+    """The raw arrays of a built system (copies)."""
+    t1, t2 = param_tables(system.args)
+    return Raw(t1.copy(), t2.copy(), system.inv_mass.copy(), np.asarray(damp, float).copy(),
+               terms.con_prm.copy(), terms.drv_prm.copy(), system.q0.copy(), system.v0.copy())
+
+
+def check_differentiable(system, terms: Terms) -> None:
+    """Refuse models without gradient kernels and velocity-dependent external terms."""
+    try:
+        adjoint_kernels_of(type(system.args))
+    except TypeError as err:
+        raise GradientError(f"model {system.model!r}: {err}") from None
+    if terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION):
+        raise GradientError("gradients through dashpots or ground friction are not implemented "
+                            "(velocity-dependent external forces); use on-site viscous damping")
+
+
+@dataclass
+class Records:
+    """(q, v, f) at the observed DOFs, one row per recorded step (nondimensional)."""
+
+    q: np.ndarray
+    v: np.ndarray
+    f: np.ndarray
+
+
+#: an objective maps the records (and the raw arrays) to (value, dJ/dq, dJ/dv, dJ/df, dJ/draw or None)
+Objective = Callable[[Records, Raw], tuple]
+
+
+@dataclass
+class Trajectory:
+    """What a differentiated run needs besides the raw arrays: the system's args and terms (their
+    non-differentiable parts), the step ``h``, ``nsteps``, the recording ``stride`` and the
+    observed DOFs ``obs``, and the start time ``t0``."""
+
+    args: tuple
+    terms: Terms
+    h: float
+    nsteps: int
+    stride: int
+    obs: np.ndarray
+    t0: float = 0.0
+
+    def __post_init__(self):
+        self.obs = np.asarray(self.obs, np.int64)
+        if self.nsteps % self.stride:
+            raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
+
+    @property
+    def n_samples(self) -> int:
+        return self.nsteps // self.stride + 1
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.t0 + self.h * self.stride * np.arange(self.n_samples)
+
+    # -- the arrays a sweep takes -----------------------------------------------------------
+    def bind(self, raw: Raw) -> tuple:
+        args = with_tables(self.args, raw.t1, raw.t2)
+        terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
+        h = self.h
+        g = raw.damp * raw.minv
+        kick = 0.5 * h * raw.minv
+        pre = 1.0 - 0.5 * h * g
+        post = 1.0 / (1.0 + 0.5 * h * g)
+        return args, terms, kick, pre, post
+
+    def _buffers(self, ndof: int, rows: int) -> tuple:
+        return np.empty((rows, ndof)), np.empty((rows, ndof)), np.empty((rows, ndof)), np.empty(rows)
+
+    def _records(self) -> Records:
+        shape = (self.n_samples, self.obs.size)
+        return Records(np.empty(shape), np.empty(shape), np.empty(shape))
+
+    # -- runs ----------------------------------------------------------------------------------
+    def run(self, raw: Raw, segment: int | None = None) -> tuple[Records, tuple]:
+        """Forward run: the records, and the checkpoints (CQ, CV, CF, CT, segment)."""
+        args, terms, kick, pre, post = self.bind(raw)
+        q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
+        sweeps.initial_force(args, terms, q, v, f, self.t0)
+        seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
+        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1)
+        rec = self._records()
+        sweeps.forward(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, seg,
+                       self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
+        return rec, (CQ, CV, CF, CT, seg)
+
+    def gradient(self, raw: Raw, objective: Objective, segment: int | None = None) -> tuple[float, Raw, Records]:
+        """(J, dJ/draw, records) by one checkpointed forward run and one reverse sweep."""
+        rec, (CQ, CV, CF, CT, seg) = self.run(raw, segment)
+        value, dq, dv, df, explicit = objective(rec, raw)
+        dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
+        args, terms, kick, pre, post = self.bind(raw)
+        n = raw.q0.size
+        lq, lv, lf = np.zeros(n), np.zeros(n), np.zeros(n)
+        g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
+        gK, gP, gS = np.zeros(n), np.zeros(n), np.zeros(n)
+        gcon, gdrv = np.zeros_like(raw.con), np.zeros_like(raw.drv)
+        N = self.nsteps
+        if N % self.stride == 0:
+            j = N // self.stride
+            lq[self.obs] += dq[j]
+            lv[self.obs] += dv[j]
+            lf[self.obs] += df[j]
+        SQ, SV, SF, ST = self._buffers(n, seg + 1)
+        for c in range((N - 1) // seg if N else -1, -1, -1):
+            k0 = c * seg
+            m = min(seg, N - k0)
+            sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
+            sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, self.stride, self.obs,
+                           dq, dv, df, lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv)
+        if N == 0:
+            lq[self.obs] += dq[0]
+            lv[self.obs] += dv[0]
+            lf[self.obs] += df[0]
+        q0 = raw.q0.copy()
+        v0 = raw.v0.copy()
+        sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
+        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv)
+        # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹)
+        hh = 0.5 * self.h
+        s2 = post * post
+        g_minv = hh * gK - hh * raw.damp * gP - s2 * hh * raw.damp * gS
+        g_damp = -hh * raw.minv * gP - s2 * hh * raw.minv * gS
+        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv)
+        if explicit is not None:
+            grad = grad.axpy(1.0, explicit)
+        return float(value), grad, rec
+
+    def value(self, raw: Raw, objective: Objective) -> float:
+        rec, _ = self.run(raw, segment=self.nsteps + 1)
+        return float(objective(rec, raw)[0])
+
+    def sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
+        """Records and their derivatives along each raw direction (one forward tangent run)."""
+        args, terms, kick, pre, post = self.bind(raw)
+        nd, n = len(directions), raw.q0.size
+        hh = 0.5 * self.h
+
+        def stack(name):
+            return np.ascontiguousarray(np.stack([getattr(d, name) for d in directions]) if nd else
+                                        np.zeros((0,) + getattr(raw, name).shape))
+
+        dminv, ddamp = stack("minv"), stack("damp")
+        dg = ddamp * raw.minv + raw.damp * dminv  # d(c m⁻¹)
+        DK = hh * dminv
+        DP = -hh * dg
+        DS = -(post * post) * hh * dg
+        rec = self._records()
+        shape = (nd, self.n_samples, self.obs.size)
+        TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
+        q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
+        sweeps.tangent(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, self.stride, self.obs,
+                       stack("t1"), stack("t2"), DK, DP, DS, stack("con"), stack("drv"), stack("q0"), stack("v0"),
+                       rec.q, rec.v, rec.f, TQ, TV, TF)
+        return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
+
+
+def trajectory_of(problem, nsteps: int | None = None, stride: int = 1, obs=None, h: float | None = None) -> tuple[Trajectory, Raw]:
+    """The Trajectory and raw arrays of a built problem (``assemble.Problem``), velocity Verlet.
+
+    ``nsteps`` defaults to the problem's duration in steps of ``h`` (default: its dt), rounded
+    up to a multiple of ``stride``; ``obs`` defaults to every DOF.
+    """
+    s = problem.system
+    check_differentiable(s, problem.terms)
+    h = problem.dt if h is None else h
+    if nsteps is None:
+        nsteps = max(1, math.ceil(problem.duration / h - 1e-9))
+    nsteps = stride * math.ceil(nsteps / stride)
+    obs = np.arange(s.ndof) if obs is None else obs
+    traj = Trajectory(s.args, problem.terms, h, nsteps, stride, obs)
+    return traj, raw_of(s, problem.terms, problem.damp)
+
+
+def with_raw(traj: Trajectory, raw: Raw) -> Trajectory:
+    """``traj`` whose fixed args/terms carry the tables of ``raw`` (e.g. to run a Stepper)."""
+    args, terms, *_ = traj.bind(raw)
+    return replace(traj, args=args, terms=terms)

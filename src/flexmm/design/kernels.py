@@ -1,0 +1,378 @@
+"""Second derivatives of the model forces: the kernels the adjoint and tangent sweeps need.
+
+For a model with energy E(q; p) and force F = −∂E/∂q, a reverse (adjoint) step needs, for an
+adjoint vector λ, the Hessian-vector product and the parameter vector-Jacobian product
+
+    (∂F/∂q)ᵀ λ = −∇²E λ,        (∂F/∂p)ᵀ λ = −∂(λ·∇E)/∂p,
+
+and a forward (tangent) step needs (∂F/∂q) dq + (∂F/∂p) dp. Both are written per element
+(hinge, bond, on-site term) from the element's closed-form law, so they cost about two force
+evaluations. Parameters are the model's two tables (``param_tables``): for ``ChainArgs`` the
+hinge table (H, 7) and the site table (N, 3) of ``models.hinge``; for ``MassArgs`` the bond and
+on-site law rows (B, 9), (S, 9) of ``models.laws``. Columns that are not continuous (the hinge
+sign, a tabulated law's start and length) get zero derivatives.
+
+``model_adjoint(q, args, lam, out, g1, g2)`` writes (∂F/∂q)ᵀλ into ``out`` and adds (∂F/∂p)ᵀλ to
+(g1, g2); ``model_tangent(q, args, dq, d1, d2, out)`` writes (∂F/∂q)dq + (∂F/∂p)(d1, d2). Like
+``models.kernels.model_force`` they are plain functions for Python and numba overloads that
+dispatch on the type of ``args`` inside compiled loops (``ADJOINT_KERNELS``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from numba.extending import overload
+
+from flexmm._jit import JIT_OPTIONS, NO_JIT, jit
+from flexmm.models import laws as lw
+from flexmm.models.hinge import (
+    H_HALF_A,
+    H_HALF_B,
+    H_KL,
+    H_KS,
+    H_KT,
+    H_REST,
+    H_SIGN,
+    S_KG,
+    S_KR,
+    S_THETA0,
+    ChainArgs,
+)
+from flexmm.models.mass_kernels import MassArgs
+
+# ---------------------------------------------------------------- rotating-squares chain
+
+
+@jit
+def _chain_site_terms(q, sprm, lam, out, g2, n):
+    """Lateral-hinge on-site terms E = ½ k_g (cos θ0 − cos φ)² + ½ k_r θ², φ = θ0 + θ."""
+    for i in range(n):
+        th = q[n + i]
+        t0 = sprm[i, S_THETA0]
+        phi = t0 + th
+        c, s = math.cos(phi), math.sin(phi)
+        g = math.cos(t0) - c
+        kg, kr = sprm[i, S_KG], sprm[i, S_KR]
+        li = lam[n + i]
+        out[n + i] = -(kg * (s * s + g * c) + kr) * li
+        g2[i, S_KG] -= g * s * li
+        g2[i, S_KR] -= th * li
+        g2[i, S_THETA0] -= kg * ((s - math.sin(t0)) * s + g * c) * li
+
+
+@jit
+def _hinge_state(q, hprm, sprm, n, h, a, b):
+    """cos/sin of both units' angles, the hinge's h_A, h_B, σ, k_l, k_s, k_θ and el, es, ep."""
+    pa = sprm[a, S_THETA0] + q[n + a]
+    pb = sprm[b, S_THETA0] + q[n + b]
+    ca, sa, cb, sb = math.cos(pa), math.sin(pa), math.cos(pb), math.sin(pb)
+    hA, hB, sig = hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN]
+    el = q[b] - q[a] + hprm[h, H_REST] - (hA * ca + hB * cb)
+    es = sig * (hB * sb - hA * sa)
+    ep = q[n + a] + q[n + b]
+    return ca, sa, cb, sb, hA, hB, sig, hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT], el, es, ep
+
+
+@jit
+def chain_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ into ``out``; (∂F/∂p)ᵀλ added to g1 (hinge table), g2 (site table).
+
+    Per hinge (d_s = 0), with el, es, ep its stretch, shear and bend (``models.hinge``) and
+    del, des, dep their derivatives along λ, D = λ·∇E = k_l el del + k_s es des + k_θ ep dep;
+    the Hessian-vector product is ∂D/∂q and the parameter product ∂D/∂p (both negated).
+    """
+    ha, hb, hprm, sprm, _, _ = args
+    n = sprm.shape[0]
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    _chain_site_terms(q, sprm, lam, out, g2, n)
+    for h in range(ha.shape[0]):
+        a = ha[h]
+        b = hb[h]
+        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, sprm, n, h, a, b)
+        lua, lub, lta, ltb = lam[a], lam[b], lam[n + a], lam[n + b]
+        dl = lub - lua + hA * sa * lta + hB * sb * ltb
+        ds = sig * (hB * cb * ltb - hA * ca * lta)
+        dp = lta + ltb
+        d_ta = kl * (hA * sa * dl + el * hA * ca * lta) + ks * (-sig * hA * ca * ds + es * sig * hA * sa * lta) + kt * dp
+        d_tb = kl * (hB * sb * dl + el * hB * cb * ltb) + ks * (sig * hB * cb * ds - es * sig * hB * sb * ltb) + kt * dp
+        out[a] += kl * dl
+        out[b] -= kl * dl
+        out[n + a] -= d_ta
+        out[n + b] -= d_tb
+        g1[h, H_REST] -= kl * dl
+        g1[h, H_HALF_A] -= kl * (-ca * dl + el * sa * lta) + ks * (-sig * sa * ds - es * sig * ca * lta)
+        g1[h, H_HALF_B] -= kl * (-cb * dl + el * sb * ltb) + ks * (sig * sb * ds + es * sig * cb * ltb)
+        g1[h, H_KL] -= el * dl
+        g1[h, H_KS] -= es * ds
+        g1[h, H_KT] -= ep * dp
+        g2[a, S_THETA0] -= d_ta - kt * dp
+        g2[b, S_THETA0] -= d_tb - kt * dp
+
+
+@jit
+def chain_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge-table, d2: site-table directions)."""
+    ha, hb, hprm, sprm, _, _ = args
+    n = sprm.shape[0]
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    for i in range(n):
+        th = q[n + i]
+        t0 = sprm[i, S_THETA0]
+        phi = t0 + th
+        c, s = math.cos(phi), math.sin(phi)
+        g = math.cos(t0) - c
+        kg = sprm[i, S_KG]
+        dt0 = d2[i, S_THETA0]
+        dphi = dt0 + dq[n + i]
+        # g_θ = k_g g sin φ + k_r θ
+        dgrad = (d2[i, S_KG] * g * s + kg * ((s - math.sin(t0)) * dt0 * s + s * s * dq[n + i] + g * c * dphi)
+                 + d2[i, S_KR] * th + sprm[i, S_KR] * dq[n + i])
+        out[n + i] = -dgrad
+    for h in range(ha.shape[0]):
+        a = ha[h]
+        b = hb[h]
+        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, sprm, n, h, a, b)
+        dpa = d2[a, S_THETA0] + dq[n + a]
+        dpb = d2[b, S_THETA0] + dq[n + b]
+        dhA, dhB = d1[h, H_HALF_A], d1[h, H_HALF_B]
+        dkl, dks, dkt = d1[h, H_KL], d1[h, H_KS], d1[h, H_KT]
+        # variations of el, es, ep, and of the factors (h sin φ, σ h cos φ) in the gradient
+        d_el = dq[b] - dq[a] + d1[h, H_REST] - (dhA * ca + dhB * cb) + hA * sa * dpa + hB * sb * dpb
+        d_es = sig * (dhB * sb + hB * cb * dpb - dhA * sa - hA * ca * dpa)
+        d_ep = dq[n + a] + dq[n + b]
+        d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
+        d_fb = dhB * sb + hB * cb * dpb
+        d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
+        d_gb = dhB * cb - hB * sb * dpb
+        d_fl = dkl * el + kl * d_el
+        d_fs = dks * es + ks * d_es
+        d_fp = dkt * ep + kt * d_ep
+        fl, fs = kl * el, ks * es
+        out[a] += d_fl
+        out[b] -= d_fl
+        out[n + a] -= d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp
+        out[n + b] -= d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp
+
+
+# ---------------------------------------------------------------- chains of masses
+
+
+@jit
+def law_second(code, z, prm, tab, dprm):
+    """E''(z) of one law element and ∂E'/∂prm_c into ``dprm`` (N_LAW_PRM,), c = 0 the shift.
+
+    Matches ``laws.law`` branch by branch (same clipping: a clipped dipole gap and a Hertz
+    contact out of touch have zero derivatives).
+    """
+    for c in range(dprm.shape[0]):
+        dprm[c] = 0.0
+    z = z + prm[0]
+    d2 = 0.0
+    if code == lw.POLY:
+        zp = 1.0  # z^(n−1)
+        zq = 0.0  # z^(n−2)
+        for n in range(1, lw.POLY_DEGREE + 1):
+            dprm[n] = n * zp
+            d2 += n * (n - 1) * prm[n] * zq
+            zq = zp
+            zp *= z
+    elif code == lw.HERTZ:
+        delta = prm[3] - z
+        if delta > 0.0:
+            a, p = prm[1], prm[2]
+            dp = delta**p
+            d2 = a * p * delta ** (p - 1.0)
+            dprm[1] = -dp
+            dprm[2] = -a * dp * math.log(delta)
+            dprm[3] = -d2
+    elif code == lw.TODA:
+        a, b = prm[1], prm[2]
+        ex = math.exp(-b * z)
+        d2 = a * b * ex
+        dprm[1] = 1.0 - ex
+        dprm[2] = a * z * ex
+    elif code == lw.DIPOLE:
+        d0 = prm[2]
+        gap = prm[2] + z
+        if gap > lw.DIPOLE_MIN_GAP * d0:
+            c0, p = prm[1], prm[3]
+            gp = gap ** (-p - 1.0)
+            d2 = p * (p + 1.0) * c0 * gp / gap
+            dprm[1] = -p * gp
+            dprm[2] = d2
+            dprm[3] = -c0 * gp * (1.0 - p * math.log(gap))
+        else:  # clipped: E' = −p C (ε d)^(−p−1), constant in z
+            c0, p = prm[1], prm[3]
+            g0 = lw.DIPOLE_MIN_GAP * d0
+            gp = g0 ** (-p - 1.0)
+            dprm[1] = -p * gp
+            dprm[2] = p * (p + 1.0) * c0 * gp / d0
+            dprm[3] = -c0 * gp * (1.0 - p * math.log(g0))
+    elif code == lw.TABLE:
+        d2 = _table_second(z, int(prm[1]), int(prm[2]), tab)
+    else:  # SINE
+        a, k = prm[1], prm[2]
+        kz = k * z
+        d2 = a * k * k * math.cos(kz)
+        dprm[1] = k * math.sin(kz)
+        dprm[2] = a * math.sin(kz) + a * kz * math.cos(kz)
+    if code != lw.DIPOLE or prm[2] + z > lw.DIPOLE_MIN_GAP * prm[2]:
+        dprm[0] = d2
+    return d2
+
+
+@jit
+def _table_second(z, start, n, tab):
+    """d²E/dz² of a tabulated law (the slope of its spline force, linear beyond the knots)."""
+    x0 = tab[start]
+    x1 = tab[start + n - 1]
+    m = n - 1
+    c3 = start + 2 * n
+    c2 = c3 + m
+    c1 = c2 + m
+    if z <= x0:
+        return tab[c1]
+    if z >= x1:
+        k = m - 1
+        h = x1 - tab[start + k]
+        return tab[c1 + k] + h * (2.0 * tab[c2 + k] + 3.0 * h * tab[c3 + k])
+    lo, hi = 0, m
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tab[start + mid] <= z:
+            lo = mid
+        else:
+            hi = mid
+    s = z - tab[start + lo]
+    return tab[c1 + lo] + s * (2.0 * tab[c2 + lo] + 3.0 * s * tab[c3 + lo])
+
+
+@jit
+def mass_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ into ``out``; (∂F/∂p)ᵀλ added to g1 (bond rows), g2 (on-site rows)."""
+    bi, bj, bcode, bprm, si, scode, sprm, tab = args
+    dprm = np.empty(bprm.shape[1])
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    for b in range(bi.shape[0]):
+        i = bi[b]
+        j = bj[b]
+        d2 = law_second(bcode[b], q[j] - q[i], bprm[b], tab, dprm)
+        w = d2 * (lam[j] - lam[i])  # F_i = E'(z), F_j = −E'(z), z = q_j − q_i
+        out[i] += w
+        out[j] -= w
+        dl = lam[i] - lam[j]
+        for c in range(dprm.shape[0]):
+            g1[b, c] += dl * dprm[c]
+    for s in range(si.shape[0]):
+        i = si[s]
+        d2 = law_second(scode[s], q[i], sprm[s], tab, dprm)
+        out[i] -= d2 * lam[i]  # F_i = −E'(q_i)
+        for c in range(dprm.shape[0]):
+            g2[s, c] -= lam[i] * dprm[c]
+
+
+@jit
+def mass_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: bond rows, d2: on-site rows)."""
+    bi, bj, bcode, bprm, si, scode, sprm, tab = args
+    dprm = np.empty(bprm.shape[1])
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    for b in range(bi.shape[0]):
+        i = bi[b]
+        j = bj[b]
+        e2 = law_second(bcode[b], q[j] - q[i], bprm[b], tab, dprm)
+        w = e2 * (dq[j] - dq[i])
+        for c in range(dprm.shape[0]):
+            w += dprm[c] * d1[b, c]
+        out[i] += w
+        out[j] -= w
+    for s in range(si.shape[0]):
+        i = si[s]
+        e2 = law_second(scode[s], q[i], sprm[s], tab, dprm)
+        w = e2 * dq[i]
+        for c in range(dprm.shape[0]):
+            w += dprm[c] * d2[s, c]
+        out[i] -= w
+
+
+# ---------------------------------------------------------------- dispatch
+
+
+@dataclass(frozen=True)
+class AdjointKernels:
+    """Second-derivative kernels of one args type and the names of its two parameter tables."""
+
+    adjoint: Callable
+    tangent: Callable
+    tables: tuple[str, str]
+
+
+ADJOINT_KERNELS: dict[type, AdjointKernels] = {
+    ChainArgs: AdjointKernels(chain_adjoint, chain_tangent, ("hinge_prm", "site_prm")),
+    MassArgs: AdjointKernels(mass_adjoint, mass_tangent, ("bond_prm", "site_prm")),
+}
+
+
+def adjoint_kernels_of(args_type: type) -> AdjointKernels:
+    try:
+        return ADJOINT_KERNELS[args_type]
+    except KeyError:
+        known = ", ".join(k.__name__ for k in ADJOINT_KERNELS)
+        raise TypeError(f"no gradient kernels for model arguments {args_type.__name__} (known: {known})") from None
+
+
+def param_tables(args) -> tuple[np.ndarray, np.ndarray]:
+    """The two differentiable parameter tables of a model's args."""
+    a, b = adjoint_kernels_of(type(args)).tables
+    return getattr(args, a), getattr(args, b)
+
+
+def with_tables(args, t1: np.ndarray, t2: np.ndarray):
+    """A copy of ``args`` with its two parameter tables replaced."""
+    a, b = adjoint_kernels_of(type(args)).tables
+    return args._replace(**{a: t1, b: t2})
+
+
+def model_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ into ``out``, (∂F/∂p)ᵀλ added to the parameter-table gradients g1, g2."""
+    adjoint_kernels_of(type(args)).adjoint(q, args, lam, out, g1, g2)
+
+
+def model_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out``."""
+    adjoint_kernels_of(type(args)).tangent(q, args, dq, d1, d2, out)
+
+
+if not NO_JIT:
+
+    def _cls(args):
+        cls = getattr(args, "instance_class", None)
+        if cls is None:
+            raise TypeError(f"model arguments must be a NamedTuple declared in ADJOINT_KERNELS, got {args}")
+        return cls
+
+    @overload(model_adjoint, jit_options=JIT_OPTIONS)
+    def _model_adjoint(q, args, lam, out, g1, g2):
+        kernel = adjoint_kernels_of(_cls(args)).adjoint
+
+        def impl(q, args, lam, out, g1, g2):
+            kernel(q, args, lam, out, g1, g2)
+
+        return impl
+
+    @overload(model_tangent, jit_options=JIT_OPTIONS)
+    def _model_tangent(q, args, dq, d1, d2, out):
+        kernel = adjoint_kernels_of(_cls(args)).tangent
+
+        def impl(q, args, dq, d1, d2, out):
+            kernel(q, args, dq, d1, d2, out)
+
+        return impl

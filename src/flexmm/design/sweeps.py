@@ -1,0 +1,247 @@
+"""Compiled forward, reverse (adjoint) and tangent sweeps of velocity Verlet (docs/physics.md §3).
+
+One step of ``integrators.verlet`` with on-site damping, written with the per-DOF factors
+K = h/2 m⁻¹, P = 1 − hγ/2, S = 1/(1 + hγ/2) (γ = c m⁻¹):
+
+    w = P v + K f,   q' = q + h w,   [q'_D, w_D] = [g(t'), ġ(t')]   (prescribed DOFs D),
+    f' = F(q', t'),  v' = S (w + K f').
+
+The reverse of a step, given the adjoints (λq, λv, λf) of (q', v', f'):
+
+    λw = S λv,  λf += K S λv,                       ∂J/∂S += λv ⊙ (w + K f'), ∂J/∂K += S λv ⊙ f',
+    λq += (∂F/∂q)ᵀ λf,  ∂J/∂p += (∂F/∂p)ᵀ λf,         (model, contacts, applied forces)
+    λq_D, λw_D → drive parameters, then zeroed,
+    λw += h λq,  λv ← P λw,  λf ← K λw,              ∂J/∂P += λw ⊙ v, ∂J/∂K += λw ⊙ f.
+
+This is the exact transpose of the discrete step, so gradients agree with finite differences
+of the same discrete run to rounding. The objective enters through records of (q, v, f) at
+the observed DOFs every ``stride`` steps: their adjoints are added at those steps.
+Velocity-dependent external terms (dashpots, ground friction) are not differentiated
+(``design.gradient`` refuses them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexmm._jit import jit
+from flexmm.design.kernels import model_adjoint, model_tangent
+from flexmm.design.terms import (
+    contact_adjoint,
+    contact_tangent,
+    drive_force_adjoint,
+    drive_force_tangent,
+    prescribed_adjoint,
+    prescribed_tangent,
+)
+from flexmm.integrators.common import apply_prescribed, total_force, waveform
+
+
+@jit
+def initial_force(args, terms, q, v, f, t):
+    """Prescribe the driven DOFs at t and fill f with the total force (``Stepper`` does the same)."""
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    total_force(args, q, v, t, f, terms)
+
+
+@jit
+def verlet_step(args, terms, kick, pre, post, q, v, f, t, h):
+    """One damped velocity-Verlet step in place (``integrators.verlet``); returns t + h."""
+    n = q.shape[0]
+    for k in range(n):
+        v[k] = pre[k] * v[k] + kick[k] * f[k]
+        q[k] += h * v[k]
+    t1 = t + h
+    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    total_force(args, q, v, t1, f, terms)
+    for k in range(n):
+        v[k] = (v[k] + kick[k] * f[k]) * post[k]
+    return t1
+
+
+@jit
+def _record(q, v, f, obs, Rq, Rv, Rf, j):
+    for i in range(obs.shape[0]):
+        Rq[j, i] = q[obs[i]]
+        Rv[j, i] = v[obs[i]]
+        Rf[j, i] = f[obs[i]]
+
+
+@jit
+def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, Rq, Rv, Rf):
+    """Run ``nsteps`` from (q, v, f, t) in place; checkpoint every ``seg`` steps (rows of CQ, CV,
+    CF, CT), record (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
+    for k in range(nsteps + 1):
+        if k % seg == 0:
+            c = k // seg
+            CQ[c, :] = q
+            CV[c, :] = v
+            CF[c, :] = f
+            CT[c] = t
+        if k % stride == 0:
+            _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h)
+    return t
+
+
+@jit
+def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST):
+    """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST."""
+    q = q0.copy()
+    v = v0.copy()
+    f = f0.copy()
+    t = t0
+    for s in range(nsteps + 1):
+        SQ[s, :] = q
+        SV[s, :] = v
+        SF[s, :] = f
+        ST[s] = t
+        if s < nsteps:
+            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h)
+
+
+@jit
+def _force_adjoint(args, terms, q, t, lf, lq, tmp, g1, g2, gcon, gdrv, dg, ddg):
+    """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces."""
+    model_adjoint(q, args, lf, tmp, g1, g2)
+    contact_adjoint(q, lf, tmp, terms.con_ij, terms.con_prm, gcon)
+    for k in range(q.shape[0]):
+        lq[k] += tmp[k]
+    drive_force_adjoint(t, lf, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
+
+
+@jit
+def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
+    if k % stride == 0:
+        j = k // stride
+        for i in range(obs.shape[0]):
+            lq[obs[i]] += dRq[j, i]
+            lv[obs[i]] += dRv[j, i]
+            lf[obs[i]] += dRf[j, i]
+
+
+@jit
+def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+            lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv):
+    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
+
+    (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
+    and leave as those at step k0 (objective at k0 included); parameter adjoints accumulate.
+    """
+    n = lq.shape[0]
+    tmp = np.empty(n)
+    lw = np.empty(n)
+    u = np.empty(n)
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    for s in range(nsteps - 1, -1, -1):
+        q1 = SQ[s + 1]
+        v0 = SV[s]
+        f0 = SF[s]
+        f1 = SF[s + 1]
+        t1 = ST[s + 1]
+        for k in range(n):
+            u[k] = pre[k] * v0[k] + kick[k] * f0[k]
+        for d in range(dd.shape[0]):
+            if dm[d] == 0:
+                _, u[dd[d]] = waveform(ds[d], dp[d], t1)
+        for k in range(n):
+            gS[k] += lv[k] * (u[k] + kick[k] * f1[k])
+            sl = post[k] * lv[k]
+            gK[k] += sl * f1[k]
+            lw[k] = sl
+            lf[k] += kick[k] * sl
+        _force_adjoint(args, terms, q1, t1, lf, lq, tmp, g1, g2, gcon, gdrv, dg, ddg)
+        prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
+        for k in range(n):
+            lw[k] += h * lq[k]
+            gP[k] += lw[k] * v0[k]
+            gK[k] += lw[k] * f0[k]
+            lv[k] = pre[k] * lw[k]
+            lf[k] = kick[k] * lw[k]
+        _inject(k0 + s, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+
+
+@jit
+def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv):
+    """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
+    tmp = np.empty(lq.shape[0])
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    _force_adjoint(args, terms, q0, t0, lf, lq, tmp, g1, g2, gcon, gdrv, dg, ddg)
+    prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
+
+
+@jit
+def _force_tangent(args, terms, q, t, dq, d1, d2, dcon, ddrv, out, dg, ddg):
+    model_tangent(q, args, dq, d1, d2, out)
+    contact_tangent(q, dq, out, terms.con_ij, terms.con_prm, dcon)
+    drive_force_tangent(t, out, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, ddrv, dg, ddg)
+
+
+@jit
+def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
+            D1, D2, DK, DP, DS, DCON, DDRV, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF):
+    """Forward run with tangents along several parameter directions (index m of every D*).
+
+    From the given (q, v) at t (prescribed and force computed here, as ``initial_force``),
+    records the state at the observed DOFs every ``stride`` steps (Rq, Rv, Rf: (samples, obs))
+    and its derivatives along each direction (TQ, TV, TF: (dirs, samples, obs)). D1, D2 are the
+    directions of the parameter tables, DK, DP, DS of the integrator factors, DCON, DDRV of the
+    contact and drive parameters, DQ0, DV0 of the initial state. Returns t.
+    """
+    n = q.shape[0]
+    nd = D1.shape[0]
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    dq = DQ0.copy()
+    dv = DV0.copy()
+    df = np.zeros((nd, n))
+    dw = np.empty(n)
+    tmp = np.empty(n)
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    apply_prescribed(q, v, t, dd, dm, ds, dp)
+    total_force(args, q, v, t, f, terms)
+    for m in range(nd):
+        prescribed_tangent(t, dq[m], dv[m], dd, dm, ds, dp, DDRV[m], dg, ddg)
+        _force_tangent(args, terms, q, t, dq[m], D1[m], D2[m], DCON[m], DDRV[m], df[m], dg, ddg)
+    w = np.empty(n)
+    for k in range(nsteps + 1):
+        if k % stride == 0:
+            j = k // stride
+            _record(q, v, f, obs, Rq, Rv, Rf, j)
+            for m in range(nd):
+                _record(dq[m], dv[m], df[m], obs, TQ[m], TV[m], TF[m], j)
+        if k == nsteps:
+            break
+        # primal half kick and drift (w kept), tangents of w and q'
+        for m in range(nd):
+            for i in range(n):
+                dw[i] = pre[i] * dv[m, i] + DP[m, i] * v[i] + kick[i] * df[m, i] + DK[m, i] * f[i]
+                dq[m, i] += h * dw[i]
+            dv[m, :] = dw  # holds dw until the closing kick
+        for i in range(n):
+            w[i] = pre[i] * v[i] + kick[i] * f[i]
+            q[i] += h * w[i]
+        t1 = t + h
+        apply_prescribed(q, w, t1, dd, dm, ds, dp)
+        total_force(args, q, w, t1, f, terms)
+        for m in range(nd):
+            prescribed_tangent(t1, dq[m], dv[m], dd, dm, ds, dp, DDRV[m], dg, ddg)
+            _force_tangent(args, terms, q, t1, dq[m], D1[m], D2[m], DCON[m], DDRV[m], tmp, dg, ddg)
+            for i in range(n):
+                df[m, i] = tmp[i]
+                dv[m, i] = DS[m, i] * (w[i] + kick[i] * f[i]) + post[i] * (
+                    dv[m, i] + DK[m, i] * f[i] + kick[i] * tmp[i])
+        for i in range(n):
+            v[i] = (w[i] + kick[i] * f[i]) * post[i]
+        t = t1
+    return t
+
+
+@jit
+def apply_prescribed_only(terms, q, v, t):
+    """``common.apply_prescribed`` with the terms' drive tables (the start of a run)."""
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
