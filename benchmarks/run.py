@@ -83,7 +83,7 @@ def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: 
             "wall_median_s": float(np.median(walls)), "cpu_min_s": min(cpus),
             "M_unit_steps_per_s": steps * n / min(walls) / 1e6,
             "M_unit_steps_per_cpu_s": steps * n / min(cpus) / 1e6 * used,
-            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__, "walls_s": walls}
+            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__, "walls_s": walls, "cpus_s": cpus}
 
 
 def _load() -> str:
@@ -225,9 +225,12 @@ def _sheet_bytes(system) -> float:
 
 
 def _chain_bytes(system, damp, h: float = 0.1) -> float:
-    """Bytes per unit-step the fused chain kernel moves: q and v read and written (64), plus 8
-    for each parameter or kick column it streams where that column varies (the per-call tables
-    of ``verlet_chain._prepare``; a uniform chain streams none)."""
+    """Bytes per unit-step of one sweep of the fused chain kernel: q and v read and written (64),
+    plus 8 for each parameter or kick column it streams where that column varies (the per-call
+    tables of ``verlet_chain._prepare``; a uniform chain streams none). The memory roof is
+    taken against these bytes, what a kernel sweeping the chain once per step moves; blocked in
+    time (``verlet_chain.TIME_BLOCK`` steps per sweep), the kernel moves them once per time
+    block (``roofline`` prints both)."""
     from flexmm.integrators.verlet_chain import BLOCK, _is_damped, _prepare
 
     n = system.n_sites
@@ -235,6 +238,13 @@ def _chain_bytes(system, damp, h: float = 0.1) -> float:
     flag = tables[3]
     sizes = np.minimum(BLOCK, n - BLOCK * np.arange(flag.shape[0]))
     return 64.0 + 8.0 * float((flag.sum(axis=1) * sizes).sum()) / n
+
+
+def _time_block(steps: int) -> int:
+    """Steps per sweep over memory of the fused chain kernel in calls of ``steps`` steps."""
+    from flexmm.integrators.verlet_chain import TIME_BLOCK
+
+    return min(steps, TIME_BLOCK)
 
 
 def _prepare_s(system, damp, repeats: int = 5) -> float:
@@ -349,7 +359,8 @@ def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=
             step_s = row["wall_min_s"] / steps
             report(f"chain {chain}", n, rate, rate * row["wall_min_s"] / row["wall_median_s"],
                    _chain_bytes(system, damp), CHAIN_FLOPS,
-                   f"; preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
+                   f"; time-blocked traffic {_chain_bytes(system, damp) / _time_block(steps):.1f} B per unit-step; "
+                   f"preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
             del system
     for r, c in sheet_sizes:
         row = _sheet_rate(r, c, repeats)
@@ -364,7 +375,7 @@ def _busy_loop() -> subprocess.Popen:
 
 
 def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
-    """One thread against two on the fused chain kernel, on an idle machine and beside a busy
+    """One thread against two on the fused chain kernel, without and beside a busy
     loop (another process holding a core): advances of the two steppers alternate, minimum and
     median of ``repeats`` each. Also what ``parallel.choose_threads`` picks in each case."""
     from flexmm.integrators import INTEGRATORS
@@ -400,7 +411,7 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
                    **{f"threads{th}_best": max(r) for th, r in rates.items()},
                    **{f"threads{th}_median": m for th, m in med.items()},
                    "median_ratio": med[2] / med[1], "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
-            print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'idle machine      '}: one thread "
+            print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'no busy loop      '}: one thread "
                   f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median; two threads {max(rates[2]):6.1f} best, "
                   f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; choose_threads -> {auto} ({load})")
             out.append(row)
@@ -437,7 +448,7 @@ def _kinetic_contention(rows: int = 60, cols: int = 80, repeats: int = 41) -> di
             if busy is not None:
                 busy.kill()
                 busy.wait()
-        print(f"kinetic energy, {system.ndof:,d} DOFs, {'beside a busy loop' if loaded else 'idle machine'}: "
+        print(f"kinetic energy, {system.ndof:,d} DOFs, {'beside a busy loop' if loaded else 'no busy loop'}: "
               f"System.kinetic_energy median {row[f'compiled_{tag}_median_ms']:.3f} ms (worst "
               f"{row[f'compiled_{tag}_worst_ms']:.3f}); np.dot median {row[f'np.dot_{tag}_median_ms']:.3f} ms "
               f"(worst {row[f'np.dot_{tag}_worst_ms']:.3f}) ({load})")
@@ -709,6 +720,7 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
         out.append({"what": key, "max_rel_deviation": dev})
     for what, size in cases:
         rates = {"this": [], "base": []}
+        cpu = {"this": [], "base": []}
         n = None
         for rnd in range(rounds if size != 10_000_000 else 1):
             order = ("this", "base") if rnd % 2 == 0 else ("base", "this")
@@ -716,14 +728,17 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
                 row = _in_tree(trees[tag], "_case", json.dumps([what, size, repeats]))
                 n = row["n_units"]
                 rates[tag] += [row["steps"] * n / w / 1e6 for w in row["walls_s"]]
+                cpu[tag] += [row["steps"] * n / c / 1e6 for c in row["cpus_s"]]
                 rates[tag + "_kernel"] = row["kernel"]
         best = {tag: max(rates[tag]) for tag in trees}
         med = {tag: float(np.median(rates[tag])) for tag in trees}
         label = f"{what} {size[0]}x{size[1]}" if what == "sheet" else f"{what} N = {size:,d}"
         print(f"{label:24s} this {best['this']:6.1f} M unit-steps/s best, {med['this']:6.1f} median "
               f"({rates['this_kernel']}); base {best['base']:6.1f}, {med['base']:6.1f} ({rates['base_kernel']}): "
-              f"{med['this'] / med['base']:.2f}x by medians ({len(rates['this'])} runs each; {_load()})")
+              f"{med['this'] / med['base']:.2f}x by medians; per CPU-second {max(cpu['this']):.1f} and "
+              f"{max(cpu['base']):.1f} best ({len(rates['this'])} runs each; {_load()})")
         out.append({"what": what, "size": size, "n_units": n, "best": best, "median": med,
+                    "best_per_cpu_s": {tag: max(cpu[tag]) for tag in trees},
                     "ratio_median": med["this"] / med["base"], "load": os.getloadavg()})
     return out
 

@@ -18,8 +18,8 @@ from flexmm.models.hinge import ChainArgs
 from flexmm.models.sheet_kernels import SheetArgs
 from flexmm.integrators.verlet import verlet_advance
 from flexmm.integrators.common import ACC_DISSIPATED, ACC_WORK
-from flexmm.integrators.verlet_chain import (C_KR, C_KS, RANGE_MIN, TIME_BLOCK, _is_damped, _n_ranges, _prepare,
-                                             chain_verlet_advance, chain_verlet_advance_parallel, fusable)
+from flexmm.integrators.verlet_chain import (C_KR, C_KS, RANGE_MIN, TIME_BLOCK, _is_damped, _n_chunks, _n_ranges,
+                                             _prepare, chain_verlet_advance, chain_verlet_advance_parallel, fusable)
 from flexmm.models.hinge import (BLOCK, H_KL, H_KS, H_REST, S_KR, S_THETA0, chain_energy, chain_force,
                                  chain_force_parallel, chain_reference)
 
@@ -125,7 +125,7 @@ VARIANTS = ["undamped", "viscous", "shaker+viscous", "prescribed"]
 @pytest.mark.parametrize("chain", ["uniform", "graded", "patch"])
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_fused_chain_verlet_equals_unfused(threads, chain, variant) -> None:
-    """Fused sweep (several blocks, 5 ranges, 45 steps = a time block of 32 and a shorter one)
+    """Fused sweep (several blocks, 15 ranges in 5 chunks, 45 steps = a time block of 32 and a shorter one)
     = verlet_advance + chain_force, bit for bit, on uniform chains (scalar parameters), graded
     ones (columns) and ones graded in a few blocks; with damping, an applied force and a
     prescribed displacement. The ledger's applied work is the same sum; the dissipation is
@@ -133,7 +133,7 @@ def test_fused_chain_verlet_equals_unfused(threads, chain, variant) -> None:
     problem = chain_problem(5 * RANGE_MIN + 1234, variant=variant, theta0_rad=0.2, n_lateral=2,
                             lateral_stretch=True, right="fixed")
     s = problem.system
-    assert _n_ranges(s.n_sites) == 5
+    assert _n_chunks(s.n_sites) == 5 and _n_ranges(s.n_sites) == 15
     assert fusable(s.args, s.q0, s.inv_mass, problem.damp, problem.terms)
     _grade(s, chain)
     tables = _prepare(s.args, s.inv_mass, problem.damp, 0.1, _is_damped(s.inv_mass, problem.damp))
