@@ -182,8 +182,8 @@ def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) 
     return out
 
 
-def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float]:
-    """(best, median) GB/s of the triad, one thread, on three arrays of ``nbytes`` in all: the
+def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float, float]:
+    """(best, median, best per CPU-second) GB/s of the triad, one thread, on three arrays of ``nbytes`` in all: the
     bandwidth of the memory level a working set of that size lives in."""
     import numba
 
@@ -192,12 +192,13 @@ def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float]:
     numba.set_num_threads(1)
     a, b, c = np.zeros(n), np.ones(n), np.ones(n)
     triad(a, b, c, 0.5, 16)
-    walls = []
+    walls, cpus = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         triad(a, b, c, 0.5, 16)
         walls.append(time.perf_counter() - t0)
-    return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9
+        cpus.append(time.process_time() - c0)
+    return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9, 24 * n / max(min(cpus), 1e-9) / 1e9
 
 
 #: flops per unit-step of the fused chain kernel, counted from its loops (no FMA: a multiply and
@@ -333,16 +334,19 @@ def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=
     spec = INTEGRATORS["velocity_verlet"]
     out = []
 
-    def report(what, n, rate, rate_med, nbytes, flops, extra=""):
-        bw, bw_med = _triad_gbs(nbytes * n)
-        roof = bw * 1e9 / nbytes / 1e6
+    def report(what, n, rate, rate_med, rate_cpu, nbytes, flops, extra=""):
+        bw, bw_med, bw_cpu = _triad_gbs(nbytes * n)
+        roof, roof_cpu = bw * 1e9 / nbytes / 1e6, bw_cpu * 1e9 / nbytes / 1e6
         row = {"what": what, "n_units": n, "M_unit_steps_per_s": rate, "M_unit_steps_per_s_median": rate_med,
-               "bytes_per_unit_step": nbytes, "flops_per_unit_step": flops, "triad_GB_s": bw,
-               "triad_GB_s_median": bw_med, "memory_roof_M_per_s": roof, "fraction_of_roof": rate / roof,
-               "load": os.getloadavg()}
+               "M_unit_steps_per_cpu_s": rate_cpu, "bytes_per_unit_step": nbytes, "flops_per_unit_step": flops,
+               "triad_GB_s": bw, "triad_GB_s_median": bw_med, "triad_GB_per_cpu_s": bw_cpu,
+               "memory_roof_M_per_s": roof, "fraction_of_roof": rate / roof,
+               "fraction_of_roof_per_cpu_s": rate_cpu / roof_cpu, "load": os.getloadavg()}
         print(f"{what:18s} N = {n:>10,d}: {rate:6.1f} M/s (median {rate_med:6.1f}); {nbytes:5.0f} B, {flops} flop per "
               f"unit-step -> {rate * nbytes / 1e3:5.1f} GB/s, {rate * flops / 1e3:5.1f} GFLOP/s; triad {bw:5.1f} GB/s "
-              f"(median {bw_med:.1f}) -> roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it{extra} ({_load()})")
+              f"(median {bw_med:.1f}) -> roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it; per CPU-second "
+              f"{rate_cpu:6.1f} M/s against a triad of {bw_cpu:5.1f} GB/s: {100 * rate_cpu / roof_cpu:4.0f} % of that "
+              f"roof{extra} ({_load()})")
         out.append(row)
 
     for n in sizes:
@@ -358,14 +362,14 @@ def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=
             prep = _prepare_s(system, damp)
             step_s = row["wall_min_s"] / steps
             report(f"chain {chain}", n, rate, rate * row["wall_min_s"] / row["wall_median_s"],
-                   _chain_bytes(system, damp), CHAIN_FLOPS,
+                   row["M_unit_steps_per_cpu_s"], _chain_bytes(system, damp), CHAIN_FLOPS,
                    f"; time-blocked traffic {_chain_bytes(system, damp) / _time_block(steps):.1f} B per unit-step; "
                    f"preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
             del system
     for r, c in sheet_sizes:
         row = _sheet_rate(r, c, repeats)
         report("sheet Verlet", row["n_units"], row["M_unit_steps_per_s"], row["M_unit_steps_per_s_median"],
-               row["bytes_per_unit_step"], SHEET_FLOPS)
+               row["M_unit_steps_per_cpu_s"], row["bytes_per_unit_step"], SHEET_FLOPS)
     return out
 
 
