@@ -400,8 +400,9 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
                 time.sleep(0.5)
                 auto = choose_threads(n)
                 rates = {1: [], 2: []}
-                for _ in range(repeats):
-                    for th, st in steppers.items():
+                for rep in range(repeats):
+                    for th in ((1, 2) if rep % 2 == 0 else (2, 1)):  # ABBA: neither always goes first
+                        st = steppers[th]
                         w0 = st.wall_s
                         st.advance(steps)
                         rates[th].append(n * steps / (st.wall_s - w0) / 1e6)
@@ -411,13 +412,15 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
                     busy.kill()
                     busy.wait()
             med = {th: float(np.median(r)) for th, r in rates.items()}
-            row = {"n_units": n, "competing_process": loaded, "auto_threads": auto,
+            counts = dict(getattr(steppers[2].kernel, "counts", {}))  # calls by thread count (AdaptiveThreads)
+            row = {"n_units": n, "competing_process": loaded, "auto_threads": auto, "calls_by_threads": counts,
                    **{f"threads{th}_best": max(r) for th, r in rates.items()},
                    **{f"threads{th}_median": m for th, m in med.items()},
                    "median_ratio": med[2] / med[1], "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
             print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'no busy loop      '}: one thread "
                   f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median; two threads {max(rates[2]):6.1f} best, "
-                  f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; choose_threads -> {auto} ({load})")
+                  f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; two-thread stepper's calls by threads so far {counts}; "
+                  f"choose_threads -> {auto} ({load})")
             out.append(row)
         del system, steppers
     out.append(_kinetic_contention())
