@@ -56,7 +56,17 @@ def _grade(system) -> None:
 def _grade_all(system) -> None:
     """Vary every parameter of the hinges and sites by ±0.1 % along the chain (rest length and
     angle, half sizes, all stiffnesses): the fused kernel then streams nine parameter columns."""
-    from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, S_KG, S_KR, S_THETA0
+    from flexmm.models.hinge import (
+        H_HALF_A,
+        H_HALF_B,
+        H_KL,
+        H_KS,
+        H_KT,
+        H_REST,
+        S_KG,
+        S_KR,
+        S_THETA0,
+    )
 
     x = 1e-3 * np.linspace(-1.0, 1.0, system.n_sites)
     for k in (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT):
@@ -163,13 +173,7 @@ def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) 
             if th > numba.config.NUMBA_NUM_THREADS:
                 continue
             numba.set_num_threads(th)
-            triad(a, b, c, 0.5, 16)
-            walls, cpus = [], []
-            for _ in range(repeats):
-                t0, c0 = time.perf_counter(), time.process_time()
-                triad(a, b, c, 0.5, 16)
-                walls.append(time.perf_counter() - t0)
-                cpus.append(time.process_time() - c0)
+            walls, cpus = _time_triad(triad, a, b, c, repeats)
             row = {"n": n, "threads": th, "GB_per_s": 24 * n / min(walls) / 1e9,
                    "GB_per_s_median": 24 * n / float(np.median(walls)) / 1e9, "cpu_over_wall": min(cpus) / min(walls)}
             print(f"triad {n:>11,d} doubles ({8 * n / 2**20:.0f} MiB/array), threads {th}: {row['GB_per_s']:6.1f} GB/s "
@@ -182,6 +186,18 @@ def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) 
     return out
 
 
+def _time_triad(triad, a, b, c, repeats: int) -> tuple[list, list]:
+    """(wall, process CPU) seconds of ``repeats`` triads after a warm-up call."""
+    triad(a, b, c, 0.5, 16)
+    walls, cpus = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        triad(a, b, c, 0.5, 16)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return walls, cpus
+
+
 def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float, float]:
     """(best, median, best per CPU-second) GB/s of the triad, one thread, on three arrays of ``nbytes`` in all: the
     bandwidth of the memory level a working set of that size lives in."""
@@ -190,14 +206,7 @@ def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float, float]:
     n = max(4096, int(nbytes / 24))
     triad = _triad_kernel()
     numba.set_num_threads(1)
-    a, b, c = np.zeros(n), np.ones(n), np.ones(n)
-    triad(a, b, c, 0.5, 16)
-    walls, cpus = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        triad(a, b, c, 0.5, 16)
-        walls.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
+    walls, cpus = _time_triad(triad, np.zeros(n), np.ones(n), np.ones(n), repeats)
     return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9, 24 * n / max(min(cpus), 1e-9) / 1e9
 
 
