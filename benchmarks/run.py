@@ -56,7 +56,17 @@ def _grade(system) -> None:
 def _grade_all(system) -> None:
     """Vary every parameter of the hinges and sites by ±0.1 % along the chain (rest length and
     angle, half sizes, all stiffnesses): the fused kernel then streams nine parameter columns."""
-    from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, S_KG, S_KR, S_THETA0
+    from flexmm.models.hinge import (
+        H_HALF_A,
+        H_HALF_B,
+        H_KL,
+        H_KS,
+        H_KT,
+        H_REST,
+        S_KG,
+        S_KR,
+        S_THETA0,
+    )
 
     x = 1e-3 * np.linspace(-1.0, 1.0, system.n_sites)
     for k in (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT):
@@ -83,7 +93,7 @@ def _time_advance(spec, system, terms, damp, threads: int, steps: int, repeats: 
             "wall_median_s": float(np.median(walls)), "cpu_min_s": min(cpus),
             "M_unit_steps_per_s": steps * n / min(walls) / 1e6,
             "M_unit_steps_per_cpu_s": steps * n / min(cpus) / 1e6 * used,
-            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__, "walls_s": walls}
+            "finite": bool(np.isfinite(q).all()), "kernel": advance.__name__, "walls_s": walls, "cpus_s": cpus}
 
 
 def _load() -> str:
@@ -163,13 +173,7 @@ def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) 
             if th > numba.config.NUMBA_NUM_THREADS:
                 continue
             numba.set_num_threads(th)
-            triad(a, b, c, 0.5, 16)
-            walls, cpus = [], []
-            for _ in range(repeats):
-                t0, c0 = time.perf_counter(), time.process_time()
-                triad(a, b, c, 0.5, 16)
-                walls.append(time.perf_counter() - t0)
-                cpus.append(time.process_time() - c0)
+            walls, cpus = _time_triad(triad, a, b, c, repeats)
             row = {"n": n, "threads": th, "GB_per_s": 24 * n / min(walls) / 1e9,
                    "GB_per_s_median": 24 * n / float(np.median(walls)) / 1e9, "cpu_over_wall": min(cpus) / min(walls)}
             print(f"triad {n:>11,d} doubles ({8 * n / 2**20:.0f} MiB/array), threads {th}: {row['GB_per_s']:6.1f} GB/s "
@@ -182,22 +186,28 @@ def bandwidth(sizes=(2_000_000, 16_000_000), threads=(1, 2), repeats: int = 15) 
     return out
 
 
-def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float]:
-    """(best, median) GB/s of the triad, one thread, on three arrays of ``nbytes`` in all: the
+def _time_triad(triad, a, b, c, repeats: int) -> tuple[list, list]:
+    """(wall, process CPU) seconds of ``repeats`` triads after a warm-up call."""
+    triad(a, b, c, 0.5, 16)
+    walls, cpus = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        triad(a, b, c, 0.5, 16)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return walls, cpus
+
+
+def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float, float]:
+    """(best, median, best per CPU-second) GB/s of the triad, one thread, on three arrays of ``nbytes`` in all: the
     bandwidth of the memory level a working set of that size lives in."""
     import numba
 
     n = max(4096, int(nbytes / 24))
     triad = _triad_kernel()
     numba.set_num_threads(1)
-    a, b, c = np.zeros(n), np.ones(n), np.ones(n)
-    triad(a, b, c, 0.5, 16)
-    walls = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        triad(a, b, c, 0.5, 16)
-        walls.append(time.perf_counter() - t0)
-    return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9
+    walls, cpus = _time_triad(triad, np.zeros(n), np.ones(n), np.ones(n), repeats)
+    return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9, 24 * n / max(min(cpus), 1e-9) / 1e9
 
 
 #: flops per unit-step of the fused chain kernel, counted from its loops (no FMA: a multiply and
@@ -225,9 +235,12 @@ def _sheet_bytes(system) -> float:
 
 
 def _chain_bytes(system, damp, h: float = 0.1) -> float:
-    """Bytes per unit-step the fused chain kernel moves: q and v read and written (64), plus 8
-    for each parameter or kick column it streams where that column varies (the per-call tables
-    of ``verlet_chain._prepare``; a uniform chain streams none)."""
+    """Bytes per unit-step of one sweep of the fused chain kernel: q and v read and written (64),
+    plus 8 for each parameter or kick column it streams where that column varies (the per-call
+    tables of ``verlet_chain._prepare``; a uniform chain streams none). The memory roof is
+    taken against these bytes, what a kernel sweeping the chain once per step moves; blocked in
+    time (``verlet_chain.TIME_BLOCK`` steps per sweep), the kernel moves them once per time
+    block (``roofline`` prints both)."""
     from flexmm.integrators.verlet_chain import BLOCK, _is_damped, _prepare
 
     n = system.n_sites
@@ -235,6 +248,13 @@ def _chain_bytes(system, damp, h: float = 0.1) -> float:
     flag = tables[3]
     sizes = np.minimum(BLOCK, n - BLOCK * np.arange(flag.shape[0]))
     return 64.0 + 8.0 * float((flag.sum(axis=1) * sizes).sum()) / n
+
+
+def _time_block(steps: int) -> int:
+    """Steps per sweep over memory of the fused chain kernel in calls of ``steps`` steps."""
+    from flexmm.integrators.verlet_chain import TIME_BLOCK
+
+    return min(steps, TIME_BLOCK)
 
 
 def _prepare_s(system, damp, repeats: int = 5) -> float:
@@ -323,16 +343,19 @@ def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=
     spec = INTEGRATORS["velocity_verlet"]
     out = []
 
-    def report(what, n, rate, rate_med, nbytes, flops, extra=""):
-        bw, bw_med = _triad_gbs(nbytes * n)
-        roof = bw * 1e9 / nbytes / 1e6
+    def report(what, n, rate, rate_med, rate_cpu, nbytes, flops, extra=""):
+        bw, bw_med, bw_cpu = _triad_gbs(nbytes * n)
+        roof, roof_cpu = bw * 1e9 / nbytes / 1e6, bw_cpu * 1e9 / nbytes / 1e6
         row = {"what": what, "n_units": n, "M_unit_steps_per_s": rate, "M_unit_steps_per_s_median": rate_med,
-               "bytes_per_unit_step": nbytes, "flops_per_unit_step": flops, "triad_GB_s": bw,
-               "triad_GB_s_median": bw_med, "memory_roof_M_per_s": roof, "fraction_of_roof": rate / roof,
-               "load": os.getloadavg()}
+               "M_unit_steps_per_cpu_s": rate_cpu, "bytes_per_unit_step": nbytes, "flops_per_unit_step": flops,
+               "triad_GB_s": bw, "triad_GB_s_median": bw_med, "triad_GB_per_cpu_s": bw_cpu,
+               "memory_roof_M_per_s": roof, "fraction_of_roof": rate / roof,
+               "fraction_of_roof_per_cpu_s": rate_cpu / roof_cpu, "load": os.getloadavg()}
         print(f"{what:18s} N = {n:>10,d}: {rate:6.1f} M/s (median {rate_med:6.1f}); {nbytes:5.0f} B, {flops} flop per "
               f"unit-step -> {rate * nbytes / 1e3:5.1f} GB/s, {rate * flops / 1e3:5.1f} GFLOP/s; triad {bw:5.1f} GB/s "
-              f"(median {bw_med:.1f}) -> roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it{extra} ({_load()})")
+              f"(median {bw_med:.1f}) -> roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it; per CPU-second "
+              f"{rate_cpu:6.1f} M/s against a triad of {bw_cpu:5.1f} GB/s: {100 * rate_cpu / roof_cpu:4.0f} % of that "
+              f"roof{extra} ({_load()})")
         out.append(row)
 
     for n in sizes:
@@ -348,13 +371,14 @@ def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=
             prep = _prepare_s(system, damp)
             step_s = row["wall_min_s"] / steps
             report(f"chain {chain}", n, rate, rate * row["wall_min_s"] / row["wall_median_s"],
-                   _chain_bytes(system, damp), CHAIN_FLOPS,
-                   f"; preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
+                   row["M_unit_steps_per_cpu_s"], _chain_bytes(system, damp), CHAIN_FLOPS,
+                   f"; time-blocked traffic {_chain_bytes(system, damp) / _time_block(steps):.1f} B per unit-step; "
+                   f"preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
             del system
     for r, c in sheet_sizes:
         row = _sheet_rate(r, c, repeats)
         report("sheet Verlet", row["n_units"], row["M_unit_steps_per_s"], row["M_unit_steps_per_s_median"],
-               row["bytes_per_unit_step"], SHEET_FLOPS)
+               row["M_unit_steps_per_cpu_s"], row["bytes_per_unit_step"], SHEET_FLOPS)
     return out
 
 
@@ -364,7 +388,7 @@ def _busy_loop() -> subprocess.Popen:
 
 
 def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
-    """One thread against two on the fused chain kernel, on an idle machine and beside a busy
+    """One thread against two on the fused chain kernel, without and beside a busy
     loop (another process holding a core): advances of the two steppers alternate, minimum and
     median of ``repeats`` each. Also what ``parallel.choose_threads`` picks in each case."""
     from flexmm.integrators import INTEGRATORS
@@ -385,8 +409,9 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
                 time.sleep(0.5)
                 auto = choose_threads(n)
                 rates = {1: [], 2: []}
-                for _ in range(repeats):
-                    for th, st in steppers.items():
+                for rep in range(repeats):
+                    for th in ((1, 2) if rep % 2 == 0 else (2, 1)):  # ABBA: neither always goes first
+                        st = steppers[th]
                         w0 = st.wall_s
                         st.advance(steps)
                         rates[th].append(n * steps / (st.wall_s - w0) / 1e6)
@@ -396,13 +421,15 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
                     busy.kill()
                     busy.wait()
             med = {th: float(np.median(r)) for th, r in rates.items()}
-            row = {"n_units": n, "competing_process": loaded, "auto_threads": auto,
+            counts = dict(getattr(steppers[2].kernel, "counts", {}))  # calls by thread count (AdaptiveThreads)
+            row = {"n_units": n, "competing_process": loaded, "auto_threads": auto, "calls_by_threads": counts,
                    **{f"threads{th}_best": max(r) for th, r in rates.items()},
                    **{f"threads{th}_median": m for th, m in med.items()},
                    "median_ratio": med[2] / med[1], "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
-            print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'idle machine      '}: one thread "
+            print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'no busy loop      '}: one thread "
                   f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median; two threads {max(rates[2]):6.1f} best, "
-                  f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; choose_threads -> {auto} ({load})")
+                  f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; two-thread stepper's calls by threads so far {counts}; "
+                  f"choose_threads -> {auto} ({load})")
             out.append(row)
         del system, steppers
     out.append(_kinetic_contention())
@@ -437,7 +464,7 @@ def _kinetic_contention(rows: int = 60, cols: int = 80, repeats: int = 41) -> di
             if busy is not None:
                 busy.kill()
                 busy.wait()
-        print(f"kinetic energy, {system.ndof:,d} DOFs, {'beside a busy loop' if loaded else 'idle machine'}: "
+        print(f"kinetic energy, {system.ndof:,d} DOFs, {'beside a busy loop' if loaded else 'no busy loop'}: "
               f"System.kinetic_energy median {row[f'compiled_{tag}_median_ms']:.3f} ms (worst "
               f"{row[f'compiled_{tag}_worst_ms']:.3f}); np.dot median {row[f'np.dot_{tag}_median_ms']:.3f} ms "
               f"(worst {row[f'np.dot_{tag}_worst_ms']:.3f}) ({load})")
@@ -709,6 +736,7 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
         out.append({"what": key, "max_rel_deviation": dev})
     for what, size in cases:
         rates = {"this": [], "base": []}
+        cpu = {"this": [], "base": []}
         n = None
         for rnd in range(rounds if size != 10_000_000 else 1):
             order = ("this", "base") if rnd % 2 == 0 else ("base", "this")
@@ -716,14 +744,17 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
                 row = _in_tree(trees[tag], "_case", json.dumps([what, size, repeats]))
                 n = row["n_units"]
                 rates[tag] += [row["steps"] * n / w / 1e6 for w in row["walls_s"]]
+                cpu[tag] += [row["steps"] * n / c / 1e6 for c in row["cpus_s"]]
                 rates[tag + "_kernel"] = row["kernel"]
         best = {tag: max(rates[tag]) for tag in trees}
         med = {tag: float(np.median(rates[tag])) for tag in trees}
         label = f"{what} {size[0]}x{size[1]}" if what == "sheet" else f"{what} N = {size:,d}"
         print(f"{label:24s} this {best['this']:6.1f} M unit-steps/s best, {med['this']:6.1f} median "
               f"({rates['this_kernel']}); base {best['base']:6.1f}, {med['base']:6.1f} ({rates['base_kernel']}): "
-              f"{med['this'] / med['base']:.2f}x by medians ({len(rates['this'])} runs each; {_load()})")
+              f"{med['this'] / med['base']:.2f}x by medians; per CPU-second {max(cpu['this']):.1f} and "
+              f"{max(cpu['base']):.1f} best ({len(rates['this'])} runs each; {_load()})")
         out.append({"what": what, "size": size, "n_units": n, "best": best, "median": med,
+                    "best_per_cpu_s": {tag: max(cpu[tag]) for tag in trees},
                     "ratio_median": med["this"] / med["base"], "load": os.getloadavg()})
     return out
 

@@ -75,3 +75,19 @@ def verlet_run(advance, problem, q0, v0, steps: int, h: float, calls: int = 1):
     for _ in range(calls):
         t = advance(s.args, q, v, f, s.inv_mass, problem.damp, terms, t, h, steps, acc)
     return q, v, f, t, acc
+
+
+def assert_same_run(out, ref) -> None:
+    """Two ``verlet_run`` results agree: state, force and time bit for bit, the ledger's applied
+    work and counters exactly, its dissipation to rounding (a fused kernel sums it by blocks)."""
+    import pytest
+
+    from flexmm.integrators.common import ACC_DISSIPATED, ACC_WORK
+
+    for a, b in zip(out[:3], ref[:3]):
+        np.testing.assert_array_equal(a, b)
+    assert out[3] == ref[3]
+    acc, acc_ref = out[4], ref[4]
+    assert acc[ACC_WORK] == acc_ref[ACC_WORK]
+    assert acc[ACC_DISSIPATED] == pytest.approx(acc_ref[ACC_DISSIPATED], rel=1e-13, abs=0)
+    np.testing.assert_array_equal(acc[ACC_WORK + 1 :], acc_ref[ACC_WORK + 1 :])  # counters

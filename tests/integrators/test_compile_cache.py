@@ -23,37 +23,47 @@ from flexmm.config import scene_from_dict
 from flexmm.integrators.stepper import make_stepper
 import flexmm._jit as J
 
-integrator = sys.argv[1]
-lat = {"kind": "rotating_squares_chain", "n_units": 12, "a_m": 0.016, "k_long_n_per_m": 71690.0,
-       "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3,
-       "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
-scene = scene_from_dict({"name": "t", "lattice": lat, "excitation": {"kind": "impact", "end": "left",
-                         "velocity_m_s": 1.0, "angular_velocity_rad_s": 50.0},
+integrator, model = sys.argv[1], sys.argv[2]
+if model == "chain":
+    lat = {"kind": "rotating_squares_chain", "n_units": 12, "a_m": 0.016, "k_long_n_per_m": 71690.0,
+           "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3,
+           "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+    excitation = {"kind": "impact", "end": "left", "velocity_m_s": 1.0, "angular_velocity_rad_s": 50.0}
+else:  # the sheet, driven on its left column (Verlet fused with the sheet force)
+    lat = {"kind": "rotating_squares_sheet", "n_rows": 5, "n_cols": 7, "a_m": 0.01, "theta0_rad": 0.35,
+           "k_long_n_per_m": 1.0e4, "k_shear_n_per_m": 3.3e3, "k_rot_n_m_per_rad": 7.5e-3, "mass_kg": 1.0e-3,
+           "inertia_kg_m2": 8.333333333e-9, "left": "driven"}
+    excitation = {"kind": "shaker", "end": "left", "frequency_hz": 500.0, "amplitude_n": 2.0, "ramp_cycles": 0.5,
+                  "duration_s": 0.002}
+scene = scene_from_dict({"name": "t", "lattice": lat, "excitation": excitation,
                          "solver": {"duration_s": 1e-3, "integrator": integrator}})
 st = make_stepper(build_problem(scene), threads=1)
 st.advance(50)
 stats = st.kernel.stats
 print(json.dumps({"hits": sum(stats.cache_hits.values()), "misses": sum(stats.cache_misses.values()),
                   "q": st.q.tolist(), "v": st.v.tolist(), "cache_dir": str(J.CACHE_DIR),
-                  "compile_s": st.compile_s}))
+                  "compile_s": st.compile_s, "kernel": st.kernel.__name__}))
 """
 
 
-def _run(integrator: str, env: dict) -> dict:
-    out = subprocess.run([sys.executable, "-c", SCRIPT, integrator], env=env, capture_output=True,
+def _run(integrator: str, env: dict, model: str = "chain") -> dict:
+    out = subprocess.run([sys.executable, "-c", SCRIPT, integrator, model], env=env, capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return {**json.loads(out.stdout.strip().splitlines()[-1]), "stderr": out.stderr}
 
 
-@pytest.mark.parametrize("integrator", ["velocity_verlet", pytest.param("pefrl", marks=pytest.mark.slow)])
-def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator, tmp_path) -> None:
+@pytest.mark.parametrize(("integrator", "model"), [("velocity_verlet", "chain"),
+                                                   pytest.param("pefrl", "chain", marks=pytest.mark.slow),
+                                                   pytest.param("velocity_verlet", "sheet", marks=pytest.mark.slow)])
+def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator, model, tmp_path) -> None:
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    cold = _run(integrator, env)
-    warm = _run(integrator, env)
+    cold = _run(integrator, env, model)
+    warm = _run(integrator, env, model)
     assert cold["misses"] >= 1 and cold["cache_dir"] == str(tmp_path / "cache")
     assert warm["misses"] == 0 and warm["hits"] >= 1
     assert warm["q"] == cold["q"] and warm["v"] == cold["v"]  # bit for bit
+    assert model != "sheet" or cold["kernel"] == "sheet_verlet_advance"
     assert warm["compile_s"] < cold["compile_s"]
     print(f"{integrator}: compile {cold['compile_s']:.2f} s cold, {warm['compile_s']:.3f} s from cache")
 

@@ -6,22 +6,19 @@ threads start to win on the chain. Below it, or for methods without a threaded v
 everything runs on one thread.
 
 On a shared machine three rules keep threads from hurting (``python benchmarks/run.py
-contention``, N = 1e5 and 1e6 on 2 cores beside a busy-loop process):
+contention`` measures one thread against two beside a busy-loop process; README):
 
 - Idle threads sleep instead of spinning: ``OMP_WAIT_POLICY=PASSIVE`` unless the user set it
   (read once, when numba starts its OpenMP threads, so it is set on import here). A spinning
   thread that has finished its share holds a core that the thread still working needs when
-  another process has the other core: the fused two-thread chain kernel's median was
-  0.6–0.7× one thread's with spinning, 0.85–1.04× with passive waiting. Cost on an idle
-  machine: a wake-up per parallel region, nothing for the fused chain kernel (one region per
-  ``verlet_chain.TIME_BLOCK`` steps), ≈ 10 % for threaded kernels with several regions a step.
-- The automatic choice counts the cores that are actually free (``free_cpus``: /proc/stat over
-  20 ms), so a run started beside a busy process uses one thread.
+  another process has the other core. Cost: a wake-up per parallel region, negligible for the
+  fused chain kernel (one region per ``verlet_chain.TIME_BLOCK`` steps).
+- The automatic choice counts the cores of this process's affinity set that are actually free
+  (``free_cpus``: /proc/stat over 20 ms; the 1-minute load average where that cannot be read),
+  so a run started beside a busy process uses one thread.
 - The fused chain kernel gives the same bits on any number of threads, so its threaded advance
   (``AdaptiveThreads``) runs a call on one thread while other processes hold the cores, and
-  otherwise on whichever thread count has been faster lately: 0.98–1.05× one thread's median
-  beside a busy loop (the per-step-barrier kernel before it: 0.55× at N = 1e5, 0.11× when
-  the machine was busier still).
+  otherwise on whichever thread count has been faster lately.
 """
 
 from __future__ import annotations

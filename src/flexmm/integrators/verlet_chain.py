@@ -1,4 +1,4 @@
-"""Velocity Verlet fused with the rotating-squares chain force: one sweep over memory per step.
+"""Velocity Verlet fused with the rotating-squares chain force, blocked in time.
 
 ``verlet_advance`` streams the state three times per step (force; closing kick; opening kick
 and drift). Here each step is one sweep over blocks of ``hinge.BLOCK`` sites, and each block
@@ -23,12 +23,16 @@ scalars (one compiled variant of the loops, ``hinge.param``); any other block re
 block-sized copies of the pattern for the uniform ones, full columns for those that vary
 there (so a graded chain streams only the columns that vary, and only where they do).
 
-Threads (``chain_verlet_advance_parallel``): the chain is cut into fixed ranges (by N, whole
-blocks); each range advances ``TIME_BLOCK`` steps between synchronisations, on its own sites
-plus a halo of ``TIME_BLOCK`` sites on each side copied at the start (the halo's outer sites go
-wrong one site per step, never reaching the range). So the threads meet once per
-``TIME_BLOCK`` steps instead of every step. The serial kernel sums its ledger by the same
-ranges, so both give the same bits, ledger included (``parallel.AdaptiveThreads`` relies on it).
+Time blocking (both kernels): the chain is cut into fixed ranges of about ``RANGE_SITES``
+sites (by N, whole blocks), and each range advances ``TIME_BLOCK`` steps at a time while its
+state is in cache, on its own sites plus a halo of ``TIME_BLOCK`` sites on each side copied
+before any range moves (the halo's outer sites go wrong one site per step, never reaching the
+range; the halos are ≈ 1 % more work). So a chain longer than the caches streams through
+memory once per ``TIME_BLOCK`` steps, not every step. The threaded kernel
+(``chain_verlet_advance_parallel``) shares the ranges out in fixed chunks, so its threads
+meet once per ``TIME_BLOCK`` steps; both kernels do the same arithmetic on the same ranges
+and sum the ledger by range in the same order, so they give the same bits, ledger included
+(``parallel.AdaptiveThreads`` relies on it).
 
 Used for chains with their own hinge order and 2N DOFs, with on-site damping and with
 prescribed-displacement or applied-force drives on up to ``MAX_DRIVES`` DOFs, but without
@@ -50,12 +54,14 @@ from flexmm.models.hinge import (BLOCK, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_
                                  S_KR, S_THETA0, W_FL, W_FT, W_GA, W_GB, W_X, W_Y, ChainArgs,
                                  chain_block_hinges, chain_site_forces, lane_sum, param)
 
-#: steps each thread takes between synchronisations (and the halo width, in sites)
+#: steps a range takes at a time (between synchronisations of the threads; the halo width, in sites)
 TIME_BLOCK = 32
-#: sites per range at least (ranges are fixed by N, not by thread count, and hold whole blocks)
+#: sites per range, about (whole blocks; a range's state and the block scratch stay in L2)
+RANGE_SITES = 2 * BLOCK
+#: sites per chunk of ranges at least (the threaded kernel's unit of work)
 RANGE_MIN = 6 * BLOCK
-#: at most this many ranges (each has two halos to advance besides its sites)
-MAX_RANGES = 16
+#: at most this many chunks
+MAX_CHUNKS = 16
 #: drives (prescribed displacements, applied forces) the fused kernels accept
 MAX_DRIVES = 64
 
@@ -142,6 +148,24 @@ def _table_flags(flat, tile, width, lo, hi, flag, g, col0, tab, pat):
             for i in range(lo, hi):
                 d |= tab[i, k] != pat[i & 1, k]
             flag[g, col0 + k] = d
+
+
+@jit
+def _copy_columns(tab, full, row, c0, cols, m):
+    """full[row[c0 + j]] = column cols[j] of the row-wise table, for the j that have a row: one
+    pass over the table's rows (not one strided pass per column)."""
+    dst = np.empty(len(cols), np.int64)
+    src = np.empty(len(cols), np.int64)
+    k = 0
+    for j in range(len(cols)):
+        if row[c0 + j] >= 0:
+            dst[k] = row[c0 + j]
+            src[k] = cols[j]
+            k += 1
+    if k > 0:
+        for i in range(m):
+            for j in range(k):
+                full[dst[j], i] = tab[i, src[j]]
 
 
 @jit
@@ -235,17 +259,11 @@ def _prepare(args, minv, damp, h, damped):
                 row[c] = nf
                 nf += 1
     full = np.empty((nf, n))
+    _copy_columns(hprm, full, row, C_REST, hcols, n - 1)
+    _copy_columns(sprm, full, row, C_TH0, (S_THETA0, S_KG, S_KR), n)
     for c in range(C_TH0):
         if row[c] >= 0:
-            col, k = full[row[c]], hcols[c]
-            for i in range(n - 1):
-                col[i] = hprm[i, k]
-            col[n - 1] = 0.0
-    for c, k in ((C_TH0, S_THETA0), (C_KG, S_KG), (C_KR, S_KR)):
-        if row[c] >= 0:
-            col = full[row[c]]
-            for i in range(n):
-                col[i] = sprm[i, k]
+            full[row[c], n - 1] = 0.0
     if row[C_C0] >= 0:
         col = full[row[C_C0]]
         for i in range(n):
@@ -485,9 +503,16 @@ def _drives_of(terms, n):
 
 @jit
 def _n_ranges(n):
-    """Fixed ranges of a chain (by N only, not by thread count: serial and threaded kernels cut
-    the chain alike, so their energy ledgers sum in the same order)."""
-    return max(1, min(n // RANGE_MIN, MAX_RANGES))
+    """Ranges of a chain (about ``RANGE_SITES`` each, by N only: serial and threaded kernels cut
+    the chain alike, so they do the same arithmetic and sum their ledgers in the same order)."""
+    return max(1, n // RANGE_SITES)
+
+
+@jit
+def _n_chunks(n):
+    """Chunks of consecutive ranges the threaded kernel shares out (fixed by N, not by thread
+    count, so the compiled kernel is cacheable)."""
+    return max(1, min(n // RANGE_MIN, MAX_CHUNKS))
 
 
 @jit
@@ -521,45 +546,7 @@ def _start_drives(drives, t, gvals, state, lo, hi, p0):
     _power(drives, gvals, state, 0, lo, hi, p0)
 
 
-# ------------------------------------------------------------------ serial
-
-
-@jit
-def chain_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """``verlet_advance`` for ``hinge.chain_force`` (same arguments and results), fused.
-
-    Only for states where ``fusable`` holds (the caller checks).
-    """
-    if nsteps <= 0:
-        return t
-    n = args[3].shape[0]
-    damped = _is_damped(minv, damp)
-    tables = _prepare(args, minv, damp, h, damped)
-    _open(q, v, f, minv, damp, h, damped)
-    drives = _drives_of(terms, n)
-    nd = drives[0].shape[0]
-    nr = _n_ranges(n)
-    gvals, p0, p1, diss = np.zeros(nd), np.zeros(nd), np.zeros(nd), np.zeros(nr)
-    w = np.empty((N_W, min(BLOCK, n) + 1))
-    state = (q[:n], q[n:], v[:n], v[n:])
-    for s in range(nsteps):
-        _start_drives(drives, t, gvals, state, 0, n, p0)
-        t += h
-        _prescribe(drives, t, state, 0, 0, n)
-        _drive_values(drives, t, gvals)
-        _power(drives, gvals, state, 0, 0, n, p1)
-        fl, gb = 0.0, 0.0
-        for r in range(nr):  # the ranges of the threaded kernel, in order
-            lo, hi = _edge(n, nr, r), _edge(n, nr, r + 1)
-            k = min(hi, n - 1)
-            fl, gb, diss[r] = _segment(q[:n], q[n:], v[:n], v[n:], f[:n], f[n:], 0, lo, hi, q[k], q[n + k], hi < n,
-                                       fl, gb, tables, w, h, s == nsteps - 1, damped, drives, gvals)
-        _ledger(acc, h, damped, diss, p0, p1)
-    _count(acc, nsteps)
-    return t
-
-
-# ------------------------------------------------------------------ threaded
+# ------------------------------------------------------------------ time blocks over ranges
 
 
 @jit
@@ -609,10 +596,90 @@ def _range_steps(q, v, f, tables, w, halo, hf, drives, gvals, p0, p1, diss, n, l
                      damped, drives, gvals)
 
 
+@jit
+def _work(n, nd, n_chunks):
+    """Scratch of one call: (halo, halo forces, block scratch, drive values) per range or chunk,
+    and the per-step ledger terms of each range (p0, p1, diss; ``_time_block_end``)."""
+    nr, kt = _n_ranges(n), TIME_BLOCK
+    return (np.zeros((nr, 2, 4, kt)), np.empty((n_chunks, 2, kt)), np.empty((n_chunks, N_W, min(BLOCK, n) + 1)),
+            np.zeros((n_chunks, nd)), np.zeros((nr, kt, nd)), np.zeros((nr, kt, nd)), np.zeros((kt, nr)))
+
+
+@jit
+def _time_block_start(q, v, n, k, work):
+    """Before k steps: every range's halos at the old state (no range has moved yet)."""
+    halo, p0, p1 = work[0], work[4], work[5]
+    nr = halo.shape[0]
+    for r in range(nr):
+        _snapshot(q, v, n, _edge(n, nr, r), _edge(n, nr, r + 1), k, halo[r])
+    p0[:] = 0.0
+    p1[:] = 0.0
+
+
+@jit
+def _chunk_steps(q, v, f, tables, work, drives, c, n_chunks, n, k, t, h, last_step, damped):
+    """k steps of the ranges of chunk c (of n_chunks: the ranges in order, shared out as evenly
+    as they go), one range after the other, each while it is in cache."""
+    halo, hf, w, gvals, p0, p1, diss = work
+    nr = halo.shape[0]
+    for r in range(c * nr // n_chunks, (c + 1) * nr // n_chunks):
+        _range_steps(q, v, f, tables, w[c], halo[r], hf[c], drives, gvals[c], p0[r], p1[r], diss[:, r], n,
+                     _edge(n, nr, r), _edge(n, nr, r + 1), k, t, h, last_step, damped)
+
+
+@jit
+def _time_block_end(acc, h, damped, k, t, work):
+    """The ledger of the k steps, step by step, each range's terms in range order (the same sums
+    whatever the chunks and threads); returns t + k h as the steps add it."""
+    p0, p1, diss = work[4], work[5], work[6]
+    nr, nd = p0.shape[0], p0.shape[2]
+    sp0, sp1 = np.zeros(nd), np.zeros(nd)
+    for s in range(k):
+        for d in range(nd):  # each drive's power from the range that holds its site
+            sp0[d] = 0.0
+            sp1[d] = 0.0
+            for r in range(nr):
+                sp0[d] += p0[r, s, d]
+                sp1[d] += p1[r, s, d]
+        _ledger(acc, h, damped, diss[s], sp0, sp1)
+        t += h
+    return t
+
+
+# ------------------------------------------------------------------ the kernels
+
+
+@jit
+def chain_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``verlet_advance`` for ``hinge.chain_force`` (same arguments and results), fused, and
+    blocked in time: each range of ``RANGE_SITES`` sites takes ``TIME_BLOCK`` steps while it is
+    in cache (halos: module docstring), so a long chain streams through memory once per
+    ``TIME_BLOCK`` steps. Only where ``fusable`` holds (the caller checks).
+    """
+    if nsteps <= 0:
+        return t
+    n = args[3].shape[0]
+    damped = _is_damped(minv, damp)
+    tables = _prepare(args, minv, damp, h, damped)
+    _open(q, v, f, minv, damp, h, damped)
+    drives = _drives_of(terms, n)
+    work = _work(n, drives[0].shape[0], 1)
+    s0 = 0
+    while s0 < nsteps:
+        k = min(TIME_BLOCK, nsteps - s0)
+        _time_block_start(q, v, n, k, work)
+        _chunk_steps(q, v, f, tables, work, drives, 0, 1, n, k, t, h, nsteps - 1 - s0, damped)
+        t = _time_block_end(acc, h, damped, k, t, work)
+        s0 += k
+    _count(acc, nsteps)
+    return t
+
+
 @jit(parallel=True)
 def chain_verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """``chain_verlet_advance`` with the chain's ranges shared out among numba's threads, which
-    meet once per ``TIME_BLOCK`` steps (halos: module docstring). Bit-identical to it."""
+    """``chain_verlet_advance`` with the chain's ranges shared out among numba's threads (in
+    ``_n_chunks`` fixed chunks), which meet once per ``TIME_BLOCK`` steps. Bit-identical to it:
+    the ranges, not the chunks, fix the arithmetic."""
     if nsteps <= 0:
         return t
     n = args[3].shape[0]
@@ -624,37 +691,15 @@ def chain_verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps
         lo, hi = c * nd2 // nb, (c + 1) * nd2 // nb
         _open(q[lo:hi], v[lo:hi], f[lo:hi], minv[lo:hi], damp[lo:hi], h, damped)
     drives = _drives_of(terms, n)
-    nd = drives[0].shape[0]
-    nr = _n_ranges(n)
-    kt = TIME_BLOCK
-    halo = np.zeros((nr, 2, 4, kt))
-    hf = np.empty((nr, 2, kt))
-    w = np.empty((nr, N_W, min(BLOCK, n) + 1))
-    gvals = np.zeros((nr, nd))
-    p0, p1 = np.zeros((nr, kt, nd)), np.zeros((nr, kt, nd))
-    diss = np.zeros((kt, nr))
-    dr = np.zeros(nr)
-    sp0, sp1 = np.zeros(nd), np.zeros(nd)
+    nch = _n_chunks(n)
+    work = _work(n, drives[0].shape[0], nch)
     s0 = 0
     while s0 < nsteps:
-        k = min(kt, nsteps - s0)
-        for r in range(nr):
-            _snapshot(q, v, n, _edge(n, nr, r), _edge(n, nr, r + 1), k, halo[r])
-        p0[:] = 0.0
-        p1[:] = 0.0
-        for r in prange(nr):
-            _range_steps(q, v, f, tables, w[r], halo[r], hf[r], drives, gvals[r], p0[r], p1[r], diss[:, r], n,
-                         _edge(n, nr, r), _edge(n, nr, r + 1), k, t, h, nsteps - 1 - s0, damped)
-        for s in range(k):
-            for d in range(nd):  # each drive's power from the range that holds its site
-                sp0[d] = 0.0
-                sp1[d] = 0.0
-                for r in range(nr):
-                    sp0[d] += p0[r, s, d]
-                    sp1[d] += p1[r, s, d]
-            dr[:] = diss[s]
-            _ledger(acc, h, damped, dr, sp0, sp1)
-            t += h
+        k = min(TIME_BLOCK, nsteps - s0)
+        _time_block_start(q, v, n, k, work)
+        for c in prange(nch):
+            _chunk_steps(q, v, f, tables, work, drives, c, nch, n, k, t, h, nsteps - 1 - s0, damped)
+        t = _time_block_end(acc, h, damped, k, t, work)
         s0 += k
     _count(acc, nsteps)
     return t
