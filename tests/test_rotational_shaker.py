@@ -1,6 +1,7 @@
 """The shaker's prescribed-rotation mode (``amplitude_rad``): config rules and the driven DOFs."""
 import copy
 
+import numpy as np
 import pytest
 from conftest import LEGO_LATTICE
 
@@ -26,3 +27,18 @@ def test_rotational_shaker_excludes_other_amplitudes_and_tilts(extra):
     data["excitation"].update(extra)
     with pytest.raises((FlexmmError, ValueError)):
         scene_from_dict(data)
+
+
+def test_energy_budget_infers_the_work_of_a_prescribed_rotation():
+    """A prescribed rotation does work the controller does not record: the budget infers it."""
+    import xarray as xr
+    import yaml
+
+    from flexmm.analysis.energy import energy_budget
+
+    t = np.linspace(0.0, 1.0, 5)
+    ds = xr.Dataset({"kinetic_energy": ("time", t), "potential_energy": ("time", 0 * t),
+                     "total_energy": ("time", t), "applied_work": ("time", 0 * t)},
+                    coords={"time": t}, attrs={"config": yaml.safe_dump(SCENE)})
+    budget = energy_budget(ds)
+    assert not budget.work_recorded and budget.work_j == pytest.approx(1.0)
