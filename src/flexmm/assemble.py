@@ -134,7 +134,10 @@ def _apply_one(system: System, scene: Scene, exc, terms: dict) -> None:
             system.v0[rot] += exc.angular_velocity_rad_s * sc.time_s
         return
     if exc.kind == "shaker":
-        if exc.mode == "displacement":
+        if exc.amplitude_rad is not None:  # a prescribed harmonic rotation of the end units
+            dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_rad"), exc.sites)
+            amp, mode = exc.amplitude_rad, MODE_DISPLACEMENT
+        elif exc.mode == "displacement":
             amp, mode = direction * exc.amplitude_m / sc.length_m, MODE_DISPLACEMENT
         else:
             amp, mode = direction * exc.amplitude_n / sc.force, MODE_FORCE

@@ -1,4 +1,4 @@
-"""The outlook's waves (harmonic generation, breathers) in their shipped scenes, against theory.
+"""The outlook's waves (harmonic generation, breathers, envelope solitons) in their shipped scenes, against theory.
 
 Slow: each test runs a scene. docs/scenes.md lists the measured numbers.
 """
@@ -9,10 +9,13 @@ import pytest
 from mass_chain_scene_checks import run
 
 from flexmm.analysis.breathers import site_oscillation
+from flexmm.analysis.envelope import envelope_track
 from flexmm.analysis.harmonics import harmonic_profiles
 from flexmm.models.mass_chain import build
 from flexmm.theory.breathers import SineGordonBreather, breather_frequency, frenkel_kontorova_scales
+from flexmm.theory.envelope import SECH_FWHM, envelope_soliton
 from flexmm.theory.harmonics import fpu_second_harmonic
+from flexmm.theory.rotating import RotatingChainND
 
 pytestmark = pytest.mark.slow
 
@@ -63,3 +66,27 @@ def test_scene_breather_frequency_amplitude_and_energy_as_sine_gordon(tmp_path):
     width = ell / math.sqrt(1 - omega**2)
     far = np.abs(phi[late][:, centre + int(4 * width)]).max()
     assert far < 1.5 * 4 * math.atan(math.sqrt(1 - omega**2) / omega / math.cosh(4.0))
+
+
+def _envelope(tmp_path, overrides=()):
+    scene, ds = run("rotating_envelope_soliton", tmp_path, list(overrides), tag=str(len(overrides)))
+    track = envelope_track(ds.time.values, ds.theta.values[:, :780])  # before the absorbing layer
+    return scene, track
+
+
+def test_scene_envelope_soliton_against_nonlinear_schroedinger(tmp_path):
+    scene, strong = _envelope(tmp_path)
+    lat, exc = scene.lattice, scene.excitation
+    p = RotatingChainND.from_si(lat.a_m, lat.theta0_rad, lat.k_long_n_per_m, lat.k_shear_n_per_m,
+                                lat.k_rot_n_m_per_rad, lat.mass_kg, lat.inertia_kg_m2, lat.n_lateral)
+    T = math.sqrt(lat.mass_kg / lat.k_long_n_per_m)
+    nls = envelope_soliton(p, 2 * math.pi * exc.frequency_hz * T)
+    assert nls.focusing
+    late = strong.time >= 3.0
+    product = strong.amplitude[late] * strong.fwhm[late] / SECH_FWHM  # θ_m L
+    assert product.mean() == pytest.approx(nls.product, rel=0.05)
+    assert np.ptp(strong.fwhm[late]) < 0.1 * strong.fwhm[late].mean()  # it keeps its width
+    assert strong.speed(2.0, 4.5) * T == pytest.approx(nls.group_velocity, rel=0.01)
+    _, weak = _envelope(tmp_path, ["excitation.amplitude_rad=0.001"])
+    early = np.argmin(np.abs(weak.time - 0.5))
+    assert weak.fwhm[-5] > 3 * weak.fwhm[early]  # the linear burst spreads

@@ -5,7 +5,7 @@ Reads the per-time variables the controller writes (``kinetic_energy``, ``potent
 E(t) − E(0) − W(t) + D(t) measures the integrator's energy error, relative to the largest energy
 that entered the system (E(0) + max W).
 
-A prescribed-displacement drive (shaker with ``amplitude_m``, ``boundary_displacement``) does
+A prescribed-displacement drive (shaker with ``amplitude_m`` or ``amplitude_rad``, ``boundary_displacement``) does
 work that ``applied_work`` does not record; when the config has one and the recorded work is
 zero, the work is inferred from the balance, W = E(t) − E(0) + D(t), ``work_recorded`` is
 False and the balance error is NaN (there is nothing independent left to check).
@@ -44,7 +44,7 @@ def _displacement_drive(ds) -> bool:
 
     exc = (yaml.safe_load(ds.attrs.get("config", "")) or {}).get("excitation") or {}
     return exc.get("kind") == "boundary_displacement" or (
-        exc.get("kind") == "shaker" and exc.get("amplitude_m") is not None)
+        exc.get("kind") == "shaker" and exc.get("amplitude_n") is None)
 
 
 def energy_budget(ds) -> EnergyBudget | None:

@@ -58,16 +58,27 @@ class Shaker(EndDrive):
     frequency_hz: float = Field(ge=10.0, le=10_000.0, description="drive frequency (Hz)")
     amplitude_m: Positive | None = Field(None, description="displacement amplitude (m)")
     amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
+    amplitude_rad: Positive | None = Field(
+        None, description="instead: amplitude of a prescribed staggered rotation θ of the driven units (rad); "
+        "u, v stay free"
+    )
     ramp_cycles: NonNegative = Field(3.0, description="cycles of smooth ramp-up")
     duration_s: Positive | None = Field(None, description="drive stops (smoothly) after this")
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        return exactly_one(self, "amplitude_m", "amplitude_n", ("displacement", "force"))
+        if self.amplitude_rad is None:
+            return exactly_one(self, "amplitude_m", "amplitude_n", ("displacement", "force"))
+        if self.amplitude_m is not None or self.amplitude_n is not None:
+            raise ValueError("give exactly one of amplitude_m (displacement), amplitude_n (force) or "
+                             "amplitude_rad (rotation)")
+        if self.angle_deg:
+            raise ValueError("angle_deg tilts a displacement drive; a prescribed rotation has no direction")
+        return self
 
     @property
     def mode(self) -> str:
-        return "displacement" if self.amplitude_m is not None else "force"
+        return "force" if self.amplitude_n is not None else "displacement"
 
 
 class BoundaryDisplacement(EndDrive):
