@@ -107,6 +107,22 @@ def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
     return _rows(f"pulse {p.index}", measured, _safe(theory_for(ctx).pulse, ctx, p))
 
 
+def compare_collision(ctx: RunContext, c) -> list[Comparison]:
+    """Rows for one Collision: per incoming pulse its shift, delay, amplitude and speed change.
+
+    No model registers a collision relation (docs/physics.md has none for these chains), so the
+    rows carry no prediction; the note says what came out.
+    """
+    rows = []
+    for tag, pulse, out, outcome in (("a", c.pulse_a, c.out_a, c.outcome_a), ("b", c.pulse_b, c.out_b, c.outcome_b)):
+        note = f"pulse {pulse} {outcome}" + (f" as pulse {out}" if out >= 0 else "")
+        for q, attr, units in (("space shift", "shift", "m"), ("time shift", "delay", "s"),
+                               ("amplitude change", "amplitude_change", "1"), ("speed change", "speed_change", "1")):
+            key = f"{attr}_{tag}_m" if attr == "shift" else f"{attr}_{tag}_s" if attr == "delay" else f"{attr}_{tag}"
+            rows.append(Comparison(f"collision {c.index}", f"{q} of pulse {pulse}", getattr(c, key), None, units, note))
+    return rows
+
+
 def compare_front(ctx: RunContext, f) -> list[Comparison]:
     measured = {
         "speed": (f.speed_m_s, "m/s"),

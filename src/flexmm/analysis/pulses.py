@@ -21,7 +21,7 @@ import numpy as np
 from scipy.signal import find_peaks, peak_widths
 
 from flexmm.analysis.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
-from flexmm.analysis.detect import Track, refine_peak, track_peaks
+from flexmm.analysis.detect import Track, refine_peak, split_reversals, track_peaks
 from flexmm.analysis.profiles import SHAPES
 from flexmm.analysis.widths import PEAK_WARNING, fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
 
@@ -136,7 +136,8 @@ class PulseMeasurement:
     """One travelling pulse of a field.
 
     Scalars are SI (amplitude in the field's units); ``sites``, ``x_m``, ``arrival_time_s`` and
-    ``peak`` are (n,) arrays over the sites used in the speed fit; ``track_*`` are the tracked
+    ``peak`` are (n,) arrays over the sites used in the speed fit, ``segment`` the stretch between
+    collisions each belongs to; ``track_*`` are the tracked
     peak positions per frame; ``profile_*`` one measured spatial profile (for figures).
     """
 
@@ -171,6 +172,7 @@ class PulseMeasurement:
     x_m: np.ndarray
     arrival_time_s: np.ndarray
     peak: np.ndarray
+    segment: np.ndarray
     track_time_s: np.ndarray
     track_pos_m: np.ndarray
     profile_x_m: np.ndarray
@@ -239,7 +241,7 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
         collision_shift_m=float(-delay * abs(speed)),
         n_sites_fitted=int(sites.size), first_site=float(view.site[sites].min()),
         last_site=float(view.site[sites].max()), sites=view.site[sites], x_m=x,
-        arrival_time_s=times, peak=peaks, track_time_s=t, track_pos_m=pos,
+        arrival_time_s=times, peak=peaks, segment=seg, track_time_s=t, track_pos_m=pos,
         profile_x_m=view.x[prof], profile_values=view.values[frames[mid], prof],
         profile_time_s=float(view.time[frames[mid]]),
         profile_fits={s: fits[s][sub.size // 2] for s in fits if fits[s]},
@@ -293,6 +295,7 @@ def _thresholds(vals: np.ndarray, fraction: float, floor: float, per_sign: bool)
 
 def _track(view, thr, gate, min_travel_sites, max_pulses):
     tracks = track_peaks(view.values, view.time, view.x, threshold=thr, gate=gate)
+    tracks = [leg for tr in tracks for leg in split_reversals(tr, min_travel_sites * view.spacing_m)]
     tracks = [tr for tr in tracks if len(tr.frames) >= 5 and tr.travel >= min_travel_sites * view.spacing_m]
     tracks.sort(key=lambda tr: (tr.time[0], tr.pos[0]))
     tracks = tracks[:max_pulses]

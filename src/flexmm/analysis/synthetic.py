@@ -1,7 +1,8 @@
 """Synthetic run datasets with known answers, laid out like ``flexmm run`` outputs.
 
 Used by the tests (and handy for trying the analysis): travelling pulses of a given shape,
-speed, width and amplitude (several at once for trains and collisions), a transition front
+speed, width and amplitude (several at once for trains and collisions), collisions with known
+shifts and outcomes, a transition front
 between two wells, and a driven chain with a known steady amplitude per site.
 """
 
@@ -51,6 +52,38 @@ def pulse_dataset(pulses: list[SynthPulse], *, n_sites: int = 200, spacing_m: fl
         vals += amp * SHAPES[p.shape](x[None, :], 1.0, c, p.width_m)
     rng = np.random.default_rng(seed)
     vals += noise * rng.standard_normal(vals.shape)
+    return _dataset(time, x, {field: vals}, {field: units})
+
+
+@dataclass(frozen=True)
+class SynthLeg:
+    """A pulse entering or leaving a collision at (t_c, x_c): ``amplitude · shape((x − X(t))/W)``
+    with X(t) = x_c + d · shift_m + v (t − t_c), d = sign(v): a leaving pulse shifted forward
+    along its motion by ``shift_m`` (an entering one has shift 0: it aims at x_c)."""
+
+    amplitude: float
+    speed_m_s: float
+    width_m: float
+    shift_m: float = 0.0
+    shape: str = "sech"
+
+
+def collision_dataset(incoming: tuple[SynthLeg, SynthLeg], outgoing: list[SynthLeg], *, t_c: float,
+                      x_c: float, n_sites: int = 240, spacing_m: float = 1.0, duration_s: float = 200.0,
+                      n_frames: int = 801, switch_s: float = 1.0, noise: float = 0.0, seed: int = 0,
+                      field: str = "theta", units: str = "rad") -> xr.Dataset:
+    """Two pulses meeting at (t_c, x_c) and the pulses that leave it (known shifts, amplitude and
+    speed changes, passing or reflected); the incoming pulses fade out and the outgoing ones in
+    over ``switch_s`` around t_c, while they overlap."""
+    time = np.linspace(0.0, duration_s, n_frames)
+    x = np.arange(n_sites) * spacing_m
+    before = 0.5 * (1 - np.tanh((time - t_c) / switch_s))[:, None]
+    vals = np.zeros((n_frames, n_sites))
+    for legs, weight in ((incoming, before), (outgoing, 1 - before)):
+        for leg in legs:
+            c = x_c + np.sign(leg.speed_m_s) * leg.shift_m + leg.speed_m_s * (time[:, None] - t_c)
+            vals += weight * SHAPES[leg.shape](x[None, :], leg.amplitude, c, leg.width_m)
+    vals += noise * np.random.default_rng(seed).standard_normal(vals.shape)
     return _dataset(time, x, {field: vals}, {field: units})
 
 
