@@ -8,10 +8,13 @@ with the pulse's slowness s. Two legs of different pulses *collide* when
   (``REACH_FWHM`` widths of the wider pulse) from x_c — i.e. they stopped being measurable
   because they met, not because the run ended — and having approached x_c by at least a width
   (FWHM); pairs of longer legs are taken first;
-- they approach each other there (head-on: opposite directions; overtaking: the faster behind).
+- they approach each other there (head-on: opposite directions; overtaking: the faster behind),
+  were under way at the same time, and meet inside the analysed line before the run ends.
 
 The pulses leaving the collision are the legs that start after t_c − reach/|v| and whose lines,
-extended back to t_c, pass within ``reach`` of x_c, and that move at least a width away from it. Each incoming leg is matched to one outgoing
+extended back to t_c, pass within ``reach`` of x_c, and that move at least a width away from it;
+two incoming legs with no outgoing one are not counted as a collision. A leg's line, amplitude
+and own speed are taken over its steady sites (after a formation transient, ``steady``). Each incoming leg is matched to one outgoing
 leg of the same polarity, choosing the pairing whose amplitudes change least (ties: keep the
 direction). An incoming pulse whose match keeps its direction *passed through*; one whose match
 moves back *was reflected* (repelled); one without a match was *absorbed* (merged, or too weak
@@ -36,7 +39,7 @@ from itertools import combinations, permutations
 
 import numpy as np
 
-REACH_FWHM = 8.0  # a collision's neighbourhood: this many FWHM of the wider pulse
+REACH_FWHM = 5.0  # a collision's neighbourhood: this many FWHM of the wider pulse
 MIN_LEG_SITES = 5  # a stretch of fewer fitted sites (the overlapping peak itself) is not a leg
 
 
@@ -77,9 +80,10 @@ def legs_of(p) -> list[Leg]:
         x, t, pk = p.x_m[m], p.arrival_time_s[m], p.peak[m]
         slow = p.direction / p.speed_m_s
         order = np.argsort(t)
-        out.append(Leg(p.index, int(k), p.polarity, p.direction, p.speed_m_s, float(np.median(pk)), fwhm,
+        st = p.steady[m] if p.steady[m].sum() >= MIN_LEG_SITES else np.ones(x.size, bool)  # past its formation
+        out.append(Leg(p.index, int(k), p.polarity, p.direction, p.speed_m_s, float(np.median(pk[st])), fwhm,
                        float(t[order[0]]), float(t[order[-1]]), float(x[order[0]]), float(x[order[-1]]),
-                       float(np.median(t - slow * x)), float(abs(1.0 / np.polyfit(x, t, 1)[0]))))
+                       float(np.median(t[st] - slow * x[st])), float(abs(1.0 / np.polyfit(x[st], t[st], 1)[0]))))
     return out
 
 
@@ -160,7 +164,7 @@ def _reach(*legs: Leg, spacing: float) -> float:
     return REACH_FWHM * max(max(w) if w else 3 * spacing, 3 * spacing)
 
 
-def _incoming(a: Leg, b: Leg, spacing: float, t_end: float):
+def _incoming(a: Leg, b: Leg, spacing: float, t_end: float, x_range: tuple[float, float]):
     """(t_c, x_c, kind) if legs a, b end by colliding with each other, else None."""
     if a.pulse == b.pulse:
         return None
@@ -169,8 +173,9 @@ def _incoming(a: Leg, b: Leg, spacing: float, t_end: float):
         return None
     tc, xc = hit
     r = _reach(a, b, spacing=spacing)
-    if tc > t_end:
-        return None
+    gap = r / max(a.speed_m_s, b.speed_m_s)
+    if tc > t_end or not x_range[0] <= xc <= x_range[1] or max(a.t0, b.t0) > min(a.t1, b.t1) + gap:
+        return None  # no meeting inside the run, or the two were never under way together
     for leg in (a, b):
         # ends before the meeting, close to it, having come from at least a width further away
         if leg.t1 > tc + r / leg.speed_m_s or abs(leg.x1 - xc) > r or leg.direction * (xc - leg.x0) <= 0 \
@@ -222,15 +227,17 @@ def _changes(inc: Leg, out: Leg | None, tc: float, xc: float) -> tuple[str, floa
             out.amplitude / inc.amplitude - 1.0, out.own_speed_m_s / inc.own_speed_m_s - 1.0)
 
 
-def find_collisions(pulses: list, spacing_m: float, t_end: float) -> tuple[list[Collision], list, int]:
+def find_collisions(pulses: list, spacing_m: float, t_end: float,
+                    x_range: tuple[float, float] = (-math.inf, math.inf)) -> tuple[list[Collision], list, int]:
     """Collisions among measured pulses: (collisions, pulses without overlap artefacts, dropped).
+    A collision happens before ``t_end`` and inside ``x_range`` (the analysed line).
 
     Pulses are re-indexed in order after dropping, and the collisions refer to the new indices.
     """
     legs = [leg for p in pulses for leg in legs_of(p)]
     found = []
     for a, b in combinations(legs, 2):
-        hit = _incoming(a, b, spacing_m, t_end)
+        hit = _incoming(a, b, spacing_m, t_end, x_range)
         if hit is not None:
             found.append((hit[0], a, b, hit[1], hit[2]))
     # the longest legs first: the overlapping peak of two pulses, measured over a few sites near
@@ -245,6 +252,8 @@ def find_collisions(pulses: list, spacing_m: float, t_end: float) -> tuple[list[
         post = _outgoing(legs, tc, xc, r, used | {(a.pulse, a.segment), (b.pulse, b.segment)}, spacing_m)
         post = [p for p in post if p.t0 >= min(a.t1, b.t1) - r / p.speed_m_s]
         oa, ob = _match((a, b), post)
+        if oa is None and ob is None:  # nothing left the meeting point: no evidence of a collision
+            continue
         used |= {(a.pulse, a.segment), (b.pulse, b.segment)}
         events.append((tc, xc, kind, a, b, oa, ob))
     # overlap artefacts: pulses all of whose legs lie inside a collision's neighbourhood

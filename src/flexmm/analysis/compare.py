@@ -103,6 +103,9 @@ def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
         "FWHM": (p.fwhm_m, "m"),
         "temporal FWHM": (p.temporal_fwhm_s, "s"),
         "attenuation": (p.attenuation_per_m, "1/m"),
+        "formation distance": (p.formation_distance_m, "m"),
+        "amplitude range": (p.amplitude_range, u),
+        "breathing period": (p.breathing_period_s, "s"),
     }
     return _rows(f"pulse {p.index}", measured, _safe(theory_for(ctx).pulse, ctx, p))
 

@@ -143,8 +143,8 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
     if kind == "pulse":
         pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
-        out.collisions, out.pulses, out.overlap_artefacts = find_collisions(pulses, view.spacing_m,
-                                                                            float(view.time[-1]))
+        out.collisions, out.pulses, out.overlap_artefacts = find_collisions(
+            pulses, view.spacing_m, float(view.time[-1]), (float(view.x.min()), float(view.x.max())))
         for p in out.pulses:
             out.comparisons += compare_pulse(ctx, p)
         for c in out.collisions:
