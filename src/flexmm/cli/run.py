@@ -21,6 +21,8 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path (no label)."),
     fidelity: str = FidelityOption,
     analysis: str = AnalysisOption,
+    from_run: str = typer.Option(None, "--from", help="Continue RUN: start from its last frame "
+                                                      "(sets initial.from_run; the config records it)."),
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
 
@@ -34,6 +36,8 @@ def run(
     ov = list(overrides or [])
     if force:
         ov.append("solver.allow_unstable=true")
+    if from_run:
+        ov.append(f"initial.from_run={from_run}")
     analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
     scene = load_or_exit(config, ov)
     run_dir = check_output_dir(run_dir_for(scene, out))
