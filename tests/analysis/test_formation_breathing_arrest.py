@@ -60,14 +60,15 @@ def test_steady_part_is_exact_on_a_clean_series():
     assert s.amplitude_min == s.amplitude_max == -1.0 and not s.breathing
 
 
-@pytest.mark.parametrize("creep, arrested", [(0.0, True), (0.02, False), (0.005, False)])
+@pytest.mark.parametrize("creep, arrested", [(0.0, True), (0.02, False), (0.01, False), (0.003, True)])
 def test_front_is_arrested_only_when_its_speed_is_statistically_zero(creep, arrested):
-    """A front that slows at x = 120 to ``creep`` (0.5–2 % of its speed) is still moving."""
+    """A front that slows at x = 120 to ``creep`` (1–2 % of its speed) is still moving; slower than
+    one site per run (150 s, 1 m sites: 0.0067 m/s) it cannot be told from a stopped, relaxing one."""
     ds = front_dataset(speed_m_s=1.0, width_m=3.0, arrest_m=120.0, creep_m_s=creep, noise=1e-4)
     (f,) = measure_fronts(field_view(ds, "u"))
     assert f.arrested is arrested
     if creep:
         assert f.final_speed_m_s == pytest.approx(creep, rel=0.1)
-        assert f.final_speed_ci_m_s < f.final_speed_m_s
+        assert f.final_speed_ci_m_s < f.final_speed_m_s  # statistically non-zero either way
     else:
         assert f.final_speed_m_s <= f.final_speed_ci_m_s

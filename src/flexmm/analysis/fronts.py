@@ -13,7 +13,9 @@ shorter than three sites (ringing behind a front) are ignored. Per front:
   the frames before the front has covered 90 % of its path;
 - distance travelled, switched sites, and arrest: stopped before reaching the end, i.e. the 95 %
   confidence interval of the speed fitted to the last tenth of its track (``final_speed``)
-  contains 0. A slow front still moving near the pinning threshold is not arrested.
+  contains 0, or that speed would not carry it one more site in a time as long as the run (a
+  stopped front still relaxing). A slow front still moving near the pinning threshold is not
+  arrested.
 """
 
 from __future__ import annotations
@@ -184,8 +186,10 @@ def _measure(view, tr, index, first, mask, s, L, h) -> FrontMeasurement:
     w = float(np.nanmedian(widths)) if widths and np.isfinite(widths).any() else np.nan
     end_x = view.x.max() if direction > 0 else view.x.min()
     v_end, ci = final_speed(t, pos)
-    exact = 1e-9 * h / max(t[-1] - t[0], 1e-300)  # a front standing exactly still (ci = 0)
-    arrested = bool(abs(v_end) <= ci + exact and abs(pos[-1] - end_x) > 3 * h)
+    # stopped: its final speed is statistically zero, or too slow to cross one more site in a
+    # time as long as the whole run (a stopped front still relaxing); not at the end of the line
+    creep = h / max(float(view.time[-1] - view.time[0]), 1e-300)
+    arrested = bool((abs(v_end) <= ci or abs(v_end) < creep) and abs(pos[-1] - end_x) > 3 * h)
     return FrontMeasurement(
         index=index, field=view.spec, direction=direction, jump=float(L), speed_m_s=float(speed),
         speed_stderr_m_s=float(err), speed_whole_path_m_s=float(speed_all), width_10_90_m=w, width_10_90_sites=w / h,
