@@ -84,3 +84,16 @@ def test_linear_superposition_passes_with_zero_shift():
     assert np.isfinite(cols[0].shift_a_m)
     assert abs(cols[0].shift_a_m) < 0.05 and abs(cols[0].shift_b_m) < 0.05
     assert abs(cols[0].speed_change_a) < 0.005
+
+
+def test_a_track_that_turns_back_is_split_at_its_turning_point():
+    from flexmm.analysis.detect import Track, split_reversals
+
+    t = np.arange(40.0)
+    pos = np.where(t < 20, 10 + t, 50 - t) + 0.2 * np.sin(3 * t)  # out and back, with jitter
+    tr = Track(1, list(range(40)), list(t), list(pos), [1.0] * 40)
+    a, b = split_reversals(tr, 3.0)
+    assert a.frames[-1] + 1 == b.frames[0] and abs(b.time[0] - 20) <= 1
+    assert a.pos[-1] > a.pos[0] and b.pos[-1] < b.pos[0]
+    assert split_reversals(Track(1, list(range(40)), list(t), list(10 + t + 0.2 * np.sin(3 * t)), [1.0] * 40),
+                           3.0)[0].frames == list(range(40))  # jitter below 3 m is no reversal
