@@ -147,3 +147,15 @@ def test_launched_sech2_pulse_keeps_its_shape_and_long_wave_speed(tmp_path, dire
     assert p.direction == direction
     assert (p.speed_m_s - c0) / (v - c0) == pytest.approx(1.0, abs=0.03)
     assert p.width_sech2_m == pytest.approx(W * a, rel=0.01) and p.amplitude == pytest.approx(strain, rel=0.01)
+
+
+def test_launch_on_the_wrong_chain_is_a_config_error_and_a_cli_user_error(tmp_path):
+    f = tmp_path / "wrong.yaml"
+    f.write_text(yaml.safe_dump({
+        "name": "wrong", "solver": {"duration_s": 0.1},
+        "lattice": {**TODA, "bond": {"law": "linear", "k_n_per_m": 100.0}},
+        "initial": {"launch": [{"kind": "toda_soliton", "kappa": 1.0, "center_site": 40}]}}, sort_keys=False))
+    with pytest.raises(ConfigError, match="wrong.yaml:.*toda bond"):
+        load_scene(f)
+    r = CliRunner().invoke(app, ["run", str(f), "--out", str(tmp_path / "w")])
+    assert r.exit_code == 2 and "toda bond" in r.output and "Traceback" not in r.output

@@ -149,9 +149,15 @@ class Scene(Strict):
             bad = [s for s in pin.sites if s >= n]
             if bad:
                 raise ValueError(f"initial.pinned.{k}.sites {bad} outside 0..{n - 1}")
+        needs = {"toda_soliton": "toda", "sech2_pulse": "polynomial", "tanh_front": "linear"}
         for k, spec in enumerate(init.launch):
             if not 0 <= spec.center_site <= n - 1:
                 raise ValueError(f"initial.launch.{k}.center_site={spec.center_site} is outside 0..{n - 1}")
+            law = getattr(getattr(self.lattice, "bond", None), "law", None)
+            if self.lattice.kind != "mass_chain" or law != needs[spec.kind]:
+                raise ValueError(f"initial.launch.{k}: a {spec.kind} launches on a mass_chain with a "
+                                 f"{needs[spec.kind]} bond (this lattice: {self.lattice.kind}"
+                                 + (f", {law} bond)" if law else ")"))
 
     @model_validator(mode="after")
     def _consistent(self):
