@@ -159,3 +159,16 @@ def test_launch_on_the_wrong_chain_is_a_config_error_and_a_cli_user_error(tmp_pa
         load_scene(f)
     r = CliRunner().invoke(app, ["run", str(f), "--out", str(tmp_path / "w")])
     assert r.exit_code == 2 and "toda bond" in r.output and "Traceback" not in r.output
+
+
+def test_rotation_field_of_a_rotating_squares_chain_from_an_expression(lego_config):
+    lego_config["initial"] = {"fields": [{"field": "theta", "value": "0.1 * sech((x - 1.0) / 0.05)",
+                                          "rate": "where(n == 3, 2.0, 0)"}]}
+    lego_config["excitation"] = {"kind": "none"}
+    lego_config["lattice"]["left"] = "free"
+    system, _ = build_system(scene_from_dict(lego_config))
+    sl = slice(system.field_index("theta") * system.n_sites, (system.field_index("theta") + 1) * system.n_sites)
+    x = np.arange(system.n_sites) * lego_config["lattice"]["a_m"]
+    assert np.allclose(system.q0[sl], 0.1 / np.cosh((x - 1.0) / 0.05))  # radians are not scaled
+    rate = system.v0[sl] / system.scales.time_s  # rad/s
+    assert rate[3] == pytest.approx(2.0) and np.count_nonzero(rate) == 1
