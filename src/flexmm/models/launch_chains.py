@@ -21,6 +21,12 @@ import numpy as np
 from flexmm.theory import chains as th
 
 
+def _sech2(z: np.ndarray) -> np.ndarray:
+    """sech² z without overflow far from the centre."""
+    e = np.exp(-2.0 * np.abs(z))
+    return 4.0 * e / (1.0 + e) ** 2
+
+
 def _from_bonds(r: np.ndarray, rdot: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
     """Site displacements/velocities (n = bonds + 1) at rest ahead of a wave moving ``direction``."""
     if direction > 0:  # ahead = right end: u_{N-1} = 0, u_i = −Σ_{k≥i} r_k
@@ -50,7 +56,7 @@ def toda_soliton(lat, kappa: float, center_site: float, direction: int) -> tuple
     a, b = bond.a_n, bond.b_per_m
     beta = math.sqrt(a * b / m) * math.sinh(kappa)
     z = kappa * (np.arange(n - 1) + 0.5 - center_site)  # bond n sits between sites n and n+1
-    s2 = math.sinh(kappa) ** 2 / np.cosh(z) ** 2
+    s2 = math.sinh(kappa) ** 2 * _sech2(z)
     r = -np.log1p(s2) / b
     drdz = 2 * s2 * np.tanh(z) / (b * (1 + s2))
     return _from_bonds(r, drdz * (-direction * beta), direction)
@@ -63,7 +69,7 @@ def sech2_pulse(lat, strain: float, center_site: float, direction: int) -> tuple
         raise ValueError("the sech² wave needs a polynomial bond k1 D + k2 D² (k3 = 0) and no on-site terms")
     wave = th.softening_solitary_wave(bond.k1_n_per_m, bond.k2_n_per_m2, strain * a, m, a)
     z = (np.arange(n - 1) + 0.5 - center_site) / wave.W
-    D = strain * a / np.cosh(z) ** 2
+    D = strain * a * _sech2(z)
     dDdz = -2 * D * np.tanh(z)
     return _from_bonds(D, dDdz * (-direction * wave.v / (a * wave.W)), direction)
 
