@@ -172,3 +172,24 @@ def test_rotation_field_of_a_rotating_squares_chain_from_an_expression(lego_conf
     assert np.allclose(system.q0[sl], 0.1 / np.cosh((x - 1.0) / 0.05))  # radians are not scaled
     rate = system.v0[sl] / system.scales.time_s  # rad/s
     assert rate[3] == pytest.approx(2.0) and np.count_nonzero(rate) == 1
+
+
+def test_launched_damped_front_runs_at_its_predicted_speed(tmp_path):
+    """The tanh front of a damped bistable_cubic chain (w = 14 sites) launched at its predicted
+    speed keeps it (docs/physics.md §2): speed within 1 %, carried kinetic energy within 2 %."""
+    from flexmm.analysis.summary import principal
+    from flexmm.theory.chains import bistable_front
+
+    sc = scene_from_dict({
+        "name": "front", "solver": {"duration_s": 1.5},
+        "lattice": {"kind": "mass_chain", "n_units": 300, "spacing_m": 0.01, "mass_kg": 0.01,
+                    "bond": {"law": "linear", "k_n_per_m": 100.0},
+                    "onsite": [{"law": "bistable_cubic", "alpha_n_per_m3": 2e4, "beta": 0.25, "jump_m": 0.01}]},
+        "damping": {"viscous": {"coefficient_n_s_per_m": 0.05}},
+        "initial": {"launch": [{"kind": "tanh_front", "center_site": 60}]}})
+    res = report.analyze_run(run_scene(sc, run_dir=tmp_path / "front").path)
+    item, f = principal(res)
+    assert f.speed_m_s == pytest.approx(bistable_front(2e4, 0.25, 0.01, 100.0, 0.01, 0.01, 0.05).v, rel=0.01)
+    assert not f.arrested and f.n_switched > 90
+    k = next(c for c in res.comparisons if c.item == item and c.quantity == "kinetic energy")
+    assert abs(k.rel_diff) < 0.02
