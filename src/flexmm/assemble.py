@@ -318,6 +318,10 @@ def build_system(scene: Scene) -> tuple[System, Terms]:
     terms = empty_terms()._asdict()
     apply_imperfection(system, scene)
     apply_excitation(system, scene, terms)
+    if scene.initial is not None:
+        from flexmm.initial_state import apply_initial
+
+        apply_initial(system, scene)
     apply_friction(system, terms)
     return system, Terms(**terms)
 
@@ -379,4 +383,6 @@ def _build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> P
     # explicit regularised friction: keep h F/(m v_ε) <= 1
     dt, stable, notes = resolve_dt(spec, w_max, scene.solver, sc.time_s, friction_rate)
     duration = scene.solver.duration_s / sc.time_s
+    if scene.initial is not None and scene.initial.from_run:  # provenance: the run this one continues
+        notes = [*notes, f"initial state: the last frame of {scene.initial.from_run}"]
     return Problem(scene, system, terms, damp, dt, duration, w_max, stable, notes)

@@ -73,7 +73,7 @@ def test_raney_transition_wave_summary_is_the_front_speed(tmp_path):
 
 def test_principal_pulse_is_the_largest_not_the_first():
     """A small fast precursor ahead of a large slow pulse: the large one is the headline."""
-    ds = pulse_dataset([SynthPulse(0.15, 3.0, 2.0, 10.0), SynthPulse(0.4, 1.0, 4.0, 10.0)],
+    ds = pulse_dataset([SynthPulse(0.15, 3.0, 2.0, 40.0), SynthPulse(0.4, 1.0, 4.0, 10.0)],
                        n_sites=400, duration_s=100.0, n_frames=401)
     view = field_view(ds, "theta")
     res = report.RunAnalysis(Path("synthetic"), "pulse", RunContext("synthetic", {}, ds), view,

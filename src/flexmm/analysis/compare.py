@@ -30,7 +30,8 @@ class ModelTheory:
     driven(ctx, DrivenMeasurement) -> [Comparison]; speed_curve(ctx, field, amplitudes) -> speeds
     (m/s, NaN where no pulse exists); profile(ctx, PulseMeasurement, x_m) -> field values;
     bands_hz(ctx) -> [(f_lo, f_hi)] linear pass bands; analysis(ctx) -> 'pulse' or 'front', the
-    default analysis of a run that is not driven (e.g. 'front' for multistable chains).
+    default analysis of a run that is not driven (e.g. 'front' for multistable chains);
+    collision(ctx, Collision) -> [Comparison] (e.g. the Toda head-on shifts).
     """
 
     pulse: Predictor | None = None
@@ -40,6 +41,7 @@ class ModelTheory:
     profile: Callable[..., np.ndarray] | None = None
     bands_hz: Callable[..., list] | None = None
     analysis: Callable[..., str] | None = None
+    collision: Predictor | None = None
 
 
 THEORY: dict[str, ModelTheory] = {
@@ -58,6 +60,7 @@ THEORY: dict[str, ModelTheory] = {
         pulse=predict_chains.pulse,
         front=predict_chains.front,
         analysis=predict_chains.analysis,
+        collision=predict_chains.collision,
     ),
 }
 
@@ -103,8 +106,28 @@ def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
         "FWHM": (p.fwhm_m, "m"),
         "temporal FWHM": (p.temporal_fwhm_s, "s"),
         "attenuation": (p.attenuation_per_m, "1/m"),
+        "formation distance": (p.formation_distance_m, "m"),
+        "amplitude range": (p.amplitude_range, u),
+        "breathing period": (p.breathing_period_s, "s"),
     }
     return _rows(f"pulse {p.index}", measured, _safe(theory_for(ctx).pulse, ctx, p))
+
+
+def compare_collision(ctx: RunContext, c) -> list[Comparison]:
+    """Rows for one Collision: per incoming pulse its shift, delay, amplitude and speed change,
+    with the model's collision relation where it has one (Toda chains: the head-on shifts; the
+    rotating-squares solitons have none in docs/physics.md)."""
+    pred = {p.quantity: p for p in _safe(theory_for(ctx).collision, ctx, c)}
+    rows = []
+    for tag, pulse, out, outcome in (("a", c.pulse_a, c.out_a, c.outcome_a), ("b", c.pulse_b, c.out_b, c.outcome_b)):
+        note = f"pulse {pulse} {outcome}" + (f" as pulse {out}" if out >= 0 else "")
+        for q, attr, units in (("space shift", "shift", "m"), ("time shift", "delay", "s"),
+                               ("amplitude change", "amplitude_change", "1"), ("speed change", "speed_change", "1")):
+            key = f"{attr}_{tag}_m" if attr == "shift" else f"{attr}_{tag}_s" if attr == "delay" else f"{attr}_{tag}"
+            p = pred.get(f"{q} of pulse {pulse}")
+            rows.append(Comparison(f"collision {c.index}", f"{q} of pulse {pulse}", getattr(c, key),
+                                   p.predicted if p else None, units, p.note if p else note))
+    return rows
 
 
 def compare_front(ctx: RunContext, f) -> list[Comparison]:

@@ -6,6 +6,7 @@ analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
   ``time`` (the run's frames), ``comparison``, and for driven runs ``harmonic`` and ``frequency``;
 - per pulse: every scalar of PulseMeasurement (``pulse_speed_m_s``, ...), ``arrival_time``
   and ``peak`` on (pulse, position), ``track_position`` on (pulse, time);
+- per collision (dim ``collision``): every scalar of ``collisions.Collision``;
 - per front: scalars, ``switch_time`` on (front, position), ``front_position`` on (front, time);
 - oblique plane waves (analysis ``modes``): per group, every scalar of WaveGroup on ``group``;
 - driven: ``steady_amplitude`` (position), ``harmonic_amplitude`` (harmonic),
@@ -89,6 +90,8 @@ def to_dataset(res) -> xr.Dataset:
                            v.units, f"pulse peak of {v.spec}")
         data["track_position"] = var(("pulse", "time"), _on_time(v, [(p.track_time_s, p.track_pos_m) for p in ps]),
                                      "m", "tracked peak position")
+    if getattr(res, "collisions", None):
+        data.update(_scalar_vars("collision", "collision", [c.scalars() for c in res.collisions]))
     if res.fronts:
         fs = res.fronts
         data.update(_scalar_vars("front", "front", [f.scalars() for f in fs]))
@@ -151,6 +154,9 @@ def to_dict(res) -> dict:
         "run": str(res.path), "name": res.name, "model": res.ctx.model, "analysis": res.kind,
         "field": res.view.spec, "field_units": res.view.units,
         "pulses": [{k: _clean(x) for k, x in p.scalars().items()} for p in res.pulses],
+        "collisions": [{**{k: _clean(x) for k, x in c.scalars().items()}, "outcome": c.outcome}
+                       for c in getattr(res, "collisions", [])],
+        "overlap_artefacts": getattr(res, "overlap_artefacts", 0),
         "fronts": [{k: _clean(x) for k, x in f.scalars().items()} for f in res.fronts],
         "driven": {k: _clean(x) for k, x in res.driven.scalars().items()} if res.driven else None,
         "groups": [{k: _clean(x) for k, x in g.scalars().items()} for g in res.groups],

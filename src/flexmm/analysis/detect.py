@@ -151,6 +151,30 @@ def merge_tracks(tracks: list[Track], gate: float, rel_speed: float = 0.25) -> l
     return tracks
 
 
+def split_reversals(tr: Track, min_retreat: float) -> list[Track]:
+    """Split a track where it turns back by more than ``min_retreat`` (m) from its running extreme
+    (a pulse repelled in a collision keeps its polarity and is followed as one track): one track
+    per monotone leg, cut at the turning point."""
+    pos = np.asarray(tr.pos)
+    cuts, start, direction, ext = [], 0, 0, 0
+    for k in range(1, pos.size):
+        if direction == 0:
+            if abs(pos[k] - pos[start]) > min_retreat:
+                direction = 1 if pos[k] > pos[start] else -1
+                ext = start + int(np.argmax(direction * pos[start : k + 1]))
+            continue
+        if direction * pos[k] > direction * pos[ext]:
+            ext = k
+        elif direction * (pos[ext] - pos[k]) > min_retreat:
+            cuts.append(ext)
+            start, direction = ext, -direction
+            ext = start + int(np.argmax(direction * pos[start : k + 1]))
+    if not cuts:
+        return [tr]
+    return [Track(tr.polarity, tr.frames[a:b], tr.time[a:b], tr.pos[a:b], tr.height[a:b])
+            for a, b in zip([0] + cuts, cuts + [pos.size])]
+
+
 def auto_gate(values: np.ndarray, x: np.ndarray, min_sites: float = 4.0) -> float:
     """Linking gate (m): twice the median frame-to-frame move of the global maximum, ≥ min_sites."""
     h = float(np.median(np.abs(np.diff(x)))) if x.size > 1 else 1.0

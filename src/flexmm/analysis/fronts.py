@@ -11,7 +11,11 @@ shorter than three sites (ringing behind a front) are ignored. Per front:
   60 % of the path (the steady part; the whole-path value is kept too);
 - 10–90 % width: distance between the 10 % and 90 % crossings next to the front, median over
   the frames before the front has covered 90 % of its path;
-- distance travelled, switched sites, and arrest (stopped before reaching the end).
+- distance travelled, switched sites, and arrest: stopped before reaching the end, i.e. the 95 %
+  confidence interval of the speed fitted to the last tenth of its track (``final_speed``)
+  contains 0, or that speed would not carry it one more site in a time as long as the run (a
+  stopped front still relaxing). A slow front still moving near the pinning threshold is not
+  arrested.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, stats
 
 from flexmm.analysis.detect import link, merge_tracks
 
@@ -45,6 +49,8 @@ class FrontMeasurement:
     start_m: float
     stop_m: float
     arrested: bool
+    final_speed_m_s: float
+    final_speed_ci_m_s: float
     n_switched: int
     sites: np.ndarray
     x_m: np.ndarray
@@ -121,6 +127,27 @@ def _width(x, s, pos, spacing):
     return abs(c10[np.argmin(np.abs(c10 - pos))] - c90[np.argmin(np.abs(c90 - pos))])
 
 
+LATE_FRACTION = 0.1  # the end of a front's track whose speed decides whether it was arrested
+
+
+def final_speed(t: np.ndarray, pos: np.ndarray, fraction: float = LATE_FRACTION) -> tuple[float, float]:
+    """Speed of the last ``fraction`` of a track (at least 5 frames) and the half-width of its
+    95 % confidence interval (Student t on the slope's standard error); (0, inf) with fewer than
+    three frames."""
+    late = t >= t[-1] - fraction * (t[-1] - t[0])
+    if late.sum() < 5:
+        late = np.zeros(t.size, bool)
+        late[-5:] = True
+    tt, xx = t[late], pos[late]
+    if tt.size < 3 or np.ptp(tt) == 0:
+        return 0.0, np.inf
+    coef, cov = np.polyfit(tt - tt.mean(), xx, 1, cov="unscaled")
+    res = xx - np.polyval(coef, tt - tt.mean())
+    dof = tt.size - 2
+    se = float(np.sqrt(cov[0, 0] * float(res @ res) / dof)) if dof > 0 else np.inf
+    return float(coef[0]), float(stats.t.ppf(0.975, dof) * se) if dof > 0 else np.inf
+
+
 def measure_fronts(view, *, jump: float | None = None, min_travel_sites: float = 3.0) -> list[FrontMeasurement]:
     """Find and measure the transition fronts of a displacement FieldView; FrontNotFound if none."""
     u = view.values
@@ -158,13 +185,16 @@ def _measure(view, tr, index, first, mask, s, L, h) -> FrontMeasurement:
               if m and view.x.min() + 3 * h < p < view.x.max() - 3 * h]
     w = float(np.nanmedian(widths)) if widths and np.isfinite(widths).any() else np.nan
     end_x = view.x.max() if direction > 0 else view.x.min()
-    late = t >= t[0] + 0.9 * (view.time[-1] - t[0])
-    still = np.ptp(pos[late]) < h if late.sum() >= 2 else False
-    arrested = bool(still and abs(pos[-1] - end_x) > 3 * h)
+    v_end, ci = final_speed(t, pos)
+    # stopped: its final speed is statistically zero, or too slow to cross one more site in a
+    # time as long as the whole run (a stopped front still relaxing); not at the end of the line
+    creep = h / max(float(view.time[-1] - view.time[0]), 1e-300)
+    arrested = bool((abs(v_end) <= ci or abs(v_end) < creep) and abs(pos[-1] - end_x) > 3 * h)
     return FrontMeasurement(
         index=index, field=view.spec, direction=direction, jump=float(L), speed_m_s=float(speed),
         speed_stderr_m_s=float(err), speed_whole_path_m_s=float(speed_all), width_10_90_m=w, width_10_90_sites=w / h,
         distance_m=float(abs(pos[-1] - pos[0])), start_m=float(pos[0]), stop_m=float(pos[-1]),
-        arrested=arrested, n_switched=int(sel.size), sites=view.site[sel], x_m=view.x[sel],
+        arrested=arrested, final_speed_m_s=float(abs(v_end)), final_speed_ci_m_s=float(ci),
+        n_switched=int(sel.size), sites=view.site[sel], x_m=view.x[sel],
         switch_time_s=first[sel], track_time_s=t, track_pos_m=pos,
     )

@@ -67,15 +67,31 @@ def linear_chain_bands_hz(k: float, m: float, k_onsite: float = 0.0) -> list[tup
     return [(lo / (2 * math.pi), hi / (2 * math.pi))]
 
 
+def toda_kappa(strain_peak: float, b_per_m: float, spacing: float) -> float:
+    """κ of the Toda soliton whose peak bond strain is ``strain_peak`` (< 0): e^(−b r_m) − 1 = sinh²κ."""
+    r_m = strain_peak * spacing
+    if not r_m < 0:
+        raise ValueError("a Toda soliton compresses the bonds (b > 0)")
+    return math.asinh(math.sqrt(math.expm1(-b_per_m * r_m)))
+
+
+def toda_collision(c, b_per_m: float, spacing: float) -> list[Comparison]:
+    """Forward shifts of two Toda solitons after a head-on collision, at their measured κ."""
+    if c.kind != "head-on":
+        raise ValueError("the Toda shift relation here is for head-on collisions")
+    ka, kb = toda_kappa(c.amplitude_a, b_per_m, spacing), toda_kappa(c.amplitude_b, b_per_m, spacing)
+    da, db = th.toda_head_on_shifts(ka, kb)
+    note = f"Toda two-soliton shift −ln A12/(2κ), κ = {ka:.4g}, {kb:.4g}"
+    return [Comparison("", f"space shift of pulse {c.pulse_a}", c.shift_a_m, da * spacing, "m", note),
+            Comparison("", f"space shift of pulse {c.pulse_b}", c.shift_b_m, db * spacing, "m", note)]
+
+
 def toda_pulse(p_meas, a_n: float, b_per_m: float, m: float, spacing: float) -> list[Comparison]:
     """Toda soliton speed at the measured bond stretch peak r_m = strain · a (< 0, compressive).
 
     e^(−b r_m) − 1 = sinh²κ gives κ; speed = sqrt(ab/m) sinh κ/κ sites per unit time (§2).
     """
-    r_m = p_meas.amplitude * spacing
-    if not r_m < 0:
-        raise ValueError("a Toda soliton compresses the bonds (b > 0)")
-    kappa = math.asinh(math.sqrt(math.expm1(-b_per_m * r_m)))
+    kappa = toda_kappa(p_meas.amplitude, b_per_m, spacing)
     return [Comparison("", "speed", p_meas.speed_m_s, th.toda_speed(a_n, b_per_m, m, kappa) * spacing, "m/s",
                        f"Toda soliton, κ = {kappa:.4g}")]
 
@@ -113,6 +129,14 @@ def pulse(ctx, p_meas) -> list[Comparison]:
         return [Comparison("", "speed", p_meas.speed_m_s, a * math.sqrt(bond.k_n_per_m / m), "m/s",
                            "linear long-wave speed c0 = a sqrt(k/m)")]
     raise ValueError(f"no solitary-wave relation for a {bond.law} bond")
+
+
+def collision(ctx, c) -> list[Comparison]:
+    """Collision shifts where the chain's bond law has a relation (Toda, head-on)."""
+    lat = _chain(ctx)
+    if lat.onsite or lat.bond.law != "toda" or lat.bond.offset_m != 0:
+        raise ValueError("no collision relation for this chain")
+    return toda_collision(c, lat.bond.b_per_m, lat.spacing_m)
 
 
 def _viscous_eta(ctx, lat) -> float:

@@ -21,8 +21,9 @@ import numpy as np
 from scipy.signal import find_peaks, peak_widths
 
 from flexmm.analysis.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
-from flexmm.analysis.detect import Track, refine_peak, track_peaks
+from flexmm.analysis.detect import Track, refine_peak, split_reversals, track_peaks
 from flexmm.analysis.profiles import SHAPES
+from flexmm.analysis.steady import steady_part
 from flexmm.analysis.widths import PEAK_WARNING, fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
 
 
@@ -136,7 +137,8 @@ class PulseMeasurement:
     """One travelling pulse of a field.
 
     Scalars are SI (amplitude in the field's units); ``sites``, ``x_m``, ``arrival_time_s`` and
-    ``peak`` are (n,) arrays over the sites used in the speed fit; ``track_*`` are the tracked
+    ``peak`` are (n,) arrays over the sites used in the speed fit, ``segment`` the stretch between
+    collisions each belongs to, ``steady`` False in the formation transient; ``track_*`` are the tracked
     peak positions per frame; ``profile_*`` one measured spatial profile (for figures).
     """
 
@@ -150,6 +152,13 @@ class PulseMeasurement:
     speed_stderr_m_s: float
     amplitude: float
     amplitude_spread: float
+    amplitude_min: float
+    amplitude_max: float
+    amplitude_range: float
+    breathing: bool
+    breathing_period_s: float
+    formation_distance_m: float
+    formation_time_s: float
     amplitude_first: float
     amplitude_last: float
     attenuation_per_m: float
@@ -171,6 +180,8 @@ class PulseMeasurement:
     x_m: np.ndarray
     arrival_time_s: np.ndarray
     peak: np.ndarray
+    segment: np.ndarray
+    steady: np.ndarray
     track_time_s: np.ndarray
     track_pos_m: np.ndarray
     profile_x_m: np.ndarray
@@ -195,7 +206,17 @@ def _trimmed_arrivals(view, tr_t, tr_pos, pol, fwhm, others, edge, min_sites):
     keep &= np.array([counts.get(k, 0) >= 3 for k in seg], bool)
     sites, times, peaks, seg = sites[keep], times[keep], peaks[keep], seg[keep]
     if sites.size >= min_sites:
-        good = clean(view.x[sites], times, seg)
+        # the formation transient arrives off the steady line: kept (it is measured as such), not
+        # taken for outliers of the steady fit
+        d = direction * view.x[sites]
+        order = np.argsort(d)
+        steady = np.zeros(sites.size, bool)
+        steady[order[steady_part(d[order] - d.min(), times[order], peaks[order]).start:]] = True
+        good = ~steady
+        if steady.sum() >= min_sites:
+            good[steady] = clean(view.x[sites][steady], times[steady], seg[steady])
+        else:
+            good = clean(view.x[sites], times, seg)
         sites, times, peaks, seg = sites[good], times[good], peaks[good], seg[good]
     return sites, times, peaks, seg, direction, (lo_x, hi_x)
 
@@ -205,10 +226,16 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
     frames, t, pos, h = track
     sites, times, peaks, seg = arr
     x = view.x[sites]
-    slowness, s_err, intercepts, _ = segment_fit(x, times, seg)
+    att, att0, att_err = line_fit(direction * x, np.log(np.abs(peaks)))
+    order = np.argsort(direction * x)
+    st = steady_part(direction * x[order] - (direction * x).min(), times[order], peaks[order])
+    steady = np.zeros(x.size, bool)
+    steady[order[st.start:]] = True
+    if steady.sum() < 5:  # too short a steady part to fit: use the whole path
+        steady[:] = True
+    slowness, s_err, intercepts, _ = segment_fit(x[steady], times[steady], seg[steady])
     speed = 1.0 / slowness
     delay = float(intercepts[-1] - intercepts[0])
-    att, att0, att_err = line_fit(direction * x, np.log(np.abs(peaks)))
     pick = frames_inside(pos, t, fwhm, *bounds, others)
     sub = pick[:: max(1, pick.size // 25)]
     fw, fits = frame_fits(view, frames, pos, h, pol, fwhm, sub) if sub.size else (np.nan, {})
@@ -221,6 +248,10 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
     if pick.size:
         pooled = pooled_fits(view, frames, t, pos, pick, fwhm, lambda xc: pol * np.exp(att0 + att * direction * xc))
         W = {s: (f.W, f.b) for s, f in pooled.items()}
+    t_fwhm = temporal_fwhm(view, sites, times, pol, 3 * fwhm * abs(slowness))
+    # a pulse that crosses a site in fewer than 3 frames is sampled too coarsely in time for its
+    # peak to be followed: its apparent amplitude variation is not breathing
+    breathing = st.breathing and t_fwhm >= 3 * float(np.median(np.diff(view.time)))
     mid = sub[sub.size // 2] if sub.size else len(frames) // 2
     prof = np.abs(view.x - pos[mid]) <= 4 * fwhm
     kind = view.kind if view.kind in POLARITY_LABELS else "length"
@@ -228,18 +259,22 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
         index=index, field=view.spec, units=view.units, polarity=pol,
         polarity_label=POLARITY_LABELS[kind][pol], direction=int(np.sign(speed)),
         speed_m_s=float(abs(speed)), speed_stderr_m_s=float(s_err * speed**2),
-        amplitude=float(np.median(peaks)), amplitude_spread=float(np.std(peaks)),
+        amplitude=float(np.median(peaks[steady])), amplitude_spread=float(np.std(peaks[steady])),
+        amplitude_min=st.amplitude_min, amplitude_max=st.amplitude_max,
+        amplitude_range=float(abs(st.amplitude_max - st.amplitude_min)), breathing=breathing,
+        breathing_period_s=st.breathing_period_s if breathing else np.nan, formation_distance_m=st.formation_distance_m,
+        formation_time_s=st.formation_time_s,
         amplitude_first=float(peaks[np.argmin(direction * x)]),
         amplitude_last=float(peaks[np.argmax(direction * x)]),
         attenuation_per_m=float(-att), attenuation_stderr_per_m=float(att_err),
         fwhm_m=fw, width_sech_m=W["sech"][0], width_sech2_m=W["sech2"][0], width_kg_m=W["kg"][0],
         kg_b=W["kg"][1], width_spread_m=spread(fits.get("sech", [])),
-        temporal_fwhm_s=temporal_fwhm(view, sites, times, pol, 3 * fwhm * abs(slowness)),
+        temporal_fwhm_s=t_fwhm,
         n_collisions=int(intercepts.size - 1), collision_delay_s=delay,
         collision_shift_m=float(-delay * abs(speed)),
         n_sites_fitted=int(sites.size), first_site=float(view.site[sites].min()),
         last_site=float(view.site[sites].max()), sites=view.site[sites], x_m=x,
-        arrival_time_s=times, peak=peaks, track_time_s=t, track_pos_m=pos,
+        arrival_time_s=times, peak=peaks, segment=seg, steady=steady, track_time_s=t, track_pos_m=pos,
         profile_x_m=view.x[prof], profile_values=view.values[frames[mid], prof],
         profile_time_s=float(view.time[frames[mid]]),
         profile_fits={s: fits[s][sub.size // 2] for s in fits if fits[s]},
@@ -293,6 +328,7 @@ def _thresholds(vals: np.ndarray, fraction: float, floor: float, per_sign: bool)
 
 def _track(view, thr, gate, min_travel_sites, max_pulses):
     tracks = track_peaks(view.values, view.time, view.x, threshold=thr, gate=gate)
+    tracks = [leg for tr in tracks for leg in split_reversals(tr, min_travel_sites * view.spacing_m)]
     tracks = [tr for tr in tracks if len(tr.frames) >= 5 and tr.travel >= min_travel_sites * view.spacing_m]
     tracks.sort(key=lambda tr: (tr.time[0], tr.pos[0]))
     tracks = tracks[:max_pulses]
@@ -313,7 +349,9 @@ def measure_pulses(view, *, threshold_fraction: float = 0.25, min_travel_sites: 
     max(2, FWHM) sites of the ends, sites where a colliding pulse is near, and outliers
     (> 4 MAD); across a collision the line keeps its slope but gets a new intercept, whose
     change is the collision delay (phase shift, ``collision_shift_m`` > 0: pushed forward),
-    and a speed change of more than 2 % starts a new pulse; amplitude = median signed peak, its
+    and a speed change of more than 2 % starts a new pulse; the sites of the formation transient
+    are left out of the speed and amplitude (``steady``: formation distance and time, amplitude
+    range, breathing and its period); amplitude = median signed peak of the steady part, its
     first and last values and the attenuation rate α of |peak| ∝ exp(−α · distance); spatial
     FWHM (peak_widths) and fits of sech, sech² and the §1.3 profile; temporal FWHM; polarity
     (see ``arrivals`` and ``widths``).

@@ -3,7 +3,7 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of ``compare.THEORY``, and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
+of ``compare.THEORY``, pairs colliding pulses (``analysis.collisions``), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
 a predeformed run are measured from its relaxed state (``analysis.rest``).
 """
 
@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from flexmm.analysis.collisions import Collision, find_collisions
 from flexmm.analysis.compare import (
-    Comparison, RunContext, compare_driven, compare_front, compare_pulse, theory_for,
+    Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, theory_for,
 )
 from flexmm.analysis.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
 from flexmm.analysis.energy import EnergyBudget, energy_budget
@@ -45,6 +46,8 @@ class RunAnalysis:
     groups: list[WaveGroup] = field(default_factory=list)
     energy: EnergyBudget | None = None
     comparisons: list[Comparison] = field(default_factory=list)
+    collisions: list[Collision] = field(default_factory=list)
+    overlap_artefacts: int = 0
 
     @property
     def name(self) -> str:
@@ -139,9 +142,13 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     view = field_view(ds, field_spec or default_field_for(kind, ds), row=row)
     out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
     if kind == "pulse":
-        out.pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
+        pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
+        out.collisions, out.pulses, out.overlap_artefacts = find_collisions(
+            pulses, view.spacing_m, float(view.time[-1]), (float(view.x.min()), float(view.x.max())))
         for p in out.pulses:
             out.comparisons += compare_pulse(ctx, p)
+        for c in out.collisions:
+            out.comparisons += compare_collision(ctx, c)
     elif kind == "modes":
         out.groups = wave_groups(ds)
         if not out.groups:

@@ -119,5 +119,9 @@ def summary_lines(res) -> list[str]:
                  f"{_num(m.amplitude_drive)} {m.units}, at far end {_num(m.amplitude_far)} {m.units}, "
                  f"transmission {_num(m.transmission)}, decay {_num(m.decay_per_site)} per site"]
     for c in getattr(res, "collisions", []) or []:
-        lines.append("  " + c.describe())
+        theory = [f"pulse {pulse} {_num(r.predicted * 1e3)} mm ({100 * r.rel_diff:+.2f} %)"
+                  for pulse in (c.pulse_a, c.pulse_b) for r in res.comparisons
+                  if r.item == f"collision {c.index}" and r.quantity == f"space shift of pulse {pulse}"
+                  and r.predicted is not None and r.rel_diff is not None]
+        lines.append("  " + c.describe() + (f"; theory shifts: {', '.join(theory)}" if theory else ""))
     return lines

@@ -21,6 +21,8 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path (no label)."),
     fidelity: str = FidelityOption,
     analysis: str = AnalysisOption,
+    from_run: str = typer.Option(None, "--from", help="Continue RUN: start from its last frame "
+                                                      "(sets initial.from_run; the config records it)."),
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
 
@@ -34,6 +36,8 @@ def run(
     ov = list(overrides or [])
     if force:
         ov.append("solver.allow_unstable=true")
+    if from_run:
+        ov.append(f"initial.from_run={from_run}")
     analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
     scene = load_or_exit(config, ov)
     run_dir = check_output_dir(run_dir_for(scene, out))
@@ -67,7 +71,7 @@ def run(
 def _print_summary(path, analysis: str | None = None) -> None:
     """What ``flexmm analyze`` measures on the run (the same analysis, field and feature), in a
     few lines: the pulse, front, driven response or wave groups the scene is about, with theory."""
-    from flexmm.analysis import report
+    from flexmm.analysis import FieldError, report
     from flexmm.analysis.summary import principal, summary_lines
     from flexmm.cli.common import analysis_request
     from flexmm.plan.continuum import alongside
@@ -78,7 +82,8 @@ def _print_summary(path, analysis: str | None = None) -> None:
     kind = request.kind if request is not None else "auto"
     try:
         res = report.analyze_run(path, kind=kind, field_spec=request.field if request else None)
-    except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups) as exc:
+    except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups,
+            FieldError) as exc:  # the run is fine; there is just nothing (or no field) to measure
         typer.echo(f"nothing measured: {exc}")
         return
     for line in summary_lines(res):

@@ -9,6 +9,7 @@ from pydantic import AliasChoices, Field, model_validator
 from flexmm.config.absorbing import AbsorbingLayer
 from flexmm.config.base import NonNegative, Positive, Strict, exactly_one
 from flexmm.config.excitation import ExcitationConfig, NoExcitation
+from flexmm.config.initial import Initial
 from flexmm.config.lattice import LatticeConfig
 
 
@@ -132,8 +133,31 @@ class Scene(Strict):
     excitation: ExcitationConfig = Field(default_factory=lambda: NoExcitation(kind="none"))
     damping: Damping = Field(default_factory=Damping)
     imperfection: ImperfectionConfig | None = None
+    initial: Initial | None = Field(None, description="initial state of any shape (config/initial.py)")
     solver: Solver
     output: Output = Field(default_factory=Output)
+
+    def _check_initial(self, n: int) -> None:
+        valid = getattr(type(self.lattice), "FIELD_NAMES", None)
+        init = self.initial
+        for where, items in (("fields", init.fields), ("pinned", init.pinned)):
+            for k, item in enumerate(items):
+                if valid is not None and item.field not in valid:
+                    raise ValueError(f"initial.{where}.{k}.field {item.field!r}: this lattice's fields are "
+                                     f"{', '.join(valid)}")
+        for k, pin in enumerate(init.pinned):
+            bad = [s for s in pin.sites if s >= n]
+            if bad:
+                raise ValueError(f"initial.pinned.{k}.sites {bad} outside 0..{n - 1}")
+        needs = {"toda_soliton": "toda", "sech2_pulse": "polynomial", "tanh_front": "linear"}
+        for k, spec in enumerate(init.launch):
+            if not 0 <= spec.center_site <= n - 1:
+                raise ValueError(f"initial.launch.{k}.center_site={spec.center_site} is outside 0..{n - 1}")
+            law = getattr(getattr(self.lattice, "bond", None), "law", None)
+            if self.lattice.kind != "mass_chain" or law != needs[spec.kind]:
+                raise ValueError(f"initial.launch.{k}: a {spec.kind} launches on a mass_chain with a "
+                                 f"{needs[spec.kind]} bond (this lattice: {self.lattice.kind}"
+                                 + (f", {law} bond)" if law else ")"))
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -160,6 +184,8 @@ class Scene(Strict):
         for p in pulses:
             if p.center_site >= n:
                 raise ValueError(f"excitation.center_site={p.center_site} is outside 0..{n - 1}")
+        if self.initial is not None:
+            self._check_initial(n)
         if isinstance(self.imperfection, RotationSeed):
             bad = [s for s in self.imperfection.sites if s >= n]
             if bad:

@@ -205,6 +205,8 @@ class Reach:
 def _sources(scene, ix: np.ndarray) -> list[int] | None:
     """x indices where waves start (excited ends, soliton centres, seeds); None if everywhere."""
     exc, imp = scene.excitation, scene.imperfection
+    if getattr(scene, "initial", None) is not None:
+        return None  # an initial state (fields, launched waves, pins, another run) may be anywhere
     if imp is not None and imp.kind != "rotation_seed":
         return None  # random imperfections: every unit is a source
     last = int(ix.max())

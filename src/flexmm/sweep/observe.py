@@ -29,6 +29,16 @@ OBSERVABLES = {
     "n_sites_fitted": ("1", "sites used in the speed fit (switched sites for a front)"),
     "speed_theory": ("m/s", "theory: speed at the measured amplitude"),
     "transmission": ("1", "driven: far-end over drive amplitude"),
+    "formation_distance": ("m", "pulse: distance travelled before its amplitude is steady"),
+    "amplitude_min": (None, "pulse: smallest |peak| of the steady part (signed), the breathing range"),
+    "amplitude_max": (None, "pulse: largest |peak| of the steady part (signed)"),
+    "breathing_period": ("s", "pulse: period of its amplitude oscillation (NaN: not breathing)"),
+    "n_collisions": ("1", "pulse collisions found (analysis.collisions)"),
+    "collision_shift": ("m", "first collision: space shift of its first incoming pulse"),
+    "collision_delay": ("s", "first collision: time shift (delay) of its first incoming pulse"),
+    "collision_amplitude_change": ("1", "first collision: relative amplitude change of its first incoming pulse"),
+    "collision_speed_change": ("1", "first collision: relative speed change of its first incoming pulse"),
+    "collision_passed": ("1", "first collision: 1 if both pulses passed through, 0 if reflected, else NaN"),
 }
 
 
@@ -72,7 +82,14 @@ def _full(path, kind: str, field: str | None, opts: dict) -> dict:
     if a.kind == "pulse":
         out.update(speed=m.speed_m_s, speed_stderr=m.speed_stderr_m_s, amplitude=m.amplitude,
                    width=m.fwhm_m, n_sites_fitted=float(m.n_sites_fitted),
-                   speed_theory=_speed_theory(a.ctx, m.units, m.amplitude))
+                   speed_theory=_speed_theory(a.ctx, m.units, m.amplitude), n_collisions=float(len(a.collisions)),
+                   formation_distance=m.formation_distance_m, amplitude_min=m.amplitude_min,
+                   amplitude_max=m.amplitude_max, breathing_period=m.breathing_period_s)
+        if a.collisions:
+            c = a.collisions[0]
+            out.update(collision_shift=c.shift_a_m, collision_delay=c.delay_a_s,
+                       collision_amplitude_change=c.amplitude_change_a, collision_speed_change=c.speed_change_a,
+                       collision_passed={"passed through": 1.0, "reflected": 0.0}.get(c.outcome, math.nan))
     elif a.kind == "front":
         out.update(speed=m.speed_m_s, speed_stderr=m.speed_stderr_m_s, amplitude=m.jump,
                    width=m.width_10_90_m, n_sites_fitted=float(m.n_switched))

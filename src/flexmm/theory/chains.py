@@ -163,6 +163,19 @@ def toda_speed(a: float, b: float, m: float, kappa: float) -> float:
     return math.sqrt(a * b / m) * math.sinh(kappa) / kappa
 
 
+def toda_head_on_shifts(kappa1: float, kappa2: float) -> tuple[float, float]:
+    """Forward shifts (sites) of two Toda solitons after a head-on collision (docs/physics.md §2).
+
+    A12 = −[(s1 + s2)² − sinh²(κ1 − κ2)]/[(s1 − s2)² − sinh²(κ1 + κ2)], s = sinh κ (Hirota's
+    two-soliton τ function); soliton i moves forward by −ln A12/(2 κ_i) sites.
+    """
+    if min(kappa1, kappa2) <= 0:
+        raise ValueError("need kappa1, kappa2 > 0")
+    s1, s2 = math.sinh(kappa1), math.sinh(kappa2)
+    a12 = -((s1 + s2) ** 2 - math.sinh(kappa1 - kappa2) ** 2) / ((s1 - s2) ** 2 - math.sinh(kappa1 + kappa2) ** 2)
+    return -math.log(a12) / (2 * kappa1), -math.log(a12) / (2 * kappa2)
+
+
 # ---------------------------------------------------------------- linear chain
 def linear_chain_dispersion(k: float, m: float, q, k_onsite: float = 0.0):
     """omega(q) = sqrt((k_onsite + 4 k sin^2(q/2))/m), q the phase per site (q a) (docs/physics.md §2); shape of q."""

@@ -1,0 +1,97 @@
+"""Exact and continuum waves of chains of masses as initial states (docs/physics.md §2).
+
+Each launcher returns SI displacements and velocities of the chain's sites (n,) for one wave:
+
+- ``toda_soliton``: the exact Toda soliton of bond stretch r_n, with its exact velocity field;
+- ``sech2_pulse``: the long-wave sech² solitary wave of a polynomial bond k1 D + k2 D²;
+- ``tanh_front``: the damped bistable front (L/2)(1 − tanh((x − X)/w)) of a bistable_cubic
+  on-site term with linear coupling, at its predicted speed (or at rest: the kink saddle).
+
+A wave of bond stretch D_n (bond n joins sites n and n+1) becomes displacements by summing
+the stretches towards the side the wave moves away from, so the chain ahead of it is at rest
+(u = 0, u̇ = 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flexmm.theory import chains as th
+
+
+def _sech2(z: np.ndarray) -> np.ndarray:
+    """sech² z without overflow far from the centre."""
+    e = np.exp(-2.0 * np.abs(z))
+    return 4.0 * e / (1.0 + e) ** 2
+
+
+def _from_bonds(r: np.ndarray, rdot: np.ndarray, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """Site displacements/velocities (n = bonds + 1) at rest ahead of a wave moving ``direction``."""
+    if direction > 0:  # ahead = right end: u_{N-1} = 0, u_i = −Σ_{k≥i} r_k
+        u = np.append(-np.cumsum(r[::-1])[::-1], 0.0)
+        ud = np.append(-np.cumsum(rdot[::-1])[::-1], 0.0)
+    else:  # ahead = left end: u_0 = 0, u_i = Σ_{k<i} r_k
+        u = np.concatenate([[0.0], np.cumsum(r)])
+        ud = np.concatenate([[0.0], np.cumsum(rdot)])
+    return u, ud
+
+
+def _chain(lat, law: str):
+    if lat.kind != "mass_chain":
+        raise ValueError(f"launches a wave of a mass_chain, not of a {lat.kind}")
+    if lat.bond2 is not None or lat.variation:
+        raise ValueError("the wave is exact only on a uniform nearest-neighbour chain (no variation, no bond2)")
+    if law and lat.bond.law != law:
+        raise ValueError(f"needs a {law} bond (lattice.bond.law is {lat.bond.law})")
+    return lat.bond, lat.spacing_m, lat.mass_kg, lat.n_units
+
+
+def toda_soliton(lat, kappa: float, center_site: float, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exact Toda soliton e^(−b r_n) − 1 = sinh²κ sech²(κ(n − n0) − β t), β = sqrt(ab/m) sinh κ."""
+    bond, _, m, n = _chain(lat, "toda")
+    if lat.onsite:
+        raise ValueError("the Toda soliton needs a chain without on-site terms")
+    a, b = bond.a_n, bond.b_per_m
+    beta = math.sqrt(a * b / m) * math.sinh(kappa)
+    z = kappa * (np.arange(n - 1) + 0.5 - center_site)  # bond n sits between sites n and n+1
+    s2 = math.sinh(kappa) ** 2 * _sech2(z)
+    r = -np.log1p(s2) / b
+    drdz = 2 * s2 * np.tanh(z) / (b * (1 + s2))
+    return _from_bonds(r, drdz * (-direction * beta), direction)
+
+
+def sech2_pulse(lat, strain: float, center_site: float, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """Long-wave solitary wave D_n = D_m sech²((n − n0)/W) of T(D) = k1 D + k2 D², moving at v."""
+    bond, a, m, n = _chain(lat, "polynomial")
+    if lat.onsite or bond.k3_n_per_m3 != 0 or bond.offset_m != 0:
+        raise ValueError("the sech² wave needs a polynomial bond k1 D + k2 D² (k3 = 0) and no on-site terms")
+    wave = th.softening_solitary_wave(bond.k1_n_per_m, bond.k2_n_per_m2, strain * a, m, a)
+    z = (np.arange(n - 1) + 0.5 - center_site) / wave.W
+    D = strain * a * _sech2(z)
+    dDdz = -2 * D * np.tanh(z)
+    return _from_bonds(D, dDdz * (-direction * wave.v / (a * wave.W)), direction)
+
+
+def tanh_front(lat, eta: float | None, center_site: float, direction: int,
+               static: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Bistable front u = (L/2)(1 − d tanh((x − X(t))/w)), X = x0 + d v t: state L behind, 0 ahead."""
+    bond, a, m, n = _chain(lat, "linear")
+    laws = [law for law in lat.onsite if law.law == "bistable_cubic"]
+    if len(laws) != 1 or len(lat.onsite) != 1 or bond.offset_m != 0 or laws[0].offset_m != 0:
+        raise ValueError("the tanh front needs one bistable_cubic on-site term and a linear bond")
+    law = laws[0]
+    alpha, beta, L, k = law.alpha_n_per_m3, law.beta, law.jump_m, bond.k_n_per_m
+    if static:
+        v, w = 0.0, math.sqrt(8 * k * a * a / (alpha * L * L))
+    else:
+        if eta is None:
+            raise ValueError("a moving front needs damping.viscous.coefficient_n_s_per_m (its speed is set by η)")
+        fr = th.bistable_front(alpha, beta, L, k, m, a, eta)
+        v, w = fr.v, fr.w
+    x = (np.arange(n) - center_site) * a
+    th_ = np.tanh(direction * x / w)
+    u = 0.5 * L * (1 - th_)
+    dudx = -0.5 * L * direction * (1 - th_**2) / w
+    return u, -direction * v * dudx
