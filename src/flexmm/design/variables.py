@@ -6,8 +6,10 @@ list (``k_rot_n_m_per_rad``, ``mass_kg``, ``bond.k1_n_per_m``, ...) with a ``pro
 
 - ``uniform`` (1 value): every element takes it (a gradient variation with start = end);
 - ``linear`` (2 values): a linear ramp over the elements from the first to the last value;
-- ``spline`` (``knots`` values): a cubic spline (scipy) through knots spread evenly over the
-  units, written as per-unit defects (per-unit targets only).
+- ``spline`` (``knots`` values): a clamped cubic B-spline (scipy) over the units with the values
+  as its control points, written as per-unit defects (per-unit targets only). It is linear in
+  the values and stays between the smallest and largest of them, so the bounds hold at every
+  unit (an interpolating spline can overshoot, e.g. to a negative mass).
 
 Variables are appended to the scene's own variations, so the lattice's scales stay those of
 its base parameters and every design is a runnable scene (``Design.scene_data``). The map from
@@ -80,14 +82,15 @@ def _set_path(data: dict, dotted: str, value) -> None:
     data[last] = value
 
 
-def spline_values(knots: np.ndarray, n: int) -> np.ndarray:
-    """Values at n elements of the cubic spline (scipy) through knots spread over 0..n−1."""
-    from scipy.interpolate import CubicSpline
+def spline_values(coefficients: np.ndarray, n: int) -> np.ndarray:
+    """Values at n elements of the clamped B-spline (degree ≤ 3) with these control points, over 0..n−1."""
+    from scipy.interpolate import BSpline
 
-    xk = np.linspace(0.0, n - 1.0, knots.size)
-    if knots.size < 4:
-        return np.interp(np.arange(n), xk, knots)
-    return CubicSpline(xk, knots, bc_type="not-a-knot")(np.arange(n))
+    c = np.asarray(coefficients, float)
+    k = min(3, c.size - 1)
+    inner = np.linspace(0.0, n - 1.0, c.size - k + 1)
+    t = np.concatenate([np.full(k, 0.0), inner, np.full(k, n - 1.0)])
+    return BSpline(t, c, k)(np.arange(n, dtype=float))
 
 
 class Design:
