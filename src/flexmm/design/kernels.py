@@ -12,7 +12,7 @@ hinge table (H, 7) and the site table (N, 3) of ``models.hinge``; for ``MassArgs
 on-site law rows (B, 9), (S, 9) of ``models.laws``. Columns that are not continuous (the hinge
 sign, a tabulated law's start and length) get zero derivatives.
 
-``model_adjoint(q, args, lam, out, g1, g2)`` writes (∂F/∂q)ᵀλ into ``out`` and adds (∂F/∂p)ᵀλ to
+``model_adjoint(q, args, lam, out, g1, g2)`` adds (∂F/∂q)ᵀλ to ``out`` and (∂F/∂p)ᵀλ to
 (g1, g2); ``model_tangent(q, args, dq, d1, d2, out)`` writes (∂F/∂q)dq + (∂F/∂p)(d1, d2). Like
 ``models.kernels.model_force`` they are plain functions for Python and numba overloads that
 dispatch on the type of ``args`` inside compiled loops (``ADJOINT_KERNELS``).
@@ -28,6 +28,7 @@ import numpy as np
 from numba.extending import overload
 
 from flexmm._jit import JIT_OPTIONS, NO_JIT, jit
+from flexmm._trig import sincos
 from flexmm.models import laws as lw
 from flexmm.models.hinge import (
     H_HALF_A,
@@ -48,28 +49,34 @@ from flexmm.models.mass_kernels import MassArgs
 
 
 @jit
-def _chain_site_terms(q, sprm, lam, out, g2, n):
+def _chain_trig(q, sprm, n, cs, sn):
+    """cos and sin of every unit's angle θ0 + θ (vectorised ``_trig.sincos``)."""
+    for i in range(n):
+        s, c = sincos(sprm[i, S_THETA0] + q[n + i])
+        cs[i] = c
+        sn[i] = s
+
+
+@jit
+def _chain_site_terms(q, sprm, lam, out, g2, n, cs, sn):
     """Lateral-hinge on-site terms E = ½ k_g (cos θ0 − cos φ)² + ½ k_r θ², φ = θ0 + θ."""
     for i in range(n):
         th = q[n + i]
         t0 = sprm[i, S_THETA0]
-        phi = t0 + th
-        c, s = math.cos(phi), math.sin(phi)
-        g = math.cos(t0) - c
+        c, s = cs[i], sn[i]
         kg, kr = sprm[i, S_KG], sprm[i, S_KR]
         li = lam[n + i]
-        out[n + i] = -(kg * (s * s + g * c) + kr) * li
-        g2[i, S_KG] -= g * s * li
+        g = math.cos(t0) - c
+        out[n + i] -= (kg * (s * s + g * c) + kr) * li
         g2[i, S_KR] -= th * li
+        g2[i, S_KG] -= g * s * li
         g2[i, S_THETA0] -= kg * ((s - math.sin(t0)) * s + g * c) * li
 
 
 @jit
-def _hinge_state(q, hprm, sprm, n, h, a, b):
+def _hinge_state(q, hprm, cs, sn, n, h, a, b):
     """cos/sin of both units' angles, the hinge's h_A, h_B, σ, k_l, k_s, k_θ and el, es, ep."""
-    pa = sprm[a, S_THETA0] + q[n + a]
-    pb = sprm[b, S_THETA0] + q[n + b]
-    ca, sa, cb, sb = math.cos(pa), math.sin(pa), math.cos(pb), math.sin(pb)
+    ca, sa, cb, sb = cs[a], sn[a], cs[b], sn[b]
     hA, hB, sig = hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN]
     el = q[b] - q[a] + hprm[h, H_REST] - (hA * ca + hB * cb)
     es = sig * (hB * sb - hA * sa)
@@ -79,7 +86,7 @@ def _hinge_state(q, hprm, sprm, n, h, a, b):
 
 @jit
 def chain_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ into ``out``; (∂F/∂p)ᵀλ added to g1 (hinge table), g2 (site table).
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table), g2 (site table).
 
     Per hinge (d_s = 0), with el, es, ep its stretch, shear and bend (``models.hinge``) and
     del, des, dep their derivatives along λ, D = λ·∇E = k_l el del + k_s es des + k_θ ep dep;
@@ -87,13 +94,14 @@ def chain_adjoint(q, args, lam, out, g1, g2):
     """
     ha, hb, hprm, sprm, _, _ = args
     n = sprm.shape[0]
-    for k in range(out.shape[0]):
-        out[k] = 0.0
-    _chain_site_terms(q, sprm, lam, out, g2, n)
+    cs = np.empty(n)
+    sn = np.empty(n)
+    _chain_trig(q, sprm, n, cs, sn)
+    _chain_site_terms(q, sprm, lam, out, g2, n, cs, sn)
     for h in range(ha.shape[0]):
         a = ha[h]
         b = hb[h]
-        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, sprm, n, h, a, b)
+        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, cs, sn, n, h, a, b)
         lua, lub, lta, ltb = lam[a], lam[b], lam[n + a], lam[n + b]
         dl = lub - lua + hA * sa * lta + hB * sb * ltb
         ds = sig * (hB * cb * ltb - hA * ca * lta)
@@ -121,11 +129,13 @@ def chain_tangent(q, args, dq, d1, d2, out):
     n = sprm.shape[0]
     for k in range(out.shape[0]):
         out[k] = 0.0
+    cs = np.empty(n)
+    sn = np.empty(n)
+    _chain_trig(q, sprm, n, cs, sn)
     for i in range(n):
         th = q[n + i]
         t0 = sprm[i, S_THETA0]
-        phi = t0 + th
-        c, s = math.cos(phi), math.sin(phi)
+        c, s = cs[i], sn[i]
         g = math.cos(t0) - c
         kg = sprm[i, S_KG]
         dt0 = d2[i, S_THETA0]
@@ -137,7 +147,7 @@ def chain_tangent(q, args, dq, d1, d2, out):
     for h in range(ha.shape[0]):
         a = ha[h]
         b = hb[h]
-        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, sprm, n, h, a, b)
+        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, cs, sn, n, h, a, b)
         dpa = d2[a, S_THETA0] + dq[n + a]
         dpb = d2[b, S_THETA0] + dq[n + b]
         dhA, dhB = d1[h, H_HALF_A], d1[h, H_HALF_B]
@@ -255,11 +265,9 @@ def _table_second(z, start, n, tab):
 
 @jit
 def mass_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ into ``out``; (∂F/∂p)ᵀλ added to g1 (bond rows), g2 (on-site rows)."""
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (bond rows), g2 (on-site rows)."""
     bi, bj, bcode, bprm, si, scode, sprm, tab = args
     dprm = np.empty(bprm.shape[1])
-    for k in range(out.shape[0]):
-        out[k] = 0.0
     for b in range(bi.shape[0]):
         i = bi[b]
         j = bj[b]
@@ -342,7 +350,7 @@ def with_tables(args, t1: np.ndarray, t2: np.ndarray):
 
 
 def model_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ into ``out``, (∂F/∂p)ᵀλ added to the parameter-table gradients g1, g2."""
+    """Add (∂F/∂q)ᵀλ to ``out`` and (∂F/∂p)ᵀλ to the parameter-table gradients g1, g2."""
     adjoint_kernels_of(type(args)).adjoint(q, args, lam, out, g1, g2)
 
 
