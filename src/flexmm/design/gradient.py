@@ -77,6 +77,10 @@ def check_differentiable(system, terms: Terms) -> None:
         adjoint_kernels_of(type(system.args))
     except TypeError as err:
         raise GradientError(f"model {system.model!r}: {err}") from None
+    args = system.args
+    if hasattr(args, "dipoles") and (args.dipoles[0].shape[0] or args.joints[0].shape[0]):
+        raise GradientError(f"model {system.model!r}: gradients through magnets or bistable joints are not "
+                            "implemented (hinges only)")
     if terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION):
         raise GradientError("gradients through dashpots or ground friction are not implemented "
                             "(velocity-dependent external forces); use on-site viscous damping")
