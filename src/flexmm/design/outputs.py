@@ -97,7 +97,7 @@ def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Pa
         for x, style, label in ((x_start, "--", "start"), (x_best, "-", "best")):
             values = element_profile(dp, x, var)
             ax.plot(np.arange(values.size), values, style, marker=".", label=label)
-        ax.set_xlabel("unit")
+        ax.set_xlabel({"x": "unit (column)", "y": "row"}[var.axis])
         ax.set_ylabel(var.target)
         ax.legend(fontsize=7)
         row += 1
@@ -139,8 +139,10 @@ def element_profile(dp, x: np.ndarray, var) -> np.ndarray:
     """Per-unit values of a per-element variable in the design ``x`` (SI)."""
     from flexmm.design.variables import spline_values
 
+    from flexmm.design.variables import profile_lines
+
     vals = dp.design.split(x)[dp.design.variables.index(var)]
-    n = dp.problem.system.n_sites
+    n = len(profile_lines(dp.design.base["lattice"], var.axis))
     if var.profile == "spline":
         return spline_values(vals, n)
     return np.linspace(vals[0], vals[-1], n)
