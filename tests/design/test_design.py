@@ -29,6 +29,7 @@ VARIABLES = [
     {"name": "k_rot", "target": "k_rot_n_m_per_rad", "profile": "linear", "initial": [6e-4, 9e-4],
      "bounds": [1e-4, 5e-3]},
     {"name": "zeta", "path": "damping.viscous.damping_ratio", "initial": 0.02, "bounds": [0.0, 0.5]},
+    {"name": "impact", "path": "excitation.velocity_m_s", "initial": 2.0, "bounds": [0.5, 4.0]},
 ]
 TERMS = {
     "peak_force": {"kind": "peak_force", "region": {"end": "right"}},
@@ -50,7 +51,8 @@ def _spec(tmp_path: Path, terms, **changes) -> Path:
 @pytest.mark.parametrize("terms", [["peak_force"], ["energy"], ["peak_energy"], ["arrival_time"],
                                    ["peak_force", "energy", "arrival_time"]])
 def test_objective_gradient_matches_central_differences(tmp_path, terms):
-    """Every term and a weighted sum, w.r.t. per-unit masses (spline), a stiffness ramp, damping."""
+    """Every term and a weighted sum, w.r.t. per-unit masses (spline), a stiffness ramp, damping
+    and the striker's speed."""
     g, fd, err = check_gradient(load_design(_spec(tmp_path, terms)))
     assert np.all(err < 1e-6), (g, fd, err)
 
@@ -139,3 +141,18 @@ def test_sheet_focusing_showcase(tmp_path):
         rec, _ = traj.run(raw)
         energies.append(np.mean(0.5 * (rec.v**2 * s.mass[dofs]).sum(axis=1)) * s.scales.energy)
     assert energies[1] / energies[0] > 1.3, energies
+
+
+def test_spline_profile_stays_within_its_values_and_follows_rows():
+    from flexmm.design.variables import profile_lines, spline_values
+
+    rng = np.random.default_rng(0)
+    for knots in (2, 3, 4, 8):
+        c = rng.uniform(1.0, 5.0, knots)
+        v = spline_values(c, 23)
+        assert v.min() >= c.min() - 1e-12 and v.max() <= c.max() + 1e-12
+        assert v[0] == pytest.approx(c[0]) and v[-1] == pytest.approx(c[-1])  # clamped ends
+    np.testing.assert_allclose(spline_values(np.array([1.0, 3.0]), 5), [1.0, 1.5, 2.0, 2.5, 3.0])
+    sheet = {"n_rows": 2, "n_cols": 3}
+    assert profile_lines(sheet, "y") == [[0, 1, 2], [3, 4, 5]]
+    assert profile_lines(sheet, "x") == [[0, 3], [1, 4], [2, 5]]
