@@ -3,7 +3,7 @@
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
                                               #              | roofline | sheet_throughput | contention
-                                              #              | sheet | workprecision | render
+                                              #              | sheet | workprecision | render | gradient
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -759,9 +759,70 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
     return out
 
 
-SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth, "memory": memory, "sheet": sheet,
-            "sheet_throughput": sheet_throughput, "roofline": roofline, "contention": contention, "compare": compare,
-            "workprecision": workprecision, "render": render}
+def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient (flexmm.design: checkpointed forward + reverse sweep) as a multiple
+    of one forward run of the engine (the Stepper's velocity Verlet, damped so both take the same
+    scheme), interleaved in the same loop; memory of the checkpoints and the peak traced by
+    tracemalloc during the gradient. DifFlexMM (JAX) is not run: JAX is not a flexmm dependency.
+    """
+    import tracemalloc
+
+    from flexmm.design.gradient import MEMORY_MB, Trajectory, raw_of
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.stepper import Stepper
+
+    rows = []
+    for n_units, steps in cases:
+        system, terms, damp = _chain(n_units)
+        damp = damp + 0.01 * system.mass  # light damping: the engine's general Verlet kernel
+        st = Stepper(INTEGRATORS["velocity_verlet"], system, terms, damp, 0.1, check_energy=False)
+        st.warm_up()
+        obs = np.arange(system.n_sites, 2 * system.n_sites)  # every θ, at the last step only
+        traj = Trajectory(system.args, terms, 0.1, steps, steps, obs)
+        raw = raw_of(system, terms, damp)
+
+        def objective(rec, raw):  # ½ Σ θ(T)²
+            dq = np.zeros_like(rec.q)
+            dq[-1] = rec.q[-1]
+            return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+        small = Trajectory(system.args, terms, 0.1, 4, 4, obs)
+        small.gradient(raw, objective)  # compile
+        fwd, grad = [], []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            st.advance(steps)
+            fwd.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            traj.gradient(raw, objective)
+            grad.append(time.perf_counter() - t0)
+        tracemalloc.start()
+        traj.gradient(raw, objective)
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        seg = max(1, int(np.sqrt(steps)))
+        all_states = (steps + 1) * (3 * system.ndof + 1) * 8
+        keep_all = all_states <= MEMORY_MB * 1e6  # what Trajectory.gradient does by default
+        ckpt = all_states if keep_all else (steps // seg + 1 + seg + 1) * 3 * system.ndof * 8
+        row = {"n_units": n_units, "steps": steps, "forward_min_s": min(fwd), "forward_median_s": float(np.median(fwd)),
+               "gradient_min_s": min(grad), "gradient_median_s": float(np.median(grad)),
+               "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd)),
+               "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps",
+               "stored_MB": ckpt / 1e6, "traced_peak_MB": peak / 1e6,
+               "all_states_MB": (steps + 1) * 3 * system.ndof * 8 / 1e6}
+        print(f"  gradient, {n_units} units x {steps} steps: forward {row['forward_min_s']:.3g} s, gradient "
+              f"{row['gradient_min_s']:.3g} s (x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
+              f"target <= 4); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak {row['traced_peak_MB']:.1f} MB "
+              f"(all states would be {row['all_states_MB']:.0f} MB)")
+        rows.append(row)
+    print("  DifFlexMM (JAX) comparison: not run (JAX is not a flexmm dependency)")
+    return rows
+
+
+SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth,
+            "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
+            "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
+            "gradient": gradient}
 
 
 def main(argv: list[str]) -> None:

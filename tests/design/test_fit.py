@@ -94,3 +94,24 @@ def test_lego_showcase_recovers_the_parameters_within_one_percent(tmp_path):
     assert np.all(np.abs(value - truth) < 4 * stderr)  # the covariance is an honest uncertainty
     assert 0.8 < chi2 < 1.2  # σ of the spec is the noise of the trace
     assert (tmp_path / "fitted_scene.yaml").exists() and (tmp_path / "fit.png").exists()
+
+
+def test_netcdf_table_reads_like_the_csv(tmp_path):
+    """A (time, site) netCDF variable (the layout of a flexmm dataset), in degrees, with a site subset."""
+    import xarray as xr
+
+    csv_fit = load_fit(_spec(tmp_path))
+    m = csv_fit.measured
+    ds = xr.Dataset({"theta": (("time", "site"), np.degrees(m.values), {"units": "deg"}),
+                     "u": (("time", "site"), np.zeros_like(m.values), {"units": "m"})},
+                    coords={"time": m.times, "site": m.sites})
+    ds.to_netcdf(tmp_path / "trace.nc", engine="h5netcdf")
+    spec = yaml.safe_load((tmp_path / "fit.yaml").read_text())
+    spec["data"] = {"file": "trace.nc", "field": "theta", "unit": "deg", "sites": [2, 6],
+                    "sigma": float(np.degrees(1e-6))}
+    (tmp_path / "fit_nc.yaml").write_text(yaml.safe_dump(spec))
+    nc_fit = load_fit(tmp_path / "fit_nc.yaml")
+    keep = [0, 2]  # sites 2 and 6 of (2, 4, 6)
+    np.testing.assert_allclose(nc_fit.measured.values, m.values[:, keep], rtol=1e-12)
+    r_csv = csv_fit.residuals(csv_fit.design.x0).reshape(m.values.shape)[:, keep]
+    np.testing.assert_allclose(nc_fit.residuals(nc_fit.design.x0).reshape(-1, 2), r_csv, rtol=1e-9)

@@ -2,9 +2,10 @@
 
 Every scene is small (a few units, 200 steps) so finite differences over random directions in
 each block of raw arrays are cheap; the adjoint must match them to 1e-6 relative (central
-differences themselves are good to ~1e-9 here). Scenes cover both model kinds with gradient
-kernels, on-site damping, prescribed displacements and applied forces (half-sine, Gaussian,
-harmonic), a striker contact, fixed ends and checkpointed reverse sweeps.
+differences themselves are good to ~1e-9 here). Scenes cover the three model kinds with gradient
+kernels (rotating-squares chain and sheet, chains of masses), on-site damping, prescribed
+displacements and applied forces (half-sine, Gaussian, smooth step, harmonic), a striker
+contact, fixed ends and checkpointed reverse sweeps.
 """
 
 from __future__ import annotations
@@ -27,7 +28,18 @@ CHAIN = {"kind": "rotating_squares_chain", "n_units": 6, "a_m": 0.016, "theta0_r
 MASS = {"kind": "mass_chain", "n_units": 6, "spacing_m": 0.01, "mass_kg": 0.01,
         "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
 
+SHEET = {"kind": "rotating_squares_sheet", "n_rows": 3, "n_cols": 4, "a_m": 0.016, "theta0_rad": 0.15,
+         "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
+         "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
+
 SCENES = {
+    "sheet-tilted-pulse-damped": {
+        "lattice": dict(SHEET, left="driven"),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "angle_deg": 20.0,
+                       "duration_s": 1e-3, "shape": "half_sine"},
+        "damping": {"viscous": {"damping_ratio": 0.05}},
+        "imperfection": {"kind": "random_rotation", "std_rad": 0.01, "seed": 2},
+        "solver": {"duration_s": 3e-3}},
     "chain-displacement-damped": {
         "lattice": dict(CHAIN, left="driven", right="fixed"),
         "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3,

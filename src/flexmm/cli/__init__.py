@@ -19,6 +19,7 @@ from flexmm import __version__
 from flexmm.cli import analyze as _analyze
 from flexmm.cli import bench as _bench
 from flexmm.cli import compare as _compare
+from flexmm.cli import design as _design
 from flexmm.cli import fit as _fit
 from flexmm.cli import plan as _plan
 from flexmm.cli import render as _render
@@ -65,6 +66,7 @@ for _name, _func in (
     ("bench", _bench.bench),
     ("render", _render.render),
     ("fit", _fit.fit),
+    ("design", _design.design),
 ):
     app.command(_name, cls=UserErrorCommand)(_func)
 

@@ -8,9 +8,10 @@ velocity Verlet and records (q, v, f) at the observed DOFs every ``stride`` step
 forward run with checkpoints and one reverse sweep; ``sensitivities`` returns the records'
 derivatives along a few raw directions (forward mode, for least-squares Jacobians).
 
-Memory: checkpoints every ``segment`` steps (default ⌈√nsteps⌉) hold (q, v, f); the reverse
-sweep replays one segment at a time, so a run of N steps keeps about 2√N states, plus the
-records.
+Memory: a run whose states fit in ``MEMORY_MB`` keeps them all; a longer one keeps
+checkpoints every ``segment`` steps (default ⌈√nsteps⌉) of (q, v, f) and the reverse sweep
+replays one segment at a time, so a run of N steps keeps about 2√N states, plus the records
+(a 1e6-step run of a 100-unit chain: 10 MB instead of 4.8 GB).
 """
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ from flexmm.design import sweeps
 from flexmm.design.kernels import adjoint_kernels_of, param_tables, with_tables
 from flexmm.errors import FlexmmError
 from flexmm.integrators.common import MODE_FRICTION, Terms
+
+
+#: a run whose states fit in this many MB keeps them all (no replay); larger runs checkpoint
+MEMORY_MB = 256.0
 
 
 class GradientError(FlexmmError):
@@ -77,6 +82,10 @@ def check_differentiable(system, terms: Terms) -> None:
         adjoint_kernels_of(type(system.args))
     except TypeError as err:
         raise GradientError(f"model {system.model!r}: {err}") from None
+    args = system.args
+    if hasattr(args, "dipoles") and (args.dipoles[0].shape[0] or args.joints[0].shape[0]):
+        raise GradientError(f"model {system.model!r}: gradients through magnets or bistable joints are not "
+                            "implemented (hinges only)")
     if terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION):
         raise GradientError("gradients through dashpots or ground friction are not implemented "
                             "(velocity-dependent external forces); use on-site viscous damping")
@@ -153,13 +162,32 @@ class Trajectory:
                        self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
         return rec, (CQ, CV, CF, CT, seg)
 
-    def gradient(self, raw: Raw, objective: Objective, segment: int | None = None) -> tuple[float, Raw, Records]:
-        """(J, dJ/draw, records) by one checkpointed forward run and one reverse sweep."""
-        rec, (CQ, CV, CF, CT, seg) = self.run(raw, segment)
+    def gradient(self, raw: Raw, objective: Objective, segment: int | None = None,
+                 memory_mb: float = MEMORY_MB) -> tuple[float, Raw, Records]:
+        """(J, dJ/draw, records) by one forward run and one reverse sweep.
+
+        If every state of the run fits in ``memory_mb`` (and no ``segment`` is asked for), the
+        forward run keeps them all and the reverse sweep reads them; otherwise the forward run
+        keeps checkpoints every ``segment`` steps (default ⌈√nsteps⌉) and the reverse sweep
+        replays one segment at a time (one more forward run in all, memory ~2√N states).
+        """
+        n = raw.q0.size
+        args, terms, kick, pre, post = self.bind(raw)
+        if segment is None and (self.nsteps + 1) * (3 * n + 1) * 8 <= memory_mb * 1e6:
+            SQ, SV, SF, ST = self._buffers(n, self.nsteps + 1)
+            q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
+            sweeps.initial_force(args, terms, q, v, f, self.t0)
+            sweeps.replay(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, SQ, SV, SF, ST)
+            rows = np.arange(0, self.nsteps + 1, self.stride)
+            rec = Records(SQ[rows][:, self.obs], SV[rows][:, self.obs], SF[rows][:, self.obs])
+            stored = (SQ, SV, SF, ST)
+            seg = self.nsteps
+            CQ = CV = CF = CT = None
+        else:
+            rec, (CQ, CV, CF, CT, seg) = self.run(raw, segment)
+            stored = None
         value, dq, dv, df, explicit = objective(rec, raw)
         dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
-        args, terms, kick, pre, post = self.bind(raw)
-        n = raw.q0.size
         lq, lv, lf = np.zeros(n), np.zeros(n), np.zeros(n)
         g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
         gK, gP, gS = np.zeros(n), np.zeros(n), np.zeros(n)
@@ -170,11 +198,12 @@ class Trajectory:
             lq[self.obs] += dq[j]
             lv[self.obs] += dv[j]
             lf[self.obs] += df[j]
-        SQ, SV, SF, ST = self._buffers(n, seg + 1)
+        SQ, SV, SF, ST = stored or self._buffers(n, seg + 1)
         for c in range((N - 1) // seg if N else -1, -1, -1):
             k0 = c * seg
             m = min(seg, N - k0)
-            sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
+            if stored is None:
+                sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
             sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, self.stride, self.obs,
                            dq, dv, df, lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv)
         if N == 0:

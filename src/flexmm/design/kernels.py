@@ -8,11 +8,12 @@ adjoint vector λ, the Hessian-vector product and the parameter vector-Jacobian 
 and a forward (tangent) step needs (∂F/∂q) dq + (∂F/∂p) dp. Both are written per element
 (hinge, bond, on-site term) from the element's closed-form law, so they cost about two force
 evaluations. Parameters are the model's two tables (``param_tables``): for ``ChainArgs`` the
-hinge table (H, 7) and the site table (N, 3) of ``models.hinge``; for ``MassArgs`` the bond and
-on-site law rows (B, 9), (S, 9) of ``models.laws``. Columns that are not continuous (the hinge
+hinge table (H, 7) and the site table (N, 3) of ``models.hinge``; for ``SheetArgs`` the hinge
+table and θ0 (N,); for ``MassArgs`` the bond and on-site law rows (B, 9), (S, 9) of
+``models.laws``. Columns that are not continuous (the hinge
 sign, a tabulated law's start and length) get zero derivatives.
 
-``model_adjoint(q, args, lam, out, g1, g2)`` writes (∂F/∂q)ᵀλ into ``out`` and adds (∂F/∂p)ᵀλ to
+``model_adjoint(q, args, lam, out, g1, g2)`` adds (∂F/∂q)ᵀλ to ``out`` and (∂F/∂p)ᵀλ to
 (g1, g2); ``model_tangent(q, args, dq, d1, d2, out)`` writes (∂F/∂q)dq + (∂F/∂p)(d1, d2). Like
 ``models.kernels.model_force`` they are plain functions for Python and numba overloads that
 dispatch on the type of ``args`` inside compiled loops (``ADJOINT_KERNELS``).
@@ -28,6 +29,7 @@ import numpy as np
 from numba.extending import overload
 
 from flexmm._jit import JIT_OPTIONS, NO_JIT, jit
+from flexmm._trig import sincos
 from flexmm.models import laws as lw
 from flexmm.models.hinge import (
     H_HALF_A,
@@ -43,75 +45,129 @@ from flexmm.models.hinge import (
     ChainArgs,
 )
 from flexmm.models.mass_kernels import MassArgs
+from flexmm.models.sheet_kernels import SheetArgs
 
 # ---------------------------------------------------------------- rotating-squares chain
 
 
 @jit
-def _chain_site_terms(q, sprm, lam, out, g2, n):
+def _chain_trig(q, sprm, n, cs, sn):
+    """cos and sin of every unit's angle θ0 + θ (vectorised ``_trig.sincos``)."""
+    for i in range(n):
+        s, c = sincos(sprm[i, S_THETA0] + q[n + i])
+        cs[i] = c
+        sn[i] = s
+
+
+@jit
+def _chain_site_terms(q, sprm, lam, out, g2, n, cs, sn):
     """Lateral-hinge on-site terms E = ½ k_g (cos θ0 − cos φ)² + ½ k_r θ², φ = θ0 + θ."""
     for i in range(n):
         th = q[n + i]
         t0 = sprm[i, S_THETA0]
-        phi = t0 + th
-        c, s = math.cos(phi), math.sin(phi)
-        g = math.cos(t0) - c
+        c, s = cs[i], sn[i]
         kg, kr = sprm[i, S_KG], sprm[i, S_KR]
         li = lam[n + i]
-        out[n + i] = -(kg * (s * s + g * c) + kr) * li
-        g2[i, S_KG] -= g * s * li
+        g = math.cos(t0) - c
+        out[n + i] -= (kg * (s * s + g * c) + kr) * li
         g2[i, S_KR] -= th * li
+        g2[i, S_KG] -= g * s * li
         g2[i, S_THETA0] -= kg * ((s - math.sin(t0)) * s + g * c) * li
 
 
 @jit
-def _hinge_state(q, hprm, sprm, n, h, a, b):
-    """cos/sin of both units' angles, the hinge's h_A, h_B, σ, k_l, k_s, k_θ and el, es, ep."""
-    pa = sprm[a, S_THETA0] + q[n + a]
-    pb = sprm[b, S_THETA0] + q[n + b]
-    ca, sa, cb, sb = math.cos(pa), math.sin(pa), math.cos(pb), math.sin(pb)
+def _hinge_strains(q, hprm, h, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb):
+    """h_A, h_B, σ, k_l, k_s, k_θ of hinge h and its stretch el, shear es and bend ep."""
     hA, hB, sig = hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN]
-    el = q[b] - q[a] + hprm[h, H_REST] - (hA * ca + hB * cb)
+    el = q[lb] - q[la] + hprm[h, H_REST] - (hA * ca + hB * cb)
     es = sig * (hB * sb - hA * sa)
-    ep = q[n + a] + q[n + b]
-    return ca, sa, cb, sb, hA, hB, sig, hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT], el, es, ep
+    if sa_ >= 0:
+        es += q[sb_] - q[sa_]
+    return hA, hB, sig, hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT], el, es, q[ta] + q[tb]
+
+
+@jit
+def hinge_adjoint(q, lam, out, g1, h, hprm, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb):
+    """One hinge's share of ``chain_adjoint``/``sheet_adjoint``; returns ∂D/∂θ0 of its two units.
+
+    la, lb: the DOFs along the hinge axis; sa_, sb_: across it (−1: none, a chain); ta, tb: the
+    rotations. With el, es, ep the hinge's stretch, shear and bend (``models.hinge``) and del,
+    des, dep their derivatives along λ, D = λ·∇E = k_l el del + k_s es des + k_θ ep dep: the
+    Hessian-vector product is ∂D/∂q and the parameter product ∂D/∂p (both negated).
+    """
+    hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_strains(q, hprm, h, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb)
+    shear = sa_ >= 0
+    lta, ltb = lam[ta], lam[tb]
+    dl = lam[lb] - lam[la] + hA * sa * lta + hB * sb * ltb
+    ds = sig * (hB * cb * ltb - hA * ca * lta)
+    if shear:
+        ds += lam[sb_] - lam[sa_]
+    dp = lta + ltb
+    d_ta = kl * (hA * sa * dl + el * hA * ca * lta) + ks * (-sig * hA * ca * ds + es * sig * hA * sa * lta) + kt * dp
+    d_tb = kl * (hB * sb * dl + el * hB * cb * ltb) + ks * (sig * hB * cb * ds - es * sig * hB * sb * ltb) + kt * dp
+    out[la] += kl * dl
+    out[lb] -= kl * dl
+    if shear:
+        out[sa_] += ks * ds
+        out[sb_] -= ks * ds
+    out[ta] -= d_ta
+    out[tb] -= d_tb
+    g1[h, H_REST] -= kl * dl
+    g1[h, H_HALF_A] -= kl * (-ca * dl + el * sa * lta) + ks * (-sig * sa * ds - es * sig * ca * lta)
+    g1[h, H_HALF_B] -= kl * (-cb * dl + el * sb * ltb) + ks * (sig * sb * ds + es * sig * cb * ltb)
+    g1[h, H_KL] -= el * dl
+    g1[h, H_KS] -= es * ds
+    g1[h, H_KT] -= ep * dp
+    return d_ta - kt * dp, d_tb - kt * dp
+
+
+@jit
+def hinge_tangent(q, dq, d1, h, hprm, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb, dt0a, dt0b, out):
+    """One hinge's share of the tangent (∂F/∂q) dq + (∂F/∂p) dp, added to ``out`` (DOFs as in
+    ``hinge_adjoint``; dt0a, dt0b: the directions of the units' θ0)."""
+    hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_strains(q, hprm, h, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb)
+    shear = sa_ >= 0
+    dpa = dt0a + dq[ta]
+    dpb = dt0b + dq[tb]
+    dhA, dhB = d1[h, H_HALF_A], d1[h, H_HALF_B]
+    # variations of el, es, ep, and of the factors (h sin φ, σ h cos φ) in the gradient
+    d_el = dq[lb] - dq[la] + d1[h, H_REST] - (dhA * ca + dhB * cb) + hA * sa * dpa + hB * sb * dpb
+    d_es = sig * (dhB * sb + hB * cb * dpb - dhA * sa - hA * ca * dpa)
+    if shear:
+        d_es += dq[sb_] - dq[sa_]
+    d_ep = dq[ta] + dq[tb]
+    d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
+    d_fb = dhB * sb + hB * cb * dpb
+    d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
+    d_gb = dhB * cb - hB * sb * dpb
+    d_fl = d1[h, H_KL] * el + kl * d_el
+    d_fs = d1[h, H_KS] * es + ks * d_es
+    d_fp = d1[h, H_KT] * ep + kt * d_ep
+    fl, fs = kl * el, ks * es
+    out[la] += d_fl
+    out[lb] -= d_fl
+    if shear:
+        out[sa_] += d_fs
+        out[sb_] -= d_fs
+    out[ta] -= d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp
+    out[tb] -= d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp
 
 
 @jit
 def chain_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ into ``out``; (∂F/∂p)ᵀλ added to g1 (hinge table), g2 (site table).
-
-    Per hinge (d_s = 0), with el, es, ep its stretch, shear and bend (``models.hinge``) and
-    del, des, dep their derivatives along λ, D = λ·∇E = k_l el del + k_s es des + k_θ ep dep;
-    the Hessian-vector product is ∂D/∂q and the parameter product ∂D/∂p (both negated).
-    """
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table), g2 (site table)."""
     ha, hb, hprm, sprm, _, _ = args
     n = sprm.shape[0]
-    for k in range(out.shape[0]):
-        out[k] = 0.0
-    _chain_site_terms(q, sprm, lam, out, g2, n)
+    cs = np.empty(n)
+    sn = np.empty(n)
+    _chain_trig(q, sprm, n, cs, sn)
+    _chain_site_terms(q, sprm, lam, out, g2, n, cs, sn)
     for h in range(ha.shape[0]):
         a = ha[h]
         b = hb[h]
-        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, sprm, n, h, a, b)
-        lua, lub, lta, ltb = lam[a], lam[b], lam[n + a], lam[n + b]
-        dl = lub - lua + hA * sa * lta + hB * sb * ltb
-        ds = sig * (hB * cb * ltb - hA * ca * lta)
-        dp = lta + ltb
-        d_ta = kl * (hA * sa * dl + el * hA * ca * lta) + ks * (-sig * hA * ca * ds + es * sig * hA * sa * lta) + kt * dp
-        d_tb = kl * (hB * sb * dl + el * hB * cb * ltb) + ks * (sig * hB * cb * ds - es * sig * hB * sb * ltb) + kt * dp
-        out[a] += kl * dl
-        out[b] -= kl * dl
-        out[n + a] -= d_ta
-        out[n + b] -= d_tb
-        g1[h, H_REST] -= kl * dl
-        g1[h, H_HALF_A] -= kl * (-ca * dl + el * sa * lta) + ks * (-sig * sa * ds - es * sig * ca * lta)
-        g1[h, H_HALF_B] -= kl * (-cb * dl + el * sb * ltb) + ks * (sig * sb * ds + es * sig * cb * ltb)
-        g1[h, H_KL] -= el * dl
-        g1[h, H_KS] -= es * ds
-        g1[h, H_KT] -= ep * dp
-        g2[a, S_THETA0] -= d_ta - kt * dp
-        g2[b, S_THETA0] -= d_tb - kt * dp
+        ga, gb = hinge_adjoint(q, lam, out, g1, h, hprm, a, b, -1, -1, n + a, n + b, cs[a], sn[a], cs[b], sn[b])
+        g2[a, S_THETA0] -= ga
+        g2[b, S_THETA0] -= gb
 
 
 @jit
@@ -121,11 +177,13 @@ def chain_tangent(q, args, dq, d1, d2, out):
     n = sprm.shape[0]
     for k in range(out.shape[0]):
         out[k] = 0.0
+    cs = np.empty(n)
+    sn = np.empty(n)
+    _chain_trig(q, sprm, n, cs, sn)
     for i in range(n):
         th = q[n + i]
         t0 = sprm[i, S_THETA0]
-        phi = t0 + th
-        c, s = math.cos(phi), math.sin(phi)
+        c, s = cs[i], sn[i]
         g = math.cos(t0) - c
         kg = sprm[i, S_KG]
         dt0 = d2[i, S_THETA0]
@@ -137,27 +195,60 @@ def chain_tangent(q, args, dq, d1, d2, out):
     for h in range(ha.shape[0]):
         a = ha[h]
         b = hb[h]
-        ca, sa, cb, sb, hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_state(q, hprm, sprm, n, h, a, b)
-        dpa = d2[a, S_THETA0] + dq[n + a]
-        dpb = d2[b, S_THETA0] + dq[n + b]
-        dhA, dhB = d1[h, H_HALF_A], d1[h, H_HALF_B]
-        dkl, dks, dkt = d1[h, H_KL], d1[h, H_KS], d1[h, H_KT]
-        # variations of el, es, ep, and of the factors (h sin φ, σ h cos φ) in the gradient
-        d_el = dq[b] - dq[a] + d1[h, H_REST] - (dhA * ca + dhB * cb) + hA * sa * dpa + hB * sb * dpb
-        d_es = sig * (dhB * sb + hB * cb * dpb - dhA * sa - hA * ca * dpa)
-        d_ep = dq[n + a] + dq[n + b]
-        d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
-        d_fb = dhB * sb + hB * cb * dpb
-        d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
-        d_gb = dhB * cb - hB * sb * dpb
-        d_fl = dkl * el + kl * d_el
-        d_fs = dks * es + ks * d_es
-        d_fp = dkt * ep + kt * d_ep
-        fl, fs = kl * el, ks * es
-        out[a] += d_fl
-        out[b] -= d_fl
-        out[n + a] -= d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp
-        out[n + b] -= d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp
+        hinge_tangent(q, dq, d1, h, hprm, a, b, -1, -1, n + a, n + b, cs[a], sn[a], cs[b], sn[b],
+                      d2[a, S_THETA0], d2[b, S_THETA0], out)
+
+
+# ---------------------------------------------------------------- 2D sheet
+
+
+@jit
+def _sheet_dofs(hax, n, a, b):
+    """(la, lb, sa, sb) of a sheet hinge: along-axis and across-axis DOFs of its units."""
+    if hax == 0:
+        return a, b, n + a, n + b
+    return n + a, n + b, a, b
+
+
+@jit
+def sheet_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0 per unit).
+
+    Hinges only: a sheet with dipoles or bistable joints is refused by ``design.gradient``
+    (its constant loads have no second derivatives).
+    """
+    ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
+    n = theta0.shape[0]
+    cs = np.empty(n)
+    sn = np.empty(n)
+    for i in range(n):
+        s, c = sincos(theta0[i] + q[2 * n + i])
+        cs[i] = c
+        sn[i] = s
+    for h in range(ha.shape[0]):
+        a = ha[h]
+        b = hb[h]
+        la, lb, sa_, sb_ = _sheet_dofs(hax[h], n, a, b)
+        ga, gb = hinge_adjoint(q, lam, out, g1, h, hprm, la, lb, sa_, sb_, 2 * n + a, 2 * n + b,
+                               cs[a], sn[a], cs[b], sn[b])
+        g2[a] -= ga
+        g2[b] -= gb
+
+
+@jit
+def sheet_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""
+    ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
+    n = theta0.shape[0]
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    for h in range(ha.shape[0]):
+        a = ha[h]
+        b = hb[h]
+        la, lb, sa_, sb_ = _sheet_dofs(hax[h], n, a, b)
+        pa, pb = theta0[a] + q[2 * n + a], theta0[b] + q[2 * n + b]
+        hinge_tangent(q, dq, d1, h, hprm, la, lb, sa_, sb_, 2 * n + a, 2 * n + b, math.cos(pa), math.sin(pa),
+                      math.cos(pb), math.sin(pb), d2[a], d2[b], out)
 
 
 # ---------------------------------------------------------------- chains of masses
@@ -255,11 +346,9 @@ def _table_second(z, start, n, tab):
 
 @jit
 def mass_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ into ``out``; (∂F/∂p)ᵀλ added to g1 (bond rows), g2 (on-site rows)."""
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (bond rows), g2 (on-site rows)."""
     bi, bj, bcode, bprm, si, scode, sprm, tab = args
     dprm = np.empty(bprm.shape[1])
-    for k in range(out.shape[0]):
-        out[k] = 0.0
     for b in range(bi.shape[0]):
         i = bi[b]
         j = bj[b]
@@ -318,6 +407,7 @@ class AdjointKernels:
 ADJOINT_KERNELS: dict[type, AdjointKernels] = {
     ChainArgs: AdjointKernels(chain_adjoint, chain_tangent, ("hinge_prm", "site_prm")),
     MassArgs: AdjointKernels(mass_adjoint, mass_tangent, ("bond_prm", "site_prm")),
+    SheetArgs: AdjointKernels(sheet_adjoint, sheet_tangent, ("hinge_prm", "theta0")),
 }
 
 
@@ -342,7 +432,7 @@ def with_tables(args, t1: np.ndarray, t2: np.ndarray):
 
 
 def model_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ into ``out``, (∂F/∂p)ᵀλ added to the parameter-table gradients g1, g2."""
+    """Add (∂F/∂q)ᵀλ to ``out`` and (∂F/∂p)ᵀλ to the parameter-table gradients g1, g2."""
     adjoint_kernels_of(type(args)).adjoint(q, args, lam, out, g1, g2)
 
 

@@ -78,3 +78,71 @@ def fit_figure(ds, path: Path) -> Path:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Path:
+    """Before/after: the design profile of each per-element variable and each objective term's
+    observable over time (force on the region, or its kinetic energy), start vs best."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    profiles = [v for v in dp.design.variables if v.target is not None]
+    n_rows = len(profiles) + len(dp.objective.terms)
+    fig, axes = plt.subplots(n_rows, 1, figsize=(7, 2.2 * n_rows + 0.4), squeeze=False)
+    row = 0
+    for var in profiles:
+        ax = axes[row, 0]
+        for x, style, label in ((x_start, "--", "start"), (x_best, "-", "best")):
+            values = element_profile(dp, x, var)
+            ax.plot(np.arange(values.size), values, style, marker=".", label=label)
+        ax.set_xlabel({"x": "unit (column)", "y": "row"}[var.axis])
+        ax.set_ylabel(var.target)
+        ax.legend(fontsize=7)
+        row += 1
+    sc = dp.problem.system.scales
+    t = dp.traj.times * sc.time_s * 1e3
+    recs = {"start": dp.records(x_start), "best": dp.records(x_best)}
+    raws = {"start": dp.design.raw(x_start), "best": dp.design.raw(x_best)}
+    for term in dp.objective.terms:
+        ax = axes[row, 0]
+        for label, style in (("start", "--"), ("best", "-")):
+            rec, raw = recs[label], raws[label]
+            if term.spec.kind == "peak_force":
+                y = rec.f[:, term.cols].sum(axis=1) * term.to_si
+                ax.set_ylabel("force on region (N)")
+            else:
+                minv = raw.minv[term.dofs]
+                mass = np.where(minv > 0, 1.0 / np.where(minv > 0, minv, 1.0), 0.0)
+                y = 0.5 * (rec.v[:, term.cols] ** 2 * mass).sum(axis=1) * sc.energy
+                ax.set_ylabel("kinetic energy\nof region (J)")
+            ax.plot(t, y, style, lw=1, label=label)
+        ax.set_title(f"{term.spec.kind} (p = {term.spec.sharpness:g} norm over time): start {_fmt(dp, term, recs['start'], raws['start'])}, "
+                     f"best {_fmt(dp, term, recs['best'], raws['best'])}", fontsize=9)
+        ax.set_xlabel("time (ms)")
+        ax.legend(fontsize=7)
+        row += 1
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def _fmt(dp, term, rec, raw) -> str:
+    from flexmm.design.objectives import UNITS
+
+    return f"{term.value(rec, raw, dp.objective.times)[0] * term.to_si:.4g} {UNITS[term.spec.kind]}"
+
+
+def element_profile(dp, x: np.ndarray, var) -> np.ndarray:
+    """Per-unit values of a per-element variable in the design ``x`` (SI)."""
+    from flexmm.design.variables import spline_values
+
+    from flexmm.design.variables import profile_lines
+
+    vals = dp.design.split(x)[dp.design.variables.index(var)]
+    n = len(profile_lines(dp.design.base["lattice"], var.axis))
+    if var.profile == "spline":
+        return spline_values(vals, n)
+    return np.linspace(vals[0], vals[-1], n)

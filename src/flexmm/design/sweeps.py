@@ -102,12 +102,10 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
 
 
 @jit
-def _force_adjoint(args, terms, q, t, lf, lq, tmp, g1, g2, gcon, gdrv, dg, ddg):
+def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg):
     """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces."""
-    model_adjoint(q, args, lf, tmp, g1, g2)
-    contact_adjoint(q, lf, tmp, terms.con_ij, terms.con_prm, gcon)
-    for k in range(q.shape[0]):
-        lq[k] += tmp[k]
+    model_adjoint(q, args, lf, lq, g1, g2)
+    contact_adjoint(q, lf, lq, terms.con_ij, terms.con_prm, gcon)
     drive_force_adjoint(t, lf, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
@@ -130,9 +128,7 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
     and leave as those at step k0 (objective at k0 included); parameter adjoints accumulate.
     """
     n = lq.shape[0]
-    tmp = np.empty(n)
     lw = np.empty(n)
-    u = np.empty(n)
     dg = np.empty(4)
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
@@ -142,18 +138,18 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
         f0 = SF[s]
         f1 = SF[s + 1]
         t1 = ST[s + 1]
-        for k in range(n):
-            u[k] = pre[k] * v0[k] + kick[k] * f0[k]
-        for d in range(dd.shape[0]):
-            if dm[d] == 0:
-                _, u[dd[d]] = waveform(ds[d], dp[d], t1)
-        for k in range(n):
-            gS[k] += lv[k] * (u[k] + kick[k] * f1[k])
+        for k in range(n):  # w = P v + K f (the half-kicked velocity) and v' = S (w + K f')
+            gS[k] += lv[k] * (pre[k] * v0[k] + kick[k] * f0[k] + kick[k] * f1[k])
             sl = post[k] * lv[k]
             gK[k] += sl * f1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        _force_adjoint(args, terms, q1, t1, lf, lq, tmp, g1, g2, gcon, gdrv, dg, ddg)
+        for d in range(dd.shape[0]):  # a prescribed DOF's w is the waveform's rate (and K = 0)
+            if dm[d] == 0:
+                k = dd[d]
+                _, rate = waveform(ds[d], dp[d], t1)
+                gS[k] += lv[k] * (rate - pre[k] * v0[k] - kick[k] * f0[k])
+        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
             lw[k] += h * lq[k]
@@ -167,10 +163,9 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
 @jit
 def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv):
     """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
-    tmp = np.empty(lq.shape[0])
     dg = np.empty(4)
     ddg = np.empty(4)
-    _force_adjoint(args, terms, q0, t0, lf, lq, tmp, g1, g2, gcon, gdrv, dg, ddg)
+    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg)
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 

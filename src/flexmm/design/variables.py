@@ -6,8 +6,12 @@ list (``k_rot_n_m_per_rad``, ``mass_kg``, ``bond.k1_n_per_m``, ...) with a ``pro
 
 - ``uniform`` (1 value): every element takes it (a gradient variation with start = end);
 - ``linear`` (2 values): a linear ramp over the elements from the first to the last value;
-- ``spline`` (``knots`` values): a cubic spline (scipy) through knots spread evenly over the
-  units, written as per-unit defects (per-unit targets only).
+- ``spline`` (``knots`` values): a clamped cubic B-spline (scipy) over the units (a sheet's
+  columns, or rows with ``axis: y``) with the values as its control points, written as defects
+  (a hinge target: the hinges touching each unit, so a hinge between two units takes the value
+  written last). It is linear in
+  the values and stays between the smallest and largest of them, so the bounds hold at every
+  unit (an interpolating spline can overshoot, e.g. to a negative mass).
 
 Variables are appended to the scene's own variations, so the lattice's scales stay those of
 its base parameters and every design is a runnable scene (``Design.scene_data``). The map from
@@ -44,6 +48,7 @@ class Variable(Strict):
     target: str | None = Field(None, description="per-element lattice variation target (e.g. k_rot_n_m_per_rad)")
     profile: Literal["uniform", "linear", "spline"] = "uniform"
     knots: int = Field(4, ge=2, le=200, description="spline knots (profile: spline)")
+    axis: Literal["x", "y"] = Field("x", description="profiles run along the columns (x) or the rows (y) of a sheet")
     initial: Finite | list[Finite] = Field(description="start value (a list: one per value of the profile)")
     bounds: tuple[Finite, Finite] | None = Field(None, description="[low, high] for every value")
 
@@ -53,6 +58,8 @@ class Variable(Strict):
             raise ValueError("give exactly one of path (a scene scalar) or target (a lattice variation target)")
         if self.path is not None and self.profile != "uniform":
             raise ValueError(f"profile {self.profile!r} needs a target (a path is a single scalar)")
+        if self.path is not None and self.axis != "x":
+            raise ValueError("axis applies to a target's profile, not to a path")
         if isinstance(self.initial, list) and len(self.initial) not in (1, self.size):
             raise ValueError(f"initial has {len(self.initial)} values; profile {self.profile} takes {self.size}")
         if self.bounds is not None and not self.bounds[0] < self.bounds[1]:
@@ -80,14 +87,27 @@ def _set_path(data: dict, dotted: str, value) -> None:
     data[last] = value
 
 
-def spline_values(knots: np.ndarray, n: int) -> np.ndarray:
-    """Values at n elements of the cubic spline (scipy) through knots spread over 0..n−1."""
-    from scipy.interpolate import CubicSpline
+def spline_values(coefficients: np.ndarray, n: int) -> np.ndarray:
+    """Values at n elements of the clamped B-spline (degree ≤ 3) with these control points, over 0..n−1."""
+    from scipy.interpolate import BSpline
 
-    xk = np.linspace(0.0, n - 1.0, knots.size)
-    if knots.size < 4:
-        return np.interp(np.arange(n), xk, knots)
-    return CubicSpline(xk, knots, bc_type="not-a-knot")(np.arange(n))
+    c = np.asarray(coefficients, float)
+    k = min(3, c.size - 1)
+    inner = np.linspace(0.0, n - 1.0, c.size - k + 1)
+    t = np.concatenate([np.full(k, 0.0), inner, np.full(k, n - 1.0)])
+    return BSpline(t, c, k)(np.arange(n, dtype=float))
+
+
+def profile_lines(lattice: dict, axis: str) -> list[list[int]]:
+    """The units of each column (axis x) or row (axis y) of a lattice dict, in order (a chain: its units)."""
+    if "n_cols" not in lattice:
+        if axis == "y":
+            raise GradientError("axis: y needs a sheet (a lattice with rows)")
+        return [[i] for i in range(int(lattice.get("n_units", 0)))]
+    rows, cols = int(lattice["n_rows"]), int(lattice["n_cols"])
+    if axis == "x":
+        return [[r * cols + c for r in range(rows)] for c in range(cols)]
+    return [[r * cols + c for c in range(cols)] for r in range(rows)]
 
 
 class Design:
@@ -115,19 +135,21 @@ class Design:
         """The base scene dict with the variables set to ``x``."""
         data = copy.deepcopy(self.base)
         lat = data.setdefault("lattice", {})
-        n = int(lat.get("n_units", 0))
         for var, vals in zip(self.variables, self.split(x)):
             if var.path is not None:
                 _set_path(data, var.path, float(vals[0]))
                 continue
             variations = lat.setdefault("variation", [])
             if var.profile in ("uniform", "linear"):
-                variations.append({"kind": "gradient", "target": var.target, "start": float(vals[0]),
-                                   "end": float(vals[-1])})
+                ramp = {"kind": "gradient", "target": var.target, "start": float(vals[0]), "end": float(vals[-1])}
+                if var.axis == "y":
+                    ramp["axis"] = "y"
+                variations.append(ramp)
             else:
-                values = spline_values(vals, n)
-                variations += [{"kind": "defects", "target": var.target, "sites": [i], "value": float(v)}
-                               for i, v in enumerate(values)]
+                lines = profile_lines(lat, var.axis)
+                values = spline_values(vals, len(lines))
+                variations += [{"kind": "defects", "target": var.target, "sites": sites, "value": float(v)}
+                               for sites, v in zip(lines, values)]
         return data
 
     def scene(self, x: np.ndarray):

@@ -1,0 +1,217 @@
+"""``flexmm design SPEC.yaml``: optimise design variables of a scene for an objective of its run.
+
+The spec holds a scene (file or inline), the design variables (``variables.Variable`` with
+bounds), the objective (``objectives.Term`` list, a weighted sum) and optional constraints
+(``total_mass``: the lattice's total mass equal to, or at most/least, its start value or a given
+one). Every evaluation is one velocity-Verlet run with checkpoints plus one adjoint sweep
+(``gradient.Trajectory.gradient``), chained through the variables' map to the raw arrays. The
+optimiser is scipy's L-BFGS-B (bounds only) or trust-constr (with constraints), on variables
+scaled by their start values. Each evaluation is appended to a history (an xarray dataset,
+``history.nc``, rewritten atomically); ``resume`` restarts from the best design in it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Literal
+
+import numpy as np
+from pydantic import Field
+
+from flexmm.assemble import build_problem
+from flexmm.config.base import Positive, Strict
+from flexmm.design.gradient import Trajectory, check_differentiable
+from flexmm.design.objectives import Objective, Term, bind_terms
+from flexmm.design.spec import load_spec, scene_data_of
+from flexmm.design.variables import Design, Variable, finite_difference, worst_relative_error
+
+
+class Constraint(Strict):
+    """The total mass of the lattice's units (kg): ``relation`` to ``value`` (default its start value)."""
+
+    kind: Literal["total_mass"]
+    relation: Literal["equal", "at_most", "at_least"] = "equal"
+    value: Positive | None = None
+
+
+class OptimizerOptions(Strict):
+    max_iterations: int = Field(40, ge=1, le=10_000)
+    tolerance: Positive = Field(1e-8, lt=1)
+    sample_every: int = Field(1, ge=1, description="record the objective's DOFs every this many steps")
+
+
+class DesignSpec(Strict):
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.\-]*$")
+    description: str = ""
+    scene: str | dict
+    variables: list[Variable] = Field(min_length=1)
+    objective: list[Term] = Field(min_length=1)
+    constraints: list[Constraint] = Field(default_factory=list)
+    optimizer: OptimizerOptions = Field(default_factory=OptimizerOptions)
+
+
+@dataclass
+class History:
+    """Every evaluation: variables (SI), objective (normalised), terms (SI), gradient norm."""
+
+    labels: list[str]
+    term_names: list[str]
+    x: list[np.ndarray] = field(default_factory=list)
+    objective: list[float] = field(default_factory=list)
+    terms: list[list[float]] = field(default_factory=list)
+    gradient_norm: list[float] = field(default_factory=list)
+
+    def add(self, x, value, terms, gnorm) -> None:
+        self.x.append(np.array(x, float))
+        self.objective.append(float(value))
+        self.terms.append(list(terms))
+        self.gradient_norm.append(float(gnorm))
+
+    @property
+    def best(self) -> int:
+        return int(np.argmin(self.objective))
+
+    def dataset(self):
+        import xarray as xr
+
+        n = len(self.objective)
+        return xr.Dataset(
+            {"x": (("evaluation", "variable"), np.array(self.x).reshape(n, len(self.labels)),
+                   {"units": "SI (per variable)", "long_name": "design variables"}),
+             "objective": ("evaluation", np.array(self.objective), {"units": "1", "long_name":
+                           "weighted objective (terms over their start values)"}),
+             "term": (("evaluation", "term_name"), np.array(self.terms).reshape(n, len(self.term_names)),
+                      {"units": "SI (per term)", "long_name": "objective terms"}),
+             "gradient_norm": ("evaluation", np.array(self.gradient_norm),
+                               {"units": "1", "long_name": "norm of the gradient in scaled variables"})},
+            coords={"evaluation": np.arange(n), "variable": self.labels, "term_name": self.term_names})
+
+    @classmethod
+    def from_dataset(cls, ds) -> History:
+        h = cls([str(v) for v in ds["variable"].values], [str(t) for t in ds["term_name"].values])
+        for k in range(ds.sizes["evaluation"]):
+            h.add(ds["x"].values[k], ds["objective"].values[k], ds["term"].values[k], ds["gradient_norm"].values[k])
+        return h
+
+
+class DesignProblem:
+    """A design spec made concrete: variables, the run, the objective."""
+
+    def __init__(self, spec: DesignSpec, spec_path: str | Path, base_dir: Path):
+        self.spec = spec
+        data, source, where = scene_data_of(spec.scene, spec_path, base_dir)
+        self.design = Design(data, spec.variables, where, source)
+        self.problem = build_problem(self.design.scene(self.design.x0))
+        s = self.problem.system
+        check_differentiable(s, self.problem.terms)
+        bound, obs = bind_terms(spec.objective, s)
+        stride = spec.optimizer.sample_every
+        nsteps = stride * max(1, math.ceil(self.problem.duration / self.problem.dt / stride - 1e-9))
+        self.traj = Trajectory(s.args, self.problem.terms, self.problem.dt, nsteps, stride, obs)
+        self.objective = Objective(bound, self.traj.times * s.scales.time_s)
+        rec, _ = self.traj.run(self.design.raw(self.design.x0))
+        self.objective.normalise(rec, self.design.raw(self.design.x0))
+        self.term_names = [f"{t.kind}[{k}]" for k, t in enumerate(spec.objective)]
+        self.mass0 = self.total_mass(self.design.x0)
+
+    def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray, list[float]]:
+        """(objective, gradient w.r.t. x, terms in SI) by one run and one adjoint sweep."""
+        raw = self.design.raw(x)
+        value, graw, _ = self.traj.gradient(raw, self.objective)
+        return value, self.design.chain(x, graw), list(self.objective.last)
+
+    def value(self, x: np.ndarray) -> float:
+        return self.traj.value(self.design.raw(x), self.objective)
+
+    def records(self, x: np.ndarray):
+        rec, _ = self.traj.run(self.design.raw(x))
+        return rec
+
+    def total_mass(self, x: np.ndarray) -> float:
+        s = self.design.build(x)[0]
+        k = s.field_index(s.longitudinal_field) * s.n_sites
+        return float(s.mass[k : k + s.n_sites].sum() * s.scales.mass_kg)
+
+    def mass_gradient(self, x: np.ndarray) -> np.ndarray:
+        return np.array([finite_difference(self.total_mass, x, k, rel_steps=(1e-4, 1e-5, 1e-6)) for k in range(x.size)])
+
+
+@dataclass
+class DesignResult:
+    x: np.ndarray
+    best: int  # its evaluation in the history
+    history: History
+    message: str
+
+
+def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callable | None = None,
+             save: Callable[[History], None] | None = None) -> DesignResult:
+    """Minimise the objective from the start values (or the best design of ``history``)."""
+    from scipy.optimize import Bounds, NonlinearConstraint, minimize
+
+    des = dp.design
+    hist = history or History(des.labels, dp.term_names)
+    x_start = hist.x[hist.best] if hist.x else des.x0
+    scale = np.where(des.x0 != 0, np.abs(des.x0), 1.0)
+    lo, hi = des.bounds
+    cache: dict[bytes, tuple[float, np.ndarray]] = {}
+
+    def fg(z):
+        key = np.asarray(z, float).tobytes()
+        if key not in cache:
+            x = z * scale
+            value, grad, terms = dp.evaluate(x)
+            gz = grad * scale
+            hist.add(x, value, terms, np.linalg.norm(gz))
+            if save is not None:
+                save(hist)
+            if on_eval is not None:
+                on_eval(len(hist.objective), x, value, terms)
+            cache[key] = (value, gz)
+        return cache[key]
+
+    opts = dp.spec.optimizer
+    bounds = Bounds(lo / scale, hi / scale)
+    cons = []
+    for c in dp.spec.constraints:
+        target = c.value if c.value is not None else dp.mass0
+        lb, ub = {"equal": (target, target), "at_most": (-np.inf, target), "at_least": (target, np.inf)}[c.relation]
+        cons.append(NonlinearConstraint(lambda z: dp.total_mass(z * scale) / target, lb / target, ub / target,
+                                        jac=lambda z: (dp.mass_gradient(z * scale) * scale / target)[None, :]))
+    z0 = x_start / scale
+    if cons:
+        res = minimize(lambda z: fg(z)[0], z0, jac=lambda z: fg(z)[1], method="trust-constr", bounds=bounds,
+                       constraints=cons, options={"maxiter": opts.max_iterations, "gtol": opts.tolerance,
+                                                  "xtol": opts.tolerance, "initial_tr_radius": 0.1})
+    else:
+        res = minimize(fg, z0, jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": opts.max_iterations, "ftol": opts.tolerance, "gtol": opts.tolerance})
+    feasible = [k for k in range(len(hist.x)) if _feasible(dp, hist.x[k])]
+    best = min(feasible, key=lambda k: hist.objective[k]) if feasible else hist.best
+    return DesignResult(hist.x[best], best, hist, str(res.message))
+
+
+def _feasible(dp: DesignProblem, x: np.ndarray, rtol: float = 1e-4) -> bool:
+    for c in dp.spec.constraints:
+        target = c.value if c.value is not None else dp.mass0
+        m = dp.total_mass(x)
+        if (c.relation == "equal" and abs(m - target) > rtol * target) or \
+           (c.relation == "at_most" and m > target * (1 + rtol)) or \
+           (c.relation == "at_least" and m < target * (1 - rtol)):
+            return False
+    return True
+
+
+def check_gradient(dp: DesignProblem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(adjoint gradient, central differences, relative errors) of the objective at the start."""
+    x0 = dp.design.x0
+    _, g, _ = dp.evaluate(x0)
+    fd = np.array([finite_difference(dp.value, x0, k) for k in range(x0.size)])
+    return g, fd, worst_relative_error(g, fd)
+
+
+def load_design(path: str | Path) -> DesignProblem:
+    spec, _, base = load_spec(path, DesignSpec)
+    return DesignProblem(spec, path, base)
