@@ -165,7 +165,19 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     return out
 
 
-__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "open_dataset",
+def measure_run(path: str | Path, *, field_spec: str | None = None,
+                kind: str = "auto") -> tuple[RunAnalysis | None, str | None]:
+    """``analyze_run``, or (None, why) when the run is fine but there is nothing (or no such field)
+    to measure: what ``flexmm run`` prints after a run (a missing run still raises)."""
+    from flexmm.analysis.fields import FieldError
+
+    try:
+        return analyze_run(path, field_spec=field_spec, kind=kind), None
+    except (PulseNotFound, FrontNotFound, NotDriven, NoWaveGroups, FieldError) as exc:
+        return None, str(exc)
+
+
+__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "measure_run", "open_dataset",
            "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound"]
 
 

@@ -71,7 +71,7 @@ def run(
 def _print_summary(path, analysis: str | None = None) -> None:
     """What ``flexmm analyze`` measures on the run (the same analysis, field and feature), in a
     few lines: the pulse, front, driven response or wave groups the scene is about, with theory."""
-    from flexmm.analysis import FieldError, report
+    from flexmm.analysis import report
     from flexmm.analysis.summary import principal, summary_lines
     from flexmm.cli.common import analysis_request
     from flexmm.plan.continuum import alongside
@@ -80,11 +80,9 @@ def _print_summary(path, analysis: str | None = None) -> None:
     if request is not None and request.kind == "energy":
         return
     kind = request.kind if request is not None else "auto"
-    try:
-        res = report.analyze_run(path, kind=kind, field_spec=request.field if request else None)
-    except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups,
-            FieldError) as exc:  # the run is fine; there is just nothing (or no field) to measure
-        typer.echo(f"nothing measured: {exc}")
+    res, why = report.measure_run(path, kind=kind, field_spec=request.field if request else None)
+    if res is None:  # the run is fine; there is just nothing (or no such field) to measure
+        typer.echo(f"nothing measured: {why}")
         return
     for line in summary_lines(res):
         typer.echo(line)
