@@ -59,6 +59,14 @@ def test_a_pulse_that_lives_to_the_end_is_not_a_transient():
     assert not any(p.transient for p in _mark(ds))
 
 
+def test_a_pulse_that_runs_far_and_then_fades_is_not_a_transient():
+    """Fading after 110 sites (14 FWHM, more than SHORT_FWHM): a decaying pulse, not a formation lobe."""
+    ds = pulse_dataset([SynthPulse(0.5, 1.0, 3.0, 10.0, ends_s=110.0, fade_s=1.5)], n_sites=200,
+                       duration_s=180.0, n_frames=721, noise=0.002)
+    (p,) = _mark(ds)
+    assert not p.transient and p.continues_as == -1 and p.speed_m_s == pytest.approx(1.0, rel=0.01)
+
+
 def test_transient_is_neither_compared_nor_the_headline(tmp_path):
     """analyze: the transient gets formation rows without a prediction, the JSON flags it, and the
     headline is the steady pulse with one line for the transient."""

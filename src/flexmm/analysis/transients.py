@@ -5,6 +5,9 @@ and hands over to the steady pulse. Measured alone, such a lobe looks like a pul
 a solitary wave and must not be compared with a steady-pulse law. A measured pulse is a
 *transient* when its tracked peak
 
+- travels at most ``SHORT_FWHM`` widths (FWHM) — a pulse that runs far and then radiates away
+  (a discrete soliton faster than the rotational waves) is a decaying pulse, measured as one
+  (its attenuation), not a formation lobe;
 - stops before the run ends (more than ``reach``/|v| before the last frame, ``reach`` = 2 FWHM,
   at least 3 spacings) and away from the ends of the analysed line (farther than ``reach``), and
 - does not end by colliding (it is not an incoming pulse of a collision), and
@@ -26,6 +29,7 @@ from dataclasses import replace
 import numpy as np
 
 REACH_FWHM = 2.0
+SHORT_FWHM = 10.0  # a lobe travels at most this many FWHM (a soliton that radiates away is not one)
 SAME_SPEED = 0.25  # pieces of one pulse: speeds within 25 % (a fast precursor is another pulse)
 
 
@@ -62,7 +66,9 @@ def mark_transients(pulses: list, collisions: list, spacing_m: float, t_end: flo
     for p in pulses:
         r = _reach(p, spacing_m)
         t1, x1 = float(p.track_time_s[-1]), float(p.track_pos_m[-1])
-        ends[p.index] = (t1 < t_end - r / p.speed_m_s and x_range[0] + r < x1 < x_range[1] - r
+        w = p.fwhm_m if math.isfinite(p.fwhm_m) else 3.0 * spacing_m
+        short = abs(x1 - float(p.track_pos_m[0])) <= SHORT_FWHM * w
+        ends[p.index] = (short and t1 < t_end - r / p.speed_m_s and x_range[0] + r < x1 < x_range[1] - r
                          and p.index not in colliding)
     transient: dict[int, bool] = {}
     # latest first, so a piece continued by a transient piece is known to be one too
