@@ -1,5 +1,6 @@
-"""The demo (configs/lego_vector_soliton.yaml) prints what the README shows, and the same impact on
-a chain with an absorbing end follows the exact speed law (docs/physics.md §1.3)."""
+"""The demo's impact (configs/lego_vector_soliton.yaml) on a chain with an absorbing end follows the
+exact speed law (docs/physics.md §1.3); on the shipped 200-unit chain with a free end the reflected
+linear waves keep crossing the soliton (docs/scenes.md)."""
 
 from __future__ import annotations
 
@@ -22,13 +23,6 @@ def _run(tmp_path, *extra) -> list[str]:
     assert res.exit_code == 0, res.output
     lines = res.output.splitlines()
     return lines[next(i for i, ln in enumerate(lines) if ln.startswith("dataset:")) + 1:]
-
-
-@pytest.mark.slow
-def test_demo_prints_what_the_readme_shows(tmp_path):
-    readme = (ROOT / "README.md").read_text()
-    block = re.search(r"```\ndataset: runs/lego_vector_soliton/dataset.nc\n(.*?)```", readme, re.S).group(1)
-    assert _run(tmp_path) == block.splitlines()
 
 
 @pytest.mark.slow
