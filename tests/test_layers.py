@@ -11,12 +11,13 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from typing import get_args
 
 import pytest
 
-from flexmm.config.lattice import LatticeConfig
-from flexmm.models import MODELS, model_fields
+from flexmm.config.base import resolve
+from flexmm.config.excitation import EXCITATIONS
+from flexmm.config.lattice import HOOK_LAYERS, MODELS
+from flexmm.models import model_fields
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,16 +30,50 @@ def test_import_contracts_hold() -> None:
     assert "2 kept, 0 broken" in out.stdout
 
 
-def _lattice_classes() -> dict[str, type]:
-    classes = {}
-    for cls in get_args(LatticeConfig):
-        kind = get_args(cls.model_fields["kind"].annotation)[0]
-        classes[kind] = cls
-    return classes
-
-
 @pytest.mark.parametrize("kind", sorted(MODELS))
 def test_config_declares_the_fields_its_model_builds(kind: str) -> None:
     """The config layer names each kind's fields (to validate output.fields without importing
     the models); the model's FieldSpecs must agree."""
-    assert _lattice_classes()[kind].FIELD_NAMES == model_fields(kind)
+    assert MODELS[kind].config.FIELD_NAMES == model_fields(kind)
+
+
+@pytest.mark.parametrize("kind", sorted(MODELS))
+def test_model_hooks_live_in_their_layer_and_resolve(kind: str) -> None:
+    """Each hook of a ModelSpec names an object of the layer that uses it, of the expected type:
+    the registry sits in the config layer and must not make it depend on a layer above the user."""
+    from flexmm.analysis.context import ModelTheory
+    from flexmm.plan.continuum import ContinuumTheory
+
+    spec = MODELS[kind]
+    paths = {"model": [spec.model], "theory": [spec.theory], "continuum": [spec.continuum],
+             "reducers": list(spec.reducers.values())}
+    for hook, items in paths.items():
+        for path in filter(None, items):
+            assert path.split(":")[0].startswith(HOOK_LAYERS[hook] + "."), (hook, path)
+            assert resolve(path) is not None
+    assert callable(spec.build) and spec.fields
+    assert spec.theory is None or isinstance(spec.hook("theory"), ModelTheory)
+    assert spec.continuum is None or isinstance(spec.hook("continuum"), ContinuumTheory)
+    assert all(callable(spec.reducer(name)) for name in spec.reducers)
+    assert spec.length is None or spec.config.model_fields[spec.length].annotation is int
+
+
+def test_importing_the_config_imports_no_higher_layer() -> None:
+    """Registry hooks are resolved lazily: loading the scene schema (and every registry) pulls in
+    no models, analysis, planning or assembly code."""
+    code = ("import sys, flexmm.config, flexmm.config.lattice, flexmm.config.excitation; "
+            "print(sorted({m for m in sys.modules if m.startswith('flexmm.') and "
+            "m.split('.')[1] not in ('config', 'errors', '_jit', 'units', 'io')}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
+@pytest.mark.parametrize("kind", sorted(EXCITATIONS))
+def test_excitation_hooks_live_in_the_assembler_and_resolve(kind: str) -> None:
+    """Each excitation kind's ``apply`` hook is a function of ``flexmm.assemble``."""
+    import inspect
+
+    spec = EXCITATIONS[kind]
+    assert spec.apply.split(":")[0] == "flexmm.assemble", spec.apply
+    fn = resolve(spec.apply)
+    assert list(inspect.signature(fn).parameters) == ["system", "scene", "exc", "terms"]

@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexmm.config.base import resolve
+from flexmm.config.excitation import EXCITATIONS
 from flexmm.config.scene import RandomRotation, RotationSeed, Scene
 from flexmm.errors import FlexmmError
 from flexmm.integrators import INTEGRATORS
@@ -72,10 +74,10 @@ def _launch_solitons(system: System, scene: Scene, pulses) -> None:
     system.q0[:], system.v0[:] = q, v
 
 
-def _apply_kicks(system: System, kicks) -> None:
+def apply_kicks(system: System, scene: Scene, exc, terms: dict) -> None:
     """Add initial velocities (x, y, rotation) to the kicked units."""
     sc, axes = system.scales, system.axis_fields
-    for kick in kicks:
+    for kick in exc.kicks:
         sites = system.ends[kick.end] if kick.sites is None else kick.sites
         for axis, value in (("x", kick.velocity_x_m_s), ("y", kick.velocity_y_m_s)):
             if value:
@@ -105,61 +107,86 @@ def _add_striker(system: System, exc, dof: int, direction: float) -> tuple[np.nd
 
 def apply_excitation(system: System, scene: Scene, terms: dict) -> None:
     """Initial conditions, striker or drive tables for the scene's excitation."""
-    exc = scene.excitation
-    for part in exc.parts if exc.kind == "combined" else [exc]:
-        _apply_one(system, scene, part, terms)
+    _apply(system, scene, scene.excitation, terms)
 
 
-def _apply_one(system: System, scene: Scene, exc, terms: dict) -> None:
-    """One excitation; drive rows are appended to ``terms`` (several may act together)."""
+def _apply(system: System, scene: Scene, exc, terms: dict) -> None:
+    """One excitation, by its registry hook; drive rows are appended to ``terms`` (several may act
+    together)."""
+    resolve(EXCITATIONS[exc.kind].apply)(system, scene, exc, terms)
+
+
+def apply_parts(system: System, scene: Scene, exc, terms: dict) -> None:
+    """A combined excitation: each part in turn."""
+    for part in exc.parts:
+        _apply(system, scene, part, terms)
+
+
+def apply_nothing(system: System, scene: Scene, exc, terms: dict) -> None:
+    """No excitation: the system keeps its initial state."""
+
+
+def apply_solitons(system: System, scene: Scene, exc, terms: dict) -> None:
+    """Launched solitons (one or several)."""
+    _launch_solitons(system, scene, exc.launches())
+
+
+def apply_impact(system: System, scene: Scene, exc, terms: dict) -> None:
+    """An initial velocity of the end units, or a striker DOF with its contact."""
     sc = system.scales
-    if exc.kind == "none":
-        return
-    if exc.kind in ("soliton", "solitons"):
-        _launch_solitons(system, scene, [exc] if exc.kind == "soliton" else exc.pulses)
-        return
-    if exc.kind == "kicks":
-        _apply_kicks(system, exc.kicks)
-        return
     direction = INWARD[exc.end]
-    dofs = _end_dofs(system, exc.end, sites=getattr(exc, "sites", None))
-    if exc.kind == "impact":
-        if exc.striker is not None:
-            ij, prm = _add_striker(system, exc, dofs[0], direction)
-            terms["con_ij"], terms["con_prm"] = ij, prm
-        else:
-            system.v0[dofs] += direction * exc.velocity_m_s / sc.velocity
-        if exc.angular_velocity_rad_s:
-            rot = _end_dofs(system, exc.end, _rotation_field(system, "angular_velocity_rad_s"), exc.sites)
-            system.v0[rot] += exc.angular_velocity_rad_s * sc.time_s
-        return
-    if exc.kind == "shaker":
-        if exc.amplitude_rad is not None:  # a prescribed harmonic rotation of the end units
-            dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_rad"), exc.sites)
-            amp, mode = exc.amplitude_rad, MODE_DISPLACEMENT
-        elif exc.mode == "displacement":
-            amp, mode = direction * exc.amplitude_m / sc.length_m, MODE_DISPLACEMENT
-        else:
-            amp, mode = direction * exc.amplitude_n / sc.force, MODE_FORCE
-        omega = 2 * math.pi * exc.frequency_hz * sc.time_s
-        ramp = exc.ramp_cycles / exc.frequency_hz / sc.time_s
-        stop = exc.duration_s / sc.time_s if exc.duration_s else np.inf
-        row, shape = [amp, omega, ramp, stop], SHAPES["harmonic"]
-    else:  # boundary_displacement
-        mode = MODE_DISPLACEMENT
-        if exc.amplitude_rad is not None:  # a prescribed rotation of the end units
-            rot = _rotation_field(system, "amplitude_rad")
-            dofs = _end_dofs(system, exc.end, rot, exc.sites)
-            amp = exc.amplitude_rad
-        else:
-            amp = direction * exc.amplitude_m / sc.length_m
-        dur = exc.duration_s / sc.time_s
-        shape = SHAPES[exc.shape]
-        if exc.shape == "gaussian":
-            sigma = dur / (2.0 * math.sqrt(2.0 * math.log(2.0)))
-            row = [amp, sigma, 2.0 * dur, 0.0]
-        else:
-            row = [amp, dur, 0.0, 0.0]
+    dofs = _end_dofs(system, exc.end, sites=exc.sites)
+    if exc.striker is not None:
+        ij, prm = _add_striker(system, exc, dofs[0], direction)
+        terms["con_ij"], terms["con_prm"] = ij, prm
+    else:
+        system.v0[dofs] += direction * exc.velocity_m_s / sc.velocity
+    if exc.angular_velocity_rad_s:
+        rot = _end_dofs(system, exc.end, _rotation_field(system, "angular_velocity_rad_s"), exc.sites)
+        system.v0[rot] += exc.angular_velocity_rad_s * sc.time_s
+
+
+def apply_shaker(system: System, scene: Scene, exc, terms: dict) -> None:
+    """A harmonic drive row (displacement, force or prescribed rotation) with its ramps."""
+    sc = system.scales
+    direction = INWARD[exc.end]
+    dofs = _end_dofs(system, exc.end, sites=exc.sites)
+    if exc.amplitude_rad is not None:  # a prescribed harmonic rotation of the end units
+        dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_rad"), exc.sites)
+        amp, mode = exc.amplitude_rad, MODE_DISPLACEMENT
+    elif exc.mode == "displacement":
+        amp, mode = direction * exc.amplitude_m / sc.length_m, MODE_DISPLACEMENT
+    else:
+        amp, mode = direction * exc.amplitude_n / sc.force, MODE_FORCE
+    omega = 2 * math.pi * exc.frequency_hz * sc.time_s
+    ramp = exc.ramp_cycles / exc.frequency_hz / sc.time_s
+    stop = exc.duration_s / sc.time_s if exc.duration_s else np.inf
+    _drive(system, exc, terms, dofs, mode, SHAPES["harmonic"], [amp, omega, ramp, stop])
+
+
+def apply_boundary_displacement(system: System, scene: Scene, exc, terms: dict) -> None:
+    """A prescribed displacement (or rotation) pulse of the end units."""
+    sc = system.scales
+    direction = INWARD[exc.end]
+    dofs = _end_dofs(system, exc.end, sites=exc.sites)
+    if exc.amplitude_rad is not None:  # a prescribed rotation of the end units
+        rot = _rotation_field(system, "amplitude_rad")
+        dofs = _end_dofs(system, exc.end, rot, exc.sites)
+        amp = exc.amplitude_rad
+    else:
+        amp = direction * exc.amplitude_m / sc.length_m
+    dur = exc.duration_s / sc.time_s
+    shape = SHAPES[exc.shape]
+    if exc.shape == "gaussian":
+        sigma = dur / (2.0 * math.sqrt(2.0 * math.log(2.0)))
+        row = [amp, sigma, 2.0 * dur, 0.0]
+    else:
+        row = [amp, dur, 0.0, 0.0]
+    _drive(system, exc, terms, dofs, MODE_DISPLACEMENT, shape, row)
+
+
+def _drive(system: System, exc, terms: dict, dofs: list[int], mode: int, shape: int, row: list) -> None:
+    """Append the drive rows of ``exc`` (its direction split over the axes if tilted)."""
     for dof_list, factor in _drive_components(system, exc, dofs):
         _append_drive(system, exc, terms, dof_list, mode, shape, [row[0] * factor] + row[1:])
 

@@ -11,7 +11,7 @@ import pytest
 import xarray as xr
 
 from flexmm.analysis import analyze_run
-from flexmm.analysis.compare import THEORY, RunContext, bands_for
+from flexmm.analysis.compare import RunContext, bands_for, theory_for
 from flexmm.analysis.dataset import write_dataset
 from flexmm.config import scene_from_dict
 from flexmm.config.lattice import RotatingSquaresChain
@@ -72,7 +72,7 @@ def test_bistable_front_prediction_and_default_analysis(tmp_path):
     u = u - u[0]
     run = _write_run(tmp_path / "front", scene, {"u": (u, "m")}, t, x)
     ctx = RunContext.from_dataset(xr.load_dataset(run / "dataset.nc", engine="h5netcdf"))
-    assert THEORY["mass_chain"].analysis(ctx) == "front"
+    assert theory_for(ctx).analysis(ctx) == "front"
     res = analyze_run(run)  # auto: a front
     rows = {c.quantity: c for c in res.comparisons}
     assert res.kind == "front"

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-import flexmm.models as models
+from flexmm.models import rotating_chain
 from flexmm.analysis.context import RunContext
 from flexmm.analysis.rest import from_rest, rest_fields
 from flexmm.api import run_scene
@@ -40,8 +40,7 @@ def test_rest_state_is_stored_on_the_saved_sites_and_used_without_a_rebuild(stri
     def no_rebuild(*_a, **_k):
         raise AssertionError("analysis rebuilt the model")
 
-    monkeypatch.setitem(models.MODELS, "rotating_squares_chain",
-                        models.MODELS["rotating_squares_chain"].__class__(no_rebuild, ()))
+    monkeypatch.setattr(rotating_chain, "build", no_rebuild)  # what MODELS["rotating_squares_chain"] builds with
     moved = from_rest(ds, rest_fields(RunContext.from_dataset(ds)))
     assert np.max(np.abs(moved["theta"].values)) < 1e-6  # residual of the relaxation only (static θ ≈ 0.1)
     assert np.max(np.abs(moved["u"].values)) < 1e-8

@@ -1,73 +1,28 @@
-"""Measured against predicted: a registry of theories, one entry per model kind.
+"""Measured against predicted: each run's rows, with its model's theory where it has one.
 
-``THEORY[kind]`` is a ``ModelTheory``: plain functions that take the run's context and a
-measurement and return ``Comparison`` rows (or a curve for figures). A model without an entry,
-or a measurement a theory does not cover, simply gets no prediction. To plug in a new model, add
-``"my_kind": ModelTheory(pulse=..., front=...)`` to ``THEORY`` below (see ``predict_rotating``
-and ``predict_chains``).
+A model kind's theory is a ``ModelTheory`` (``analysis.context``): plain functions that take the
+run's context and a measurement and return ``Comparison`` rows (or a curve for figures), named by
+the ``theory`` hook of its ``ModelSpec`` (``flexmm.config.lattice.MODELS``; see
+``predict_rotating.CHAIN`` and ``predict_chains.MASS_CHAIN``). A model without one, or a measurement
+a theory does not cover, simply gets no prediction.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from flexmm.analysis import predict_chains, predict_rotating
-from flexmm.analysis.context import Comparison, RunContext
-
-
-Predictor = Callable[..., list[Comparison]]
-
-
-@dataclass(frozen=True)
-class ModelTheory:
-    """Prediction functions of one model kind (any may be None).
-
-    pulse(ctx, PulseMeasurement) -> [Comparison]; front(ctx, FrontMeasurement) -> [Comparison];
-    driven(ctx, DrivenMeasurement) -> [Comparison]; speed_curve(ctx, field, amplitudes) -> speeds
-    (m/s, NaN where no pulse exists); profile(ctx, PulseMeasurement, x_m) -> field values;
-    bands_hz(ctx) -> [(f_lo, f_hi)] linear pass bands; analysis(ctx) -> 'pulse' or 'front', the
-    default analysis of a run that is not driven (e.g. 'front' for multistable chains);
-    collision(ctx, Collision) -> [Comparison] (e.g. the Toda head-on shifts).
-    """
-
-    pulse: Predictor | None = None
-    front: Predictor | None = None
-    driven: Predictor | None = None
-    speed_curve: Callable[..., np.ndarray] | None = None
-    profile: Callable[..., np.ndarray] | None = None
-    bands_hz: Callable[..., list] | None = None
-    analysis: Callable[..., str] | None = None
-    collision: Predictor | None = None
-
-
-THEORY: dict[str, ModelTheory] = {
-    "rotating_squares_chain": ModelTheory(
-        pulse=predict_rotating.pulse,
-        speed_curve=predict_rotating.speed_curve,
-        profile=predict_rotating.profile,
-        bands_hz=predict_rotating.bands_hz,
-    ),
-    "rotating_squares_sheet": ModelTheory(
-        pulse=predict_rotating.pulse,
-        speed_curve=predict_rotating.speed_curve,
-        profile=predict_rotating.profile,
-    ),
-    "mass_chain": ModelTheory(
-        pulse=predict_chains.pulse,
-        front=predict_chains.front,
-        analysis=predict_chains.analysis,
-        collision=predict_chains.collision,
-    ),
-}
+from flexmm.analysis.context import Comparison, ModelTheory, RunContext
 
 
 def theory_for(ctx: RunContext) -> ModelTheory:
     """The registered theory of the run's model, or an empty one."""
-    return THEORY.get(ctx.model, ModelTheory())
+    from flexmm.config.lattice import MODELS
+
+    spec = MODELS.get(ctx.model)
+    theory = None if spec is None else spec.hook("theory")
+    return ModelTheory() if theory is None else theory
 
 
 def _rows(item: str, measured: dict, predicted: list[Comparison]) -> list[Comparison]:

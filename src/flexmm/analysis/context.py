@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,3 +57,30 @@ class RunContext:
 
             self.cache["scene"] = scene_from_dict(self.config)
         return self.cache["scene"]
+
+
+Predictor = Callable[..., list[Comparison]]
+
+
+@dataclass(frozen=True)
+class ModelTheory:
+    """Prediction functions of one model kind (any may be None); a ``ModelSpec``'s ``theory`` hook.
+
+    pulse(ctx, PulseMeasurement) -> [Comparison]; front(ctx, FrontMeasurement) -> [Comparison];
+    driven(ctx, DrivenMeasurement) -> [Comparison]; speed_curve(ctx, field, amplitudes) -> speeds
+    (m/s, NaN where no pulse exists); profile(ctx, PulseMeasurement, x_m) -> field values;
+    bands_hz(ctx) -> [(f_lo, f_hi)] linear pass bands; analysis(ctx) -> 'pulse' or 'front', the
+    default analysis of a run that is not driven (e.g. 'front' for multistable chains);
+    collision(ctx, Collision) -> [Comparison] (e.g. the Toda head-on shifts);
+    reference_lines(ctx) -> {name: value}, scalar thresholds sweeps store and draw (``theory_*``).
+    """
+
+    pulse: Predictor | None = None
+    front: Predictor | None = None
+    driven: Predictor | None = None
+    speed_curve: Callable[..., Any] | None = None
+    profile: Callable[..., Any] | None = None
+    bands_hz: Callable[..., list] | None = None
+    analysis: Callable[..., str] | None = None
+    collision: Predictor | None = None
+    reference_lines: Callable[..., dict] | None = None

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from flexmm.analysis.context import Comparison
+from flexmm.analysis.context import Comparison, ModelTheory
 from flexmm.theory import chains as th
 
 
@@ -159,3 +159,7 @@ def front(ctx, f_meas) -> list[Comparison]:
         dphi = law.alpha_n_per_m3 * law.jump_m**4 * (1 - 2 * law.beta) / 12
         rows += front_kinetic_energy(ctx.ds, f_meas, lat.mass_kg, dphi, eta, lat.spacing_m)
     return rows
+
+
+#: the ``theory`` hook of the chain of masses (``flexmm.config.lattice.MODELS``)
+MASS_CHAIN = ModelTheory(pulse=pulse, front=front, analysis=analysis, collision=collision)

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from flexmm.analysis.context import Comparison
+from flexmm.analysis.context import Comparison, ModelTheory
 from flexmm.theory import rotating as rt
 
 
@@ -162,3 +162,22 @@ def bands_hz(ctx) -> list[tuple[float, float]]:
     e = rt.band_edges(p)
     f = 1.0 / (2 * math.pi * T)
     return [(0.0, e.lower_max * f), (e.upper_min * f, e.upper_max * f)]
+
+
+def amplitude_gap_lines(ctx) -> dict[str, float]:
+    """The amplitude gap A_min of each polarity (docs/physics.md §1.3; NaN where there is none),
+    as the ``theory_amplitude_gap_*_rad`` values sweeps store and draw."""
+    p, _, _ = params(ctx)
+    out = {}
+    for sign, name in ((+1, "positive"), (-1, "negative")):
+        try:
+            out[f"theory_amplitude_gap_{name}_rad"] = rt.amplitude_gap(p, sign)
+        except ValueError:
+            out[f"theory_amplitude_gap_{name}_rad"] = math.nan
+    return out
+
+
+#: the ``theory`` hooks of the rotating-squares chain and sheet (``flexmm.config.lattice.MODELS``)
+CHAIN = ModelTheory(pulse=pulse, speed_curve=speed_curve, profile=profile, bands_hz=bands_hz,
+                    reference_lines=amplitude_gap_lines)
+SHEET = ModelTheory(pulse=pulse, speed_curve=speed_curve, profile=profile)

@@ -3,7 +3,7 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of ``compare.THEORY``, pairs colliding pulses (``analysis.collisions``), tells formation
+of the model's theory (``compare.theory_for``), pairs colliding pulses (``analysis.collisions``), tells formation
 transients from persistent pulses (``analysis.transients``; transients are not compared with
 theory), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
 a predeformed run are measured from its relaxed state (``analysis.rest``).

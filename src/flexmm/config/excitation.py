@@ -1,12 +1,67 @@
-"""Excitations of a scene: impact, shaker, prescribed boundary pulse, launched soliton."""
+"""Excitations of a scene, and their registry: one ``ExcitationSpec`` per ``kind``.
+
+Every excitation class derives from ``Excitation``, whose methods are the per-kind behaviour the
+scene checks and the planner read from a config (where it acts, what it imposes, whether it keeps
+a planar wave planar); what it does to a built system is the ``apply`` hook of its spec, a
+``"module:function"`` path into ``flexmm.assemble`` (imported when a system is assembled).
+``ExcitationConfig`` (and the parts a ``combined`` excitation accepts) are derived from
+``EXCITATIONS``: adding a kind is its class, its apply function and one registry line.
+"""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+import math
+from dataclasses import dataclass
+from typing import Annotated, ClassVar, Literal, Union, get_args
 
 from pydantic import Field, model_validator
 
 from flexmm.config.base import End, Finite, NonNegative, Positive, Strict, exactly_one
+
+
+class Excitation(Strict):
+    """Base of the excitation configs: the hooks, with the defaults of an excitation that does none
+    of these things."""
+
+    #: acts on an end (or listed sites of it) through ``end``/``sites``, so it can be what a
+    #: lattice's ``driven`` end condition refers to
+    at_end: ClassVar[bool] = False
+
+    def components(self) -> list[Excitation]:
+        """The excitations acting together (``combined``: its parts)."""
+        return [self]
+
+    def targets(self) -> list:
+        """What acts on an end or listed sites: objects with ``end`` and ``sites``."""
+        return [self] if self.at_end else []
+
+    def launches(self) -> list:
+        """Launched solitons: objects with ``amplitude_rad``, ``center_site``, ``direction``."""
+        return []
+
+    def sources(self) -> list[int | str] | None:
+        """Where waves start: site indices and the ends ``left``/``right``; None if anywhere (or
+        not known)."""
+        return None
+
+    def imposed_velocity_m_s(self) -> float:
+        """Velocity scale the excitation imposes on the lattice (m/s, ≥ 0; 0 if none)."""
+        return 0.0
+
+    def planar_issue(self) -> str | None:
+        """Why a sheet driven this way would not carry a wave uniform along its columns, or None."""
+        return f"excitation {self.kind!r} is not planar"
+
+
+def _edge_issue(end: str) -> str | None:
+    return None if end in ("left", "right") else f"excitation on the {end} edge is not a wave along x"
+
+
+def _end_sources(exc) -> list[int | str] | None:
+    """An end drive starts waves at its end (left/right) or at its listed sites."""
+    if exc.end not in ("left", "right"):
+        return None
+    return [exc.end] if exc.sites is None else list(exc.sites)
 
 
 class Striker(Strict):
@@ -19,9 +74,10 @@ class Striker(Strict):
     exponent: Literal[1.0, 1.5] = 1.0
 
 
-class Impact(Strict):
+class Impact(Excitation):
     """Initial velocity on the end unit, or a striker mass hitting it (docs/physics.md §1)."""
 
+    at_end: ClassVar[bool] = True
     kind: Literal["impact"]
     velocity_m_s: Finite = Field(description="impact velocity, positive into the lattice")
     end: End = "left"
@@ -37,10 +93,22 @@ class Impact(Strict):
             raise ValueError("a striker hits one unit: give a single site (or none)")
         return self
 
+    def sources(self):
+        return _end_sources(self)
 
-class EndDrive(Strict):
+    def imposed_velocity_m_s(self) -> float:
+        return abs(self.velocity_m_s)
+
+    def planar_issue(self) -> str | None:
+        if self.striker is not None or self.sites is not None:
+            return _edge_issue(self.end) or "the impact hits single units, not a whole edge"
+        return _edge_issue(self.end)
+
+
+class EndDrive(Excitation):
     """Where a drive acts: an end (or listed sites of it), in the end's normal direction or tilted."""
 
+    at_end: ClassVar[bool] = True
     end: End = "left"
     angle_deg: Finite = Field(
         0.0, ge=-90.0, le=90.0, description="2D lattices: drive direction tilted from the end's inward "
@@ -49,6 +117,12 @@ class EndDrive(Strict):
     sites: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="units driven (a point or a line); default every unit of the end"
     )
+
+    def sources(self):
+        return _end_sources(self)
+
+    def planar_issue(self) -> str | None:
+        return _edge_issue(self.end)
 
 
 class Shaker(EndDrive):
@@ -80,6 +154,10 @@ class Shaker(EndDrive):
     def mode(self) -> str:
         return "force" if self.amplitude_n is not None else "displacement"
 
+    def imposed_velocity_m_s(self) -> float:
+        # a force drive imposes a strain, not a velocity; a prescribed rotation no velocity scale
+        return 0.0 if self.amplitude_m is None else 2 * math.pi * self.frequency_hz * self.amplitude_m
+
 
 class BoundaryDisplacement(EndDrive):
     """A prescribed displacement pulse u_0(t) of the end unit (or a prescribed rotation θ_0(t))."""
@@ -99,14 +177,27 @@ class BoundaryDisplacement(EndDrive):
             raise ValueError("angle_deg tilts a displacement drive; a prescribed rotation has no direction")
         return self
 
+    def imposed_velocity_m_s(self) -> float:
+        # a prescribed rotation (amplitude_rad): no imposed velocity scale
+        return 0.0 if self.amplitude_m is None else math.pi * abs(self.amplitude_m) / self.duration_s
 
-class Soliton(Strict):
+
+class Soliton(Excitation):
     """Start from the exact continuum vector soliton (docs/physics.md §1.3) at a given site."""
 
     kind: Literal["soliton"]
     amplitude_rad: Finite = Field(description="peak staggered rotation A (sign = polarity)")
     center_site: int = Field(ge=0)
     direction: Literal[1, -1] = 1
+
+    def launches(self) -> list:
+        return [self]
+
+    def sources(self):
+        return [self.center_site]
+
+    def planar_issue(self) -> None:
+        return None
 
 
 class Kick(Strict):
@@ -123,11 +214,23 @@ class Kick(Strict):
         return exactly_one(self, "end", "sites")
 
 
-class Kicks(Strict):
+class Kicks(Excitation):
     """Several kicks at once (e.g. opposite spins at both ends: two colliding transition waves)."""
 
     kind: Literal["kicks"]
     kicks: list[Kick] = Field(min_length=1)
+
+    def targets(self) -> list:
+        return list(self.kicks)
+
+    def sources(self):
+        return [s for k in self.kicks for s in (k.sites if k.sites is not None else [k.end])]
+
+    def planar_issue(self) -> str | None:
+        for k in self.kicks:
+            if k.sites is not None or k.end not in ("left", "right") or k.velocity_y_m_s:
+                return "a kick on listed units, a y edge, or along y is not planar"
+        return None
 
 
 class SolitonLaunch(Strict):
@@ -138,35 +241,86 @@ class SolitonLaunch(Strict):
     direction: Literal[1, -1] = 1
 
 
-class Solitons(Strict):
+class Solitons(Excitation):
     """Superposed exact solitons (well separated), e.g. two launched towards each other to collide."""
 
     kind: Literal["solitons"]
     pulses: list[SolitonLaunch] = Field(min_length=1)
 
+    def launches(self) -> list:
+        return list(self.pulses)
 
-class Combined(Strict):
+    def sources(self):
+        return [p.center_site for p in self.pulses]
+
+    def planar_issue(self) -> None:
+        return None
+
+
+class Combined(Excitation):
     """Several excitations acting together, e.g. a drive or an impact at each end."""
 
     kind: Literal["combined"]
-    parts: list[Annotated[Union[Impact, Shaker, BoundaryDisplacement, Kicks], Field(discriminator="kind")]] = (
-        Field(min_length=2)
-    )
+    parts: list[Annotated[CombinablePart, Field(discriminator="kind")]] = Field(min_length=2)
 
     @model_validator(mode="after")
     def _one_striker(self):
-        if sum(1 for p in self.parts if p.kind == "impact" and p.striker is not None) > 1:
+        if sum(1 for p in self.parts if getattr(p, "striker", None) is not None) > 1:
             raise ValueError("at most one part may use a striker")
         return self
 
+    def components(self) -> list[Excitation]:
+        return list(self.parts)
 
-class NoExcitation(Strict):
+    def targets(self) -> list:
+        return [t for p in self.parts for t in p.targets()]
+
+
+class NoExcitation(Excitation):
     """Nothing drives the lattice (free vibration of the imperfection or initial state)."""
 
     kind: Literal["none"]
 
+    def sources(self):
+        return []
 
-ExcitationConfig = Annotated[
-    Union[Impact, Shaker, BoundaryDisplacement, Soliton, Solitons, Kicks, Combined, NoExcitation],
-    Field(discriminator="kind"),
-]
+    def planar_issue(self) -> None:
+        return None
+
+
+@dataclass(frozen=True)
+class ExcitationSpec:
+    """One excitation kind: its config class (its ``kind`` Literal names it), ``apply``, the
+    ``"flexmm.assemble:function"`` that applies it to a built system as
+    ``apply(system, scene, excitation, terms)``, and whether it may be a part of ``combined``."""
+
+    config: type[Excitation]
+    apply: str
+    combinable: bool = False
+
+    @property
+    def kind(self) -> str:
+        return get_args(self.config.model_fields["kind"].annotation)[0]
+
+
+def _registry(*specs: ExcitationSpec) -> dict[str, ExcitationSpec]:
+    return {s.kind: s for s in specs}
+
+
+EXCITATIONS: dict[str, ExcitationSpec] = _registry(
+    ExcitationSpec(Impact, "flexmm.assemble:apply_impact", combinable=True),
+    ExcitationSpec(Shaker, "flexmm.assemble:apply_shaker", combinable=True),
+    ExcitationSpec(BoundaryDisplacement, "flexmm.assemble:apply_boundary_displacement", combinable=True),
+    ExcitationSpec(Soliton, "flexmm.assemble:apply_solitons"),
+    ExcitationSpec(Solitons, "flexmm.assemble:apply_solitons"),
+    ExcitationSpec(Kicks, "flexmm.assemble:apply_kicks", combinable=True),
+    ExcitationSpec(Combined, "flexmm.assemble:apply_parts"),
+    ExcitationSpec(NoExcitation, "flexmm.assemble:apply_nothing"),
+)
+
+#: the kinds a ``combined`` excitation may combine
+CombinablePart = Union[tuple(s.config for s in EXCITATIONS.values() if s.combinable)]
+Combined.model_rebuild()
+
+#: the ``excitation`` section of a scene: any registered kind, discriminated on ``kind``
+ExcitationConfig = Annotated[Union[tuple(s.config for s in EXCITATIONS.values())], Field(discriminator="kind")]

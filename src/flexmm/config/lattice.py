@@ -1,59 +1,108 @@
-"""Lattice sections of a scene: one model per ``kind`` (see ``flexmm.models.MODELS``)."""
+"""The model registry: one ``ModelSpec`` per lattice kind, and the lattice union derived from it.
+
+A spec names everything flexmm knows about a kind: its config class (whose ``kind`` Literal is the
+registry key), the models module that builds it, the config field that counts its units along x,
+and the hooks of higher layers — the analysis theory, the continuum predictor, the lower-dimensional
+reductions. Hooks are ``"module:attribute"`` paths (``flexmm.config.base.resolve``), imported only
+by the layer that uses them, so the config layer stays importable without numpy models, analysis or
+planning (docs/architecture.md, Registries).
+
+Adding a model kind: its config class, its models module (``build``, ``FIELDS``), one line below.
+"""
 
 from __future__ import annotations
 
-import math
-from typing import ClassVar, Literal, Union
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Union, get_args
 
-from pydantic import Field, model_validator
-
-from flexmm.config.base import Finite, NonNegative, Positive
+from flexmm.config.base import Strict, resolve
 from flexmm.config.mass_chain import MassChain, MassGrid, MassNetwork
-from flexmm.config.rigid import BistableLinkage, RotatingSquaresSheet, RigidOptions, check_variation
+from flexmm.config.rigid import (
+    BistableLinkage,
+    RotatingSquaresChain,
+    RotatingSquaresSheet,
+)
 
-EndCondition = Literal["free", "fixed", "driven"]
+#: which layer each hook of a spec belongs to (tests/test_layers.py checks the paths)
+HOOK_LAYERS = {"model": "flexmm.models", "theory": "flexmm.analysis", "continuum": "flexmm.plan",
+               "reducers": "flexmm.plan"}
 
 
-class RotatingSquaresChain(RigidOptions):
-    """1D chain of rigid squares joined by hinges (docs/physics.md §1.1), DOFs u and θ per unit."""
+@dataclass(frozen=True)
+class ModelSpec:
+    """One lattice kind.
 
-    kind: Literal["rotating_squares_chain"]
-    #: per-site coordinates of the built model, in state order (models.rotating_chain.FIELDS)
-    FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "theta")
+    - ``config``: the lattice config class; its ``kind`` Literal names the kind;
+    - ``model``: the models module with ``build(cfg) -> System`` and ``FIELDS`` (the per-site
+      coordinates and their roles, ``models.base.FieldSpec``), optionally ``launch_soliton`` and
+      ``SOLITON_ON_PREDEFORMED`` (the launcher knows the prestressed theory);
+    - ``length``: the config field counting units along x (domain trimming), None if the lattice
+      has none (a network of branches);
+    - ``theory``: an ``analysis.context.ModelTheory`` (predictions compared with measurements);
+    - ``continuum``: a ``plan.continuum.ContinuumTheory`` (the wave before the run);
+    - ``reducers``: reduction name -> ``reducer(scene dict, lattice config) -> reduced scene dict``.
+    """
+
+    config: type[Strict]
+    model: str
+    length: str | None
+    theory: str | None = None
+    continuum: str | None = None
+    reducers: Mapping[str, str] = field(default_factory=dict)
 
     @property
-    def n_sites(self) -> int:
-        """Number of units."""
-        return self.n_units
+    def kind(self) -> str:
+        return get_args(self.config.model_fields["kind"].annotation)[0]
 
-    def small_copy(self, n: int):
-        """The same lattice with at most ``n`` units (for cheap estimates; not validated)."""
-        return self.model_copy(update={"n_units": min(self.n_units, n), "variation": [], "predeform": None})
-    n_units: int = Field(ge=2, le=20_000_000, description="number of rigid units")
-    a_m: Positive = Field(description="hinge-to-hinge size of a unit (m)")
-    theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad)")
-    k_long_n_per_m: Positive = Field(description="hinge longitudinal stiffness k_l (N/m)")
-    k_shear_n_per_m: NonNegative = Field(description="hinge shear stiffness k_s (N/m)")
-    k_rot_n_m_per_rad: NonNegative = Field(description="hinge rotational stiffness k_θ (N m/rad)")
-    mass_kg: Positive = Field(description="unit mass m (kg)")
-    inertia_kg_m2: Positive = Field(description="unit rotational inertia J (kg m²)")
-    n_lateral: Literal[0, 1, 2] = Field(
-        0, description="lateral hinges per unit n_v (0 single row, 2 planar wave in a sheet)"
-    )
-    lateral_stretch: bool = Field(
-        False, description="s_v: lateral hinges resist stretching (lateral contraction blocked)"
-    )
-    left: EndCondition = "free"
-    right: EndCondition = "free"
+    def hook(self, name: str) -> Any:
+        """The resolved ``theory`` or ``continuum`` hook, or None if the kind has none."""
+        path = getattr(self, name)
+        return None if path is None else resolve(path)
 
-    @model_validator(mode="after")
-    def _geometry(self):
-        if not abs(self.theta0_rad) < math.pi / 4:
-            raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
-        check_variation(self.variation, self.n_units, 1, self.n_units)
-        return self
+    def reducer(self, name: str):
+        """The named reduction (e.g. ``"strip"``), or None."""
+        path = self.reducers.get(name)
+        return None if path is None else resolve(path)
+
+    @property
+    def build(self):
+        """``build(cfg) -> System``."""
+        return resolve(self.model).build
+
+    @property
+    def fields(self):
+        """The model's per-site coordinates (``FieldSpec``), in state order."""
+        return resolve(self.model).FIELDS
+
+    @property
+    def launch_soliton(self):
+        """``launch_soliton(system, amplitude, center, direction)``, or None."""
+        return getattr(resolve(self.model), "launch_soliton", None)
+
+    @property
+    def soliton_on_predeformed(self) -> bool:
+        return bool(getattr(resolve(self.model), "SOLITON_ON_PREDEFORMED", False))
 
 
-LatticeConfig = Union[
-    RotatingSquaresChain, RotatingSquaresSheet, BistableLinkage, MassChain, MassNetwork, MassGrid
-]
+def _registry(*specs: ModelSpec) -> dict[str, ModelSpec]:
+    return {s.kind: s for s in specs}
+
+
+MODELS: dict[str, ModelSpec] = _registry(
+    ModelSpec(RotatingSquaresChain, "flexmm.models.rotating_chain", "n_units",
+              theory="flexmm.analysis.predict_rotating:CHAIN", continuum="flexmm.plan.continuum:ROTATING_CHAIN"),
+    ModelSpec(RotatingSquaresSheet, "flexmm.models.rotating_sheet", "n_cols",
+              theory="flexmm.analysis.predict_rotating:SHEET",
+              reducers={"strip": "flexmm.plan.dimension:sheet_to_strip", "chain": "flexmm.plan.dimension:sheet_to_chain"}),
+    ModelSpec(BistableLinkage, "flexmm.models.linkage", "n_cols"),
+    ModelSpec(MassChain, "flexmm.models.mass_chain", "n_units",
+              theory="flexmm.analysis.predict_chains:MASS_CHAIN", continuum="flexmm.plan.continuum:MASS_FRONT"),
+    ModelSpec(MassNetwork, "flexmm.models.mass_chain", None),
+    ModelSpec(MassGrid, "flexmm.models.mass_chain", "nx"),
+)
+
+#: the ``lattice`` section of a scene: any registered config class, discriminated on ``kind``
+LatticeConfig = Union[tuple(s.config for s in MODELS.values())]
+
+__all__ = ["MODELS", "LatticeConfig", "ModelSpec", "RotatingSquaresChain"]

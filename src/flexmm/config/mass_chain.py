@@ -14,9 +14,7 @@ from typing import ClassVar, Annotated, Literal, Union
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from flexmm.config.base import Finite, NonNegative, Positive, Strict, exactly_one
-
-EndCondition = Literal["free", "fixed", "driven"]
+from flexmm.config.base import EndCondition, Finite, NonNegative, Positive, Strict, exactly_one
 
 
 # ---------------------------------------------------------------- laws

@@ -8,7 +8,7 @@ from pydantic import AliasChoices, Field, model_validator
 
 from flexmm.config.absorbing import AbsorbingLayer
 from flexmm.config.base import NonNegative, Positive, Strict, exactly_one
-from flexmm.config.excitation import ExcitationConfig, NoExcitation
+from flexmm.config.excitation import EXCITATIONS, ExcitationConfig, NoExcitation
 from flexmm.config.initial import Initial
 from flexmm.config.lattice import LatticeConfig
 
@@ -164,15 +164,13 @@ class Scene(Strict):
         lat, exc = self.lattice, self.excitation
         n = lat.n_units
         ends = {e: getattr(lat, e) for e in ("left", "right", "bottom", "top") if hasattr(lat, e)}
-        parts = exc.parts if exc.kind == "combined" else [exc]
-        bounds = [p for p in parts if p.kind in ("shaker", "boundary_displacement", "impact")]
+        bounds = [p for p in exc.components() if p.at_end]
         for end, cond in ends.items():
             if cond == "driven" and not any(p.end == end for p in bounds):
-                raise ValueError(
-                    f"lattice.{end} is 'driven' but no impact, shaker or boundary_displacement acts on the {end} end"
-                )
-        targets = bounds + [k for p in parts if p.kind == "kicks" for k in p.kicks]
-        for t in targets:
+                names = [k for k, spec in EXCITATIONS.items() if spec.config.at_end]
+                raise ValueError(f"lattice.{end} is 'driven' but no {', '.join(names[:-1])} or {names[-1]} "
+                                 f"acts on the {end} end")
+        for t in exc.targets():
             if t.end is not None and t.end not in ends:
                 raise ValueError(f"excitation end {t.end!r}: this lattice's ends are {', '.join(ends)}")
             if t.end is not None and ends[t.end] in ("fixed", "periodic"):
@@ -180,8 +178,7 @@ class Scene(Strict):
             bad = [s for s in (getattr(t, "sites", None) or []) if s >= n]
             if bad:
                 raise ValueError(f"excitation sites {bad} outside 0..{n - 1}")
-        pulses = [exc] if exc.kind == "soliton" else (exc.pulses if exc.kind == "solitons" else [])
-        for p in pulses:
+        for p in exc.launches():
             if p.center_site >= n:
                 raise ValueError(f"excitation.center_site={p.center_site} is outside 0..{n - 1}")
         if self.initial is not None:

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from flexmm.models.base import System
+from flexmm.models.rotating_sheet import FIELDS  # a two-row sheet: u, v, θ per cross
 
 
 def joint_stiffness(released_energy: float, switch: float, beta: float) -> float:
@@ -33,7 +34,7 @@ def joint_stiffness(released_energy: float, switch: float, beta: float) -> float
 def build(cfg) -> System:
     """The linkage as a System (a two-row rotating_sheet with pins and bistable joints)."""
     from flexmm.models.sheet_kernels import SheetArgs
-    from flexmm.models.rotating_sheet import (COORD_ATTRS, FIELDS, checkerboard, edge_sites, hinge_pairs,
+    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hinge_pairs,
                                               hinge_table)
     from flexmm.models.magnets import empty_dipoles
     from flexmm.models.loads import empty_loads

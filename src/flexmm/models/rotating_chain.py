@@ -11,7 +11,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from flexmm.config.lattice import RotatingSquaresChain
+from flexmm.config.rigid import RotatingSquaresChain
 from flexmm.models import predeform, variation
 from flexmm.models.base import FieldSpec, RotatingSquaresND, System
 from flexmm.models.hinge import (
@@ -135,6 +135,10 @@ def build(cfg: RotatingSquaresChain) -> System:
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
     return system
+
+
+#: the launcher knows the prestressed theory (solitons on a predeformed chain)
+SOLITON_ON_PREDEFORMED = True
 
 
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:

@@ -217,24 +217,41 @@ def plateau(peaks: np.ndarray) -> float | None:
     return med if drift <= PLATEAU_SPREAD * abs(med) else None
 
 
-PREDICTORS: dict[str, Callable] = {
-    "rotating_squares_chain": _rotating,
-    "mass_chain": _mass_front,
-}
+@dataclass(frozen=True)
+class ContinuumTheory:
+    """A model kind's continuum wave (the ``continuum`` hook of its ``ModelSpec``).
+
+    ``predict(scene)`` -> ContinuumPrediction (or NoContinuum/NeedsAmplitude with the reason);
+    ``at_amplitude(scene, amplitude)``, if given, the wave at a measured amplitude.
+    """
+
+    predict: Callable
+    at_amplitude: Callable | None = None
+
+
+ROTATING_CHAIN = ContinuumTheory(_rotating, lambda scene, amplitude: rotating_soliton(scene.lattice, amplitude))
+MASS_FRONT = ContinuumTheory(_mass_front)
+
+
+def _theory(scene) -> ContinuumTheory | None:
+    from flexmm.config.lattice import MODELS
+
+    return MODELS[scene.lattice.kind].hook("continuum")
 
 
 def predict(scene) -> ContinuumPrediction:
     """The continuum prediction of a scene, or NoContinuum with the reason."""
-    fn = PREDICTORS.get(scene.lattice.kind)
-    if fn is None:
+    theory = _theory(scene)
+    if theory is None:
         raise NoContinuum(f"{scene.lattice.kind}: no continuum theory registered")
-    return fn(scene)
+    return theory.predict(scene)
 
 
 def predict_from_measurement(scene, amplitude: float) -> ContinuumPrediction:
     """Continuum wave at a measured amplitude (for pulses whose amplitude the run decides)."""
-    if scene.lattice.kind == "rotating_squares_chain":
-        return rotating_soliton(scene.lattice, amplitude)
+    theory = _theory(scene)
+    if theory is not None and theory.at_amplitude is not None:
+        return theory.at_amplitude(scene, amplitude)
     return predict(scene)
 
 

@@ -13,20 +13,25 @@ the rows, and two reductions follow:
   with stiff shear (K_s ~ 0.2) the chain's θ pulse differs at first order; with K_s ~ 0.02 the
   rotational band shifts by ~0.5 %. ``flexmm compare --fidelity full,chain`` measures it.
 
-Reducers are registered per lattice kind in ``REDUCERS``; each takes the scene as a plain dict
-and its lattice config and returns the reduced scene dict, or raises ``NotPlanar``.
+Reducers are the ``reducers`` hooks of a kind's ``ModelSpec`` (``flexmm.config.lattice.MODELS``);
+each takes the scene as a plain dict and its lattice config and returns the reduced scene dict,
+or raises ``NotPlanar``.
 """
 
 from __future__ import annotations
-
-from typing import Callable
 
 
 class NotPlanar(Exception):
     """The scene has no exact lower-dimensional equivalent; the message says why."""
 
 
-_PLANAR_EXCITATIONS = ("impact", "shaker", "boundary_displacement", "soliton", "solitons", "kicks", "none")
+def _excitation(data: dict):
+    """The scene dict's excitation as its validated config (its hooks say what it does)."""
+    from pydantic import TypeAdapter
+
+    from flexmm.config.excitation import ExcitationConfig
+
+    return TypeAdapter(ExcitationConfig).validate_python(data.get("excitation") or {"kind": "none"})
 
 
 def _columns_of(sites: list[int], n_rows: int, n_cols: int, what: str) -> list[int]:
@@ -56,18 +61,9 @@ def _check_planar(data: dict, lat) -> None:
     pre = lat.predeform
     if pre is not None and (pre.strain_y is not None or any(ld.end in ("top", "bottom") for ld in pre.loads)):
         raise NotPlanar("a predeformation along y")
-    exc = data.get("excitation") or {"kind": "none"}
-    kind = exc.get("kind", "none")
-    if kind not in _PLANAR_EXCITATIONS:
-        raise NotPlanar(f"excitation {kind!r} is not planar")
-    if kind in ("impact", "shaker", "boundary_displacement") and exc.get("end") not in ("left", "right"):
-        raise NotPlanar(f"excitation on the {exc.get('end')} edge is not a wave along x")
-    if kind == "impact" and (exc.get("striker") is not None or exc.get("sites") is not None):
-        raise NotPlanar("the impact hits single units, not a whole edge")
-    if kind == "kicks":
-        for k in exc["kicks"]:
-            if k.get("sites") is not None or k.get("end") not in ("left", "right") or k.get("velocity_y_m_s"):
-                raise NotPlanar("a kick on listed units, a y edge, or along y is not planar")
+    issue = _excitation(data).planar_issue()
+    if issue is not None:
+        raise NotPlanar(issue)
     imp = data.get("imperfection")
     if imp is not None:
         if imp["kind"] != "rotation_seed":
@@ -112,10 +108,7 @@ def sheet_to_chain(data: dict, lat) -> dict:
     if lat.predeform is not None:
         chain["predeform"] = _scaled_loads(lat.predeform, 1 / lat.n_rows)
     out = {**data, "lattice": chain}
-    exc = dict(data.get("excitation") or {"kind": "none"})
-    if exc.get("kind") == "impact":
-        exc.pop("sites", None)
-    out["excitation"] = exc
+    out["excitation"] = dict(data.get("excitation") or {"kind": "none"})
     imp = data.get("imperfection")
     if imp is not None:
         out["imperfection"] = {**imp, "sites": _columns_of(imp["sites"], lat.n_rows, lat.n_cols, "")}
@@ -126,10 +119,6 @@ def sheet_to_chain(data: dict, lat) -> dict:
     return out
 
 
-#: lattice kind -> {reduction name: reducer(scene dict, lattice config) -> reduced scene dict}
-REDUCERS: dict[str, dict[str, Callable[[dict, object], dict]]] = {
-    "rotating_squares_sheet": {"strip": sheet_to_strip, "chain": sheet_to_chain},
-}
 NOTES = {
     "strip": "runs as the 2-row periodic strip ({factor:g}× fewer units, exact: the planar motion "
              "has period 2 across the rows); --fidelity full runs the sheet",
@@ -141,8 +130,9 @@ NOTES = {
 def reduce_dimension(scene, reduction: str = "strip"):
     """(reduced Scene, note) if the scene has a planar equivalent, else (None, reason)."""
     from flexmm.config import scene_from_dict
+    from flexmm.config.lattice import MODELS
 
-    reducer = REDUCERS.get(scene.lattice.kind, {}).get(reduction)
+    reducer = MODELS[scene.lattice.kind].reducer(reduction)
     if reducer is None:
         return None, f"{scene.lattice.kind}: no lower-dimensional ({reduction}) equivalent registered"
     data = scene.model_dump(mode="json")

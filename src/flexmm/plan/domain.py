@@ -33,8 +33,6 @@ from flexmm.errors import PlanError
 MARGIN = 0.10
 PAD = 20
 TRIM_WASTE = 0.20  # trim (or warn) when more than this fraction of the lattice is never reached
-#: lattice keys that give the number of units along x, by preference
-LENGTH_KEYS = ("n_units", "n_cols", "nx", "n_x")
 
 
 @dataclass(frozen=True)
@@ -123,18 +121,7 @@ def bloch_dispersion(system: System, terms: Terms, q_ref: np.ndarray | None = No
 
 def excitation_velocity(scene, system: System) -> float:
     """Velocity scale the excitation imposes on the lattice (nondimensional, ≥ 0)."""
-    exc, sc = scene.excitation, system.scales
-    if exc.kind == "impact":
-        return abs(exc.velocity_m_s) / sc.velocity
-    if exc.kind == "shaker":
-        if exc.amplitude_m is not None:
-            return 2 * math.pi * exc.frequency_hz * exc.amplitude_m / sc.velocity
-        return 0.0  # a force drive: handled by the strain of the force itself (ignored here)
-    if exc.kind == "boundary_displacement":
-        if exc.amplitude_m is None:  # a prescribed rotation (amplitude_rad): no imposed velocity scale
-            return 0.0
-        return math.pi * abs(exc.amplitude_m) / exc.duration_s / sc.velocity
-    return 0.0
+    return scene.excitation.imposed_velocity_m_s() / system.scales.velocity
 
 
 def strained_state(system: System, strain: float) -> np.ndarray:
@@ -209,28 +196,14 @@ def _sources(scene, ix: np.ndarray) -> list[int] | None:
         return None  # an initial state (fields, launched waves, pins, another run) may be anywhere
     if imp is not None and imp.kind != "rotation_seed":
         return None  # random imperfections: every unit is a source
-    last = int(ix.max())
-    if exc.kind in ("impact", "shaker", "boundary_displacement"):
-        if exc.end not in ("left", "right"):
-            return None
-        src = [0 if exc.end == "left" else last] if getattr(exc, "sites", None) is None else [int(ix[s]) for s in exc.sites]
-    elif exc.kind == "soliton":
-        src = [int(ix[min(exc.center_site, ix.size - 1)])]
-    elif exc.kind == "solitons":
-        src = [int(ix[min(p.center_site, ix.size - 1)]) for p in exc.pulses]
-    elif exc.kind == "kicks":
-        src = []
-        for k in exc.kicks:
-            if k.sites is not None:
-                src += [int(ix[s]) for s in k.sites]
-            elif k.end in ("left", "right"):
-                src.append(0 if k.end == "left" else last)
-            else:
-                return None
-    elif exc.kind == "none":
-        src = []
-    else:
+    points = exc.sources()
+    if points is None:
         return None
+    last, src = int(ix.max()), []
+    for p in points:  # a site index, or the left/right end
+        if isinstance(p, str) and p not in ("left", "right"):
+            return None
+        src.append(int(ix[min(p, ix.size - 1)]) if isinstance(p, int) else 0 if p == "left" else last)
     if imp is not None:
         src += [int(ix[s]) for s in imp.sites]
     return src or None
@@ -254,9 +227,10 @@ def wave_reach(scene, system: System, terms: Terms, duration: float) -> Reach:
 
 
 def length_key(lattice_cfg) -> str | None:
-    """Name of the lattice field that counts units along x, or None."""
-    fields = type(lattice_cfg).model_fields
-    return next((k for k in LENGTH_KEYS if k in fields), None)
+    """Name of the lattice field that counts units along x (its ``ModelSpec.length``), or None."""
+    from flexmm.config.lattice import MODELS
+
+    return MODELS[lattice_cfg.kind].length
 
 
 def trim_scene(scene, keep: tuple[int, int]):
@@ -282,7 +256,7 @@ def trim_scene(scene, keep: tuple[int, int]):
         return [r * n_new + c - lo for r, c in rows_cols if lo <= c <= hi]
 
     exc = data.get("excitation") or {}
-    if exc.get("kind") == "soliton":
+    if "center_site" in exc:  # a soliton
         exc["center_site"] -= lo
     for p in exc.get("pulses") or []:
         p["center_site"] -= lo

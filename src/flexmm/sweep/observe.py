@@ -8,7 +8,7 @@ front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says
   among pulses fitted over ≥ 10 sites, the front that switched most sites, the fastest group of
   an oblique plane wave, the driven response);
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
-  predicted speed (fronts), from ``flexmm.analysis.compare.THEORY``.
+  predicted speed (fronts), from the model's theory (``analysis.compare.theory_for``).
 
 Options (``analysis:`` block): ``kind`` (auto, pulse, front, driven, modes), ``field``,
 ``threshold_fraction`` (``trim_fraction`` is accepted and unused: the pulse fit leaves out the
