@@ -45,13 +45,14 @@ def test_model_hooks_live_in_their_layer_and_resolve(kind: str) -> None:
     from flexmm.plan.continuum import ContinuumTheory
 
     spec = MODELS[kind]
-    paths = {"model": [spec.model], "theory": [spec.theory], "continuum": [spec.continuum],
-             "reducers": list(spec.reducers.values())}
+    paths = {"builder": [spec.builder], "launcher": [spec.launcher], "theory": [spec.theory],
+             "continuum": [spec.continuum], "reducers": list(spec.reducers.values())}
     for hook, items in paths.items():
         for path in filter(None, items):
             assert path.split(":")[0].startswith(HOOK_LAYERS[hook] + "."), (hook, path)
             assert resolve(path) is not None
     assert callable(spec.build) and spec.fields
+    assert spec.launcher is None or callable(spec.launch_soliton)
     assert spec.theory is None or isinstance(spec.hook("theory"), ModelTheory)
     assert spec.continuum is None or isinstance(spec.hook("continuum"), ContinuumTheory)
     assert all(callable(spec.reducer(name)) for name in spec.reducers)

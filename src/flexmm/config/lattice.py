@@ -7,7 +7,7 @@ reductions. Hooks are ``"module:attribute"`` paths (``flexmm.config.base.resolve
 by the layer that uses them, so the config layer stays importable without numpy models, analysis or
 planning (docs/architecture.md, Registries).
 
-Adding a model kind: its config class, its models module (``build``, ``FIELDS``), one line below.
+Adding a model kind: its config class, its models module (a builder, ``FIELDS``), one line below.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from flexmm.config.rigid import (
 )
 
 #: which layer each hook of a spec belongs to (tests/test_layers.py checks the paths)
-HOOK_LAYERS = {"model": "flexmm.models", "theory": "flexmm.analysis", "continuum": "flexmm.plan",
-               "reducers": "flexmm.plan"}
+HOOK_LAYERS = {"builder": "flexmm.models", "launcher": "flexmm.models", "theory": "flexmm.analysis",
+               "continuum": "flexmm.plan", "reducers": "flexmm.plan"}
 
 
 @dataclass(frozen=True)
@@ -34,19 +34,22 @@ class ModelSpec:
     """One lattice kind.
 
     - ``config``: the lattice config class; its ``kind`` Literal names the kind;
-    - ``model``: the models module with ``build(cfg) -> System`` and ``FIELDS`` (the per-site
-      coordinates and their roles, ``models.base.FieldSpec``), optionally ``launch_soliton`` and
-      ``SOLITON_ON_PREDEFORMED`` (the launcher knows the prestressed theory);
+    - ``builder``: ``build(cfg) -> System``, in a models module whose ``FIELDS`` lists the per-site
+      coordinates and their roles (``models.base.FieldSpec``), in state order;
     - ``length``: the config field counting units along x (domain trimming), None if the lattice
       has none (a network of branches);
+    - ``launcher``: ``launch_soliton(system, amplitude, center, direction)`` for ``soliton``
+      excitations; ``soliton_on_predeformed``: it knows the prestressed theory;
     - ``theory``: an ``analysis.context.ModelTheory`` (predictions compared with measurements);
     - ``continuum``: a ``plan.continuum.ContinuumTheory`` (the wave before the run);
     - ``reducers``: reduction name -> ``reducer(scene dict, lattice config) -> reduced scene dict``.
     """
 
     config: type[Strict]
-    model: str
+    builder: str
     length: str | None
+    launcher: str | None = None
+    soliton_on_predeformed: bool = False
     theory: str | None = None
     continuum: str | None = None
     reducers: Mapping[str, str] = field(default_factory=dict)
@@ -56,7 +59,7 @@ class ModelSpec:
         return get_args(self.config.model_fields["kind"].annotation)[0]
 
     def hook(self, name: str) -> Any:
-        """The resolved ``theory`` or ``continuum`` hook, or None if the kind has none."""
+        """The resolved ``launcher``, ``theory`` or ``continuum`` hook, or None if the kind has none."""
         path = getattr(self, name)
         return None if path is None else resolve(path)
 
@@ -68,21 +71,17 @@ class ModelSpec:
     @property
     def build(self):
         """``build(cfg) -> System``."""
-        return resolve(self.model).build
+        return resolve(self.builder)
 
     @property
     def fields(self):
         """The model's per-site coordinates (``FieldSpec``), in state order."""
-        return resolve(self.model).FIELDS
+        return resolve(self.builder.partition(":")[0]).FIELDS
 
     @property
     def launch_soliton(self):
         """``launch_soliton(system, amplitude, center, direction)``, or None."""
-        return getattr(resolve(self.model), "launch_soliton", None)
-
-    @property
-    def soliton_on_predeformed(self) -> bool:
-        return bool(getattr(resolve(self.model), "SOLITON_ON_PREDEFORMED", False))
+        return self.hook("launcher")
 
 
 def _registry(*specs: ModelSpec) -> dict[str, ModelSpec]:
@@ -90,16 +89,18 @@ def _registry(*specs: ModelSpec) -> dict[str, ModelSpec]:
 
 
 MODELS: dict[str, ModelSpec] = _registry(
-    ModelSpec(RotatingSquaresChain, "flexmm.models.rotating_chain", "n_units",
+    ModelSpec(RotatingSquaresChain, "flexmm.models.rotating_chain:build", "n_units",
+              launcher="flexmm.models.rotating_chain:launch_soliton", soliton_on_predeformed=True,
               theory="flexmm.analysis.predict_rotating:CHAIN", continuum="flexmm.plan.continuum:ROTATING_CHAIN"),
-    ModelSpec(RotatingSquaresSheet, "flexmm.models.rotating_sheet", "n_cols",
-              theory="flexmm.analysis.predict_rotating:SHEET",
-              reducers={"strip": "flexmm.plan.dimension:sheet_to_strip", "chain": "flexmm.plan.dimension:sheet_to_chain"}),
-    ModelSpec(BistableLinkage, "flexmm.models.linkage", "n_cols"),
-    ModelSpec(MassChain, "flexmm.models.mass_chain", "n_units",
+    ModelSpec(RotatingSquaresSheet, "flexmm.models.rotating_sheet:build", "n_cols",
+              launcher="flexmm.models.rotating_sheet:launch_soliton", theory="flexmm.analysis.predict_rotating:SHEET",
+              reducers={"strip": "flexmm.plan.dimension:sheet_to_strip",
+                        "chain": "flexmm.plan.dimension:sheet_to_chain"}),
+    ModelSpec(BistableLinkage, "flexmm.models.linkage:build", "n_cols"),
+    ModelSpec(MassChain, "flexmm.models.mass_chain:build", "n_units",
               theory="flexmm.analysis.predict_chains:MASS_CHAIN", continuum="flexmm.plan.continuum:MASS_FRONT"),
-    ModelSpec(MassNetwork, "flexmm.models.mass_chain", None),
-    ModelSpec(MassGrid, "flexmm.models.mass_chain", "nx"),
+    ModelSpec(MassNetwork, "flexmm.models.mass_chain:build", None),
+    ModelSpec(MassGrid, "flexmm.models.mass_chain:build", "nx"),
 )
 
 #: the ``lattice`` section of a scene: any registered config class, discriminated on ``kind``

@@ -1,6 +1,6 @@
 """Model builders and kernels; ``MODELS[kind]`` is the model registry (``flexmm.config.lattice``).
 
-Each registry entry names the module here that builds its kind (``build``, ``FIELDS``); tests
+Each registry entry names the builder here of its kind (its module declares ``FIELDS``); tests
 parametrise over the registry so a new model is checked automatically (force = −∇E, compiled =
 numpy reference).
 """

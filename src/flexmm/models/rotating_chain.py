@@ -137,10 +137,6 @@ def build(cfg: RotatingSquaresChain) -> System:
     return system
 
 
-#: the launcher knows the prestressed theory (solitons on a predeformed chain)
-SOLITON_ON_PREDEFORMED = True
-
-
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
     """Overwrite q0, v0 with the exact continuum vector soliton (docs/physics.md §1.3).
 
