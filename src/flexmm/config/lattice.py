@@ -10,6 +10,7 @@ from pydantic import Field, model_validator
 from flexmm.config.base import Finite, NonNegative, Positive
 from flexmm.config.mass_chain import MassChain, MassGrid, MassNetwork
 from flexmm.config.rigid import BistableLinkage, RotatingSquaresSheet, RigidOptions, check_variation
+from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
 
 EndCondition = Literal["free", "fixed", "driven"]
 
@@ -55,5 +56,6 @@ class RotatingSquaresChain(RigidOptions):
 
 
 LatticeConfig = Union[
-    RotatingSquaresChain, RotatingSquaresSheet, BistableLinkage, MassChain, MassNetwork, MassGrid
+    RotatingSquaresChain, RotatingSquaresSheet, BistableLinkage, MassChain, MassNetwork, MassGrid,
+    RotatingTrianglesChain, RotatingTrianglesSheet,
 ]

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from flexmm.models import linkage, mass_chain, rotating_chain, rotating_sheet
+from flexmm.models import linkage, mass_chain, rotating_chain, rotating_sheet, rotating_triangles
 from flexmm.models.base import FieldSpec, System
 
 
@@ -31,6 +31,8 @@ MODELS: dict[str, ModelEntry] = {
     "rotating_squares_sheet": ModelEntry(
         rotating_sheet.build, rotating_sheet.FIELDS, rotating_sheet.launch_soliton
     ),
+    "rotating_triangles_chain": ModelEntry(rotating_triangles.build_chain, rotating_triangles.FIELDS),
+    "rotating_triangles_sheet": ModelEntry(rotating_triangles.build_sheet, rotating_triangles.FIELDS),
     "bistable_linkage": ModelEntry(linkage.build, rotating_sheet.FIELDS),
     "mass_chain": ModelEntry(mass_chain.build, mass_chain.FIELDS),
     "mass_network": ModelEntry(mass_chain.build, mass_chain.FIELDS),

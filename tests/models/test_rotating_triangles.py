@@ -1,0 +1,169 @@
+"""The rotating-triangles chain and kagome sheet (docs/physics.md §1.5).
+
+Oracles: the rest geometry written from the triangles' vertex directions (neighbours' vertices
+meet), the closed-form long-wave speed of the straight strip, the eigenvalues of the finite
+periodic lattice's Hessian against the Bloch dispersion of ``flexmm.linear``, the speed of a
+simulated small pulse against the Bloch long-wave speed, and the energy of undamped velocity
+Verlet (error bounded, ∝ dt²). The kernels' force = −∇E and compiled = reference checks run
+for every model kind in tests/test_hinge_kernel.py (examples in tests/conftest.py).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.linalg import eigh
+
+from flexmm.assemble import build_problem
+from flexmm.integrators.runner import energy, run_fixed
+from flexmm.linear.dispersion import bloch_frequencies
+from flexmm.models import MODELS
+from flexmm.stability import hessian_operator
+from flexmm.integrators.common import empty_terms
+
+A = 0.02
+KL = 71690.0
+TRI = {"a_m": A, "k_long_n_per_m": KL, "k_shear_n_per_m": 0.1 * KL, "k_rot_n_m_per_rad": 0.02 * KL * A * A,
+       "mass_kg": 4.52e-3, "inertia_kg_m2": 4.52e-3 * A * A / 12}
+
+
+def chain(make_scene, scene_dict, **changes):
+    lat = dict(TRI, kind="rotating_triangles_chain", n_units=8)
+    lat.update(changes)
+    scene = make_scene(scene_dict(lat, solver={"duration_s": 1.0}))
+    return MODELS[scene.lattice.kind].build(scene.lattice), scene
+
+
+def sheet(make_scene, scene_dict, **changes):
+    lat = dict(TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=6)
+    lat.update(changes)
+    scene = make_scene(scene_dict(lat, solver={"duration_s": 1.0}))
+    return MODELS[scene.lattice.kind].build(scene.lattice)
+
+
+def vertices(x, y, sigma, phi):
+    """(N, 3, 2) vertices of equilateral triangles of side 1 (units of a): an up triangle
+    (σ = +1) has them at 90°, 210°, 330° from its centroid, a down one at 270°, 30°, 150°, all
+    turned by the actual rotation φ."""
+    base = np.radians([90.0, 210.0, 330.0])[None, :] + np.where(sigma > 0, 0.0, math.pi)[:, None] + phi[:, None]
+    return np.stack([x[:, None] + np.cos(base) / math.sqrt(3), y[:, None] + np.sin(base) / math.sqrt(3)], -1)
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.3, -0.45])
+def test_hinged_vertices_meet_at_rest(theta0, make_scene, scene_dict):
+    """Every hinge joins a vertex of A to a vertex of B that coincide at rest (twisted kagome),
+    its axis runs from A's centroid to B's, and interior triangles have three hinges."""
+    s = sheet(make_scene, scene_dict, theta0_rad=theta0, n_rows=4, n_cols=6)
+    n, a = s.n_sites, s.scales.length_m
+    x, y = s.site_coords["x"] / a, s.site_coords["y"] / a
+    sigma = np.where((s.site_coords["row"] + s.site_coords["col"]) % 2 == 0, 1.0, -1.0)
+    vert = vertices(x, y, sigma, sigma * theta0)
+    args = s.args
+    for h, (ia, ib) in enumerate(zip(args.hinge_a, args.hinge_b)):
+        gap = np.linalg.norm(vert[ia][:, None, :] - vert[ib][None, :, :], axis=-1)
+        assert gap.min() < 1e-12, (h, gap.min())
+        d = np.array([x[ib] - x[ia], y[ib] - y[ia]])
+        np.testing.assert_allclose(d, args.hinge_prm[h, 0] * np.array([args.axis_cos[h], args.axis_sin[h]]),
+                                   atol=1e-12)
+    degree = np.bincount(args.hinge_a, minlength=n) + np.bincount(args.hinge_b, minlength=n)
+    row, col = s.site_coords["row"], s.site_coords["col"]
+    interior = (row > 0) & (row < 3) & (col > 0) & (col < 5)
+    assert np.all(degree[interior] == 3)
+    # the rest state has zero energy; the twist mechanism (θ0 → θ0 + t with the centroids
+    # scaled by cos(θ0 + t)/cos θ0) stretches and shears nothing: it costs ½ k_θ (2t)² per hinge
+    q = np.zeros(3 * n)
+    assert abs(s.energy(q, args)) < 1e-28
+    t = 0.05
+    scale = math.cos(theta0 + t) / math.cos(theta0) - 1.0
+    q[:n], q[n : 2 * n], q[2 * n :] = scale * x, scale * y, t
+    expected = 0.5 * args.hinge_prm[0, 6] * (2 * t) ** 2 * len(args.hinge_a)
+    assert s.energy(q, args) == pytest.approx(expected, rel=1e-10)
+
+
+def test_straight_strip_long_wave_speed_is_the_closed_form(make_scene, scene_dict):
+    """θ0 = 0: c_L² = 4 K_s/(1 + 3 K_s) (in c0 = a sqrt(k_l/m)), docs/physics.md §1.5."""
+    for ks in (0.02, 0.1, 0.6):
+        s, _ = chain(make_scene, scene_dict, n_units=16, k_shear_n_per_m=ks * KL)
+        q = 0.01  # phase per two-unit cell (length 2 a)
+        w = bloch_frequencies(s, np.array([q]), cell_sites=2)[0]
+        speed = w[1] / q * 2.0  # the lowest is the flexural branch (ω ∝ q²), then longitudinal
+        assert w[0] < 0.1 * w[1]
+        assert speed == pytest.approx(math.sqrt(4 * ks / (1 + 3 * ks)), rel=1e-4)
+
+
+def hessian(system) -> np.ndarray:
+    kx = hessian_operator(system, empty_terms())
+    return np.column_stack([kx(np.eye(1, system.ndof, j).ravel()) for j in range(system.ndof)])
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.25])
+def test_bloch_bands_are_the_periodic_chain_spectrum(theta0, make_scene, scene_dict):
+    """The 6 Bloch branches at q = 2πj/P (j = 0..P−1) are the eigenfrequencies of the periodic
+    chain of P two-unit cells (its Hessian and mass matrix, eigenvalues computed directly)."""
+    cells = 6
+    periodic, _ = chain(make_scene, scene_dict, n_units=2 * cells, theta0_rad=theta0, left="periodic",
+                        right="periodic")
+    lam = eigh(hessian(periodic), np.diag(periodic.mass), eigvals_only=True)
+    open_chain, _ = chain(make_scene, scene_dict, n_units=20, theta0_rad=theta0)
+    qs = 2 * math.pi * np.arange(cells) / cells
+    w = bloch_frequencies(open_chain, qs, cell_sites=2)
+    bloch = np.sort(np.nan_to_num(w).ravel() ** 2)
+    np.testing.assert_allclose(np.sort(lam), bloch, rtol=1e-6, atol=1e-7 * lam.max())
+
+
+def long_wave_speed(system, cell_sites=2) -> float:
+    """Nondimensional long-wave phase speed of the longitudinal branch (units of a per unit time)."""
+    q = 1e-3
+    w = bloch_frequencies(system, np.array([q]), cell_sites=cell_sites)[0]
+    return w[1] / q * cell_sites * system.spacing_m / system.scales.length_m
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.3])
+def test_small_pulse_travels_at_the_bloch_long_wave_speed(theta0, make_scene, scene_dict):
+    """A broad small longitudinal pulse on a long free chain: its right-going half's peak moves
+    at the Bloch long-wave speed within 1 % (dispersion of a 24-site-wide pulse over the run)."""
+    n = 600
+    s, scene = chain(make_scene, scene_dict, n_units=n, theta0_rad=theta0)
+    c = long_wave_speed(chain(make_scene, scene_dict, n_units=24, theta0_rad=theta0)[0])
+    problem = build_problem(scene)
+    x = np.arange(n) * math.cos(theta0)  # rest positions, units of a
+    x0, width = x[150], 12.0 * math.cos(theta0)
+    strain = 1e-4 * np.exp(-0.5 * ((x - x0) / width) ** 2)
+    q0 = np.zeros(3 * n)
+    q0[:n] = np.cumsum(strain) * math.cos(theta0)  # a compression-free smooth step: u' = strain
+    t_end = 0.6 * (x[-1] - x0) / c
+    traj = run_fixed(problem, "velocity_verlet", h=0.1, t_end=t_end, n_frames=3, q0=q0, v0=np.zeros(3 * n))
+    peaks = []
+    for k in (1, 2):
+        e = np.diff(traj.q[k, :n]) / math.cos(theta0)  # strain per bond, units of a / a
+        xm = 0.5 * (x[1:] + x[:-1])
+        right = xm > x0
+        i = np.argmax(np.where(right, e, -np.inf))
+        y0, y1, y2 = e[i - 1], e[i], e[i + 1]  # parabolic peak
+        peaks.append(xm[i] + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2) * (xm[1] - xm[0]))
+    measured = (peaks[1] - peaks[0]) / (traj.t[2] - traj.t[1])
+    assert measured == pytest.approx(c, rel=0.01), (measured, c)
+
+
+def test_verlet_energy_error_is_bounded_and_second_order(make_scene, scene_dict):
+    """Undamped velocity Verlet on a large-amplitude state (|θ| ~ 0.2 rad): the energy error
+    oscillates without drift (its mean over the last quarter of the run equals that over the
+    first within 10 % of its range) and scales as dt² (halving dt divides it by 3.5 to 4.5)."""
+    n = 24
+    _, scene = chain(make_scene, scene_dict, n_units=n, theta0_rad=0.2)
+    problem = build_problem(scene)
+    rng = np.random.default_rng(3)
+    q0 = np.concatenate([rng.normal(0, 0.02, 2 * n), rng.normal(0, 0.2, n)])
+    v0 = np.concatenate([rng.normal(0, 0.05, 2 * n), rng.normal(0, 0.3, n)])
+    e0 = energy(problem, q0, v0)
+    errors = []
+    for h in (0.1, 0.05):
+        traj = run_fixed(problem, "velocity_verlet", h=h, t_end=400.0, n_frames=401, q0=q0, v0=v0)
+        de = np.array([energy(problem, q, v) for q, v in zip(traj.q, traj.v)]) - e0
+        errors.append(np.max(np.abs(de)))
+        quarter = de.size // 4
+        assert abs(de[-quarter:].mean() - de[:quarter].mean()) < 0.1 * errors[-1]
+    assert errors[0] < 5e-3 * e0
+    assert 3.5 < errors[0] / errors[1] < 4.5, errors
