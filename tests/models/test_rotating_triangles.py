@@ -19,6 +19,7 @@ from scipy.linalg import eigh
 from flexmm.assemble import build_problem
 from flexmm.integrators.runner import energy, run_fixed
 from flexmm.linear.dispersion import bloch_frequencies
+from flexmm.linear.triangles import chain_bands, chain_long_wave_speed, sheet_bands, sheet_long_wave_speeds
 from flexmm.models import MODELS
 from flexmm.stability import hessian_operator
 from flexmm.integrators.common import empty_terms
@@ -83,14 +84,13 @@ def test_hinged_vertices_meet_at_rest(theta0, make_scene, scene_dict):
 
 
 def test_straight_strip_long_wave_speed_is_the_closed_form(make_scene, scene_dict):
-    """θ0 = 0: c_L² = 4 K_s/(1 + 3 K_s) (in c0 = a sqrt(k_l/m)), docs/physics.md §1.5."""
+    """θ0 = 0: c_L² = 4 K_s/(1 + 3 K_s) (in c0 = a sqrt(k_l/m)), docs/physics.md §1.5; the
+    slower acoustic branch is flexural (ω ∝ q²)."""
     for ks in (0.02, 0.1, 0.6):
-        s, _ = chain(make_scene, scene_dict, n_units=16, k_shear_n_per_m=ks * KL)
-        q = 0.01  # phase per two-unit cell (length 2 a)
-        w = bloch_frequencies(s, np.array([q]), cell_sites=2)[0]
-        speed = w[1] / q * 2.0  # the lowest is the flexural branch (ω ∝ q²), then longitudinal
-        assert w[0] < 0.1 * w[1]
-        assert speed == pytest.approx(math.sqrt(4 * ks / (1 + 3 * ks)), rel=1e-4)
+        _, scene = chain(make_scene, scene_dict, k_shear_n_per_m=ks * KL)
+        assert chain_long_wave_speed(scene.lattice) == pytest.approx(math.sqrt(4 * ks / (1 + 3 * ks)), rel=1e-4)
+        w1, w2 = chain_bands(scene.lattice, np.array([0.01, 0.02]))[:, 0]
+        assert w2 / w1 == pytest.approx(4.0, rel=1e-2)
 
 
 def hessian(system) -> np.ndarray:
@@ -113,20 +113,13 @@ def test_bloch_bands_are_the_periodic_chain_spectrum(theta0, make_scene, scene_d
     np.testing.assert_allclose(np.sort(lam), bloch, rtol=1e-6, atol=1e-7 * lam.max())
 
 
-def long_wave_speed(system, cell_sites=2) -> float:
-    """Nondimensional long-wave phase speed of the longitudinal branch (units of a per unit time)."""
-    q = 1e-3
-    w = bloch_frequencies(system, np.array([q]), cell_sites=cell_sites)[0]
-    return w[1] / q * cell_sites * system.spacing_m / system.scales.length_m
-
-
 @pytest.mark.parametrize("theta0", [0.0, 0.3])
 def test_small_pulse_travels_at_the_bloch_long_wave_speed(theta0, make_scene, scene_dict):
     """A broad small longitudinal pulse on a long free chain: its right-going half's peak moves
     at the Bloch long-wave speed within 1 % (dispersion of a 24-site-wide pulse over the run)."""
     n = 600
     s, scene = chain(make_scene, scene_dict, n_units=n, theta0_rad=theta0)
-    c = long_wave_speed(chain(make_scene, scene_dict, n_units=24, theta0_rad=theta0)[0])
+    c = chain_long_wave_speed(scene.lattice)
     problem = build_problem(scene)
     x = np.arange(n) * math.cos(theta0)  # rest positions, units of a
     x0, width = x[150], 12.0 * math.cos(theta0)
@@ -167,3 +160,40 @@ def test_verlet_energy_error_is_bounded_and_second_order(make_scene, scene_dict)
         assert abs(de[-quarter:].mean() - de[:quarter].mean()) < 0.1 * errors[-1]
     assert errors[0] < 5e-3 * e0
     assert 3.5 < errors[0] / errors[1] < 4.5, errors
+
+
+# ------------------------------------------------------------------ kagome sheet
+def sheet_lattice(make_scene, scene_dict, **changes):
+    lat = dict(TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=4)
+    lat.update(changes)
+    return make_scene(scene_dict(lat)).lattice
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.3])
+def test_sheet_bloch_bands_are_the_periodic_sheet_spectrum(theta0, make_scene, scene_dict):
+    """A periodic 4 × 6 kagome sheet (12 two-triangle cells): the eigenfrequencies of its Hessian
+    are the Bloch branches at the wave vectors (2πi/L_x, 2πj/L_y), i < 6, j < 4 — each cell state
+    twice, since (i, j) and (i + 3, j + 2) differ by a reciprocal lattice vector."""
+    nr, nc = 4, 6
+    lat = sheet_lattice(make_scene, scene_dict, n_rows=nr, n_cols=nc, theta0_rad=theta0, left="periodic",
+                        right="periodic", bottom="periodic", top="periodic")
+    system = MODELS[lat.kind].build(lat)
+    lam = eigh(hessian(system), np.diag(system.mass), eigvals_only=True)
+    lx, ly = nc * math.cos(theta0), nr * math.sqrt(3) * math.cos(theta0)
+    i, j = np.meshgrid(np.arange(nc), np.arange(nr), indexing="ij")
+    k = np.stack([2 * math.pi * i / lx, 2 * math.pi * j / ly], -1)
+    bloch = np.sort(sheet_bands(lat, k).ravel() ** 2)
+    np.testing.assert_allclose(np.repeat(np.sort(lam), 2), bloch, rtol=1e-6, atol=1e-7 * lam.max())
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.3])
+def test_sheet_long_waves_are_isotropic(theta0, make_scene, scene_dict):
+    """The kagome has three-fold symmetry, so its in-plane elasticity is isotropic: the two
+    acoustic speeds do not depend on the direction (a wrong hinge axis or rest length breaks this).
+    At θ0 = 0 a dilation stretches only the k_l springs (no internal relaxation by symmetry):
+    bulk modulus B = k_l a²/A_cell with A_cell = 2√3 a² and 2m per cell, so c_L² − c_T² = B/ρ = ½ c0²."""
+    lat = sheet_lattice(make_scene, scene_dict, theta0_rad=theta0)
+    speeds = np.array([sheet_long_wave_speeds(lat, math.radians(phi)) for phi in (0.0, 17.0, 30.0, 45.0, 90.0)])
+    np.testing.assert_allclose(speeds, np.broadcast_to(speeds[0], speeds.shape), rtol=1e-5)
+    if theta0 == 0.0:
+        assert speeds[0, 1] ** 2 - speeds[0, 0] ** 2 == pytest.approx(0.5, rel=1e-5)
