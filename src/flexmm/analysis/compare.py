@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from flexmm.analysis import predict_chains, predict_rotating
+from flexmm.analysis import predict_chains, predict_rotating, predict_triangles
 from flexmm.analysis.context import Comparison, RunContext
 
 
@@ -56,6 +56,8 @@ THEORY: dict[str, ModelTheory] = {
         speed_curve=predict_rotating.speed_curve,
         profile=predict_rotating.profile,
     ),
+    "rotating_triangles_chain": ModelTheory(pulse=predict_triangles.pulse),
+    "rotating_triangles_sheet": ModelTheory(pulse=predict_triangles.pulse),
     "mass_chain": ModelTheory(
         pulse=predict_chains.pulse,
         front=predict_chains.front,
