@@ -1,4 +1,4 @@
-"""Predictions for the rotating-triangles chain and kagome sheet (docs/physics.md §1.5) from a
+"""Predictions for the rotating-triangles chain and kagome sheet (docs/physics.md §1.6) from a
 run's config: longitudinal pulses (u, its rate and strain) against the linear long-wave speed of
 the Bloch analysis (``flexmm.linear.triangles``), converted with c0 = a sqrt(k_l/m). Rotation
 and transverse pulses (no theory of their nonlinear waves yet) get no prediction.
@@ -26,4 +26,4 @@ def pulse(ctx, p_meas) -> list[Comparison]:
         c, what = sheet_long_wave_speeds(lat, 0.0)[1], "sheet, longitudinal planar wave"
     c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.mass_kg)
     return [Comparison("", "speed", float(p_meas.speed_m_s), c * c0, "m/s",
-                       f"linear long-wave speed, Bloch ({what}; docs/physics.md §1.5)")]
+                       f"linear long-wave speed, Bloch ({what}; docs/physics.md §1.6)")]

@@ -1,4 +1,4 @@
-"""Config blocks of the rotating-triangles lattices (docs/physics.md §1.5): chain and kagome sheet.
+"""Config blocks of the rotating-triangles lattices (docs/physics.md §1.6): chain and kagome sheet.
 
 Rigid equilateral triangles of side a joined at their vertices by zero-length hinges (k_l along
 the hinge axis, k_s across it, k_θ on the relative rotation). Neighbouring triangles point up and
@@ -51,7 +51,7 @@ def _check_periodic(cfg, a: str, b: str, n: int, what: str) -> None:
 
 class RotatingTrianglesChain(_TriangleUnits):
     """A strip of rigid triangles, alternately pointing up and down, hinged vertex to vertex
-    (docs/physics.md §1.5); u, v, θ per triangle. Unit 0 points up; its centroid is the origin."""
+    (docs/physics.md §1.6); u, v, θ per triangle. Unit 0 points up; its centroid is the origin."""
 
     kind: Literal["rotating_triangles_chain"]
     #: per-site coordinates of the built model, in state order (models.rotating_triangles.FIELDS)
@@ -78,7 +78,7 @@ class RotatingTrianglesChain(_TriangleUnits):
 
 
 class RotatingTrianglesSheet(_TriangleUnits):
-    """A kagome sheet of rigid triangles (docs/physics.md §1.5): n_rows zig-zag rows of n_cols
+    """A kagome sheet of rigid triangles (docs/physics.md §1.6): n_rows zig-zag rows of n_cols
     triangles; site = row · n_cols + col, the triangle at (row, col) points up if row + col is
     even. Every triangle is hinged to its left and right neighbours, an up triangle also to the
     (down) triangle above it; u, v, θ per triangle."""

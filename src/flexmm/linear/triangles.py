@@ -1,4 +1,4 @@
-"""Linear waves of the rotating-triangles chain and kagome sheet (docs/physics.md §1.5), from the
+"""Linear waves of the rotating-triangles chain and kagome sheet (docs/physics.md §1.6), from the
 Hessian of the built model: the chain with ``linear.dispersion`` (two units per cell), the sheet
 with the two-unit cell of ``linear.sheet`` (an up and a down triangle). Nondimensional: length a
 (the side of a triangle), time sqrt(m/k_l).

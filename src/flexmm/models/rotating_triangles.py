@@ -1,4 +1,4 @@
-"""Build the rotating-triangles chain and kagome sheet (docs/physics.md §1.5) from their configs.
+"""Build the rotating-triangles chain and kagome sheet (docs/physics.md §1.6) from their configs.
 
 Nondimensionalisation: length a (the side of a triangle), time sqrt(m/k_l), mass m, so k_l = 1,
 K_s = k_s/k_l, K_θ = k_θ/(k_l a²), α² = J/(m a²); speeds in c0 = a sqrt(k_l/m). Centroid to
@@ -36,7 +36,7 @@ HALF = 1.0 / math.sqrt(3.0)
 
 
 def nondimensional(cfg) -> dict[str, float]:
-    """K_s, K_θ, α² of docs/physics.md §1.5 from the SI config."""
+    """K_s, K_θ, α² of docs/physics.md §1.6 from the SI config."""
     return {
         "Ks": cfg.k_shear_n_per_m / cfg.k_long_n_per_m,
         "Ktheta": cfg.k_rot_n_m_per_rad / (cfg.k_long_n_per_m * cfg.a_m**2),

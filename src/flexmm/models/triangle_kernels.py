@@ -1,4 +1,4 @@
-"""Compiled kernels of the rotating-triangles chain and sheet (docs/physics.md §1.5).
+"""Compiled kernels of the rotating-triangles chain and sheet (docs/physics.md §1.6).
 
 Each hinge joins vertex r_A of triangle A to vertex r_B of triangle B along a hinge axis
 e = (cos β, sin β) of its own (the kagome has three), n = (−sin β, cos β). In the hinge frame
@@ -85,7 +85,7 @@ def triangle_energy(q, args):
 def triangle_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
     """Numpy energy and forces from the vertex positions (the tests' oracle).
 
-    Written from the geometry of docs/physics.md §1.5, not from ``hinge_law``: the vertices
+    Written from the geometry of docs/physics.md §1.6, not from ``hinge_law``: the vertices
     r_A = h_A R(φ_A) e, r_B = −h_B R(φ_B) e with the actual rotations φ = σ(θ0 + θ) (σ_B = −σ_A);
     the gap g = x_B − x_A + D e + r_B − r_A (D the rest length), elongation g·e, shear g·n,
     hinge rotation θ_A + θ_B. Forces: ∂E/∂x_B = −∂E/∂x_A = G = k_l (g·e) e + k_s (g·n) n;
