@@ -21,6 +21,7 @@ from flexmm.integrators.runner import energy, run_fixed
 from flexmm.linear.dispersion import bloch_frequencies
 from flexmm.linear.triangles import chain_bands, chain_long_wave_speed, sheet_bands, sheet_long_wave_speeds
 from flexmm.models import MODELS
+from flexmm.models.rotating_triangles import centroids, sublattice_sign
 from flexmm.stability import hessian_operator
 from flexmm.integrators.common import empty_terms
 
@@ -83,6 +84,26 @@ def test_hinged_vertices_meet_at_rest(theta0, make_scene, scene_dict):
     assert s.energy(q, args) == pytest.approx(expected, rel=1e-10)
 
 
+@pytest.mark.parametrize("kind", ["chain", "sheet"])
+@pytest.mark.parametrize("theta0", [0.0, 0.3])
+def test_rigid_motion_costs_nothing(kind, theta0, make_scene, scene_dict):
+    """A free lattice turned as a whole by ψ (centroids rotated about the origin, every triangle's
+    actual rotation ψ: staggered θ = σψ) and shifted keeps its vertices together and its hinge
+    angles: zero energy and force for any ψ. With θ0 ≠ 0 this pins the documented sense of the
+    twist (up triangles, σ = +1, turn by +θ0), which the rest state and the mechanism do not."""
+    s = (chain(make_scene, scene_dict, n_units=7, theta0_rad=theta0)[0] if kind == "chain"
+         else sheet(make_scene, scene_dict, theta0_rad=theta0, n_rows=3, n_cols=4))
+    n, a = s.n_sites, s.scales.length_m
+    x, _ = centroids(*(s.grid_shape or (1, n)), theta0)
+    y = s.site_coords["y"] / a if "y" in s.site_coords else centroids(1, n, theta0)[1]
+    sig_site = sublattice_sign(*(s.grid_shape or (1, n)))  # +1: points up (docs/physics.md §1.6)
+    for psi in (0.4, -1.1):
+        c, sn = math.cos(psi), math.sin(psi)
+        q = np.concatenate([c * x - sn * y - x + 0.3, sn * x + c * y - y - 0.2, sig_site * psi])
+        assert abs(s.energy(q, s.args)) < 1e-26
+        assert np.max(np.abs(forces(s, q))) < 1e-12
+
+
 def test_straight_strip_long_wave_speed_is_the_closed_form(make_scene, scene_dict):
     """θ0 = 0: c_L² = 4 K_s/(1 + 3 K_s) (in c0 = a sqrt(k_l/m)), docs/physics.md §1.6; the
     slower acoustic branch is flexural (ω ∝ q²)."""
@@ -91,6 +112,12 @@ def test_straight_strip_long_wave_speed_is_the_closed_form(make_scene, scene_dic
         assert chain_long_wave_speed(scene.lattice) == pytest.approx(math.sqrt(4 * ks / (1 + 3 * ks)), rel=1e-4)
         w1, w2 = chain_bands(scene.lattice, np.array([0.01, 0.02]))[:, 0]
         assert w2 / w1 == pytest.approx(4.0, rel=1e-2)
+
+
+def forces(system, q) -> np.ndarray:
+    out = np.full(system.ndof, np.nan)
+    system.force(q, system.args, out)
+    return out
 
 
 def hessian(system) -> np.ndarray:
