@@ -71,6 +71,9 @@ def test_hinged_vertices_meet_at_rest(theta0, make_scene, scene_dict):
                                    atol=1e-12)
     degree = np.bincount(args.hinge_a, minlength=n) + np.bincount(args.hinge_b, minlength=n)
     row, col = s.site_coords["row"], s.site_coords["col"]
+    ix, iy = s.site_grid()  # grid indices for planners and initial fields: columns and rows
+    np.testing.assert_array_equal(ix, col)
+    np.testing.assert_array_equal(iy, row)
     interior = (row > 0) & (row < 3) & (col > 0) & (col < 5)
     assert np.all(degree[interior] == 3)
     # the rest state has zero energy; the twist mechanism (θ0 → θ0 + t with the centroids
