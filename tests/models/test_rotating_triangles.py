@@ -177,13 +177,17 @@ def test_small_pulse_travels_at_the_bloch_long_wave_speed(theta0, make_scene, sc
     assert 3.0 < d1 / d2 < 5.0, (d1, d2)
 
 
-def test_verlet_energy_error_is_bounded_and_second_order(make_scene, scene_dict):
-    """Undamped velocity Verlet on a large-amplitude state (|θ| ~ 0.2 rad): the energy error
-    oscillates without drift (its mean over the last quarter of the run equals that over the
-    first within 10 % of its range) and scales as dt² (halving dt divides it by 3.5 to 4.5)."""
-    n = 24
-    _, scene = chain(make_scene, scene_dict, n_units=n, theta0_rad=0.2)
-    problem = build_problem(scene)
+@pytest.mark.parametrize("kind", ["chain", "sheet"])
+def test_verlet_energy_error_is_bounded_and_second_order(kind, make_scene, scene_dict):
+    """Undamped velocity Verlet on a large-amplitude state (|θ| ~ 0.2 rad; a free chain of 24, a
+    periodic 4 × 4 sheet): the energy error oscillates without drift (its mean over the last
+    quarter of the run equals that over the first within 10 % of its range) and scales as dt²
+    (halving dt divides it by 3.3 to 4.7; measured 3.87 chain, 3.53 sheet)."""
+    lat = (dict(TRI, kind="rotating_triangles_chain", n_units=24) if kind == "chain" else
+           dict(TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=4, left="periodic", right="periodic",
+                bottom="periodic", top="periodic"))
+    problem = build_problem(make_scene(scene_dict(dict(lat, theta0_rad=0.2), solver={"duration_s": 1.0})))
+    n = problem.system.n_sites
     rng = np.random.default_rng(3)
     q0 = np.concatenate([rng.normal(0, 0.02, 2 * n), rng.normal(0, 0.2, n)])
     v0 = np.concatenate([rng.normal(0, 0.05, 2 * n), rng.normal(0, 0.3, n)])
@@ -196,44 +200,7 @@ def test_verlet_energy_error_is_bounded_and_second_order(make_scene, scene_dict)
         quarter = de.size // 4
         assert abs(de[-quarter:].mean() - de[:quarter].mean()) < 0.1 * errors[-1]
     assert errors[0] < 5e-3 * e0
-    assert 3.5 < errors[0] / errors[1] < 4.5, errors
-
-
-# ------------------------------------------------------------------ kagome sheet
-def sheet_lattice(make_scene, scene_dict, **changes):
-    lat = dict(TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=4)
-    lat.update(changes)
-    return make_scene(scene_dict(lat)).lattice
-
-
-@pytest.mark.parametrize("theta0", [0.0, 0.3])
-def test_sheet_bloch_bands_are_the_periodic_sheet_spectrum(theta0, make_scene, scene_dict):
-    """A periodic 4 × 6 kagome sheet (12 two-triangle cells): the eigenfrequencies of its Hessian
-    are the Bloch branches at the wave vectors (2πi/L_x, 2πj/L_y), i < 6, j < 4 — each cell state
-    twice, since (i, j) and (i + 3, j + 2) differ by a reciprocal lattice vector."""
-    nr, nc = 4, 6
-    lat = sheet_lattice(make_scene, scene_dict, n_rows=nr, n_cols=nc, theta0_rad=theta0, left="periodic",
-                        right="periodic", bottom="periodic", top="periodic")
-    system = MODELS[lat.kind].build(lat)
-    lam = eigh(hessian(system), np.diag(system.mass), eigvals_only=True)
-    lx, ly = nc * math.cos(theta0), nr * math.sqrt(3) * math.cos(theta0)
-    i, j = np.meshgrid(np.arange(nc), np.arange(nr), indexing="ij")
-    k = np.stack([2 * math.pi * i / lx, 2 * math.pi * j / ly], -1)
-    bloch = np.sort(sheet_bands(lat, k).ravel() ** 2)
-    np.testing.assert_allclose(np.repeat(np.sort(lam), 2), bloch, rtol=1e-6, atol=1e-7 * lam.max())
-
-
-@pytest.mark.parametrize("theta0", [0.0, 0.3])
-def test_sheet_long_waves_are_isotropic(theta0, make_scene, scene_dict):
-    """The kagome has three-fold symmetry, so its in-plane elasticity is isotropic: the two
-    acoustic speeds do not depend on the direction (a wrong hinge axis or rest length breaks this).
-    At θ0 = 0 a dilation stretches only the k_l springs (no internal relaxation by symmetry):
-    bulk modulus B = k_l a²/A_cell with A_cell = 2√3 a² and 2m per cell, so c_L² − c_T² = B/ρ = ½ c0²."""
-    lat = sheet_lattice(make_scene, scene_dict, theta0_rad=theta0)
-    speeds = np.array([sheet_long_wave_speeds(lat, math.radians(phi)) for phi in (0.0, 17.0, 30.0, 45.0, 90.0)])
-    np.testing.assert_allclose(speeds, np.broadcast_to(speeds[0], speeds.shape), rtol=1e-5)
-    if theta0 == 0.0:
-        assert speeds[0, 1] ** 2 - speeds[0, 0] ** 2 == pytest.approx(0.5, rel=1e-5)
+    assert 3.3 < errors[0] / errors[1] < 4.7, errors
 
 
 @pytest.mark.parametrize("name, c_long", [("rotating_triangles_chain", math.sqrt(4 * 0.1 / 1.3)),
