@@ -115,6 +115,9 @@ def test_straight_strip_long_wave_speed_is_the_closed_form(make_scene, scene_dic
         assert chain_long_wave_speed(scene.lattice) == pytest.approx(math.sqrt(4 * ks / (1 + 3 * ks)), rel=1e-4)
         w1, w2 = chain_bands(scene.lattice, np.array([0.01, 0.02]))[:, 0]
         assert w2 / w1 == pytest.approx(4.0, rel=1e-2)
+    _, free_twist = chain(make_scene, scene_dict, k_rot_n_m_per_rad=0.0)
+    with pytest.raises(ValueError, match="no gap"):  # the mechanism has no gap: no long-wave limit
+        chain_long_wave_speed(free_twist.lattice)
 
 
 def forces(system, q) -> np.ndarray:
@@ -201,6 +204,51 @@ def test_verlet_energy_error_is_bounded_and_second_order(kind, make_scene, scene
         assert abs(de[-quarter:].mean() - de[:quarter].mean()) < 0.1 * errors[-1]
     assert errors[0] < 5e-3 * e0
     assert 3.3 < errors[0] / errors[1] < 4.7, errors
+
+
+# ------------------------------------------------------------------ kagome sheet
+def sheet_lattice(make_scene, scene_dict, **changes):
+    lat = dict(TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=4)
+    lat.update(changes)
+    return make_scene(scene_dict(lat)).lattice
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.3])
+def test_sheet_bloch_bands_are_the_periodic_sheet_spectrum(theta0, make_scene, scene_dict):
+    """A periodic 4 × 6 kagome sheet (12 two-triangle cells): the eigenfrequencies of its Hessian
+    are the Bloch branches at the wave vectors (2πi/L_x, 2πj/L_y), i < 6, j < 4 — each cell state
+    twice, since (i, j) and (i + 3, j + 2) differ by a reciprocal lattice vector."""
+    nr, nc = 4, 6
+    lat = sheet_lattice(make_scene, scene_dict, n_rows=nr, n_cols=nc, theta0_rad=theta0, left="periodic",
+                        right="periodic", bottom="periodic", top="periodic")
+    system = MODELS[lat.kind].build(lat)
+    lam = eigh(hessian(system), np.diag(system.mass), eigvals_only=True)
+    lx, ly = nc * math.cos(theta0), nr * math.sqrt(3) * math.cos(theta0)
+    i, j = np.meshgrid(np.arange(nc), np.arange(nr), indexing="ij")
+    k = np.stack([2 * math.pi * i / lx, 2 * math.pi * j / ly], -1)
+    bloch = np.sort(sheet_bands(lat, k).ravel() ** 2)
+    np.testing.assert_allclose(np.repeat(np.sort(lam), 2), bloch, rtol=1e-6, atol=1e-7 * lam.max())
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.3])
+def test_sheet_long_waves_are_isotropic(theta0, make_scene, scene_dict):
+    """The kagome has three-fold symmetry, so its in-plane elasticity is isotropic: the two
+    acoustic speeds do not depend on the direction (a wrong hinge axis or rest length breaks this).
+    At θ0 = 0 the homogenised moduli of docs/physics.md §1.6: c_T² = K_s/(1 + K_s), c_L² = c_T² + ½
+    (in c0²), for any K_θ > 0 and J. With K_θ = 0 the twist mechanism has no gap and there is no
+    such limit: refused."""
+    lat = sheet_lattice(make_scene, scene_dict, theta0_rad=theta0)
+    speeds = np.array([sheet_long_wave_speeds(lat, math.radians(phi)) for phi in (0.0, 17.0, 30.0, 45.0, 90.0)])
+    np.testing.assert_allclose(speeds, np.broadcast_to(speeds[0], speeds.shape), rtol=1e-5)
+    if theta0 == 0.0:
+        for ks, kt, j in ((0.1, 0.02, 1 / 12), (0.02, 0.2, 0.3), (0.6, 0.002, 1 / 12)):
+            lat = sheet_lattice(make_scene, scene_dict, k_shear_n_per_m=ks * KL, k_rot_n_m_per_rad=kt * KL * A * A,
+                                inertia_kg_m2=j * TRI["mass_kg"] * A * A)
+            c_t, c_l = sheet_long_wave_speeds(lat, 0.4)
+            assert c_t**2 == pytest.approx(ks / (1 + ks), rel=1e-5)
+            assert c_l**2 == pytest.approx(ks / (1 + ks) + 0.5, rel=1e-5)
+        with pytest.raises(ValueError, match="no gap"):
+            sheet_long_wave_speeds(sheet_lattice(make_scene, scene_dict, k_rot_n_m_per_rad=0.0), 0.4)
 
 
 @pytest.mark.parametrize("name, c_long", [("rotating_triangles_chain", math.sqrt(4 * 0.1 / 1.3)),

@@ -29,10 +29,19 @@ def chain_bands(lat: RotatingTrianglesChain, q: np.ndarray) -> np.ndarray:
     return bloch_frequencies(small, q, cell_sites=2)
 
 
+def _acoustic(w: np.ndarray, q: float) -> np.ndarray:
+    """The two acoustic frequencies of the six at a small q; ValueError if a third branch is not
+    gapped (k_θ = 0: the twist mechanism costs nothing and mixes with the long waves)."""
+    if not w[2] > 100.0 * q:
+        raise ValueError("no long-wave limit: the twist branch has no gap (k_rot = 0?), so the "
+                         "mechanism mixes with the acoustic waves")
+    return w[:2]
+
+
 def chain_long_wave_speed(lat: RotatingTrianglesChain) -> float:
     """Longitudinal long-wave speed of the chain in c0 = a sqrt(k_l/m) (the faster of its two
     acoustic branches; the other is flexural, ω ∝ q²). θ0 = 0: sqrt(4K_s/(1 + 3K_s))."""
-    w = chain_bands(lat, np.array([_LONG_WAVE_Q]))[0]
+    w = _acoustic(chain_bands(lat, np.array([_LONG_WAVE_Q]))[0], _LONG_WAVE_Q)
     return float(w[1] / _LONG_WAVE_Q * 2.0 * math.cos(lat.theta0_rad))
 
 
@@ -59,7 +68,7 @@ def sheet_bands(lat: RotatingTrianglesSheet, kvec: np.ndarray) -> np.ndarray:
 
 def sheet_long_wave_speeds(lat: RotatingTrianglesSheet, phi: float) -> tuple[float, float]:
     """Phase speeds (c0) of the two acoustic branches along direction φ (rad) at long wavelength,
-    slow first."""
+    slow first. θ0 = 0: sqrt(K_s/(1 + K_s)) and sqrt(K_s/(1 + K_s) + ½)."""
     k = _LONG_WAVE_Q
-    w = sheet_bands(lat, np.array([k * math.cos(phi), k * math.sin(phi)]))
+    w = _acoustic(sheet_bands(lat, np.array([k * math.cos(phi), k * math.sin(phi)])), k)
     return float(w[0] / k), float(w[1] / k)
