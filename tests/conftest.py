@@ -49,7 +49,7 @@ def _chain(**changes) -> dict:
 
 _SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
           "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
-# rotating triangles (docs/physics.md §1.6): LEGO-like hinges, a stiffer shear spring to couple the fields
+# rotating triangles (docs/physics.md §1.6): LEGO k_l, a stiffer shear spring (0.1 k_l) to couple the fields
 _TRI = {"a_m": 0.02, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 7169.0, "k_rot_n_m_per_rad": 0.05,
         "mass_kg": 4.52e-3, "inertia_kg_m2": 1.2e-7}
 _MASS = {"spacing_m": 0.01, "mass_kg": 0.01,
