@@ -49,6 +49,9 @@ def _chain(**changes) -> dict:
 
 _SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
           "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
+# rotating triangles (docs/physics.md §1.6): LEGO k_l, a stiffer shear spring (0.1 k_l) to couple the fields
+_TRI = {"a_m": 0.02, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 7169.0, "k_rot_n_m_per_rad": 0.05,
+        "mass_kg": 4.52e-3, "inertia_kg_m2": 1.2e-7}
 _MASS = {"spacing_m": 0.01, "mass_kg": 0.01,
          "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
 
@@ -112,6 +115,23 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
             "translation_invariant": True,
             "not_at_rest": "facing magnets pull on each other at q = 0",
         },
+    },
+    "rotating_triangles_chain": {
+        "theta0-free": {"lattice": dict(_TRI, kind="rotating_triangles_chain", n_units=7, theta0_rad=0.2),
+                        "translation_invariant": True},
+        "straight-fixed-ends": {"lattice": dict(_TRI, kind="rotating_triangles_chain", n_units=6, left="fixed",
+                                                right="fixed", inertia_kg_m2=None),
+                                "translation_invariant": True},
+        "negative-theta0-periodic": {"lattice": dict(_TRI, kind="rotating_triangles_chain", n_units=6,
+                                                     theta0_rad=-0.35, left="periodic", right="periodic"),
+                                     "translation_invariant": True},
+    },
+    "rotating_triangles_sheet": {
+        "theta0-3x4": {"lattice": dict(_TRI, kind="rotating_triangles_sheet", n_rows=3, n_cols=4, theta0_rad=0.25),
+                       "translation_invariant": True},
+        "periodic-4x4": {"lattice": dict(_TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=4, theta0_rad=-0.1,
+                                         left="periodic", right="periodic", bottom="periodic", top="periodic"),
+                         "translation_invariant": True},
     },
     "bistable_linkage": {
         "six-bars": {

@@ -23,6 +23,7 @@ from flexmm.config.rigid import (
     RotatingSquaresChain,
     RotatingSquaresSheet,
 )
+from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
 
 #: which layer each hook of a spec belongs to (tests/test_layers.py checks the paths)
 HOOK_LAYERS = {"builder": "flexmm.models", "launcher": "flexmm.models", "theory": "flexmm.analysis",
@@ -101,6 +102,10 @@ MODELS: dict[str, ModelSpec] = _registry(
               theory="flexmm.analysis.predict_chains:MASS_CHAIN", continuum="flexmm.plan.continuum:MASS_FRONT"),
     ModelSpec(MassNetwork, "flexmm.models.mass_chain:build", None),
     ModelSpec(MassGrid, "flexmm.models.mass_chain:build", "nx"),
+    ModelSpec(RotatingTrianglesChain, "flexmm.models.rotating_triangles:build_chain", "n_units",
+              theory="flexmm.analysis.predict_triangles:THEORY"),
+    ModelSpec(RotatingTrianglesSheet, "flexmm.models.rotating_triangles:build_sheet", "n_cols",
+              theory="flexmm.analysis.predict_triangles:THEORY"),
 )
 
 #: the ``lattice`` section of a scene: any registered config class, discriminated on ``kind``

@@ -11,7 +11,9 @@ couple nearest neighbours only). The two lowest branches are acoustic: at long w
 phase speeds ω/|k| along a direction φ are the speeds of the two in-plane polarisations. For
 θ0 = 0 they are x- and y-polarised with c_x² = cos²φ + K_s sin²φ and c_y² = K_s cos²φ + sin²φ
 (in c0 = a sqrt(k_l/m)): an oblique pulse (0 < φ < 45°, K_s ≠ 1) separates into two pulses.
-Everything is nondimensional (length a, time sqrt(m/k_l)).
+Everything is nondimensional (length a, time sqrt(m/k_l)). ``cell_couplings`` and
+``cell_frequencies`` serve any periodic sheet with a two-unit cell of (u, v, θ) units (the kagome
+of rotating triangles too, ``linear.triangles``).
 """
 
 from __future__ import annotations
@@ -50,18 +52,27 @@ def bloch_matrices(lat: RotatingSquaresSheet) -> tuple[np.ndarray, np.ndarray, n
 
     system = build(_periodic_copy(lat))
     n, nc = system.n_sites, _CELL_SHEET
-    kx = hessian_operator(system, empty_terms())
     h = system.spacing_m / system.scales.length_m
-    cols = np.arange(3 * n)
-    hess = np.column_stack([kx(np.eye(1, 3 * n, j).ravel()) for j in cols])
-    units = (0, 1)
-    K = np.array([hess[[f * n + s for f in range(3)]].reshape(3, 3, n).transpose(0, 2, 1) for s in units])
     row, col = np.divmod(np.arange(n), nc)
     wrap = lambda d: (d + nc // 2) % nc - nc // 2  # noqa: E731 - minimum image on the torus
     offsets = np.stack([wrap(col) * h, wrap(row) * h], axis=1)
-    sublattice = (row + col) % 2
+    return cell_couplings(system, offsets, (row + col) % 2)
+
+
+def cell_couplings(system, offsets: np.ndarray, sublattice: np.ndarray):
+    """(K, offsets, sublattice, mass) of a periodic sheet whose primitive cell holds units 0 and 1
+    (sublattices 0 and 1), three fields each: its Hessian at rest, read column by column.
+
+    ``offsets`` (N, 2): every unit's minimum-image rest position relative to unit 0 (units of the
+    model's length); the couplings must reach less than half the periodic box.
+    """
+    n = system.n_sites
+    kx = hessian_operator(system, empty_terms())
+    hess = np.column_stack([kx(np.eye(1, 3 * n, j).ravel()) for j in range(3 * n)])
+    units = (0, 1)
+    K = np.array([hess[[f * n + s for f in range(3)]].reshape(3, 3, n).transpose(0, 2, 1) for s in units])
     mass = np.concatenate([system.mass[[f * n + s for f in range(3)]] for s in units])
-    return K, offsets, sublattice, mass
+    return K, offsets, np.asarray(sublattice), mass
 
 
 def _bloch_matrix(data, k: np.ndarray) -> np.ndarray:
@@ -78,7 +89,12 @@ def _bloch_matrix(data, k: np.ndarray) -> np.ndarray:
 
 def bloch_frequencies(lat: RotatingSquaresSheet, kvec: np.ndarray) -> np.ndarray:
     """The six ω(k) (ascending, nondimensional) for each wave vector in ``kvec`` (…, 2)."""
-    data = bloch_matrices(lat)
+    return cell_frequencies(bloch_matrices(lat), kvec)
+
+
+def cell_frequencies(data, kvec: np.ndarray) -> np.ndarray:
+    """The six ω(k) (ascending) of the two-unit cell ``data`` (``cell_couplings``) at each wave
+    vector in ``kvec`` (…, 2)."""
     kv = np.asarray(kvec, float)
     out = np.empty(kv.shape[:-1] + (6,))
     with single_blas_thread():  # 6 × 6 eigenproblems: BLAS threads only add overhead

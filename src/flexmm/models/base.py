@@ -207,7 +207,11 @@ class System:
         return 0.5 * weighted_square_sum(self.mass, v)
 
     def site_grid(self) -> tuple[np.ndarray, np.ndarray]:
-        """Integer site indices (ix, iy) (n_sites,) from the rest coordinates (iy = 0 for chains)."""
+        """Integer site indices (ix, iy) (n_sites,): the ``col``/``row`` coordinates of a grid that
+        has them (a kagome's rows are not one spacing apart), else from the rest coordinates (iy = 0
+        for chains)."""
+        if "col" in self.site_coords and "row" in self.site_coords:
+            return (np.asarray(self.site_coords["col"], np.int64), np.asarray(self.site_coords["row"], np.int64))
         h = self.spacing_m
         x = np.asarray(self.site_coords.get("x", np.arange(self.n_sites) * h), float)
         y = np.asarray(self.site_coords.get("y", np.zeros(self.n_sites)), float)

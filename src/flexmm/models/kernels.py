@@ -27,6 +27,7 @@ from flexmm.models.loads import (
     chain_loaded_reference,
 )
 from flexmm.models.sheet_kernels import SheetArgs, sheet_energy, sheet_force, sheet_reference
+from flexmm.models.triangle_kernels import TriangleArgs, triangle_energy, triangle_force, triangle_reference
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,7 @@ KERNELS: dict[type, ModelKernels] = {
     SheetArgs: ModelKernels(sheet_force, sheet_energy, sheet_reference),
     MassArgs: ModelKernels(mass_force, mass_energy, mass_reference),
     HarmonicArgs: ModelKernels(harmonic_force, harmonic_energy, harmonic_reference),
+    TriangleArgs: ModelKernels(triangle_force, triangle_energy, triangle_reference),
 }
 
 

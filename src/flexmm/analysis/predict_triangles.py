@@ -1,0 +1,33 @@
+"""Predictions for the rotating-triangles chain and kagome sheet (docs/physics.md §1.6) from a
+run's config: longitudinal pulses (u, its rate and strain) against the linear long-wave speed of
+the Bloch analysis (``flexmm.linear.triangles``), converted with c0 = a sqrt(k_l/m). Rotation
+and transverse pulses (no theory of their nonlinear waves yet) get no prediction.
+"""
+
+from __future__ import annotations
+
+import math
+
+from flexmm.analysis.context import Comparison, ModelTheory
+
+_LONGITUDINAL = ("u", "u_dot", "strain", "strain:u", "velocity", "velocity:u")
+
+
+def pulse(ctx, p_meas) -> list[Comparison]:
+    """The speed row of a longitudinal pulse (a sheet's: a planar wave along x)."""
+    from flexmm.linear.triangles import chain_long_wave_speed, sheet_long_wave_speeds
+
+    if p_meas.field not in _LONGITUDINAL:
+        return []
+    lat = ctx.scene().lattice
+    if lat.kind == "rotating_triangles_chain":
+        c, what = chain_long_wave_speed(lat), "chain"
+    else:
+        c, what = sheet_long_wave_speeds(lat, 0.0)[1], "sheet, longitudinal planar wave"
+    c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.mass_kg)
+    return [Comparison("", "speed", float(p_meas.speed_m_s), c * c0, "m/s",
+                       f"linear long-wave speed, Bloch ({what}; docs/physics.md §1.6)")]
+
+
+#: the theory registered for both triangle kinds (``config.lattice.MODELS``)
+THEORY = ModelTheory(pulse=pulse)

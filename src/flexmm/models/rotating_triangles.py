@@ -1,0 +1,135 @@
+"""Build the rotating-triangles chain and kagome sheet (docs/physics.md §1.6) from their configs.
+
+Nondimensionalisation: length a (the side of a triangle), time sqrt(m/k_l), mass m, so k_l = 1,
+K_s = k_s/k_l, K_θ = k_θ/(k_l a²), α² = J/(m a²); speeds in c0 = a sqrt(k_l/m). Centroid to
+vertex h = 1/√3; a hinge's rest length (centroid to centroid) 2h cos θ0.
+
+Geometry (θ0 = 0 is the straight kagome; the twist θ0 contracts every centroid distance by
+cos θ0 and leaves the hinge axes where they are). Row r, column c, σ = (−1)^(r+c): an up
+triangle (σ = +1) has its vertices at 90°, 210°, 330° from its centroid, a down one at 270°, 30°,
+150°. The centroid sits at x = c s, y = r H + σ d/4, with s = cos θ0 (x spacing), d = 2h cos θ0
+and H = 3d/2 = √3 cos θ0 (row spacing). The hinge c → c+1 of a row has its axis at β = −σ_A·30°,
+the hinge of an up triangle to the triangle above it at β = 90°.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
+from flexmm.models.base import FieldSpec, System
+from flexmm.models.rotating_sheet import edge_sites
+from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN, N_HINGE_PARAMS
+from flexmm.models.triangle_kernels import TriangleArgs
+from flexmm.units import Scales
+
+FIELDS = (
+    FieldSpec("u", "length", "displacement along x"),
+    FieldSpec("v", "length", "displacement along y"),
+    FieldSpec("theta", "angle", "staggered rotation"),
+)
+COORD_ATTRS = {"row": ("1", "row index of the triangle"), "col": ("1", "column index of the triangle")}
+#: centroid-to-vertex distance in units of the side a
+HALF = 1.0 / math.sqrt(3.0)
+
+
+def nondimensional(cfg) -> dict[str, float]:
+    """K_s, K_θ, α² of docs/physics.md §1.6 from the SI config."""
+    return {
+        "Ks": cfg.k_shear_n_per_m / cfg.k_long_n_per_m,
+        "Ktheta": cfg.k_rot_n_m_per_rad / (cfg.k_long_n_per_m * cfg.a_m**2),
+        "alpha2": cfg.unit_inertia_kg_m2 / (cfg.mass_kg * cfg.a_m**2),
+    }
+
+
+def kagome_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool):
+    """Hinges of an n_rows × n_cols kagome sheet: (a (H,), b (H,), β (H,) the axis angle in rad).
+
+    Row hinges (r, c) → (r, c+1) (and the wraps (r, n_cols−1) → (r, 0)); vertical hinges from
+    every up triangle (r, c) to (r+1, c) (the top row's to row 0 if periodic in y).
+    """
+    site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
+    sigma = sublattice_sign(n_rows, n_cols).reshape(n_rows, n_cols)
+    a_h, b_h = site[:, :-1].ravel(), site[:, 1:].ravel()
+    if periodic_x:
+        a_h, b_h = np.concatenate([a_h, site[:, -1]]), np.concatenate([b_h, site[:, 0]])
+    up = sigma > 0
+    below = site if periodic_y else site[:-1]
+    a_v = below[up[: below.shape[0]]]
+    b_v = np.roll(site, -1, axis=0)[: below.shape[0]][up[: below.shape[0]]]
+    a = np.concatenate([a_h, a_v]).astype(np.int64)
+    b = np.concatenate([b_h, b_v]).astype(np.int64)
+    beta = np.concatenate([-sigma.ravel()[a_h] * math.pi / 6, np.full(a_v.size, math.pi / 2)])
+    return a, b, beta
+
+
+def sublattice_sign(n_rows: int, n_cols: int) -> np.ndarray:
+    """σ = (−1)^(row+col) per site (+1: the triangle points up), shape (n_rows·n_cols,)."""
+    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
+    return np.where((r + c) % 2 == 0, 1.0, -1.0)
+
+
+def centroids(n_rows: int, n_cols: int, theta0: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rest centroid positions (x, y) (N,) in units of a."""
+    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
+    d = 2.0 * HALF * math.cos(theta0)
+    return c * math.cos(theta0), r * 1.5 * d + sublattice_sign(n_rows, n_cols) * d / 4
+
+
+def triangle_args(n_rows: int, n_cols: int, theta0: float, Ks: float, Ktheta: float,
+                  periodic_x: bool, periodic_y: bool) -> TriangleArgs:
+    """Connectivity and parameter tables (nondimensional, a = 1, k_l = 1)."""
+    a, b, beta = kagome_hinges(n_rows, n_cols, periodic_x, periodic_y)
+    n = n_rows * n_cols
+    hprm = np.empty((a.size, N_HINGE_PARAMS))
+    hprm[:, H_REST] = 2.0 * HALF * math.cos(theta0)
+    hprm[:, H_HALF_A] = HALF
+    hprm[:, H_HALF_B] = HALF
+    hprm[:, H_SIGN] = sublattice_sign(n_rows, n_cols)[a]
+    hprm[:, H_KL] = 1.0
+    hprm[:, H_KS] = Ks
+    hprm[:, H_KT] = Ktheta
+    return TriangleArgs(a, b, np.cos(beta), np.sin(beta), hprm, np.full(n, float(theta0)), np.zeros(n), np.zeros(n))
+
+
+def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
+    nd = nondimensional(cfg)
+    n = n_rows * n_cols
+    periodic_y = getattr(cfg, "bottom", "free") == "periodic"
+    args = triangle_args(n_rows, n_cols, cfg.theta0_rad, nd["Ks"], nd["Ktheta"], cfg.left == "periodic", periodic_y)
+    mass = np.concatenate([np.ones(2 * n), np.full(n, nd["alpha2"])])
+    inv_mass = 1.0 / mass
+    for end, sites in ends.items():
+        if getattr(cfg, end) == "fixed":
+            for f in range(3):
+                inv_mass[f * n + np.asarray(sites)] = 0.0
+    a = cfg.a_m
+    x, y = centroids(n_rows, n_cols, cfg.theta0_rad)
+    row, col = np.divmod(np.arange(n), n_cols)
+    rows = np.flatnonzero(args.axis_sin < 1.0)  # the hinges along the rows (not the vertical ones)
+    return System(
+        model=cfg.kind, fields=FIELDS, n_sites=n,
+        scales=Scales(a, math.sqrt(cfg.mass_kg / cfg.k_long_n_per_m), cfg.mass_kg),
+        mass=mass, inv_mass=inv_mass, args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
+        spacing_m=a * math.cos(cfg.theta0_rad),
+        # a chain keeps x only: its centroids' zig-zag (y = ±d/4) is no second row of sites
+        site_coords={"x": x * a} | ({"y": y * a, "row": row, "col": col} if n_rows > 1 else {}),
+        ends=ends, rotation_field="theta", axis_fields={"x": "u", "y": "v"},
+        end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
+        grid_shape=(n_rows, n_cols) if n_rows > 1 else None,
+        site_coord_attrs=COORD_ATTRS if n_rows > 1 else {},
+        neighbour_pairs=np.stack([args.hinge_a[rows], args.hinge_b[rows]], 1),
+    )
+
+
+def build_chain(cfg: RotatingTrianglesChain) -> System:
+    """The strip of triangles as a System: state (u, v, θ) of units 0..N−1, ends free, fixed
+    (all three DOFs of the end unit held) or periodic (even N)."""
+    return _build(cfg, 1, cfg.n_units, {"left": [0], "right": [cfg.n_units - 1]})
+
+
+def build_sheet(cfg: RotatingTrianglesSheet) -> System:
+    """The kagome sheet as a System; edges free, fixed (all DOFs of the edge units) or periodic."""
+    return _build(cfg, cfg.n_rows, cfg.n_cols, edge_sites(cfg.n_rows, cfg.n_cols))
