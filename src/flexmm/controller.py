@@ -107,7 +107,7 @@ class _Observer:
             time_vars[name + "_position"] = (u, f"{name} displacement")
             time_vars[name + "_velocity"] = (du, f"{name} velocity")
         attrs = sys_.site_coord_attrs  # (units, long_name) of non-length coordinates
-        coords = {k: (v[self.sites], *attrs.get(k, ("m", f"rest {k} position")))
+        coords = {k: (v[self.sites], *attrs.get(k, ("m", f"{k} position in the reference configuration")))
                   for k, v in sys_.site_coords.items()}
         add_state(sys_, self.sites, site_vars, coords)  # rest and initial state: analysis never rebuilds the model
         self.site_vars, self.time_vars = site_vars, time_vars

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexmm.io.atomic import atomic_target
+from flexmm.io.cf import write_netcdf
 from flexmm.sweep.observe import OBSERVABLES
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
@@ -152,7 +152,4 @@ def write_combined(plan) -> Path:
         if same:
             os.utime(path)
             return path
-    ds = combine(plan)
-    with atomic_target(path) as tmp:
-        ds.to_netcdf(tmp, engine="h5netcdf")
-    return path
+    return write_netcdf(combine(plan), path)
