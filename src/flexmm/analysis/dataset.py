@@ -14,7 +14,7 @@ analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
 - the comparison table (``item``, ``quantity``, ``measured``, ``predicted``, ``rel_diff``,
   ``units``, ``note`` on ``comparison``; ``measured`` and ``predicted`` have one unit per row,
   named by their ``units_variable``), energy budget scalars ``energy_*``;
-- attrs: source dataset, its config hash, model, analysis kind and field, flexmm version, and the
+- attrs: source dataset, its config hash, model, analysis kind and field, flexmm version and commit, and the
   CF globals (``flexmm.io.cf``: every variable has ``long_name`` and ``units``).
 """
 
@@ -29,6 +29,7 @@ import xarray as xr
 
 import flexmm
 from flexmm.io.cf import DIMENSIONLESS, units_from_name, write_netcdf
+from flexmm.io.provenance import git_commit
 
 _SKIP = {"index", "field", "units"}
 
@@ -141,7 +142,7 @@ def to_dataset(res) -> xr.Dataset:
     src = res.ctx.ds.attrs
     ds.attrs.update(source=str(res.path), source_config_sha256=str(src.get("config_sha256", "")),
                     model=res.ctx.model, analysis=res.kind, field=v.spec, field_units=v.units,
-                    flexmm_version=flexmm.__version__)
+                    flexmm_version=flexmm.__version__, git_commit=git_commit())
     return ds
 
 
