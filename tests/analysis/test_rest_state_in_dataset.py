@@ -15,11 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from typer.testing import CliRunner
 
 import flexmm.models as models
 from flexmm.analysis.context import RunContext
 from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.api import run_scene
+from flexmm.cli import app
 from flexmm.config import scene_from_dict
 from flexmm.io.dataset import open_run
 
@@ -55,3 +57,8 @@ def test_rest_state_is_stored_on_the_saved_sites_and_used_without_a_rebuild(stri
     old = ds.drop_vars([v for v in ds.variables if str(v).endswith(("_rest", "_initial"))])
     with pytest.raises(RestStateMissing):
         from_rest(old, rest_fields(RunContext.from_dataset(old)))
+    if stride > 1:  # flexmm analyze says why and goes on with the other runs
+        old.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
+        res = CliRunner().invoke(app, ["analyze", str(tmp_path / "old.nc"), "--no-save"])
+        said = " ".join(res.output.split())  # unwrapped
+        assert "does not store its rest state" in said and "run the scene again" in said

@@ -25,7 +25,7 @@ from flexmm.analysis.fields import FieldView, field_view
 from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fronts
 from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
-from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.analysis.transients import mark_transients
 from flexmm.errors import FlexmmError
 
@@ -173,7 +173,7 @@ def measure_run(path: str | Path, *, field_spec: str | None = None,
 
 
 __all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "measure_run", "open_dataset",
-           "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound"]
+           "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound", "RestStateMissing"]
 
 
 def sweep_bands(results: list[RunAnalysis], pass_level: float = 0.1) -> dict | None:
