@@ -1,6 +1,7 @@
 """Every netCDF file flexmm writes is self-describing (flexmm.io.cf, docs/architecture.md "Datasets").
 
-Small, fast runs of each command that writes one — run (a rotating-squares chain and a mass chain),
+Small, fast runs of each command that writes one — run (a rotating-squares chain, a mass chain, a
+continuum prediction),
 analyze, sweep, bench, fit, design — then every variable (coordinates included) must have
 ``long_name`` and ``units``, the globals ``Conventions`` and a timestamped ``history`` naming the
 command must be there, ``time``/``x`` carry their CF ``axis``, the reproducibility attrs stay, and
@@ -22,6 +23,7 @@ from typer.testing import CliRunner
 from flexmm.cli import app
 from flexmm.design.fit import synthetic_table, write_table
 from flexmm.io.cf import CONVENTIONS, history_line, units_from_name, variable_attrs
+from flexmm.io.dataset import REFERENCES
 
 REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -52,6 +54,8 @@ def written(tmp_path_factory) -> dict[str, Path]:
     files["run dataset"] = d / "chain" / "dataset.nc"
     _cli("analyze", d / "chain")
     files["analysis.nc"] = d / "chain" / "analysis.nc"
+    _cli("run", d / "chain.yaml", "--fidelity", "continuum", "--out", d / "continuum")
+    files["continuum run dataset"] = d / "continuum" / "dataset.nc"
     _cli("run", REPO / "configs" / "h_raney_transition_wave.yaml", "--out", d / "masses", "--set",
          "lattice.n_units=40", "--set", "solver.duration_s=0.02", "--set", "output.n_frames=5")
     files["mass-chain run dataset"] = d / "masses" / "dataset.nc"
@@ -80,7 +84,7 @@ def written(tmp_path_factory) -> dict[str, Path]:
     return files
 
 
-KINDS = ["run dataset", "mass-chain run dataset", "analysis.nc", "sweep.nc", "workprecision.nc", "fit.nc",
+KINDS = ["run dataset", "mass-chain run dataset", "continuum run dataset", "analysis.nc", "sweep.nc", "workprecision.nc", "fit.nc",
          "design history.nc"]
 
 
@@ -98,7 +102,11 @@ def test_every_file_flexmm_writes_is_cf_described(written, kind):
             assert ds["time"].attrs["axis"] == "T" and ds["time"].attrs["units"] == "s"
         if "x" in ds.variables:
             assert ds["x"].attrs["axis"] == "X"
-        if kind in ("run dataset", "mass-chain run dataset", "fit.nc", "design history.nc", "workprecision.nc"):
+        if kind.endswith("run dataset"):  # rest and initial state, and what each field is measured from
+            for name in ("u", "theta" if "theta" in ds else "u"):
+                assert ds[name].attrs["reference"] in REFERENCES
+                assert ds[name].attrs["rest_state"] in ds.coords and ds[name].attrs["initial_state"] in ds.coords
+        if kind.endswith("run dataset") or kind in ("fit.nc", "design history.nc", "workprecision.nc"):
             for key in ("config", "config_sha256", "flexmm_version", "git_commit"):
                 assert ds.attrs[key], key
 
