@@ -59,6 +59,9 @@ def from_rest(ds, rest: dict[str, np.ndarray] | None):
             if name in out.data_vars:
                 raise ValueError(f"rest state of {name!r} has {value.size} sites, the field {out.sizes['site']}")
             continue
+        if not np.any(value):  # the rest state is the reference configuration: nothing moves
+            out[name].attrs = {**ds[name].attrs, "reference": "rest_state"}
+            continue
         # datasets written before fields declared a reference stored absolute fields only
         if ds[name].attrs.get("reference", "absolute") == "absolute":
             out[name] = out[name] - value
