@@ -14,7 +14,8 @@ analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
 - the comparison table (``item``, ``quantity``, ``measured``, ``predicted``, ``rel_diff``,
   ``units``, ``note`` on ``comparison``; ``measured`` and ``predicted`` have one unit per row,
   named by their ``units_variable``), energy budget scalars ``energy_*``;
-- attrs: source dataset, its config hash, model, analysis kind and field, flexmm version and commit, and the
+- attrs: source dataset, its config hash, model, analysis kind and field (measured from the run's
+  rest state: ``field_reference``), flexmm version and commit, and the
   CF globals (``flexmm.io.cf``: every variable has ``long_name`` and ``units``).
 """
 
@@ -142,6 +143,7 @@ def to_dataset(res) -> xr.Dataset:
     src = res.ctx.ds.attrs
     ds.attrs.update(source=str(res.path), source_config_sha256=str(src.get("config_sha256", "")),
                     model=res.ctx.model, analysis=res.kind, field=v.spec, field_units=v.units,
+                    field_reference="rest_state",  # analysis measures every field from the run's rest state
                     flexmm_version=flexmm.__version__, git_commit=git_commit())
     return ds
 
