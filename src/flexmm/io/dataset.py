@@ -27,6 +27,11 @@ BUFFER_BYTES = 32 * 2**20
 CHUNK_BYTES = 4 * 2**20
 
 
+def _attrs(name: str, units: str, long_name: str, extra: list[dict]) -> dict:
+    """CF attrs of a variable given as (units, long_name[, attrs])."""
+    return variable_attrs(name, {"units": units, "long_name": long_name, **(extra[0] if extra else {})})
+
+
 class DatasetWriter:
     """Write (time, site) fields and per-time scalars; call ``close`` to publish the file.
 
@@ -58,15 +63,15 @@ class DatasetWriter:
         coord_names = " ".join(site_coords)
         for name, (values, units, long_name, *extra) in site_coords.items():
             c = self.file.create_variable(name, ("site",), np.asarray(values).dtype, data=values)
-            c.attrs.update(variable_attrs(name, {"units": units, "long_name": long_name, **(extra or [{}])[0]}))
+            c.attrs.update(_attrs(name, units, long_name, extra))
         for name, (units, long_name, *extra) in site_vars.items():
             v = self.file.create_variable(name, ("time", "site"), "f8", chunks=(chunk_t, n_site))
-            v.attrs.update(variable_attrs(name, {"units": units, "long_name": long_name, **(extra or [{}])[0]}))
+            v.attrs.update(_attrs(name, units, long_name, extra))
             if coord_names:
                 v.attrs["coordinates"] = coord_names
         for name, (units, long_name, *extra) in time_vars.items():
             v = self.file.create_variable(name, ("time",), "f8", chunks=chunk_1d)
-            v.attrs.update(variable_attrs(name, {"units": units, "long_name": long_name, **(extra or [{}])[0]}))
+            v.attrs.update(_attrs(name, units, long_name, extra))
         self.n_written = 0
         self.t_written: float | None = None  # time of the last frame on disk (s)
         self._buf: list[tuple[float, dict, dict]] = []
@@ -159,7 +164,7 @@ def add_state(system, sites: np.ndarray, site_vars: dict, site_coords: dict,
     rest = system.rest_fields_si()
     reference = system.field_reference
     for k, f in enumerate(system.fields):
-        units, rate_units = ("rad", "rad/s") if f.kind == "angle" else ("m", "m/s")
+        units, rate_units = ("rad", "rad/s") if f.kind == "angle" else ("m", "m/s")  # as flexmm.units.UNITS
         span = slice(k * n, (k + 1) * n)
         q0 = (initial or {}).get(f.name, np.asarray(system.q0[span])[sites] * sc.coordinate(f.kind))
         v0 = (initial or {}).get(f.name + "_dot", np.asarray(system.v0[span])[sites] * sc.rate(f.kind))
@@ -169,11 +174,11 @@ def add_state(system, sites: np.ndarray, site_vars: dict, site_coords: dict,
                                   {"reference": "absolute"})
         site_coords[q0_name] = (np.asarray(q0, float), units, f"{f.long_name} at t = 0", {"reference": reference})
         site_coords[v0_name] = (np.asarray(v0, float), rate_units, f"rate of {f.long_name} at t = 0")
-        declared = {"reference": reference, "rest_state": rest_name, "initial_state": q0_name}
         for name, initial_name in ((f.name, q0_name), (f.name + "_dot", v0_name)):
             if name in site_vars:
                 units_, long_name, *extra = site_vars[name]
-                site_vars[name] = (units_, long_name, {**(extra or [{}])[0], **declared, "initial_state": initial_name})
+                declared = {"reference": reference, "rest_state": rest_name, "initial_state": initial_name}
+                site_vars[name] = (units_, long_name, {**(extra[0] if extra else {}), **declared})
 
 
 def estimate_bytes(n_frames: int, n_site: int, n_site_vars: int, n_time_vars: int) -> int:
