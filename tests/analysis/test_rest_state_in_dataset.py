@@ -62,3 +62,23 @@ def test_rest_state_is_stored_on_the_saved_sites_and_used_without_a_rebuild(stri
         res = CliRunner().invoke(app, ["analyze", str(tmp_path / "old.nc"), "--no-save"])
         said = " ".join(res.output.split())  # unwrapped
         assert "does not store its rest state" in said and "run the scene again" in said
+
+
+def test_fields_measured_from_the_rest_state_are_kept_and_sites_move_to_their_rest_positions():
+    """The same rule for every family: an absolute field loses its rest value, a field already
+    measured from the rest state (mass models) keeps its values; both put the sites at x + u_rest.
+    A rest state on other sites than the fields is an error, never a skipped subtraction."""
+    import xarray as xr
+
+    rest = np.array([0.0, 1e-3, 2e-3])
+    u = np.array([[5e-4, 6e-4, 7e-4]])
+    coords = {"time": [0.0], "x": ("site", [0.0, 0.01, 0.02]), "u_rest": ("site", rest)}
+    for reference, expected in (("absolute", u - rest), ("rest_state", u)):
+        ds = xr.Dataset({"u": (("time", "site"), u, {"units": "m", "reference": reference, "rest_state": "u_rest"})},
+                        coords=coords)
+        moved = from_rest(ds, rest_fields(RunContext("mass_chain", {}, ds)))
+        np.testing.assert_array_equal(moved["u"].values, expected)
+        np.testing.assert_array_equal(moved["x"].values, ds["x"].values + rest)
+        assert moved["u"].attrs["reference"] == "rest_state"
+    with pytest.raises(ValueError, match="sites"):
+        from_rest(ds, {"u": rest[:2]})
