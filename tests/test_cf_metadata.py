@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from flexmm.cli import app
 from flexmm.design.fit import synthetic_table, write_table
-from flexmm.io.cf import CONVENTIONS, history_line, units_from_name, variable_attrs
+from flexmm.io.cf import CONVENTIONS, global_attrs, history_line, units_from_name, variable_attrs
 from flexmm.io.dataset import REFERENCES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -140,3 +140,5 @@ def test_units_come_from_the_name_and_given_attributes_win():
     assert variable_attrs("status", {}, np.dtype("U8"))["units"] == "1"
     assert variable_attrs("time", {"units": "s"})["axis"] == "T"
     assert history_line(["/x/flexmm/cli/__main__.py", "run", "a b.yaml"]).endswith(": flexmm run 'a b.yaml'")
+    lines = global_attrs("2026-01-01T00:00:00Z: flexmm sweep s.yaml")["history"].splitlines()
+    assert lines[0] == "2026-01-01T00:00:00Z: flexmm sweep s.yaml" and len(lines) == 2  # a rewrite appends

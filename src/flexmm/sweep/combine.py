@@ -143,13 +143,15 @@ def write_combined(plan) -> Path:
 
     path = plan.store.result_path
     fp = fingerprint(plan, _records(plan))
+    history = None  # the commands that wrote the sweep.nc this one replaces (CF history)
     if path.exists():
         try:
             with xr.open_dataset(path, engine="h5netcdf") as old:
                 same = old.attrs.get("fingerprint") == fp
+                history = old.attrs.get("history")
         except (OSError, ValueError):
             same = False
         if same:
             os.utime(path)
             return path
-    return write_netcdf(combine(plan), path)
+    return write_netcdf(combine(plan), path, previous_history=history)
