@@ -129,6 +129,25 @@ def test_from_continues_a_run_from_its_last_frame(tmp_path):
     assert "last frame of" in (Path(tmp_path / "b") / "run.log").read_text()
 
 
+def test_from_keeps_the_positions_when_the_runs_rest_states_differ(tmp_path):
+    """Mass chains measure u from their rest state (the relaxed start), which each dataset stores:
+    continuing in a chain started in the lower well from a run that rested in the upper well
+    (L = 0.01 m) keeps the masses where they were (u = L, at rest), not at u = 0 of the new chain."""
+    lat = {"kind": "mass_chain", "n_units": 20, "spacing_m": 0.01, "mass_kg": 0.01,
+           "bond": {"law": "linear", "k_n_per_m": 100.0},
+           "onsite": [{"law": "bistable_cubic", "alpha_n_per_m3": 2e5, "beta": 0.5, "jump_m": 0.01}],
+           "initial_displacement_m": 0.0099}
+    a = scene_from_dict({"name": "upper", "lattice": lat, "solver": {"duration_s": 0.05}, "output": {"n_frames": 3}})
+    ds_a = xr.load_dataset(run_scene(a, run_dir=tmp_path / "a").path)
+    assert np.allclose(ds_a["u_rest"].values, 0.01, atol=1e-9) and np.allclose(ds_a["u"].values, 0.0, atol=1e-9)
+    b = scene_from_dict({"name": "lower", "lattice": {**lat, "initial_displacement_m": 0.0},
+                         "initial": {"from_run": str(tmp_path / "a")}, "solver": {"duration_s": 0.05},
+                         "output": {"n_frames": 3}})
+    ds_b = xr.load_dataset(run_scene(b, run_dir=tmp_path / "b").path)
+    assert np.allclose(ds_b["u_rest"].values, 0.0) and ds_b["u"].attrs["reference"] == "rest_state"
+    np.testing.assert_allclose(ds_b["u"].values, 0.01, atol=1e-9)  # where run a left them, and static
+
+
 @pytest.mark.parametrize("direction", [1, -1])
 def test_launched_sech2_pulse_keeps_its_shape_and_long_wave_speed(tmp_path, direction):
     """W = 5 sites, D_m = 0.05 a: v − c0 within 3 % of the long-wave law (docs/physics.md §2; the

@@ -17,7 +17,7 @@ import numpy as np
 from flexmm.assemble import build_problem
 from flexmm.controller import RunResult
 from flexmm.integrators.stepper import make_stepper
-from flexmm.io.dataset import DatasetWriter
+from flexmm.io.dataset import DatasetWriter, add_state
 from flexmm.io.provenance import provenance_attrs
 from flexmm.models import MODELS
 from flexmm.plan.continuum import (
@@ -105,8 +105,9 @@ def run_continuum(scene, pred: ContinuumPrediction, run_dir, *, extra_attrs: dic
         unit = {"length": "m", "angle": "rad"}[kind] + ("/s" if name.endswith("_dot") else "")
         site_vars[name] = (unit, ("rate of " if name.endswith("_dot") else "") + units[base].long_name
                            + " (continuum prediction)")
-    coords = {k: (np.asarray(v)[sites], "m", f"rest {k} position") for k, v in system.site_coords.items()
-              if k in ("x", "y")}
+    coords = {k: (np.asarray(v)[sites], "m", f"{k} position in the reference configuration")
+              for k, v in system.site_coords.items() if k in ("x", "y")}
+    add_state(system, sites, site_vars, coords, initial=probe)
     writer = DatasetWriter(Path(run_dir) / "dataset.nc", sites.size, site_vars, {}, coords, times.size)
     for t in times:
         vals = pred.sample(x, float(t))

@@ -19,7 +19,7 @@ from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
-from flexmm.io.dataset import REST_SUFFIX, DatasetWriter, estimate_bytes
+from flexmm.io.dataset import DatasetWriter, add_state, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
@@ -107,13 +107,9 @@ class _Observer:
             time_vars[name + "_position"] = (u, f"{name} displacement")
             time_vars[name + "_velocity"] = (du, f"{name} velocity")
         attrs = sys_.site_coord_attrs  # (units, long_name) of non-length coordinates
-        coords = {k: (v[self.sites], *attrs.get(k, ("m", f"rest {k} position")))
+        coords = {k: (v[self.sites], *attrs.get(k, ("m", f"{k} position in the reference configuration")))
                   for k, v in sys_.site_coords.items()}
-        rest = sys_.rest_state
-        if rest is not None:  # a predeformed run: its equilibrium, so analysis need not rebuild it
-            for k, f in enumerate(sys_.fields):
-                coords[f.name + REST_SUFFIX] = (rest[k * sys_.n_sites + self.sites] * sc.coordinate(f.kind),
-                                                UNITS[f.kind][0], f"{f.long_name} in the predeformed rest state")
+        add_state(sys_, self.sites, site_vars, coords)  # rest and initial state: analysis never rebuilds the model
         self.site_vars, self.time_vars = site_vars, time_vars
         self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames)
         self.sc = sc

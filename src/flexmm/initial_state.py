@@ -76,8 +76,27 @@ def _spacing(lat) -> float:
     return float(getattr(lat, "spacing_m", None) or getattr(lat, "a_m"))
 
 
+def _rest_shift(system: System, ds, name: str) -> np.ndarray | float:
+    """SI amount that turns field ``name`` of a run dataset into this system's measure of the same state.
+
+    A field measured from its run's rest state (``reference: rest_state``, mass models) is that
+    plus the stored rest state from the reference configuration; this system's own rest state is
+    subtracted if its field is measured from it. Exactly 0 when both rest states agree (the same
+    lattice), and for datasets that do not declare a reference.
+    """
+    source_ref = ds[name].attrs.get("reference")
+    rest_name = ds[name].attrs.get("rest_state", "")
+    if source_ref is None or rest_name not in ds.variables:
+        return 0.0
+    source = np.asarray(ds[rest_name].values, float) if source_ref == "rest_state" else 0.0
+    target = system.rest_fields_si()[name] if system.field_reference == "rest_state" else 0.0
+    shift = source - target
+    return shift if np.any(shift) else 0.0
+
+
 def _from_run(system: System, path: str) -> str:
-    """Replace the state by the last frame of the run at ``path``; a provenance note."""
+    """Replace the state by the last frame of the run at ``path`` (the same positions, also when
+    that run measured its fields from another rest state); a provenance note."""
     from flexmm.io.dataset import open_run
 
     ds = open_run(Path(path))
@@ -92,7 +111,7 @@ def _from_run(system: System, path: str) -> str:
                                     "(continue from a run with output.velocities: true)")
         sl = _slice(system, f.name)
         vs, rs = _scale(system, f.name)
-        system.q0[sl] = np.asarray(ds[f.name].values[-1], float) / vs
+        system.q0[sl] = (np.asarray(ds[f.name].values[-1], float) + _rest_shift(system, ds, f.name)) / vs
         system.v0[sl] = np.asarray(ds[rate].values[-1], float) / rs
     sha = str(ds.attrs.get("config_sha256", ""))
     return f"initial state: last frame (t = {t:.6g} s) of {path} (config_sha256 {sha})"

@@ -67,6 +67,17 @@ class Row:
         return asdict(self)
 
 
+#: long_name of each Row column in workprecision.nc
+ROW_LONG_NAMES = {
+    "method": "integrator or solve_ivp method", "family": "flexmm or solve_ivp",
+    "parameter": "name of the accuracy parameter varied", "value": "value of the accuracy parameter",
+    "status": "run status", "final_error": "relative error of the final state against the reference",
+    "frame_error": "largest relative error over the frames", "speed_error": "relative error of the pulse speed",
+    "amplitude_error": "relative error of the pulse amplitude", "wall_s": "wall time, minimum over repeats",
+    "cpu_s": "process CPU time", "force_evaluations": "force evaluations", "steps": "time steps",
+}
+
+
 def lattice_dofs(system) -> np.ndarray:
     """Indices of the lattice DOFs (every field of every site; extra DOFs such as a striker excluded)."""
     return np.arange(len(system.fields) * system.n_sites)
@@ -224,8 +235,9 @@ def to_dataset(rows: list[Row], attrs: dict):
     import xarray as xr
 
     cols = {k: [getattr(r, k) for r in rows] for k in Row.__dataclass_fields__}
-    units = {"wall_s": "s", "cpu_s": "s", "final_error": "1", "frame_error": "1"}
-    data = {k: ("run", np.asarray(v), {"units": units.get(k, "1")}) for k, v in cols.items()}
+    units = {"wall_s": "s", "cpu_s": "s"}
+    data = {k: ("run", np.asarray(v), {"units": units.get(k, "1"), "long_name": ROW_LONG_NAMES[k]})
+            for k, v in cols.items()}
     return xr.Dataset(data, attrs={**attrs, "load_average": str(os.getloadavg()),
                                    "created": time.strftime("%Y-%m-%dT%H:%M:%S")})
 

@@ -40,20 +40,27 @@ def test_bad_launches_are_reported(amplitude, center, match):
         build_problem(_scene(amplitude, center))
 
 
-def test_from_rest_subtracts_the_relaxed_state():
+def test_from_rest_subtracts_the_stored_rest_state_and_never_rebuilds_the_model():
     import xarray as xr
+
+    from flexmm.analysis.rest import RestStateMissing
 
     scene = _scene()
     system = build_problem(scene).system
     n, a = system.n_sites, LATTICE["a_m"]
     q = system.rest_state
-    ds = xr.Dataset({"u": (("time", "site"), np.tile(q[:n] * a, (2, 1)), {"units": "m"}),
-                     "theta": (("time", "site"), np.tile(q[n:], (2, 1)), {"units": "rad"})},
-                    coords={"time": [0.0, 1.0], "site": np.arange(n), "x": ("site", np.arange(n) * a)})
-    ctx = RunContext("rotating_squares_chain", {"name": "t", "lattice": LATTICE, "solver": {"duration_s": 1e-3}})
-    moved = from_rest(ds, rest_fields(ctx))
+    fields = {"u": (("time", "site"), np.tile(q[:n] * a, (2, 1)), {"units": "m", "reference": "absolute"}),
+              "theta": (("time", "site"), np.tile(q[n:], (2, 1)), {"units": "rad", "reference": "absolute"})}
+    coords = {"time": [0.0, 1.0], "site": np.arange(n), "x": ("site", np.arange(n) * a)}
+    rest = {"u_rest": ("site", q[:n] * a), "theta_rest": ("site", q[n:])}
+    config = {"name": "t", "lattice": LATTICE, "solver": {"duration_s": 1e-3}}
+    ds = xr.Dataset(fields, coords={**coords, **rest})
+    moved = from_rest(ds, rest_fields(RunContext("rotating_squares_chain", config, ds)))
     assert np.abs(moved["theta"].values).max() < 1e-15 and np.abs(moved["u"].values).max() < 1e-15
+    assert moved["theta"].attrs["reference"] == "rest_state"
     assert np.allclose(moved["x"].values, ds["x"].values + q[:n] * a)
-    plain = RunContext("rotating_squares_chain", {"name": "t", "lattice": {**LATTICE, "predeform": None},
-                                                  "solver": {"duration_s": 1e-3}})
+    old = xr.Dataset(fields, coords=coords)  # written before datasets stored the rest state
+    with pytest.raises(RestStateMissing, match="run the scene again"):
+        rest_fields(RunContext("rotating_squares_chain", config, old))
+    plain = RunContext("rotating_squares_chain", {**config, "lattice": {**LATTICE, "predeform": None}}, old)
     assert rest_fields(plain) is None and from_rest(ds, None) is ds

@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 
 from flexmm.config import scene_from_dict
-from flexmm.io.dataset import DatasetWriter
+from flexmm.io.dataset import DatasetWriter, add_state
 from flexmm.models import MODELS
 
 #: model kinds flexmm.render does not draw or colour yet (their render tests are skipped)
@@ -41,9 +41,11 @@ def random_fields(system, n_frames: int, seed: int = 0, amplitude: float = 1.0) 
 
 
 def write_run(run_dir: Path, lattice: dict, system, fields: dict[str, np.ndarray], times=None, *,
-              attrs: dict | None = None, sites: np.ndarray | None = None, rest: dict | None = None) -> Path:
+              attrs: dict | None = None, sites: np.ndarray | None = None, rest: dict | None = None,
+              state: bool = False) -> Path:
     """A dataset.nc with the given fields (all sites, or ``sites``), the site coordinates of the
-    built model and the scene as its stored config."""
+    built model and the scene as its stored config; ``state``: with the system's rest and initial
+    state as a run stores them (``io.dataset.add_state``), else laid out as before they were stored."""
     n_frames = next(iter(fields.values())).shape[0]
     times = np.linspace(0.0, 1e-3 * (n_frames - 1), n_frames) if times is None else np.asarray(times)
     sites = np.arange(system.n_sites) if sites is None else np.asarray(sites)
@@ -53,6 +55,8 @@ def write_run(run_dir: Path, lattice: dict, system, fields: dict[str, np.ndarray
     units = {f.name: ("m" if f.kind == "length" else "rad") for f in system.fields}
     site_vars = {name: (units.get(name.removesuffix("_dot"), "") + ("/s" if name.endswith("_dot") else ""), name)
                  for name in fields}
+    if state:
+        add_state(system, sites, site_vars, coords)
     run_dir.mkdir(parents=True, exist_ok=True)
     w = DatasetWriter(run_dir / "dataset.nc", sites.size, site_vars, {}, coords, n_frames=n_frames)
     for k, t in enumerate(times):

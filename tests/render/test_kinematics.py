@@ -193,10 +193,12 @@ def test_drawn_geometry_gives_the_model_energy(example_lattice, tmp_path):
     assert e == pytest.approx(e_model, rel=1e-9)
 
 
-def test_bodies_sit_at_x_plus_u(example_lattice, tmp_path):
+@pytest.mark.parametrize("stored", [True, False], ids=["rest-state-stored", "older-dataset"])
+def test_bodies_sit_at_x_plus_u(example_lattice, tmp_path, monkeypatch, stored):
     """Masses: body centres at the rest position plus (initial displacement + u) along the chain
     (x for chains and grids); within a network branch, neighbours are one spacing plus their
-    relative displacement apart along the branch."""
+    relative displacement apart along the branch. The initial displacement is the dataset's
+    ``u_rest`` (the lattice is not relaxed again), or relaxed from the config for older datasets."""
     kind, example = example_lattice
     if kind in RIGID:
         pytest.skip("masses only")
@@ -204,7 +206,11 @@ def test_bodies_sit_at_x_plus_u(example_lattice, tmp_path):
         pytest.skip(f"flexmm.render has no {kind} yet")
     lat, system = build(example["lattice"])
     fields = random_fields(system, 2, seed=7)
-    run = write_run(tmp_path / "run", example["lattice"], system, fields)
+    run = write_run(tmp_path / "run", example["lattice"], system, fields, state=stored)
+    if stored:
+        def no_relaxation(_p):
+            raise AssertionError("the render relaxed the lattice again")
+        monkeypatch.setattr("flexmm.render.masses.relaxed_initial", no_relaxation)
     pic = still_figure(run, RenderOptions(time_s=1e-3, color="u"))
     drawn = np.asarray(pic.fig.bodies.get_offsets())
     x0 = system.initial_displacement_m

@@ -98,7 +98,8 @@ def test_same_sweep_on_a_dask_local_cluster_gives_the_same_results(local_run, tm
     for p in spec.points():  # the integration is bit-for-bit the same
         ra, rb = open_run(d_local / "points" / p.hash), open_run(tmp_path / "dask" / "points" / p.hash)
         np.testing.assert_array_equal(ra["theta"].values, rb["theta"].values)
-    xr.testing.assert_identical(a[["status", "run"]], b[["status", "run"]])
+    when = {"history": ""}  # the only attribute that differs: when each file was written
+    xr.testing.assert_identical(a[["status", "run"]].assign_attrs(when), b[["status", "run"]].assign_attrs(when))
     # fitted observables: equal to the last bits (once, in a full-suite run on a fresh clone, they
     # differed there — pool workers run with one BLAS thread, the in-process cluster with several)
     xr.testing.assert_allclose(a[["speed", "speed_stderr", "amplitude", "width"]],

@@ -12,8 +12,11 @@ analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
 - driven: ``steady_amplitude`` (position), ``harmonic_amplitude`` (harmonic),
   ``far_spectrum`` (frequency) and scalars;
 - the comparison table (``item``, ``quantity``, ``measured``, ``predicted``, ``rel_diff``,
-  ``units``, ``note`` on ``comparison``), energy budget scalars ``energy_*``;
-- attrs: source dataset, its config hash, model, analysis kind and field, flexmm version.
+  ``units``, ``note`` on ``comparison``; ``measured`` and ``predicted`` have one unit per row,
+  named by their ``units_variable``), energy budget scalars ``energy_*``;
+- attrs: source dataset, its config hash, model, analysis kind and field (measured from the run's
+  rest state: ``field_reference``), flexmm version and commit, and the
+  CF globals (``flexmm.io.cf``: every variable has ``long_name`` and ``units``).
 """
 
 from __future__ import annotations
@@ -26,12 +29,20 @@ import numpy as np
 import xarray as xr
 
 import flexmm
-from flexmm.io.atomic import atomic_target
+from flexmm.io.cf import DIMENSIONLESS, units_from_name, write_netcdf
+from flexmm.io.provenance import git_commit
 
 _SKIP = {"index", "field", "units"}
 
 
-def _scalar_vars(prefix: str, dim: str, items: list[dict]) -> dict:
+def _field_valued(key: str) -> bool:
+    """Whether a measurement scalar is a value of the analysed field (amplitudes, jumps)."""
+    return key == "jump" or (key.startswith("amplitude") and not key.startswith("amplitude_change"))
+
+
+def _scalar_vars(prefix: str, dim: str, items: list[dict], field_units: str) -> dict:
+    """One variable per scalar of the measurements; units from the name (io.cf), the field's for
+    amplitudes, else dimensionless."""
     if not items:
         return {}
     out = {}
@@ -45,9 +56,8 @@ def _scalar_vars(prefix: str, dim: str, items: list[dict]) -> dict:
             arr = np.asarray(vals, dtype=np.int64)
         else:
             arr = np.asarray(vals, dtype=float)
-        unit = next((u for suffix, u in (("_m_s", "m/s"), ("_per_m", "1/m"), ("_s", "s"), ("_m", "m"), ("_deg", "degree"))
-                     if key.endswith(suffix)), "")
-        out[f"{prefix}_{key}"] = ((dim,), arr, {"units": unit, "long_name": key.replace("_", " ")})
+        unit = field_units if _field_valued(key) and arr.dtype.kind == "f" else units_from_name(key)
+        out[f"{prefix}_{key}"] = ((dim,), arr, {"units": unit or DIMENSIONLESS, "long_name": key.replace("_", " ")})
     return out
 
 
@@ -73,9 +83,9 @@ def _on_time(view, rows: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
 def to_dataset(res) -> xr.Dataset:
     """The analysis of one run as an xarray Dataset (see module docstring)."""
     v = res.view
-    coords = {"position": ("position", v.x, {"units": "m", "long_name": "position along the line"}),
-              "site": ("position", v.site, {"long_name": "site index (k + 0.5: bond)"}),
-              "time": ("time", v.time, {"units": "s"})}
+    coords = {"position": ("position", v.x, {"units": "m", "long_name": "position along the line", "axis": "X"}),
+              "site": ("position", v.site, {"units": DIMENSIONLESS, "long_name": "site index (k + 0.5: bond)"}),
+              "time": ("time", v.time, {"units": "s", "long_name": "time"})}
     data = {}
 
     def var(dims, values, units, long_name):
@@ -83,7 +93,7 @@ def to_dataset(res) -> xr.Dataset:
 
     if res.pulses:
         ps = res.pulses
-        data.update(_scalar_vars("pulse", "pulse", [p.scalars() for p in ps]))
+        data.update(_scalar_vars("pulse", "pulse", [p.scalars() for p in ps], v.units))
         data["arrival_time"] = var(("pulse", "position"), _on_positions(v, [(p.sites, p.arrival_time_s) for p in ps]),
                                    "s", "pulse arrival time")
         data["peak"] = var(("pulse", "position"), _on_positions(v, [(p.sites, p.peak) for p in ps]),
@@ -91,41 +101,50 @@ def to_dataset(res) -> xr.Dataset:
         data["track_position"] = var(("pulse", "time"), _on_time(v, [(p.track_time_s, p.track_pos_m) for p in ps]),
                                      "m", "tracked peak position")
     if getattr(res, "collisions", None):
-        data.update(_scalar_vars("collision", "collision", [c.scalars() for c in res.collisions]))
+        data.update(_scalar_vars("collision", "collision", [c.scalars() for c in res.collisions], v.units))
     if res.fronts:
         fs = res.fronts
-        data.update(_scalar_vars("front", "front", [f.scalars() for f in fs]))
+        data.update(_scalar_vars("front", "front", [f.scalars() for f in fs], v.units))
         data["switch_time"] = var(("front", "position"), _on_positions(v, [(f.sites, f.switch_time_s) for f in fs]),
                                   "s", "time of the 50 % crossing")
         data["front_position"] = var(("front", "time"), _on_time(v, [(f.track_time_s, f.track_pos_m) for f in fs]),
                                      "m", "50 % crossing position")
     if res.groups:
-        data.update(_scalar_vars("group", "group", [g.scalars() for g in res.groups]))
+        data.update(_scalar_vars("group", "group", [g.scalars() for g in res.groups], v.units))
     d = res.driven
     if d is not None:
         data["steady_amplitude"] = var(("position",), d.amplitude, v.units, "steady amplitude at the drive frequency")
         data["harmonic_amplitude"] = var(("harmonic",), d.harmonics, v.units, "far-end amplitude of n f")
         data["far_spectrum"] = var(("frequency",), d.spectrum, v.units, "far-end amplitude spectrum")
-        coords["harmonic"] = ("harmonic", np.arange(1, d.harmonics.size + 1))
-        coords["frequency"] = ("frequency", d.spectrum_hz, {"units": "Hz"})
+        coords["harmonic"] = ("harmonic", np.arange(1, d.harmonics.size + 1),
+                              {"units": DIMENSIONLESS, "long_name": "harmonic number n (frequency n f)"})
+        coords["frequency"] = ("frequency", d.spectrum_hz, {"units": "Hz", "long_name": "frequency"})
         for k, val in d.scalars().items():
             if isinstance(val, (int, float)):
-                data[f"driven_{k}"] = ((), float(val))
+                units = v.units if _field_valued(k) else units_from_name(k) or DIMENSIONLESS
+                data[f"driven_{k}"] = ((), float(val), {"units": units, "long_name": k.replace("_", " ")})
     if res.energy is not None:
         for k, val in res.energy.scalars().items():
-            data[f"energy_{k}"] = ((), val, {"units": "J" if k.endswith("_j") else "1"})
+            data[f"energy_{k}"] = ((), val, {"units": "J" if k.endswith("_j") else DIMENSIONLESS,
+                                             "long_name": "energy budget: " + k.replace("_", " ")})
     rows = [c.as_dict() for c in res.comparisons]
     if rows:
         for key in ("item", "quantity", "units", "note"):
-            data[f"comparison_{key}"] = (("comparison",), np.array([r[key] for r in rows], dtype=str))
-        for key in ("measured", "predicted", "rel_diff"):
+            data[f"comparison_{key}"] = (("comparison",), np.array([r[key] for r in rows], dtype=str),
+                                         {"units": DIMENSIONLESS, "long_name": f"compared {key}"})
+        for key, long_name in (("measured", "measured value"), ("predicted", "predicted value"),
+                               ("rel_diff", "(measured - predicted) / |predicted|")):
             vals = [np.nan if r[key] is None else r[key] for r in rows]
-            data[f"comparison_{key}"] = (("comparison",), np.array(vals, float))
+            attrs = {"units": DIMENSIONLESS, "long_name": long_name}
+            if key != "rel_diff":  # one unit per row: the variable that holds them
+                attrs.update(units_variable="comparison_units", long_name=f"{long_name} (in the row's comparison_units)")
+            data[f"comparison_{key}"] = (("comparison",), np.array(vals, float), attrs)
     ds = xr.Dataset(data, coords=coords)
     src = res.ctx.ds.attrs
     ds.attrs.update(source=str(res.path), source_config_sha256=str(src.get("config_sha256", "")),
                     model=res.ctx.model, analysis=res.kind, field=v.spec, field_units=v.units,
-                    flexmm_version=flexmm.__version__)
+                    field_reference="rest_state",  # analysis measures every field from the run's rest state
+                    flexmm_version=flexmm.__version__, git_commit=git_commit())
     return ds
 
 
@@ -133,9 +152,7 @@ def write_dataset(res, path: str | Path | None = None) -> Path:
     """Write analysis.nc beside the run's dataset (atomic rename); returns its path."""
     base = Path(res.path)
     target = Path(path) if path else (base if base.is_dir() else base.parent) / "analysis.nc"
-    with atomic_target(target) as tmp:
-        to_dataset(res).to_netcdf(tmp, engine="h5netcdf")
-    return target
+    return write_netcdf(to_dataset(res), target)
 
 
 def _clean(v):

@@ -5,8 +5,8 @@ if the excitation is a shaker, transition fronts if the model's theory says so, 
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
 of the model's theory (``compare.theory_for``), pairs colliding pulses (``analysis.collisions``), tells formation
 transients from persistent pulses (``analysis.transients``; transients are not compared with
-theory), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
-a predeformed run are measured from its relaxed state (``analysis.rest``).
+theory), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields are
+measured from the rest state the dataset stores (``analysis.rest``; the model is never rebuilt).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from flexmm.analysis.fields import FieldView, field_view
 from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fronts
 from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
-from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.analysis.transients import mark_transients
 from flexmm.errors import FlexmmError
 
@@ -98,16 +98,6 @@ def open_dataset(path: str | Path):
         raise RunNotFound(f"cannot read {nc}: {exc}") from None
 
 
-def _rest(ctx: RunContext):
-    """rest.rest_fields, or None when the stored config does not validate in this version."""
-    from flexmm.config import ConfigError
-
-    try:
-        return rest_fields(ctx)
-    except (ConfigError, ValueError):
-        return None
-
-
 def choose_kind(ctx: RunContext) -> str:
     """'driven' for a shaker, 'modes' for oblique plane waves, else the model theory's preference,
     else 'pulse'."""
@@ -141,7 +131,7 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
         raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
     ds = open_dataset(path)
     ctx = RunContext.from_dataset(ds)
-    ctx.ds = ds = from_rest(ds, _rest(ctx))  # predeformed runs: measure what moves on the rest state
+    ctx.ds = ds = from_rest(ds, rest_fields(ctx))  # measure what moves on the rest state (dataset only)
     kind = choose_kind(ctx) if kind == "auto" else kind
     view = field_view(ds, field_spec or default_field_for(kind, ds), row=row)
     out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
@@ -183,7 +173,7 @@ def measure_run(path: str | Path, *, field_spec: str | None = None,
 
 
 __all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "measure_run", "open_dataset",
-           "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound"]
+           "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound", "RestStateMissing"]
 
 
 def sweep_bands(results: list[RunAnalysis], pass_level: float = 0.1) -> dict | None:

@@ -181,7 +181,8 @@ def analyze(
         try:
             res = report.analyze_run(r, field_spec=field, kind=analysis, row=row,
                                      threshold_fraction=threshold, jump=jump)
-        except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups) as exc:
+        except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups,
+                report.RestStateMissing) as exc:
             if quiet:
                 typer.echo(f"{r}: {exc}", err=True)
             console.print(f"[bold red]{r}[/]: {exc}")

@@ -34,7 +34,8 @@ def bench(
     from flexmm import workprecision as wp
     from flexmm.assemble import build_problem
     from flexmm.integrators import INTEGRATORS
-    from flexmm.io.provenance import config_text
+    from flexmm.io.cf import write_netcdf
+    from flexmm.io.provenance import provenance_attrs
 
     names = [m.strip() for m in (methods or ",".join(INTEGRATORS)).split(",") if m.strip()]
     ivps = [m.strip() for m in ivp.split(",") if m.strip()]
@@ -48,11 +49,11 @@ def bench(
     n_frames = frames or scene.output.n_frames  # a frame interval also caps the largest step
     say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
     rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s, log=say)
-    attrs = {"config": config_text(scene), "reference": f"dopri5 rtol {ref.rtol:g}",
+    attrs = {**provenance_attrs(scene), "reference": f"dopri5 rtol {ref.rtol:g}",
              "reference_pulse_speed_m_s": ref.speed, "reference_pulse_amplitude": ref.amplitude}
     output_dir(folder)
     with writing(folder):
-        wp.to_dataset(rows, attrs).to_netcdf(folder / "workprecision.nc", engine="h5netcdf")
+        write_netcdf(wp.to_dataset(rows, attrs), folder / "workprecision.nc")
         with open(folder / "workprecision.csv", "w", newline="") as fh:
             writer = csv.DictWriter(fh, fieldnames=list(rows[0].as_dict()))
             writer.writeheader()

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from flexmm.io.atomic import atomic_target, write_text_atomic
+from flexmm.io.atomic import write_text_atomic
+from flexmm.io.cf import write_netcdf
 from flexmm.io.provenance import provenance_attrs
 
 
@@ -19,11 +20,9 @@ def write_scene(data: dict, path: Path, header: str) -> Path:
 
 
 def write_dataset(ds, path: Path, scene) -> Path:
-    """netCDF (h5netcdf) with the scene's provenance attrs, written atomically."""
+    """netCDF (h5netcdf) with the scene's provenance attrs and CF metadata, written atomically."""
     ds.attrs.update(provenance_attrs(scene))
-    with atomic_target(path) as tmp:
-        ds.to_netcdf(tmp, engine="h5netcdf")
-    return path
+    return write_netcdf(ds, path)
 
 
 def fit_dataset(fit, result, model_start: np.ndarray, model_fit: np.ndarray):

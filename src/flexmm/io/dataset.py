@@ -14,19 +14,29 @@ import h5netcdf
 import numpy as np
 
 from flexmm.io.atomic import temporary_name
+from flexmm.io.cf import global_attrs, variable_attrs
 
-#: suffix of the site coordinates holding a predeformed run's rest state (``u_rest``, ``theta_rest``)
+#: suffix of the site coordinates holding a run's rest state (``u_rest``, ``theta_rest``)
 REST_SUFFIX = "_rest"
+#: suffix of the site coordinates holding a run's initial state (``u_initial``, ``u_dot_initial``)
+INITIAL_SUFFIX = "_initial"
+#: values of a field variable's ``reference`` attribute: what its values are measured from
+REFERENCES = ("absolute", "rest_state")
 
 BUFFER_BYTES = 32 * 2**20
 CHUNK_BYTES = 4 * 2**20
 
 
+def _attrs(name: str, units: str, long_name: str, extra: list[dict]) -> dict:
+    """CF attrs of a variable given as (units, long_name[, attrs])."""
+    return variable_attrs(name, {"units": units, "long_name": long_name, **(extra[0] if extra else {})})
+
+
 class DatasetWriter:
     """Write (time, site) fields and per-time scalars; call ``close`` to publish the file.
 
-    ``site_vars``: name -> (units, long_name); ``time_vars`` likewise; ``site_coords``:
-    name -> (values (n_site,), units, long_name). ``n_frames``: the frames the run will write,
+    ``site_vars``: name -> (units, long_name[, attrs]); ``time_vars`` likewise; ``site_coords``:
+    name -> (values (n_site,), units, long_name[, attrs]). ``n_frames``: the frames the run will write,
     if known: the time dimension is then fixed-size (readers open such files ~2× faster than
     ones with an unlimited dimension, whose size h5netcdf recomputes from every variable); a run
     that stops early is cut to the frames it wrote when it closes.
@@ -47,21 +57,21 @@ class DatasetWriter:
         chunk_t = int(max(1, min(256, cap, CHUNK_BYTES // (8 * max(n_site, 1)))))
         chunk_1d = (min(1024, cap),)
         t = self.file.create_variable("time", ("time",), "f8", chunks=chunk_1d)
-        t.attrs.update(units="s", long_name="time")
+        t.attrs.update(variable_attrs("time", {"units": "s", "long_name": "time"}))
         s = self.file.create_variable("site", ("site",), "i8", data=np.arange(n_site))
-        s.attrs.update(units="1", long_name="site index")
+        s.attrs.update(variable_attrs("site", {"units": "1", "long_name": "site index"}))
         coord_names = " ".join(site_coords)
-        for name, (values, units, long_name) in site_coords.items():
+        for name, (values, units, long_name, *extra) in site_coords.items():
             c = self.file.create_variable(name, ("site",), np.asarray(values).dtype, data=values)
-            c.attrs.update(units=units, long_name=long_name)
-        for name, (units, long_name) in site_vars.items():
+            c.attrs.update(_attrs(name, units, long_name, extra))
+        for name, (units, long_name, *extra) in site_vars.items():
             v = self.file.create_variable(name, ("time", "site"), "f8", chunks=(chunk_t, n_site))
-            v.attrs.update(units=units, long_name=long_name)
+            v.attrs.update(_attrs(name, units, long_name, extra))
             if coord_names:
                 v.attrs["coordinates"] = coord_names
-        for name, (units, long_name) in time_vars.items():
+        for name, (units, long_name, *extra) in time_vars.items():
             v = self.file.create_variable(name, ("time",), "f8", chunks=chunk_1d)
-            v.attrs.update(units=units, long_name=long_name)
+            v.attrs.update(_attrs(name, units, long_name, extra))
         self.n_written = 0
         self.t_written: float | None = None  # time of the last frame on disk (s)
         self._buf: list[tuple[float, dict, dict]] = []
@@ -97,7 +107,7 @@ class DatasetWriter:
             self.flush()
         except OSError:  # the disk is full (or failing): the frames still buffered are lost
             self._buf.clear()
-        self.file.attrs.update({k: v for k, v in attrs.items() if v is not None})
+        self.file.attrs.update({**global_attrs(), **{k: v for k, v in attrs.items() if v is not None}})
         self.file.attrs["n_frames_written"] = self.n_written
         self.file.close()
         if self.n_frames is not None and self.n_written < self.n_frames:
@@ -136,6 +146,39 @@ class DatasetWriter:
         except Exception:  # noqa: BLE001 - best effort on an already failing path
             pass
         self.tmp.unlink(missing_ok=True)
+
+
+def add_state(system, sites: np.ndarray, site_vars: dict, site_coords: dict,
+              initial: dict[str, np.ndarray] | None = None) -> None:
+    """Declare a run's rest and initial state in the layout ``DatasetWriter`` takes (changes its arguments).
+
+    Adds the site coordinates ``<field>_rest`` (the rest state, measured from the reference
+    configuration), ``<field>_initial`` and ``<field>_dot_initial`` (the state at t = 0, in the
+    field variable's own reference) for every lattice field of ``system`` (a models.System) on the
+    saved ``sites``, and gives every field variable in ``site_vars`` (and its rate) the attrs
+    ``reference`` (one of REFERENCES), ``rest_state`` and ``initial_state`` (the names of those
+    coordinates). ``initial``: SI values per variable name on the saved sites, overriding the
+    system's q0, v0 (a continuum run samples its prediction instead).
+    """
+    n, sc = system.n_sites, system.scales
+    rest = system.rest_fields_si()
+    reference = system.field_reference
+    for k, f in enumerate(system.fields):
+        units, rate_units = ("rad", "rad/s") if f.kind == "angle" else ("m", "m/s")  # as flexmm.units.UNITS
+        span = slice(k * n, (k + 1) * n)
+        q0 = (initial or {}).get(f.name, np.asarray(system.q0[span])[sites] * sc.coordinate(f.kind))
+        v0 = (initial or {}).get(f.name + "_dot", np.asarray(system.v0[span])[sites] * sc.rate(f.kind))
+        rest_name, q0_name, v0_name = (f.name + REST_SUFFIX, f.name + INITIAL_SUFFIX,
+                                       f.name + "_dot" + INITIAL_SUFFIX)
+        site_coords[rest_name] = (rest[f.name][sites], units, f"{f.long_name} in the rest state",
+                                  {"reference": "absolute"})
+        site_coords[q0_name] = (np.asarray(q0, float), units, f"{f.long_name} at t = 0", {"reference": reference})
+        site_coords[v0_name] = (np.asarray(v0, float), rate_units, f"rate of {f.long_name} at t = 0")
+        for name, initial_name in ((f.name, q0_name), (f.name + "_dot", v0_name)):
+            if name in site_vars:
+                units_, long_name, *extra = site_vars[name]
+                declared = {"reference": reference, "rest_state": rest_name, "initial_state": initial_name}
+                site_vars[name] = (units_, long_name, {**(extra[0] if extra else {}), **declared})
 
 
 def estimate_bytes(n_frames: int, n_site: int, n_site_vars: int, n_time_vars: int) -> int:

@@ -151,6 +151,31 @@ class System:
         return None if self.predeformation is None else self.predeformation.rest_state
 
     @property
+    def field_reference(self) -> str:
+        """What the lattice fields q measure (the datasets' ``reference`` attribute, docs/architecture.md).
+
+        ``'rest_state'``: displacement from the rest state (mass models fold their initial,
+        relaxed positions into the element shifts, so q = 0 there); ``'absolute'``: from the
+        lattice's reference configuration (site coordinates, rotations from the built-in angle),
+        the rest state being ``rest_state`` (predeformed) or q = 0.
+        """
+        return "rest_state" if self.initial_displacement_m is not None else "absolute"
+
+    def rest_fields_si(self) -> dict[str, np.ndarray]:
+        """Field name -> (n_sites,) SI values of the rest state, measured from the reference configuration.
+
+        The predeformed equilibrium, the initial (relaxed) positions of a mass model, or zeros.
+        """
+        n = self.n_sites
+        out = {f.name: np.zeros(n) for f in self.fields}
+        if self.rest_state is not None:
+            for k, f in enumerate(self.fields):
+                out[f.name] = self.rest_state[k * n : (k + 1) * n] * self.scales.coordinate(f.kind)
+        elif self.initial_displacement_m is not None:
+            out[self.longitudinal_field] = np.asarray(self.initial_displacement_m, float).copy()
+        return out
+
+    @property
     def force(self) -> Callable[..., None]:
         """Compiled ``force(q, args, out)`` writing −∂E/∂q into ``out`` (ndof,)."""
         from flexmm.models.kernels import kernels_of

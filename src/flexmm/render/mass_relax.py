@@ -1,8 +1,8 @@
 """The initial state of a mass lattice: the energy minimum nearest the config's initial displacement.
 
-The models fold this state into their element shifts, so the dataset's ``u`` is measured from it
-and it is not stored; to tell which well a site sits in, the render relaxes the lattice again
-from the config alone, like ``flexmm.models.mass_chain.relax``: a trust-region Newton–CG search
+The models fold this state into their element shifts, so the dataset's ``u`` is measured from it;
+datasets store it as ``u_rest``. For a dataset written before that, to tell which well a site
+sits in, the render relaxes the lattice again from the config alone, like ``flexmm.models.mass_chain.relax``: a trust-region Newton–CG search
 with short first steps (0.01 spacing), so a guess inside a well relaxes within it. Fixed and
 driven ends are held where they start. Gradients are central differences of the element laws.
 """

@@ -9,7 +9,8 @@ A network has no 2D coordinates of its own; ``network_layout`` places the juncti
 and fans the free branches out from them (inputs to the left, outputs to the right).
 
 The on-site coordinate of a site (for wells and energies) is its initial position plus u; the
-initial position is the config's ``initial_displacement_m`` (after variations) relaxed to the
+initial position is the run's rest state ``u_rest`` as its dataset stores it; for a dataset
+written before that, the config's ``initial_displacement_m`` (after variations) relaxed to the
 nearest energy minimum, as the model does (``mass_relax.relaxed_initial``).
 """
 
@@ -176,8 +177,12 @@ def _vary(values: dict, var, grid_shape) -> None:
         a[idx] = var.value if var.value is not None else a[idx] * var.factor
 
 
-def mass_params(lat) -> MassParams:
-    """The MassParams of a mass_chain, mass_network or mass_grid config."""
+def mass_params(lat, rest: tuple[np.ndarray, np.ndarray] | None = None) -> MassParams:
+    """The MassParams of a mass_chain, mass_network or mass_grid config.
+
+    ``rest``: (saved sites, their stored rest positions ``u_rest`` in m) of the run; the initial
+    positions of the other sites are then NaN. Without it they are relaxed from the config.
+    """
     a = lat.spacing_m
     grid_shape = None
     if lat.kind == "mass_chain":
@@ -216,7 +221,12 @@ def mass_params(lat) -> MassParams:
         for law in j.onsite or []:
             terms.append((law, np.array([groups[j.name][0]]), {nm: np.array([v]) for nm, v in _numeric(law)}))
     p = MassParams(lat.kind, a, xy, dirs, bonds, bonds2, vals, lat, terms, grid_shape, beads=lat.bond.law == "hertz")
-    p.x0 = relaxed_initial(p)
+    if rest is None:
+        p.x0 = relaxed_initial(p)
+    else:
+        p.x0 = np.full(n, np.nan)
+        ok = rest[0] < n  # a dataset of another lattice: MassStructure says so
+        p.x0[rest[0][ok]] = rest[1][ok]
     return p
 
 

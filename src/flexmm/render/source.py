@@ -56,8 +56,11 @@ class RunSource:
         self.fields = [name for name, var in f.variables.items() if var.dimensions == ("time", "site")]
         self.coords = {name: np.asarray(var[...]) for name, var in f.variables.items()
                        if var.dimensions == ("site",) and name != "site"}
+        # the rest state of the fields measured from the reference configuration, where it is not
+        # zero (a predeformed run); fields measured from the rest state (mass models) need none
         self.rest = {name[: -len(REST_SUFFIX)]: np.asarray(v, float) for name, v in self.coords.items()
-                     if name.endswith(REST_SUFFIX)}
+                     if name.endswith(REST_SUFFIX) and np.any(v)
+                     and self._reference(name[: -len(REST_SUFFIX)]) == "absolute"}
         if self.time.size == 0:
             raise UsageError(f"{self.path}: the run wrote no frames ({self.status_line()})")
 
@@ -92,6 +95,11 @@ class RunSource:
         if self.status == "finished":
             return ""
         return f"{self.status.upper()}" + (f": {self.reason}" if self.reason else "")
+
+    def _reference(self, name: str) -> str:
+        """What field ``name`` is measured from ('absolute' in datasets that do not say)."""
+        var = self.file.variables.get(name)
+        return "absolute" if var is None else _text(var.attrs.get("reference", "absolute"))
 
     def units(self, name: str) -> str:
         """Units of a variable ('' if none)."""

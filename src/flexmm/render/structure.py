@@ -173,7 +173,9 @@ def make_structure(source, lattice, shape: str | None, scale: float):
         shape = shape or DEFAULT_SHAPE[kind]
         return RigidStructure(rigid_params(lattice), source.sites, source.coords, source.rest, shape, scale)
     if kind in MASS_KINDS:
-        return MassStructure(mass_params(lattice), source.sites, scale)
+        stored = source.coords.get("u_rest")  # u is measured from it (no relaxation needed)
+        rest = None if stored is None else (source.sites, np.asarray(stored, float))
+        return MassStructure(mass_params(lattice, rest), source.sites, scale)
     raise UsageError(f"cannot draw model {kind!r}")
 
 

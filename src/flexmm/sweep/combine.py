@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from flexmm.io.atomic import atomic_target
+from flexmm.io.cf import write_netcdf
 from flexmm.sweep.observe import OBSERVABLES
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
@@ -143,16 +143,15 @@ def write_combined(plan) -> Path:
 
     path = plan.store.result_path
     fp = fingerprint(plan, _records(plan))
+    history = None  # the commands that wrote the sweep.nc this one replaces (CF history)
     if path.exists():
         try:
             with xr.open_dataset(path, engine="h5netcdf") as old:
                 same = old.attrs.get("fingerprint") == fp
+                history = old.attrs.get("history")
         except (OSError, ValueError):
             same = False
         if same:
             os.utime(path)
             return path
-    ds = combine(plan)
-    with atomic_target(path) as tmp:
-        ds.to_netcdf(tmp, engine="h5netcdf")
-    return path
+    return write_netcdf(combine(plan), path, previous_history=history)
