@@ -61,18 +61,64 @@ class RunResult:
     n_units: int = 0
 
 
-def schedule(duration: float, dt: float, n_frames: int, every: float | None) -> tuple[float, list[int]]:
-    """Uniform step ``h ≤ dt`` and the step counts between successive frames."""
+@dataclass(frozen=True)
+class Schedule:
+    """Step and frames of a run: ``h`` the step used, ``chunks`` the steps between successive
+    frames, ``interval`` the frame interval (nondimensional), ``notes`` what was rounded and why."""
+
+    h: float
+    chunks: list[int]
+    interval: float
+    notes: list[str]
+
+    @property
+    def t_end(self) -> float:
+        return self.h * sum(self.chunks)
+
+
+def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, exact: bool = False,
+             time_s: float = 1.0) -> Schedule:
+    """Frames at multiples of the step ``dt`` (the step is never bent to the frames).
+
+    The frame interval (``every`` or duration/(n_frames − 1)) is rounded to the nearest whole
+    number of steps (at least one), the duration up to whole steps; both roundings are noted.
+    ``exact=True`` (``output.exact_frame_times``) instead keeps the frame times and takes the
+    largest step ≤ dt that divides the interval (noted when it differs from dt). ``time_s``
+    only scales the notes to seconds.
+    """
     if every is None:
         every = duration / (n_frames - 1)
-    spf = max(1, math.ceil(every / dt - 1e-9))
-    h = every / spf
-    n_full = int(math.floor(duration / every + 1e-9))
+    notes: list[str] = []
+    if exact:
+        spf = max(1, math.ceil(every / dt - 1e-9))
+        h = every / spf
+        if abs(h - dt) > 1e-9 * dt:
+            notes.append(f"output.exact_frame_times: step {dt * time_s:.6g} s reduced to {h * time_s:.6g} s "
+                         f"({spf} steps per frame interval of {every * time_s:.6g} s)")
+        n_full = int(math.floor(duration / every + 1e-9))
+        chunks = [spf] * n_full
+        rest = duration - n_full * every
+        if rest > 1e-9 * every:
+            chunks.append(max(1, round(rest / h)))
+        return Schedule(h, chunks, every, notes)
+    h = dt
+    spf = max(1, round(every / h))
+    interval = spf * h
+    if abs(interval - every) > 1e-9 * every:
+        notes.append(f"frame interval {every * time_s:.6g} s rounded to {interval * time_s:.6g} s "
+                     f"= {spf} steps of {h * time_s:.6g} s (output.exact_frame_times: true keeps the frame "
+                     "times and shortens the step instead)")
+    n_steps = max(1, math.ceil(duration / h - 1e-9))
+    if abs(n_steps * h - duration) > 1e-9 * duration:
+        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_steps} steps = {n_steps * h * time_s:.6g} s")
+    n_full = n_steps // spf
     chunks = [spf] * n_full
-    rest = duration - n_full * every
-    if rest > 1e-9 * every:
-        chunks.append(max(1, round(rest / h)))
-    return h, chunks
+    rest = n_steps - n_full * spf
+    if rest and chunks and 2 * rest < spf:  # a sliver: the last frame comes a few steps later
+        chunks[-1] += rest
+    elif rest:
+        chunks.append(rest)
+    return Schedule(h, chunks, interval, notes)
 
 
 class _Observer:
@@ -160,7 +206,7 @@ def run_problem(
 ) -> RunResult:
     """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up.
 
-    ``on_finish(q, v, h, say) -> dict`` (if given) sees the final state of a finished run
+    ``on_finish(q, v, h, say, t) -> dict`` (if given) sees the final state of a finished run
     and returns extra attrs (used by flexmm.plan for its accuracy check).
     """
     scene, s = problem.scene, problem.system
@@ -178,9 +224,13 @@ def run_problem(
     every = scene.output.every_s / sc.time_s if scene.output.every_s else None
     if spec.adaptive:  # one call per frame; the method picks its own steps in between
         frame_dt = every if every is not None else problem.duration / (scene.output.n_frames - 1)
-        h, chunks = schedule(problem.duration, frame_dt, scene.output.n_frames, every)
+        plan = schedule(problem.duration, frame_dt, scene.output.n_frames, every, exact=True)
     else:
-        h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, every)
+        plan = schedule(problem.duration, problem.dt, scene.output.n_frames, every,
+                        exact=scene.output.exact_frame_times, time_s=sc.time_s)
+    h, chunks = plan.h, plan.chunks
+    for note in plan.notes:
+        say(note)
     n_frames = len(chunks) + 1
     obs = _Observer(problem, run_dir / "dataset.nc", n_frames)
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
@@ -211,7 +261,7 @@ def run_problem(
             prog.advance(prog.task_ids[0])
         elif log is not None and _time.monotonic() - last_line[0] >= PROGRESS_EVERY_S:
             last_line[0] = _time.monotonic()
-            frac = st.t / problem.duration
+            frac = min(st.t / problem.duration, 1.0)
             eta = st.wall_s * (1 - frac) / frac if frac > 0 else float("nan")
             log(f"progress: t = {st.t * sc.time_s:.4g} s of {problem.duration * sc.time_s:.4g} s "
                 f"({100 * frac:.1f} %), {st.steps} steps, {st.wall_s:.0f} s elapsed, ~{eta:.0f} s left")
@@ -246,7 +296,7 @@ def run_problem(
     if reason:
         say(reason)
     if on_finish is not None and status == "finished":
-        extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say)}
+        extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say, t)}
     counters = stepper.ledger.counters()
     solver_attrs = {"threads": threads, "force_evaluations": counters["force_evaluations"]}
     if spec.adaptive:
@@ -262,6 +312,8 @@ def run_problem(
         "model": s.model,
         "integrator": spec.name,
         "dt_s": h * sc.time_s,
+        "frame_interval_s": plan.interval * sc.time_s,
+        "exact_frame_times": int(bool(scene.output.exact_frame_times)),
         "stable_dt_s": problem.stable_dt * sc.time_s,
         "omega_max_rad_s": problem.omega_max / sc.time_s,
         "n_steps": n_steps,

@@ -64,8 +64,8 @@ def accuracy_check(plan: Plan, problem: Problem) -> Callable | None:
         return None
     choice = plan.choice
 
-    def on_finish(q, v, h, say) -> dict:
-        chk = acc.check(problem, choice.integrator, h, problem.duration, q, choice.order)
+    def on_finish(q, v, h, say, t) -> dict:
+        chk = acc.check(problem, choice.integrator, h, t, q, choice.order)
         ok = chk.estimate <= plan.accuracy
         ts = problem.system.scales.time_s
         say(f"accuracy check ({chk.method}, dt {chk.companion_dt * ts:.4g} s): estimated error "

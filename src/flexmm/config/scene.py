@@ -119,6 +119,9 @@ class Output(Strict):
     velocities: bool = True
     every_s: Positive | None = Field(None, description="output interval; default from n_frames")
     n_frames: int = Field(201, ge=2, le=10_000_000)
+    exact_frame_times: bool = Field(
+        False, description="keep frames exactly at every_s (or duration/(n_frames-1)) by shortening the step to "
+        "divide the interval; default: the step is kept and the interval rounded to whole steps (both reported)")
     site_stride: int = Field(1, ge=1)
     energy: bool = True
 

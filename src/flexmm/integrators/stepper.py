@@ -79,7 +79,9 @@ class Stepper:
         apply_prescribed(self.q, self.v, self.t, *terms.drives)
         spec.init(self.args, self.q, self.v, self.t, self.f, terms)
         self.last_energies: tuple[float, float] | None = self.energies()  # of the last checked state
-        self.guard = RunawayGuard(system, terms, sum(self.last_energies))
+        self._held_mass = np.where(system.inv_mass > 0, 0.0, system.mass)
+        e0 = sum(self.last_energies) - 0.5 * float(np.dot(self._held_mass, self.v * self.v))
+        self.guard = RunawayGuard(system, terms, e0)
 
     # -- one call into compiled code -------------------------------------------------------
     def warm_up(self) -> float:
@@ -123,6 +125,12 @@ class Stepper:
             e = sum(self.last_energies)
             if self.guard.runaway(e, self.ledger.work):
                 return "runaway energy"
+            # the ledger is about the DOFs that move freely: a prescribed DOF's imposed motion
+            # is not the system's energy (its work on the rest is in ledger.work)
+            e_free = e - 0.5 * float(np.dot(self._held_mass, self.v * self.v)) if self._held_mass.any() else e
+            why = self.guard.unbalanced(e_free, self.ledger.work, self.ledger.dissipated)
+            if why is not None:
+                return why
             self.guard.record(self.steps, e)
         return None
 

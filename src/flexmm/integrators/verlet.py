@@ -158,7 +158,7 @@ def verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     v_pred = np.empty(n if vdep else 0)
     _start(q, v, f, kick, pre, h, damped)
     for s in range(nsteps):
-        power0 = applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)  # with v½ at t
+        power0 = applied_power(v, f, t, drv_dof, drv_mode, drv_shape, drv_prm)  # with v½ at t
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         model_force(q, args, f)
@@ -198,7 +198,7 @@ def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
         lo, hi = b * n // nb, (b + 1) * n // nb
         _start(q[lo:hi], v[lo:hi], f[lo:hi], kick[lo:hi], pre[lo:hi], h, damped)
     for s in range(nsteps):
-        power0 = applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+        power0 = applied_power(v, f, t, drv_dof, drv_mode, drv_shape, drv_prm)
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         model_force_parallel(q, args, f)
