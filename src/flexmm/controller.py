@@ -59,6 +59,13 @@ class RunResult:
         return 0.0 if self.wall_s <= 0 else self.n_steps * self.n_units / self.wall_s
 
     n_units: int = 0
+    #: the run's error estimate and target (dataset attrs ``accuracy_*``), empty without one
+    accuracy: dict = field(default_factory=dict)
+
+    @property
+    def accuracy_missed(self) -> bool:
+        """True when the run's error estimate exceeds its target."""
+        return bool(self.accuracy) and not self.accuracy.get("accuracy_met", 1)
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,7 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, 
     largest step ≤ dt that divides the interval (noted when it differs from dt). ``time_s``
     only scales the notes to seconds.
     """
+    asked_every = every is not None
     if every is None:
         every = duration / (n_frames - 1)
     notes: list[str] = []
@@ -102,23 +110,106 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, 
             chunks.append(max(1, round(rest / h)))
         return Schedule(h, chunks, every, notes)
     h = dt
-    spf = max(1, round(every / h))
+    n_steps = max(1, math.ceil(duration / h - 1e-9))
+    if abs(n_steps * h - duration) > 1e-9 * duration:
+        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_steps} steps = {n_steps * h * time_s:.6g} s")
+    # every_s: the nearest whole number of steps; n_frames: as many whole steps as keep the count
+    spf = max(1, round(every / h) if asked_every else n_steps // (n_frames - 1))
     interval = spf * h
     if abs(interval - every) > 1e-9 * every:
         notes.append(f"frame interval {every * time_s:.6g} s rounded to {interval * time_s:.6g} s "
                      f"= {spf} steps of {h * time_s:.6g} s (output.exact_frame_times: true keeps the frame "
                      "times and shortens the step instead)")
-    n_steps = max(1, math.ceil(duration / h - 1e-9))
-    if abs(n_steps * h - duration) > 1e-9 * duration:
-        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_steps} steps = {n_steps * h * time_s:.6g} s")
-    n_full = n_steps // spf
+    n_full = n_steps // spf if asked_every else min(n_frames - 1, n_steps)
     chunks = [spf] * n_full
     rest = n_steps - n_full * spf
-    if rest and chunks and 2 * rest < spf:  # a sliver: the last frame comes a few steps later
+    if rest and chunks and (not asked_every or 2 * rest < spf):  # the last frame comes a few steps later
         chunks[-1] += rest
     elif rest:
         chunks.append(rest)
     return Schedule(h, chunks, interval, notes)
+
+
+#: the step is reduced when it exceeds this fraction of the current state's stable limit ...
+STIFF_TRIGGER = 0.9
+#: ... to at most this fraction of it (frames stay where they were: the step becomes h0/m)
+STIFF_TARGET = 0.7
+#: the checks take at most this share of the time spent advancing (frames are skipped to keep it)
+STIFF_SHARE = 0.05
+STIFF_FLOOR_S = 0.2  # ... or this many seconds in all (a small run checks every frame)
+#: a step reduced more than this many times is a diagnosis, not a run
+STIFF_MAX_REDUCTION = 1000
+
+
+class _StepFollower:
+    """The step follows the stiffness: at every frame, ω_max of the current state
+    (``stability.StiffnessTracker``, warm-started Lanczos); when the step exceeds ``STIFF_TRIGGER``
+    of the state's stable limit, a symplectic method's step is reduced to h0/m ≤ ``STIFF_TARGET``
+    × that limit for the rest of the run (frames keep their times; logged, in attrs), any other
+    fixed-step method stops with a diagnosis (time, step, stable limit). Frames are the cadence
+    (a resolved run changes its stiffness little within a frame interval; each check costs
+    2 × iters force evaluations plus Python overhead), thinned so the checks take at most
+    ``STIFF_SHARE`` of the advancing time (count and seconds reported). Off for adaptive
+    and A-stable methods and with ``solver.allow_unstable``.
+    """
+
+    def __init__(self, problem: Problem, spec, stepper: Stepper, say: Callable[[str], None]):
+        self.problem, self.spec, self.say = problem, spec, say
+        self.h0, self.m = stepper.h, 1
+        self.on = spec.explicit_limit and not problem.scene.solver.allow_unstable and problem.omega_max > 0
+        self.tracker = None
+        if self.on:
+            from flexmm.stability import StiffnessTracker
+
+            self.tracker = StiffnessTracker(problem.system, problem.terms)
+        self.w_top, self.checks, self.reductions = problem.omega_max, 0, 0
+        self.failure = ""
+
+    def chunks(self, chunks):
+        for n in chunks:
+            yield n * self.m
+
+    def check(self, st: Stepper) -> bool:
+        """True to stop the run (failure set)."""
+        if not self.on:
+            return False
+        if self.checks and self.tracker.seconds > max(STIFF_SHARE * st.wall_s, STIFF_FLOOR_S):
+            return False  # over its budget: wait until the run has advanced further
+        w = self.tracker.omega(st.q)
+        self.checks += 1
+        self.w_top = max(self.w_top, w)
+        lim = self.spec.stability_limit / w if w > 0 else math.inf
+        if st.h <= STIFF_TRIGGER * lim:
+            return False
+        ts = self.problem.system.scales.time_s
+        at = (f"at t = {st.t * ts:.6g} s the state's stable limit is {lim * ts:.4g} s "
+              f"(ω_max {w / ts:.4g} rad/s, {w / self.problem.omega_max:.3g} x its value at the start)")
+        m = max(self.m + 1, math.ceil(self.h0 / (STIFF_TARGET * lim)))
+        if not self.spec.symplectic or m > STIFF_MAX_REDUCTION:
+            why = ("it is not symplectic: its step is not changed within a run" if not self.spec.symplectic
+                   else f"the step would have to shrink {m} times")
+            self.failure = (f"stopped: {at}, below the step dt = {st.h * ts:.4g} s of {self.spec.name}, and {why}; "
+                            "use a symplectic method or a smaller solver.dt_s")
+            return True
+        self.m = m
+        st.h = self.h0 / m
+        self.reductions += 1
+        self.say(f"step reduced: {at}; dt {self.h0 * ts:.4g} s -> {st.h * ts:.4g} s (h0/{m}) from here on")
+        return False
+
+    def summary(self) -> None:
+        if self.on and self.checks:
+            ts = self.problem.system.scales.time_s
+            self.say(f"stiffness tracked at {self.checks} frames: largest ω_max {self.w_top / ts:.4g} rad/s "
+                     f"({self.w_top / self.problem.omega_max:.3g} x the start), {self.tracker.seconds:.3f} s")
+
+    def attrs(self, wall: float) -> dict:
+        if not self.on:
+            return {}
+        ts = self.problem.system.scales.time_s
+        return {"dt_min_s": self.h0 / self.m * ts, "step_reductions": self.reductions,
+                "stiffness_checks": self.checks, "stiffness_check_s": self.tracker.seconds,
+                "omega_max_run_rad_s": self.w_top / ts}
 
 
 class _Observer:
@@ -246,6 +337,7 @@ def run_problem(
         + (f", {threads} threads" if threads > 1 else ""))
 
     compile_s = stepper.warm_up()
+    track = _StepFollower(problem, spec, stepper, say)
     obs.frame(stepper)
     prog = _progress(len(chunks), progress)
     write_error: list[tuple[float, OSError]] = []
@@ -256,6 +348,8 @@ def run_problem(
             obs.frame(st)
         except OSError as exc:  # disk full, quota, I/O error: stop, keep the frames written
             write_error.append((st.t, exc))
+            return True
+        if track.check(st):
             return True
         if prog:
             prog.advance(prog.task_ids[0])
@@ -268,7 +362,7 @@ def run_problem(
         return False
 
     try:
-        outcome = stepper.run(chunks, on_frame)
+        outcome = stepper.run(track.chunks(chunks), on_frame)
     finally:
         if prog:
             prog.stop()
@@ -280,6 +374,8 @@ def run_problem(
                   f"({outcome.reason}) with dt = {h * sc.time_s:.4g} s; "
                   f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
                   f"last good time {outcome.t_good * sc.time_s:.6g} s kept")
+    if track.failure and status == "finished":
+        status, reason = "failed", track.failure
     if write_error:
         t_bad, exc = write_error[0]
         status = "failed"
@@ -295,6 +391,7 @@ def run_problem(
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
     if reason:
         say(reason)
+    track.summary()
     if on_finish is not None and status == "finished":
         extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say, t)}
     counters = stepper.ledger.counters()
@@ -318,6 +415,7 @@ def run_problem(
         "omega_max_rad_s": problem.omega_max / sc.time_s,
         "n_steps": n_steps,
         **solver_attrs,
+        **track.attrs(wall),
         "compile_time_s": compile_s,
         "wall_time_s": wall,
         "status": status,
@@ -331,4 +429,6 @@ def run_problem(
     }
     path = obs.writer.close(attrs)
     return RunResult(status, reason, path, n_steps, obs.writer.n_written, t * sc.time_s, h * sc.time_s,
-                     problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites)
+                     problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites,
+                     accuracy={k: v for k, v in attrs.items() if k.startswith("accuracy_")
+                               and "accuracy_estimate" in attrs})

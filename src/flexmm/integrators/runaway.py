@@ -11,6 +11,7 @@ A run is a runaway when its energy exceeds ``RUNAWAY_FACTOR`` × a reference: th
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -18,6 +19,14 @@ import numpy as np
 RUNAWAY_FACTOR = 1e4
 RUNAWAY_LAG_STEPS = 100
 DRIFT_TOL = 0.05  # largest ledger imbalance, as a fraction of the energy budget
+
+
+def drift_allowance(spec, h: float, omega_max: float) -> float:
+    """Largest ledger imbalance a run of ``spec`` at step h allows (module docstring)."""
+    lim = getattr(spec, "stability_limit", math.inf)
+    if not (math.isfinite(lim) and omega_max > 0) or getattr(spec, "adaptive", False):
+        return DRIFT_TOL
+    return DRIFT_TOL + min(1.0, h * omega_max / lim) ** spec.order
 
 
 class RunawayGuard:
@@ -46,7 +55,7 @@ class RunawayGuard:
             return None
         terms = "" if work == 0 and dissipated == 0 else f", work in {work:.4g}, dissipated {dissipated:.4g}"
         return (f"energy not conserved: E = {energy:.4g} from E0 = {self.e0:.4g}{terms} (nondimensional), an "
-                f"imbalance of {r:.3g} of the energy budget, beyond the {self.drift_tol:g} the integrator's error "
+                f"imbalance of {r:.3g} of the energy budget, beyond the {self.drift_tol:.3g} the integrator's error "
                 "allows: the step does not resolve the motion")
 
     def record(self, step: int, energy: float) -> None:

@@ -26,7 +26,7 @@ from flexmm._signals import signal_of
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
 from flexmm.integrators.parallel import advance_kernel, choose_threads
-from flexmm.integrators.runaway import RunawayGuard
+from flexmm.integrators.runaway import DRIFT_TOL, RunawayGuard, drift_allowance
 from flexmm.models.kernels import model_energy
 
 #: relative tolerance of adaptive integrators when none is given
@@ -61,7 +61,7 @@ class Stepper:
     def __init__(self, spec: IntegratorSpec, system, terms: Terms, damp: np.ndarray, h: float, *,
                  threads: int = 1, q0: np.ndarray | None = None, v0: np.ndarray | None = None,
                  t0: float = 0.0, rtol: float | None = None, atol: float | None = None,
-                 max_step: float | None = None, check_energy: bool = True):
+                 max_step: float | None = None, check_energy: bool = True, drift_tol: float = DRIFT_TOL):
         self.spec, self.system, self.terms, self.damp = spec, system, terms, damp
         self.args = system.args
         self.h = float(h)
@@ -81,7 +81,7 @@ class Stepper:
         self.last_energies: tuple[float, float] | None = self.energies()  # of the last checked state
         self._held_mass = np.where(system.inv_mass > 0, 0.0, system.mass)
         e0 = sum(self.last_energies) - 0.5 * float(np.dot(self._held_mass, self.v * self.v))
-        self.guard = RunawayGuard(system, terms, e0)
+        self.guard = RunawayGuard(system, terms, e0, drift_tol)
 
     # -- one call into compiled code -------------------------------------------------------
     def warm_up(self) -> float:
@@ -179,7 +179,8 @@ def make_stepper(problem, integrator: str | IntegratorSpec | None = None, *, h: 
     s = problem.system
     stepper = Stepper(spec, s, problem.terms, problem.damp, problem.dt if h is None else h,
                       threads=choose_threads(s.n_sites, threads), q0=q0, v0=v0, rtol=rtol,
-                      atol=atol, max_step=max_step, check_energy=check_energy)
+                      atol=atol, max_step=max_step, check_energy=check_energy,
+                      drift_tol=drift_allowance(spec, problem.dt if h is None else h, problem.omega_max))
     if warm:
         stepper.warm_up()
     return stepper
