@@ -29,10 +29,19 @@ from flexmm.plan.planner import Plan, PlanStep, replace_section
 DEFAULT_METHOD = "pefrl"
 
 
-def prepare(plan: Plan) -> Problem:
+def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
     """The problem of ``plan.scene``, built once; with ``solver.accuracy``, integrator and dt chosen
-    (or, with an explicit ``solver.dt_s``, honoured and its error estimated)."""
+    (or, with an explicit ``solver.dt_s``, honoured and its error estimated).
+
+    ``check_steps(steps, dt_s, n_sites)`` (``plan.cost.check_steps``) sees the fewest steps any
+    explicit method could take before the pilots run, so an impossible run is refused at once.
+    """
     problem = build_problem(plan.scene, built=plan.built_for(plan.scene))
+    if check_steps is not None and plan.scene.solver.accuracy is not None and plan.scene.solver.dt_s is None \
+            and problem.omega_max > 0:
+        h = acc.CAP * max(s.stability_limit for s in acc.candidates(problem)) / problem.omega_max \
+            if acc.candidates(problem) else problem.dt
+        check_steps(problem.duration / h, h * problem.system.scales.time_s, problem.system.n_sites)
     if plan.scene.solver.accuracy is not None:
         problem = _accuracy(plan, problem)
     problem.notes[:0] = plan.lines()
@@ -46,7 +55,7 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
     asked = "accuracy" in given  # the scene's own target, not the default
     # the scene's own target or step: the whole run is repeated at 2 dt (a pilot's short window
     # cannot extrapolate the error of an arbitrary step reliably); the default: the chooser's pilot
-    explicit = solver.dt_s is not None or "dt_fraction" in given  # the scene chose its step
+    explicit = solver.dt_s is not None  # the scene chose its step (dt_fraction applies with accuracy: null)
     mode = solver.error_check or ("run" if asked or explicit else "pilot")
     if not spec.explicit_limit:
         why = "adaptive: its error is controlled by rtol" if spec.adaptive else "not an explicit fixed-step method"
@@ -55,9 +64,7 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
         return problem
     if explicit:  # honoured, then checked
         plan.error_check, plan.choice = mode, acc.Choice(spec.name, problem.dt, math.nan, 0.0, 0.0, order=spec.order)
-        step = (f"solver.dt_s = {solver.dt_s:.4g} s" if solver.dt_s is not None else
-                f"solver.dt_fraction = {solver.dt_fraction:g} ({problem.dt * problem.system.scales.time_s:.4g} s)")
-        notes = [f"accuracy {solver.accuracy:g}: {step} honoured ({spec.name})"]
+        notes = [f"accuracy {solver.accuracy:g}: solver.dt_s = {solver.dt_s:.4g} s honoured ({spec.name})"]
         attrs = {}
         if mode == "pilot":
             est = acc.estimate(problem, spec, problem.dt)

@@ -93,7 +93,8 @@ class Solver(Strict):
     threads: int | None = Field(
         None, ge=1, le=1024, description="threads for parallel kernels (default: all cores for ≥ 1e5 units, else 1)"
     )
-    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit")
+    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit "
+                               "(with solver.accuracy: null; otherwise the accuracy pilots choose dt)")
     duration_s: Positive
     allow_unstable: bool = Field(False, description="run even if dt exceeds the stable limit")
     accuracy: Positive | None = Field(

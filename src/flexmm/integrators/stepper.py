@@ -167,12 +167,13 @@ def frame_chunks(t_end: float, h: float, n_frames: int) -> tuple[float, list[int
 def make_stepper(problem, integrator: str | IntegratorSpec | None = None, *, h: float | None = None,
                  rtol: float | None = None, atol: float | None = None, max_step: float | None = None,
                  threads: int | None = None, q0: np.ndarray | None = None, v0: np.ndarray | None = None,
-                 check_energy: bool = True, warm: bool = True) -> Stepper:
+                 check_energy: bool = True, warm: bool = True, drift_tol: float | None = None) -> Stepper:
     """The Stepper of a built problem (``assemble.Problem``).
 
     ``integrator`` defaults to the scene's; ``h`` to the problem's dt (for an adaptive method
     with ``rtol``, h is the interval between calls); ``threads`` None chooses by size
     (``parallel.choose_threads``). ``warm`` compiles before returning, so timings exclude it.
+    ``drift_tol`` the energy-ledger tolerance (default ``runaway.drift_allowance``; inf: off).
     """
     spec = (INTEGRATORS[problem.scene.solver.integrator] if integrator is None
             else INTEGRATORS[integrator] if isinstance(integrator, str) else integrator)
@@ -180,7 +181,8 @@ def make_stepper(problem, integrator: str | IntegratorSpec | None = None, *, h: 
     stepper = Stepper(spec, s, problem.terms, problem.damp, problem.dt if h is None else h,
                       threads=choose_threads(s.n_sites, threads), q0=q0, v0=v0, rtol=rtol,
                       atol=atol, max_step=max_step, check_energy=check_energy,
-                      drift_tol=drift_allowance(spec, problem.dt if h is None else h, problem.omega_max))
+                      drift_tol=drift_allowance(spec, problem.dt if h is None else h, problem.omega_max)
+                      if drift_tol is None else drift_tol)
     if warm:
         stepper.warm_up()
     return stepper
