@@ -136,7 +136,7 @@ STIFF_TRIGGER = 0.9
 STIFF_TARGET = 0.7
 #: the checks take at most this share of the time spent advancing (frames are skipped to keep it)
 STIFF_SHARE = 0.05
-STIFF_FLOOR_S = 0.2  # ... or this many seconds in all (a small run checks every frame)
+STIFF_FLOOR_S = 0.05  # ... or this many seconds in all (a small run checks most frames)
 #: a step reduced more than this many times is a diagnosis, not a run
 STIFF_MAX_REDUCTION = 1000
 
