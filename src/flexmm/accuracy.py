@@ -255,6 +255,41 @@ def choose(problem, accuracy: float, only: str | None = None) -> Choice:
 
 
 @dataclass
+class Estimate:
+    """Pilot estimate of the error a run with step h reaches at its end (``estimate``)."""
+
+    error: float
+    growth: float  # exponent β of the pilot's error growth (``extrapolate``)
+    pilot_time: float
+    wall_s: float
+
+
+def pilot_window(problem, h: float) -> float:
+    """Duration of a pilot: PILOT_FRACTION of the run, at least PILOT_MIN_STEPS steps and past the drives."""
+    T = problem.duration
+    return min(T, max(PILOT_FRACTION * T, PILOT_MIN_STEPS * h, 1.5 * _drive_end(problem)))
+
+
+def estimate(problem, spec, h: float) -> Estimate:
+    """Step doubling on a pilot: the error of steps h at the end of the run.
+
+    Runs of h and h/2 over ``pilot_window``; Richardson with the method's order gives the error of
+    h at half the window and at its end, ``extrapolate`` carries it to the duration (exact when the
+    window is the whole run). Costs 3 × window/h steps (a tenth of the run: 0.3 runs).
+    """
+    import time
+
+    t0 = time.perf_counter()
+    t_p = pilot_window(problem, h)
+    runs = [integrate(problem, spec, h / 2**k, t_p, checkpoints=(0.5, 1.0)) for k in range(2)]
+    pk = np.maximum(runs[0][1], runs[1][1])
+    rich = 2**spec.order / (2**spec.order - 1)
+    errs = tuple(state_error(problem.system, runs[0][0][j], runs[1][0][j], pk) * rich for j in (0, 1))
+    err, beta = extrapolate(errs, t_p, problem.duration)
+    return Estimate(err, beta, t_p, time.perf_counter() - t0)
+
+
+@dataclass
 class Check:
     """Step-doubling (or halving) estimate of the error of a finished run."""
 

@@ -1,36 +1,107 @@
 """From a plan to the problem that runs: build once, choose the step when accuracy is asked.
 
 ``prepare(plan)`` builds the planned scene (reusing the lattice the plan already built when only
-the output changed) and, when the scene sets ``solver.accuracy``, runs the pilots of
-``flexmm.accuracy`` to choose the integrator and dt; the plan's scene, steps and choice are
-updated so the recorded config reproduces the run. ``accuracy_check(plan, problem)`` is the
-step-doubling check after the run (``controller.run_problem(on_finish=...)``).
+the output changed) and, for its ``solver.accuracy`` (every scene has one unless it sets null),
+runs the pilots of ``flexmm.accuracy`` to choose the integrator and dt — among all methods when
+the scene sets the target, the scene's integrator when it names one, else ``DEFAULT_METHOD`` —
+or, when the scene gives ``solver.dt_s``, honours it and estimates its error. The plan's scene,
+steps and choice are updated so the recorded config reproduces the run. The error estimate is
+the pilot's step doubling extrapolated to the duration (``error_check: pilot``, the default for
+the default target, in the plan attrs) or ``accuracy_check(plan, problem)``, the whole run
+repeated at 2 dt after it (``error_check: run``, the default when the scene sets the target or
+the step).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Callable
 
 from flexmm import accuracy as acc
 from flexmm.assemble import Problem, build_problem
 from flexmm.errors import PlanError
+from flexmm.integrators import INTEGRATORS
 from flexmm.plan.planner import Plan, PlanStep, replace_section
 
 
-def prepare(plan: Plan) -> Problem:
-    """The problem of ``plan.scene``, built once; with ``solver.accuracy``, integrator and dt chosen."""
+#: the method the default accuracy pilots (when the scene names none): fourth order, symplectic,
+#: damping and friction allowed, 4 force evaluations a step — one pilot instead of one per method
+DEFAULT_METHOD = "pefrl"
+
+
+def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
+    """The problem of ``plan.scene``, built once; with ``solver.accuracy``, integrator and dt chosen
+    (or, with an explicit ``solver.dt_s``, honoured and its error estimated).
+
+    ``check_steps(steps, dt_s, n_sites)`` (``plan.cost.check_steps``) sees the fewest steps any
+    explicit method could take before the pilots run, so an impossible run is refused at once.
+    """
     problem = build_problem(plan.scene, built=plan.built_for(plan.scene))
+    if check_steps is not None and plan.scene.solver.accuracy is not None and plan.scene.solver.dt_s is None \
+            and problem.omega_max > 0:
+        h = acc.CAP * max(s.stability_limit for s in acc.candidates(problem)) / problem.omega_max \
+            if acc.candidates(problem) else problem.dt
+        check_steps(problem.duration / h, h * problem.system.scales.time_s, problem.system.n_sites)
     if plan.scene.solver.accuracy is not None:
-        problem = _choose(plan, problem)
+        problem = _accuracy(plan, problem)
     problem.notes[:0] = plan.lines()
     return problem
 
 
-def _choose(plan: Plan, problem: Problem) -> Problem:
+def _accuracy(plan: Plan, problem: Problem) -> Problem:
+    """Choose (or check) the step for ``solver.accuracy``; decide how the error is estimated."""
+    solver, given = plan.scene.solver, plan.source.solver.model_fields_set
+    spec = INTEGRATORS[solver.integrator]
+    asked = "accuracy" in given  # the scene's own target, not the default
+    # the scene's own target or step: the whole run is repeated at 2 dt (a pilot's short window
+    # cannot extrapolate the error of an arbitrary step reliably); the default: the chooser's pilot
+    explicit = solver.dt_s is not None  # the scene chose its step (dt_fraction applies with accuracy: null)
+    mode = solver.error_check or ("run" if asked or explicit else "pilot")
+    if not spec.explicit_limit:
+        why = "adaptive: its error is controlled by rtol" if spec.adaptive else "not an explicit fixed-step method"
+        plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [
+            PlanStep("accuracy", "not applied", [f"accuracy {solver.accuracy:g} not applied: {spec.name} is {why}"])]
+        return problem
+    if explicit:  # honoured, then checked
+        plan.error_check, plan.choice = mode, acc.Choice(spec.name, problem.dt, math.nan, 0.0, 0.0, order=spec.order)
+        notes = [f"accuracy {solver.accuracy:g}: solver.dt_s = {solver.dt_s:.4g} s honoured ({spec.name})"]
+        attrs = {}
+        if mode == "pilot":
+            est = acc.estimate(problem, spec, problem.dt)
+            attrs = _estimate_attrs(solver.accuracy, est.error, "pilot", est.pilot_time * problem.system.scales.time_s)
+            notes.append(_estimate_line(solver.accuracy, est.error, "step doubling on a pilot over "
+                                        f"{est.pilot_time * problem.system.scales.time_s:.3g} s"))
+        plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "checked", notes, attrs)]
+        return problem
+    only = solver.integrator if "integrator" in given else (None if asked else DEFAULT_METHOD)
+    try:
+        return _choose(plan, problem, only, mode)
+    except PlanError as exc:
+        if asked:
+            raise
+        plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [
+            PlanStep("accuracy", "not applied", [f"default accuracy not applied ({exc}); dt from solver.dt_fraction"])]
+        return problem
+
+
+def _estimate_attrs(target: float, est: float, method: str, pilot_s: float | None = None) -> dict:
+    out = {"accuracy_requested": target, "accuracy_estimate": est, "accuracy_met": int(est <= target),
+           "accuracy_check": method}
+    if pilot_s is not None:
+        out["accuracy_pilot_s"] = pilot_s
+    return out
+
+
+def _estimate_line(target: float, est: float, how: str) -> str:
+    if est <= target:
+        return f"estimated error {est:.3g} meets the target {target:g} ({how})"
+    return f"WARNING: estimated error {est:.3g} exceeds the target {target:g} ({how})"
+
+
+def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Problem:
     """Pilot runs choose integrator and dt (``accuracy.choose``); plan and problem follow the choice."""
     scene = plan.scene
     target = scene.solver.accuracy
-    only = scene.solver.integrator if "integrator" in plan.source.solver.model_fields_set else None
     try:
         choice = acc.choose(problem, target, only)
     except ValueError as exc:
@@ -50,6 +121,10 @@ def _choose(plan: Plan, problem: Problem) -> Problem:
         notes.append(f"prediction uncertain: {row['uncertain']}; the check after the run reports the error reached")
     attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
              "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable)}
+    if mode == "pilot":  # the pilot's step doubling is the estimate (no second run)
+        attrs.update(_estimate_attrs(target, choice.predicted_error, "pilot"))
+        notes.append(_estimate_line(target, choice.predicted_error, "step doubling on the pilot"))
+    plan.error_check = mode
     plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "chosen", notes, attrs)]
     plan.scene, plan.choice = planned, choice
     if choice.integrator == scene.solver.integrator:  # same method: the built problem only changes dt
@@ -60,18 +135,16 @@ def _choose(plan: Plan, problem: Problem) -> Problem:
 
 def accuracy_check(plan: Plan, problem: Problem) -> Callable | None:
     """Callback for ``run_problem(on_finish=...)``: the step-doubling accuracy check, if asked."""
-    if plan.accuracy is None or plan.choice is None:
+    if plan.choice is None or plan.error_check != "run" or plan.accuracy is None:
         return None
+    target = plan.accuracy
     choice = plan.choice
 
-    def on_finish(q, v, h, say) -> dict:
-        chk = acc.check(problem, choice.integrator, h, problem.duration, q, choice.order)
-        ok = chk.estimate <= plan.accuracy
+    def on_finish(q, v, h, say, t) -> dict:
+        chk = acc.check(problem, choice.integrator, h, t, q, choice.order)
         ts = problem.system.scales.time_s
-        say(f"accuracy check ({chk.method}, dt {chk.companion_dt * ts:.4g} s): estimated error "
-            f"{chk.estimate:.3g} {'meets' if ok else 'MISSES'} the requested {plan.accuracy:g}")
-        return {"accuracy_requested": plan.accuracy, "accuracy_estimate": chk.estimate,
-                "accuracy_met": int(ok), "accuracy_check": chk.method,
+        say(f"accuracy check: {_estimate_line(target, chk.estimate, f'{chk.method}, dt {chk.companion_dt * ts:.4g} s')}")
+        return {**_estimate_attrs(target, chk.estimate, chk.method),
                 "accuracy_check_dt_s": chk.companion_dt * ts, "accuracy_check_wall_s": chk.wall_s}
 
     return on_finish

@@ -61,6 +61,9 @@ class RandomRotation(Strict):
 ImperfectionConfig = Annotated[Union[RotationSeed, RandomRotation], Field(discriminator="kind")]
 
 
+#: the accuracy every scene gets unless it sets solver.accuracy (null turns error control off)
+DEFAULT_ACCURACY = 1e-4
+
 #: integrators with error control (``IntegratorSpec.adaptive``); they take rtol/atol
 ADAPTIVE_INTEGRATORS = frozenset({"dopri5"})
 
@@ -91,11 +94,20 @@ class Solver(Strict):
     threads: int | None = Field(
         None, ge=1, le=1024, description="threads for parallel kernels (default: all cores for ≥ 1e5 units, else 1)"
     )
-    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit")
+    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit "
+                               "(with solver.accuracy: null; otherwise the accuracy pilots choose dt)")
     duration_s: Positive
     allow_unstable: bool = Field(False, description="run even if dt exceeds the stable limit")
     accuracy: Positive | None = Field(
-        None, lt=1, description="target relative error of the final state: picks integrator and dt (flexmm.plan)"
+        DEFAULT_ACCURACY, lt=1,
+        description="target relative error of the final state (default 1e-4: wave speeds and amplitudes to well "
+        "under 0.1 %): pilots pick integrator and dt unless given (then checked); every run stores its error "
+        "estimate. null: no error control (dt = dt_fraction x the stable limit, as before)",
+    )
+    error_check: Literal["pilot", "run"] | None = Field(
+        None, description="how the error estimate is made: 'pilot' (step doubling on the pilot, extrapolated to "
+        "the duration; the default unless solver.accuracy is set in the scene) or 'run' (the whole run repeated "
+        "at 2 dt after it: ~50 % more cost)",
     )
 
     @model_validator(mode="after")
@@ -120,6 +132,9 @@ class Output(Strict):
     velocities: bool = True
     every_s: Positive | None = Field(None, description="output interval; default from n_frames")
     n_frames: int = Field(201, ge=2, le=10_000_000)
+    exact_frame_times: bool = Field(
+        False, description="keep frames exactly at every_s (or duration/(n_frames-1)) by shortening the step to "
+        "divide the interval; default: the step is kept and the interval rounded to whole steps (both reported)")
     site_stride: int = Field(1, ge=1)
     energy: bool = True
 
