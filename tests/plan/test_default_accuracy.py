@@ -1,4 +1,4 @@
-"""Error control by default: every scene has solver.accuracy; the run meets it or says it does not."""
+"""Error control (solver.accuracy, at the recommended target): the run meets it or says it does not."""
 
 from __future__ import annotations
 
@@ -15,10 +15,10 @@ from flexmm.prepare import prepare
 
 # held out: the amplitude-gap chain struck ten times harder (10 m/s, 1000 rad/s)
 STRUCK = ["excitation.velocity_m_s=10", "excitation.angular_velocity_rad_s=1000", "lattice.n_units=100",
-          "solver.duration_s=0.1"]
+          "solver.duration_s=0.1", f"solver.accuracy={DEFAULT_ACCURACY}"]
 
 
-def test_default_run_of_a_strongly_struck_chain_meets_its_target() -> None:
+def test_error_control_on_a_strongly_struck_chain_meets_its_target() -> None:
     old = build_problem(load_scene("configs/b_lego_amplitude_gap.yaml", STRUCK + ["solver.accuracy=null"]))
     pefrl = INTEGRATORS["pefrl"]
     q_ref, _, pk_ref, _ = integrate(old, pefrl, stable_step(old, pefrl) / 400, old.duration)  # converged
