@@ -113,6 +113,15 @@ def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
     return _rows(f"pulse {p.index}", measured, _safe(theory_for(ctx).pulse, ctx, p))
 
 
+def compare_transient(p) -> list[Comparison]:
+    """Rows for a formation transient (``analysis.transients``): how far and how long the lobe
+    travelled, and what it turned into; never compared with a steady-pulse law."""
+    note = "formation transient" + (f", turns into pulse {p.continues_as}" if p.continues_as >= 0 else ", dies out")
+    return [Comparison(f"pulse {p.index}", q, value, None, units, note) for q, value, units in (
+        ("formation distance", p.formation_distance_m, "m"), ("formation time", p.formation_time_s, "s"),
+        ("amplitude", p.amplitude, p.units), ("speed", p.speed_m_s, "m/s"))]
+
+
 def compare_collision(ctx: RunContext, c) -> list[Comparison]:
     """Rows for one Collision: per incoming pulse its shift, delay, amplitude and speed change,
     with the model's collision relation where it has one (Toda chains: the head-on shifts; the

@@ -140,6 +140,10 @@ class PulseMeasurement:
     ``peak`` are (n,) arrays over the sites used in the speed fit, ``segment`` the stretch between
     collisions each belongs to, ``steady`` False in the formation transient; ``track_*`` are the tracked
     peak positions per frame; ``profile_*`` one measured spatial profile (for figures).
+    ``transient``: the whole pulse is a formation transient, a lobe that dies out or turns into
+    another pulse (``analysis.transients``; its formation distance and time are then those of the
+    lobe, and it is not compared with theory); ``continues_as``: the pulse that starts where this one
+    stops mid-run (-1: none).
     """
 
     index: int
@@ -188,6 +192,8 @@ class PulseMeasurement:
     profile_values: np.ndarray
     profile_time_s: float
     profile_fits: dict
+    transient: bool = False
+    continues_as: int = -1
 
     def scalars(self) -> dict:
         """The scalar results as a flat dict (JSON/CSV friendly)."""

@@ -3,7 +3,9 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of ``compare.THEORY``, pairs colliding pulses (``analysis.collisions``), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
+of ``compare.THEORY``, pairs colliding pulses (``analysis.collisions``), tells formation
+transients from persistent pulses (``analysis.transients``; transients are not compared with
+theory), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields of
 a predeformed run are measured from its relaxed state (``analysis.rest``).
 """
 
@@ -14,7 +16,8 @@ from pathlib import Path
 
 from flexmm.analysis.collisions import Collision, find_collisions
 from flexmm.analysis.compare import (
-    Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, theory_for,
+    Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, compare_transient,
+    theory_for,
 )
 from flexmm.analysis.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
 from flexmm.analysis.energy import EnergyBudget, energy_budget
@@ -23,6 +26,7 @@ from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fron
 from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
 from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.analysis.transients import mark_transients
 from flexmm.errors import FlexmmError
 
 KINDS = ("auto", "pulse", "front", "driven", "modes")
@@ -143,10 +147,11 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
     if kind == "pulse":
         pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
-        out.collisions, out.pulses, out.overlap_artefacts = find_collisions(
-            pulses, view.spacing_m, float(view.time[-1]), (float(view.x.min()), float(view.x.max())))
+        t_end, line = float(view.time[-1]), (float(view.x.min()), float(view.x.max()))
+        out.collisions, pulses, out.overlap_artefacts = find_collisions(pulses, view.spacing_m, t_end, line)
+        out.pulses = mark_transients(pulses, out.collisions, view.spacing_m, t_end, line)
         for p in out.pulses:
-            out.comparisons += compare_pulse(ctx, p)
+            out.comparisons += compare_transient(p) if p.transient else compare_pulse(ctx, p)
         for c in out.collisions:
             out.comparisons += compare_collision(ctx, c)
     elif kind == "modes":

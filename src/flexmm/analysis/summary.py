@@ -3,13 +3,16 @@
 ``principal(res)`` picks, from a ``RunAnalysis``, the feature the scene is about, the same way
 for ``flexmm run``, ``flexmm analyze`` and sweeps:
 
-- pulses: the largest |amplitude| among the pulses fitted over at least ``MIN_TRACK_SITES``
-  sites (all pulses if none is), so a small fast precursor never hides the soliton behind it;
+- pulses: the largest |amplitude| among the persistent pulses (formation transients,
+  ``analysis.transients``, only when nothing else was measured) fitted over at least
+  ``MIN_TRACK_SITES`` sites (all of them if none is), so a small fast precursor never hides the
+  soliton behind it;
 - fronts: the front that switched the most sites;
 - oblique plane waves: the fastest group; driven runs: the steady response.
 
 ``summary_lines(res)`` turns it into text with the theory's prediction where one applies, plus
-one line per collision (``analysis.collisions``).
+one line per formation transient (distance and time; no theory) and per collision
+(``analysis.collisions``).
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ MIN_TRACK_SITES = 10
 def principal(res):
     """(item label, measurement) of the feature the run is about, or None if nothing was measured."""
     if res.kind == "pulse" and res.pulses:
-        long = [p for p in res.pulses if p.n_sites_fitted >= MIN_TRACK_SITES] or res.pulses
+        persistent = [p for p in res.pulses if not getattr(p, "transient", False)] or res.pulses
+        long = [p for p in persistent if p.n_sites_fitted >= MIN_TRACK_SITES] or persistent
         p = max(long, key=lambda q: (abs(q.amplitude), q.n_sites_fitted))
         return f"pulse {p.index}", p
     if res.kind == "front" and res.fronts:
@@ -88,6 +92,14 @@ def _pulse_lines(res, item, p) -> list[str]:
     return lines
 
 
+def _transient_line(res, p) -> str:
+    h = res.view.spacing_m
+    then = f"turns into pulse {p.continues_as}" if p.continues_as >= 0 else "dies out"
+    return (f"  formation transient pulse {p.index} ({p.polarity_label}, amplitude {_num(p.amplitude)} {p.units}): "
+            f"travels {_num(p.formation_distance_m)} m ({_num(p.formation_distance_m / h, 3)} sites) in "
+            f"{_num(p.formation_time_s)} s, then {then}; not a steady pulse (no theory)")
+
+
 def _front_lines(res, item, f) -> list[str]:
     n = len(res.fronts)
     which = f"{item} of {n}" if n > 1 else item
@@ -118,6 +130,8 @@ def summary_lines(res) -> list[str]:
         lines = [f"driven at {_num(m.frequency_hz)} Hz in {m.field}: amplitude at drive "
                  f"{_num(m.amplitude_drive)} {m.units}, at far end {_num(m.amplitude_far)} {m.units}, "
                  f"transmission {_num(m.transmission)}, decay {_num(m.decay_per_site)} per site"]
+    if res.kind == "pulse":
+        lines += [_transient_line(res, p) for p in res.pulses if getattr(p, "transient", False) and p is not m]
     for c in getattr(res, "collisions", []) or []:
         theory = [f"pulse {pulse} {_num(r.predicted * 1e3)} mm ({100 * r.rel_diff:+.2f} %)"
                   for pulse in (c.pulse_a, c.pulse_b) for r in res.comparisons

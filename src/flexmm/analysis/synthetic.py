@@ -1,7 +1,8 @@
 """Synthetic run datasets with known answers, laid out like ``flexmm run`` outputs.
 
 Used by the tests (and handy for trying the analysis): travelling pulses of a given shape,
-speed, width and amplitude (several at once for trains and collisions), collisions with known
+speed, width and amplitude (several at once for trains and collisions; lobes that form and die
+out), collisions with known
 shifts and outcomes, a transition front
 between two wells, and a driven chain with a known steady amplitude per site.
 """
@@ -19,7 +20,8 @@ from flexmm.analysis.profiles import SHAPES
 @dataclass(frozen=True)
 class SynthPulse:
     """A pulse ``amplitude · shape((x − x0 − v t)/W)``; SI units (m, m/s); optionally forming
-    (amplitude growing linearly over ``formation_m`` of travel) and breathing."""
+    (amplitude growing linearly over ``formation_m`` of travel), breathing, and living only
+    between ``starts_s`` and ``ends_s``."""
 
     amplitude: float
     speed_m_s: float
@@ -31,6 +33,9 @@ class SynthPulse:
     start_fraction: float = 0.6
     breathing: float = 0.0  # relative amplitude of a breathing 1 + b sin(2π t / period)
     breathing_period_s: float = 1.0
+    starts_s: float = -np.inf  # the pulse fades in around this time and out around ``ends_s``
+    ends_s: float = np.inf  # (over ``fade_s``): a lobe that forms and dies out
+    fade_s: float = 1.0
 
 
 def _dataset(time, x, fields: dict, units: dict, attrs: dict | None = None) -> xr.Dataset:
@@ -58,6 +63,9 @@ def pulse_dataset(pulses: list[SynthPulse], *, n_sites: int = 200, spacing_m: fl
         if p.formation_m > 0:
             amp = amp * (p.start_fraction + (1 - p.start_fraction) * np.minimum(d / p.formation_m, 1.0))
         amp = amp * (1 + p.breathing * np.sin(2 * np.pi * time[:, None] / p.breathing_period_s))
+        with np.errstate(invalid="ignore"):  # inf/inf: a pulse that lives for ever
+            life = 0.25 * (1 + np.tanh((time - p.starts_s) / p.fade_s)) * (1 - np.tanh((time - p.ends_s) / p.fade_s))
+        amp = amp * np.nan_to_num(life, nan=1.0)[:, None]
         vals += amp * SHAPES[p.shape](x[None, :], 1.0, c, p.width_m)
     rng = np.random.default_rng(seed)
     vals += noise * rng.standard_normal(vals.shape)

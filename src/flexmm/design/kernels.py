@@ -324,22 +324,14 @@ def _table_second(z, start, n, tab):
     x0 = tab[start]
     x1 = tab[start + n - 1]
     m = n - 1
-    c3 = start + 2 * n
-    c2 = c3 + m
-    c1 = c2 + m
+    _, c1, c2, c3 = lw.table_columns(start, n)
     if z <= x0:
         return tab[c1]
     if z >= x1:
         k = m - 1
         h = x1 - tab[start + k]
         return tab[c1 + k] + h * (2.0 * tab[c2 + k] + 3.0 * h * tab[c3 + k])
-    lo, hi = 0, m
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if tab[start + mid] <= z:
-            lo = mid
-        else:
-            hi = mid
+    lo = lw.table_piece(z, start, n, tab)
     s = z - tab[start + lo]
     return tab[c1 + lo] + s * (2.0 * tab[c2 + lo] + 3.0 * s * tab[c3 + lo])
 

@@ -43,15 +43,34 @@ DIPOLE_MIN_GAP = 1e-3
 
 
 @jit
+def table_columns(start, n):
+    """Offsets in ``tab`` of a tabulated law's spline coefficients (c0, c1, c2, c3: n − 1 each, after
+    the n knots and n energies that start at ``start``)."""
+    m = n - 1
+    c3 = start + 2 * n
+    return c3 + 3 * m, c3 + 2 * m, c3 + m, c3
+
+
+@jit
+def table_piece(z, start, n, tab):
+    """Index of the spline piece that holds z, strictly between the first and last knots (bisection)."""
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tab[start + mid] <= z:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@jit
 def _table(z, start, n, tab):
     """Energy and force of a tabulated (spline) law at z."""
     x0 = tab[start]
     x1 = tab[start + n - 1]
     m = n - 1
-    c3 = start + 2 * n
-    c2 = c3 + m
-    c1 = c2 + m
-    c0 = c1 + m
+    c0, c1, c2, c3 = table_columns(start, n)
     if z <= x0:
         s = z - x0
         f0, k0 = tab[c0], tab[c1]
@@ -63,13 +82,7 @@ def _table(z, start, n, tab):
         k1 = tab[c1 + k] + h * (2.0 * tab[c2 + k] + 3.0 * h * tab[c3 + k])
         s = z - x1
         return tab[start + n + m] + f1 * s + 0.5 * k1 * s * s, f1 + k1 * s
-    lo, hi = 0, m
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if tab[start + mid] <= z:
-            lo = mid
-        else:
-            hi = mid
+    lo = table_piece(z, start, n, tab)
     s = z - tab[start + lo]
     a0, a1, a2, a3 = tab[c0 + lo], tab[c1 + lo], tab[c2 + lo], tab[c3 + lo]
     e = tab[start + n + lo] + s * (a0 + s * (0.5 * a1 + s * (a2 / 3.0 + 0.25 * a3 * s)))
