@@ -15,6 +15,7 @@ average; thread/process CPU time is printed next to wall time because the machin
 from __future__ import annotations
 
 import json
+import math
 import os
 import resource
 import subprocess
@@ -819,21 +820,21 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), repeats:
     return rows
 
 
-def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor: int = 8) -> list[dict]:
-    """Issue 14: the default (solver.accuracy) against today's default, over the shipped scenes.
+def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor: int = 16) -> list[dict]:
+    """Issue 14: the default (solver.accuracy) against the old default, over the shipped scenes.
 
     For each configs/*.yaml (``names``: a subset by stem, or $FLEXMM_BENCH_SCENES, comma-separated):
     the whole ``run_scene`` pipeline (plan, pilots, run, writing; compile excluded by a warm-up
-    run) with the new default and with today's (main at e769862: velocity Verlet at the scene's
-    dt_fraction — 0.1 unless set — of the stable step at rest, ``solver.accuracy: null``), min and
-    median wall of ``repeats`` runs, interleaved. Errors are those of the final state (relative to
-    each field's peak, ``accuracy.state_error``) of both against a converged reference: the new
-    method at dt/``ref_factor``; the new run's own estimate (``accuracy_estimate``) next to its
-    measured error. Target: new error ≤ its target at ≤ 1.5 x today's cost.
+    run) with the new default and with the old one (velocity Verlet at the scene's dt_fraction —
+    0.1 unless set — of the stable step at rest, ``solver.accuracy: null``), min and median wall
+    of ``repeats`` runs, interleaved. Errors are those of the reported quantities (wave amplitudes
+    and arrival times, ``accuracy.quantity_error``) over the window the estimate covers, of both
+    against a converged reference (the new method at dt/``ref_factor``), next to the new run's own
+    estimate. Target: new error ≤ its target at ≤ 1.5 x the old cost.
     """
     import tempfile
 
-    from flexmm.accuracy import integrate, state_error
+    from flexmm.accuracy import window_grid, quantity_error, trace
     from flexmm.api import run_scene
     from flexmm.assemble import build_problem
     from flexmm.config import load_scene
@@ -866,29 +867,31 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
                     if tag == "new" and res.path is not None and res.path.exists():
                         a = open_run(res.path).attrs
                         row.update(integrator=a.get("integrator"), dt_new_s=a.get("dt_s"),
-                                   estimate=a.get("accuracy_estimate"), target=a.get("accuracy_requested"))
+                                   estimate=a.get("accuracy_estimate"), target=a.get("accuracy_requested"),
+                                   window_s=a.get("accuracy_window_s"))
             for tag in walls:
                 row[f"{tag}_wall_min_s"] = min(walls[tag])
                 row[f"{tag}_wall_median_s"] = float(np.median(walls[tag]))
             row["cost_ratio"] = row["new_wall_min_s"] / row["old_wall_min_s"]
-            # errors of the final state against a converged reference, on the planned (trimmed) scene
-            plan = make_plan(new_scene, "auto")
-            prob = prepare(plan)
-            spec = INTEGRATORS[plan.scene.solver.integrator]
-            old = build_problem(replace_section(plan.scene, "solver", integrator="velocity_verlet", dt_s=None,
-                                                accuracy=None, dt_fraction=old_scene.solver.dt_fraction))
-            q_new, _, pk_new, _ = integrate(prob, spec, prob.dt, prob.duration)
-            q_old, _, pk_old, _ = integrate(old, INTEGRATORS["velocity_verlet"], old.dt, old.duration)
-            q_ref, _, pk_ref, _ = integrate(prob, spec, prob.dt / ref_factor, prob.duration)
-            pk = np.maximum(pk_ref, np.maximum(pk_new, pk_old))
-            row["error_new"] = state_error(prob.system, q_new, q_ref, pk)
-            row["error_old"] = state_error(prob.system, q_old, q_ref, pk)
+            if row.get("window_s"):  # errors over the estimate's window, on the planned (trimmed) scene
+                plan = make_plan(new_scene, "auto")
+                prob = prepare(plan)
+                spec = INTEGRATORS[plan.scene.solver.integrator]
+                old = build_problem(replace_section(plan.scene, "solver", integrator="velocity_verlet", dt_s=None,
+                                                    accuracy=None, dt_fraction=old_scene.solver.dt_fraction))
+                T = row["window_s"] / prob.system.scales.time_s
+                n, S = window_grid(T, prob.dt)
+                ref = trace(prob, spec, n * ref_factor, T, S)
+                row["error_new"] = quantity_error(trace(prob, spec, n, T, S), ref).total
+                n_old = S * max(1, math.ceil(T / (old.dt * S) - 1e-9))
+                row["error_old"] = quantity_error(trace(old, INTEGRATORS["velocity_verlet"], n_old, T, S), ref).total
         except Exception as exc:  # a scene that cannot be measured is reported, not fatal
             row["error"] = f"{type(exc).__name__}: {exc}"
-        print(f"  {row['scene']:38s} {row.get('integrator', '?'):15s} err new {row.get('error_new', float('nan')):9.2e} "
-              f"(est {row.get('estimate') or float('nan'):8.2e}) old {row.get('error_old', float('nan')):9.2e}  "
-              f"wall new {row.get('new_wall_min_s', float('nan')):7.3f} s old {row.get('old_wall_min_s', float('nan')):7.3f} s "
-              f"ratio {row.get('cost_ratio', float('nan')):5.2f}  load {row['load']:.1f} {row.get('error', '')}", flush=True)
+        nan = float("nan")
+        print(f"  {row['scene']:38s} {row.get('integrator') or '?':17s} err new {row.get('error_new', nan):9.2e} "
+              f"(est {row.get('estimate') or nan:8.2e}) old {row.get('error_old', nan):9.2e}  "
+              f"wall new {row.get('new_wall_min_s', nan):7.3f} s old {row.get('old_wall_min_s', nan):7.3f} s "
+              f"ratio {row.get('cost_ratio', nan):5.2f}  load {row['load']:.1f} {row.get('error', '')}", flush=True)
         rows.append(row)
     met = [r for r in rows if "cost_ratio" in r]
     over = [r["scene"] for r in met if r["cost_ratio"] > 1.5 or (r.get("error_new") or 0) > (r.get("target") or 1)]

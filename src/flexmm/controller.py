@@ -88,10 +88,11 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, 
     """Frames at multiples of the step ``dt`` (the step is never bent to the frames).
 
     The frame interval (``every`` or duration/(n_frames − 1)) is rounded to the nearest whole
-    number of steps (at least one), the duration up to whole steps; both roundings are noted.
-    ``exact=True`` (``output.exact_frame_times``) instead keeps the frame times and takes the
-    largest step ≤ dt that divides the interval (noted when it differs from dt). ``time_s``
-    only scales the notes to seconds.
+    number of steps (at least one) and every frame interval is that long; the duration is rounded
+    up to whole frame intervals (so the frame count may differ from ``n_frames`` by the rounding);
+    both roundings are noted (a step the accuracy pilots chose already divides the interval:
+    ``flexmm.prepare``). ``exact=True`` (``output.exact_frame_times``) instead keeps the frame times and takes the largest step ≤ dt that divides the
+    interval (noted when it differs from dt). ``time_s`` only scales the notes to seconds.
     """
     asked_every = every is not None
     if every is None:
@@ -101,7 +102,7 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, 
         spf = max(1, math.ceil(every / dt - 1e-9))
         h = every / spf
         if abs(h - dt) > 1e-9 * dt:
-            notes.append(f"output.exact_frame_times: step {dt * time_s:.6g} s reduced to {h * time_s:.6g} s "
+            notes.append(f"step {dt * time_s:.6g} s reduced to {h * time_s:.6g} s so frames fall on whole steps "
                          f"({spf} steps per frame interval of {every * time_s:.6g} s)")
         n_full = int(math.floor(duration / every + 1e-9))
         chunks = [spf] * n_full
@@ -111,23 +112,17 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, 
         return Schedule(h, chunks, every, notes)
     h = dt
     n_steps = max(1, math.ceil(duration / h - 1e-9))
-    if abs(n_steps * h - duration) > 1e-9 * duration:
-        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_steps} steps = {n_steps * h * time_s:.6g} s")
-    # every_s: the nearest whole number of steps; n_frames: as many whole steps as keep the count
-    spf = max(1, round(every / h) if asked_every else n_steps // (n_frames - 1))
+    spf = max(1, round(every / h))  # the frame interval: the nearest whole number of steps
     interval = spf * h
     if abs(interval - every) > 1e-9 * every:
         notes.append(f"frame interval {every * time_s:.6g} s rounded to {interval * time_s:.6g} s "
                      f"= {spf} steps of {h * time_s:.6g} s (output.exact_frame_times: true keeps the frame "
                      "times and shortens the step instead)")
-    n_full = n_steps // spf if asked_every else min(n_frames - 1, n_steps)
-    chunks = [spf] * n_full
-    rest = n_steps - n_full * spf
-    if rest and chunks and (not asked_every or 2 * rest < spf):  # the last frame comes a few steps later
-        chunks[-1] += rest
-    elif rest:
-        chunks.append(rest)
-    return Schedule(h, chunks, interval, notes)
+    n_int = max(1, math.ceil(n_steps / spf - 1e-9))  # uniform frames; the run ends on the last one
+    if abs(n_int * spf * h - duration) > 1e-9 * duration:
+        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_int} frame intervals = "
+                     f"{n_int * spf} steps = {n_int * spf * h * time_s:.6g} s")
+    return Schedule(h, [spf] * n_int, interval, notes)
 
 
 #: the step is reduced when it exceeds this fraction of the current state's stable limit ...

@@ -53,24 +53,20 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
     solver, given = plan.scene.solver, plan.source.solver.model_fields_set
     spec = INTEGRATORS[solver.integrator]
     asked = "accuracy" in given  # the scene's own target, not the default
-    # the scene's own target or step: the whole run is repeated at 2 dt (a pilot's short window
-    # cannot extrapolate the error of an arbitrary step reliably); the default: the chooser's pilot
-    explicit = solver.dt_s is not None  # the scene chose its step (dt_fraction applies with accuracy: null)
-    mode = solver.error_check or ("run" if asked or explicit else "pilot")
+    mode = solver.error_check or "pilot"
     if not spec.explicit_limit:
         why = "adaptive: its error is controlled by rtol" if spec.adaptive else "not an explicit fixed-step method"
         plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [
             PlanStep("accuracy", "not applied", [f"accuracy {solver.accuracy:g} not applied: {spec.name} is {why}"])]
         return problem
-    if explicit:  # honoured, then checked
+    if solver.dt_s is not None:  # the scene chose its step: honoured, then checked
         plan.error_check, plan.choice = mode, acc.Choice(spec.name, problem.dt, math.nan, 0.0, 0.0, order=spec.order)
         notes = [f"accuracy {solver.accuracy:g}: solver.dt_s = {solver.dt_s:.4g} s honoured ({spec.name})"]
         attrs = {}
         if mode == "pilot":
             est = acc.estimate(problem, spec, problem.dt)
-            attrs = _estimate_attrs(solver.accuracy, est.error, "pilot", est.pilot_time * problem.system.scales.time_s)
-            notes.append(_estimate_line(solver.accuracy, est.error, "step doubling on a pilot over "
-                                        f"{est.pilot_time * problem.system.scales.time_s:.3g} s"))
+            attrs = _estimate_attrs(solver.accuracy, est, problem.system.scales.time_s)
+            notes.append(_estimate_line(solver.accuracy, est, problem.system.scales.time_s))
         plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "checked", notes, attrs)]
         return problem
     only = solver.integrator if "integrator" in given else (None if asked else DEFAULT_METHOD)
@@ -84,18 +80,20 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
         return problem
 
 
-def _estimate_attrs(target: float, est: float, method: str, pilot_s: float | None = None) -> dict:
-    out = {"accuracy_requested": target, "accuracy_estimate": est, "accuracy_met": int(est <= target),
-           "accuracy_check": method}
-    if pilot_s is not None:
-        out["accuracy_pilot_s"] = pilot_s
-    return out
+def _estimate_attrs(target: float, est: acc.Estimate, time_s: float) -> dict:
+    """Dataset attrs of an error estimate (``accuracy_*``)."""
+    return {"accuracy_requested": target, "accuracy_estimate": est.error, "accuracy_met": int(est.error <= target),
+            "accuracy_estimate_amplitude": est.amplitude, "accuracy_estimate_speed": est.speed,
+            "accuracy_check": est.method, "accuracy_window_s": est.window * time_s,
+            "accuracy_check_wall_s": est.wall_s}
 
 
-def _estimate_line(target: float, est: float, how: str) -> str:
-    if est <= target:
-        return f"estimated error {est:.3g} meets the target {target:g} ({how})"
-    return f"WARNING: estimated error {est:.3g} exceeds the target {target:g} ({how})"
+def _estimate_line(target: float, est: acc.Estimate, time_s: float) -> str:
+    how = (f"{est.method} over {est.window * time_s:.3g} s: amplitudes {est.amplitude:.2g}, "
+           f"speeds {est.speed:.2g}")
+    if est.error <= target:
+        return f"estimated error {est.error:.3g} meets the target {target:g} ({how})"
+    return f"WARNING: estimated error {est.error:.3g} exceeds the target {target:g} ({how})"
 
 
 def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Problem:
@@ -107,6 +105,12 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     except ValueError as exc:
         raise PlanError(f"solver.accuracy: {exc}") from None
     ts = problem.system.scales.time_s
+    out = scene.output
+    every = out.every_s / ts if out.every_s else problem.duration / (out.n_frames - 1)
+    if every > choice.dt:  # the chosen step, shortened a little so that frames fall on whole steps
+        dt = every / math.ceil(every / choice.dt - 1e-9)
+        choice.predicted_error *= (dt / choice.dt) ** choice.order
+        choice.dt = dt
     planned = replace_section(scene, "solver", integrator=choice.integrator, dt_s=choice.dt * ts, accuracy=None)
     rows = "; ".join(f"{r['integrator']}: dt {r['dt'] * ts:.3g} s, {r['cost']:.3g} force evals"
                      for r in choice.table)
@@ -114,37 +118,40 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
              f"(predicted error {choice.predicted_error:.2g}, pilot over {choice.pilot_time * ts:.3g} s) — {rows}"]
     row = next(r for r in choice.table if r["integrator"] == choice.integrator)
     if not choice.reachable:
-        notes.append(f"WARNING: accuracy {target:g} looks out of reach ({row['why']}; pilot errors grow "
-                     f"like t^{row['growth']:.1f}: the dynamics amplify perturbations); the run uses the "
-                     "step above and the check after it reports the error reached")
+        notes.append(f"WARNING: accuracy {target:g} looks out of reach ({row['why']}); the run uses the step "
+                     "above and its error estimate is reported")
     elif row["uncertain"]:
-        notes.append(f"prediction uncertain: {row['uncertain']}; the check after the run reports the error reached")
+        notes.append(f"prediction uncertain: {row['uncertain']}")
     attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
              "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable)}
-    if mode == "pilot":  # the pilot's step doubling is the estimate (no second run)
-        attrs.update(_estimate_attrs(target, choice.predicted_error, "pilot"))
-        notes.append(_estimate_line(target, choice.predicted_error, "step doubling on the pilot"))
+    if mode == "pilot":  # the pilot's step doubling, carried to the chosen step by h^p, is the estimate
+        scale = (choice.dt / row["pilot_dt"]) ** choice.order
+        amp, speed = row["amplitude_error"] * scale, row["speed_error"] * scale
+        est = acc.Estimate(max(amp, speed), amp, speed, choice.pilot_time, "step doubling on the pilot",
+                           row["pilot_wall_s"])
+        attrs.update(_estimate_attrs(target, est, ts))
+        notes.append(_estimate_line(target, est, ts))
     plan.error_check = mode
     plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "chosen", notes, attrs)]
     plan.scene, plan.choice = planned, choice
     if choice.integrator == scene.solver.integrator:  # same method: the built problem only changes dt
         problem.scene, problem.dt, problem.notes = planned, choice.dt, []
         return problem
-    return build_problem(planned)  # another method: its own stable limit and checks
+    return build_problem(planned, built=plan.built_for(planned))  # another method: its own stable limit
 
 
 def accuracy_check(plan: Plan, problem: Problem) -> Callable | None:
-    """Callback for ``run_problem(on_finish=...)``: the step-doubling accuracy check, if asked."""
+    """Callback for ``run_problem(on_finish=...)``: step doubling over the whole run
+    (``solver.error_check: run``), at the step the run used."""
     if plan.choice is None or plan.error_check != "run" or plan.accuracy is None:
         return None
     target = plan.accuracy
-    choice = plan.choice
+    spec = INTEGRATORS[plan.choice.integrator]
 
     def on_finish(q, v, h, say, t) -> dict:
-        chk = acc.check(problem, choice.integrator, h, t, q, choice.order)
+        est = acc.estimate(problem, spec, h, whole_run=True)
         ts = problem.system.scales.time_s
-        say(f"accuracy check: {_estimate_line(target, chk.estimate, f'{chk.method}, dt {chk.companion_dt * ts:.4g} s')}")
-        return {**_estimate_attrs(target, chk.estimate, chk.method),
-                "accuracy_check_dt_s": chk.companion_dt * ts, "accuracy_check_wall_s": chk.wall_s}
+        say(f"accuracy check: {_estimate_line(target, est, ts)}")
+        return _estimate_attrs(target, est, ts)
 
     return on_finish

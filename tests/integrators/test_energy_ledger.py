@@ -69,3 +69,36 @@ def test_a_1e6_m_s_impact_fails_with_the_reason(tmp_path) -> None:
                               ["lattice.n_units=40", "solver.duration_s=0.02", "output.n_frames=21",
                                "solver.accuracy=null"]), run_dir=tmp_path / "ok")
     assert ok.ok, ok.reason
+
+
+def _guard():
+    import numpy as np
+
+    from flexmm.integrators.runaway import RunawayGuard
+
+    class System:
+        mass = v0 = np.zeros(3)
+        n_sites = 3
+
+    class Terms:
+        drv_prm = np.zeros((0, 4))
+
+    return RunawayGuard(System, Terms, e0=0.0, drift_tol=0.05)
+
+
+def test_an_imbalance_must_persist_before_a_run_fails() -> None:
+    """The first steps of a drive give O(1) relative imbalances on a tiny budget (the work of a
+    drive starting like t² sampled by a few steps); a run fails only when the imbalance lasts."""
+    from flexmm.integrators.runaway import PERSIST_CHECKS, RUNAWAY_LAG_STEPS
+
+    g = _guard()
+    assert g.unbalanced(1.085e-14, 1e-14, 0.0, step=5) is None  # 8.5 % at the first frame
+    assert g.unbalanced(1.0e-10, 1.001e-10, 0.0, step=10) is None  # balanced again: forgotten
+    assert g.unbalanced(2.0, 1.0, 0.0, step=20) is None  # a real drift starts ...
+    assert g.unbalanced(2.0, 1.0, 0.0, step=20 + RUNAWAY_LAG_STEPS - 1) is None
+    why = g.unbalanced(2.0, 1.0, 0.0, step=20 + RUNAWAY_LAG_STEPS)  # ... and lasts
+    assert why is not None and "imbalance of 1 of the energy budget" in why  # |2 − 0 − 1| / (0 + 1 + 0)
+    g = _guard()  # frequent checks: PERSIST_CHECKS in a row are enough
+    assert [g.unbalanced(2.0, 1.0, 0.0, step=k) is not None for k in range(1, PERSIST_CHECKS + 1)] == \
+        [False] * (PERSIST_CHECKS - 1) + [True]
+    assert _guard().unbalanced(2.0, 1.0, 0.0) is not None  # without a step count: at once

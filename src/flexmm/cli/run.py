@@ -82,7 +82,10 @@ def _print_error_estimate(acc: dict, quiet: bool) -> None:
     if not acc:
         return
     est, target = acc["accuracy_estimate"], acc.get("accuracy_requested")
-    line = f"error estimate: {est:.3g} (target {target:g}, {acc.get('accuracy_check', '')})"
+    parts = (f"amplitudes {acc['accuracy_estimate_amplitude']:.2g}, speeds {acc['accuracy_estimate_speed']:.2g}; "
+             if "accuracy_estimate_speed" in acc else "")
+    line = (f"error estimate: {est:.3g} of the wave amplitudes and speeds (target {target:g}; {parts}"
+            f"{acc.get('accuracy_check', '')})")
     if not quiet:
         typer.echo(line)
     if not acc.get("accuracy_met", 1):

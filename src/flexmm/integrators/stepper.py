@@ -128,7 +128,7 @@ class Stepper:
             # the ledger is about the DOFs that move freely: a prescribed DOF's imposed motion
             # is not the system's energy (its work on the rest is in ledger.work)
             e_free = e - 0.5 * float(np.dot(self._held_mass, self.v * self.v)) if self._held_mass.any() else e
-            why = self.guard.unbalanced(e_free, self.ledger.work, self.ledger.dissipated)
+            why = self.guard.unbalanced(e_free, self.ledger.work, self.ledger.dissipated, self.steps)
             if why is not None:
                 return why
             self.guard.record(self.steps, e)
