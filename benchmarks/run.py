@@ -2,8 +2,8 @@
 
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
-                                              #              | roofline | sheet_throughput | contention
-                                              #              | sheet | workprecision | render | gradient
+                                              #              | roofline | sheet_throughput | contention | sheet | workprecision
+                                              #              | render | gradient | accuracy
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -15,6 +15,7 @@ average; thread/process CPU time is printed next to wall time because the machin
 from __future__ import annotations
 
 import json
+import math
 import os
 import resource
 import subprocess
@@ -819,10 +820,89 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), repeats:
     return rows
 
 
+def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor: int = 16) -> list[dict]:
+    """Issue 14: the default (solver.accuracy) against the old default, over the shipped scenes.
+
+    For each configs/*.yaml (``names``: a subset by stem, or $FLEXMM_BENCH_SCENES, comma-separated):
+    the whole ``run_scene`` pipeline (plan, pilots, run, writing; compile excluded by a warm-up
+    run) with the new default and with the old one (velocity Verlet at the scene's dt_fraction —
+    0.1 unless set — of the stable step at rest, ``solver.accuracy: null``), min and median wall
+    of ``repeats`` runs, interleaved. Errors are those of the reported quantities (wave amplitudes
+    and arrival times, ``accuracy.quantity_error``) over the window the estimate covers, of both
+    against a converged reference (the new method at dt/``ref_factor``), next to the new run's own
+    estimate. Target: new error ≤ its target at ≤ 1.5 x the old cost.
+    """
+    import tempfile
+
+    from flexmm.accuracy import window_grid, quantity_error, trace
+    from flexmm.api import run_scene
+    from flexmm.assemble import build_problem
+    from flexmm.config import load_scene
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.io.dataset import open_run
+    from flexmm.plan import make_plan
+    from flexmm.plan.planner import replace_section
+    from flexmm.prepare import prepare
+
+    env = os.environ.get("FLEXMM_BENCH_SCENES")
+    names = names or (tuple(env.split(",")) if env else None)
+    paths = sorted((ROOT.parent / "configs").glob("*.yaml"))
+    if names:
+        paths = [p for p in paths if p.stem in names]
+    rows = []
+    tmp = Path(tempfile.mkdtemp(prefix="flexmm-acc-"))
+    for path in paths:
+        new_scene = load_scene(path)
+        old_scene = load_scene(path, ["solver.accuracy=null"])
+        row = {"scene": path.stem, "load": os.getloadavg()[0]}
+        try:
+            walls = {"new": [], "old": []}
+            for k in range(repeats + 1):  # the first round compiles
+                for tag, sc in (("new", new_scene), ("old", old_scene)):
+                    t0 = time.perf_counter()
+                    res = run_scene(sc, run_dir=tmp / f"{path.stem}-{tag}", fidelity="auto")
+                    if k:
+                        walls[tag].append(time.perf_counter() - t0)
+                    row[f"{tag}_status"] = res.status
+                    if tag == "new" and res.path is not None and res.path.exists():
+                        a = open_run(res.path).attrs
+                        row.update(integrator=a.get("integrator"), dt_new_s=a.get("dt_s"),
+                                   estimate=a.get("accuracy_estimate"), target=a.get("accuracy_requested"),
+                                   window_s=a.get("accuracy_window_s"))
+            for tag in walls:
+                row[f"{tag}_wall_min_s"] = min(walls[tag])
+                row[f"{tag}_wall_median_s"] = float(np.median(walls[tag]))
+            row["cost_ratio"] = row["new_wall_min_s"] / row["old_wall_min_s"]
+            if row.get("window_s"):  # errors over the estimate's window, on the planned (trimmed) scene
+                plan = make_plan(new_scene, "auto")
+                prob = prepare(plan)
+                spec = INTEGRATORS[plan.scene.solver.integrator]
+                old = build_problem(replace_section(plan.scene, "solver", integrator="velocity_verlet", dt_s=None,
+                                                    accuracy=None, dt_fraction=old_scene.solver.dt_fraction))
+                T = row["window_s"] / prob.system.scales.time_s
+                n, S = window_grid(T, prob.dt)
+                ref = trace(prob, spec, n * ref_factor, T, S)
+                row["error_new"] = quantity_error(trace(prob, spec, n, T, S), ref).total
+                n_old = S * max(1, math.ceil(T / (old.dt * S) - 1e-9))
+                row["error_old"] = quantity_error(trace(old, INTEGRATORS["velocity_verlet"], n_old, T, S), ref).total
+        except Exception as exc:  # a scene that cannot be measured is reported, not fatal
+            row["error"] = f"{type(exc).__name__}: {exc}"
+        nan = float("nan")
+        print(f"  {row['scene']:38s} {row.get('integrator') or '?':17s} err new {row.get('error_new', nan):9.2e} "
+              f"(est {row.get('estimate') or nan:8.2e}) old {row.get('error_old', nan):9.2e}  "
+              f"wall new {row.get('new_wall_min_s', nan):7.3f} s old {row.get('old_wall_min_s', nan):7.3f} s "
+              f"ratio {row.get('cost_ratio', nan):5.2f}  load {row['load']:.1f} {row.get('error', '')}", flush=True)
+        rows.append(row)
+    met = [r for r in rows if "cost_ratio" in r]
+    over = [r["scene"] for r in met if r["cost_ratio"] > 1.5 or (r.get("error_new") or 0) > (r.get("target") or 1)]
+    print(f"  {len(met)} scenes measured; not meeting (error <= target at <= 1.5 x cost): {', '.join(over) or 'none'}")
+    return rows
+
+
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
-            "gradient": gradient}
+            "gradient": gradient, "accuracy": accuracy}
 
 
 def main(argv: list[str]) -> None:

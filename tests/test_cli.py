@@ -71,7 +71,9 @@ def test_run_writes_outputs_and_prints_dataset_path(short_lego, tmp_path):
 
 def test_dataset_is_self_describing_si(declared_run):
     ds = declared_run
-    assert 280 <= ds.attrs["n_steps"] <= 320 and ds.sizes["time"] == 31
+    # whole steps of the reported dt cover the duration; the frame count is kept
+    duration = yaml.safe_load(ds.attrs["config"])["solver"]["duration_s"]
+    assert ds.attrs["n_steps"] == math.ceil(duration / ds.attrs["dt_s"] - 1e-9) and ds.sizes["time"] == 31
     for name in list(ds.data_vars) + list(ds.coords):
         assert ds[name].attrs.get("units"), f"{name} has no units"
         assert ds[name].attrs.get("long_name"), f"{name} has no long_name"
@@ -96,7 +98,10 @@ def test_dataset_is_self_describing_si(declared_run):
     assert np.allclose(np.diff(ds.x.values), lat.a_m * math.cos(lat.theta0_rad), rtol=1e-12)
     e0 = 0.5 * lat.mass_kg * exc.velocity_m_s**2 + 0.5 * lat.inertia_kg_m2 * exc.angular_velocity_rad_s**2
     assert float(ds.total_energy[0]) == pytest.approx(e0, rel=1e-12)
-    assert float(ds.time[-1]) == pytest.approx(scene.solver.duration_s, rel=1e-9)
+    # the run covers the duration in whole steps of the reported dt (rounded up, never bent)
+    dt, t_end = ds.attrs["dt_s"], float(ds.time[-1])
+    assert scene.solver.duration_s * (1 - 1e-9) <= t_end < scene.solver.duration_s + dt
+    assert t_end / dt == pytest.approx(round(t_end / dt), abs=1e-6)
 
 
 def test_set_overrides_land_in_resolved_config(short_lego, tmp_path):

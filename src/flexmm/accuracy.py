@@ -1,51 +1,64 @@
-"""Pick the cheapest integrator and step that meet ``solver.accuracy``, and check it afterwards.
+"""Pick the cheapest integrator and step that meet ``solver.accuracy``, and estimate the error reached.
 
-Accuracy is the relative error of the final state,
+Accuracy is the relative error of the quantities a run reports — how fast waves travel and how
+large they are — not of the final state (whose error grows without bound once a wave field turns
+chaotic after reflections, while the speeds and amplitudes a run measures stay good). Over a
+window [0, T_w] the lattice fields q_f,i(t) − q_f,i(0) are sampled on a fixed time grid
+(``Trace``); against a reference trace q* (a finer step), for each field f
 
-    err = max_f  max_i |q_f,i(T) − q*_f,i(T)| / max_{i,t} |q_f,i(t)|,
+    amplitude error  e_A = max_i |P_i − P*_i| / max_i P*_i,   P_i = max_t |q_f,i(t) − q_f,i(0)|,
+                     over the sites a wave has passed (peak before the window's last tenth, and
+                     |q − q0| fallen below ``PASSED`` of it by the end: at a site a wave is still
+                     reaching, the peak measures its timing, not its size),
+    speed error      e_c = Σ_i |t_i − t*_i| t*_i / Σ_i t*_i²,
 
-over the lattice fields f (u, θ, ...) that move, q* the exact solution. For a method of order
-p and step h the error behaves like err ≈ C h^p g(T), g the growth of errors in time: linear for
-the phase error of travelling waves, exponential where the dynamics amplify perturbations
-(many interacting waves: an impact's wave field after several reflections is chaotic). A pilot
-over a short time T_p runs each candidate at h₁ = ½ h_stab, h₁/2 and h₁/4; the observed order
-p (≤ the method's: a kink in a drive reduces it) and Richardson give
-err(h₁, t) ≈ |q_{h₁} − q_{h₁/2}| 2^p/(2^p − 1) at t = T_p/2 and T_p, whose ratio fixes the growth
-(``extrapolate``), and
+t_i the first time site i reaches half its peak P*_i (linear interpolation between samples, the
+same grid for both traces, so the interpolation cancels to first order): a wave whose speed is
+off by δc/c arrives at every site late by t δc/c, and e_c = δc/c. Sites below ``SITE_FLOOR`` of
+the field's largest peak (tails ahead of the waves) and sites already displaced at t = 0 are left
+out. err = max_f max(e_A, e_c). Both are intensive — a steady pulse's speed error does not grow
+along the run — so the window is a pilot of ``PILOT_FRACTION`` of the run (at least
+``PILOT_MIN_STEPS`` steps and past the drives) and no extrapolation in time is needed.
 
-    h = h₁ (S · accuracy / err(h₁, T))^{1/p},   S = SAFETY,
+For a method of order p, err(h) ≈ C h^p. A pilot runs each candidate at h₁ = ½ h_stab and h₁/2
+(and h₁/4 unless the error is already far below the target): the observed order p (≤ the
+method's: a kink in a drive reduces it) and Richardson give err(h₁) ≈ d(h₁, h₁/2) 2^p/(2^p − 1),
+d the error of one trace against the other, and
+
+    h = h₁ (S · accuracy / err(h₁))^{1/p},   S = SAFETY,
 
 between FLOOR × the stable step h_stab = stability_limit/ω_max and h₁ (no extrapolation to steps
-larger than the pilot's: a sixth-order method's error grows faster than h^6 there). When that h is so small
-that a pilot over the whole duration costs at most LONG_PILOT_SHARE of the run, the pilot is
-repeated over all of T (late error growth — chaos setting in after several reflections — is
-then seen, not extrapolated). If even FLOOR·h_stab is predicted to miss, the plan says the
-accuracy is out of reach; if the pilot's error is O(1) (no h^p regime) it says the prediction
-is uncertain. The cost of a method is its force evaluations per step × T/h; the cheapest wins.
-After the run a companion run at 2h (or h/2 if 2h is not stable) gives the step-doubling
-estimate err(h) ≈ |q_h − q_{2h}|/(2^p − 1) (p as observed in the pilot), recorded in the
-dataset attrs (``accuracy_estimate``, ``accuracy_met``).
+larger than the pilot's: a sixth-order method's error grows faster than h^6 there). If even
+FLOOR·h_stab is predicted to miss, the plan says the accuracy is out of reach; if the pilot's
+error is O(1) (no h^p regime) it says the prediction is uncertain. The cost of a method is its
+force evaluations per step × T/h; the cheapest wins. ``estimate`` is the same step doubling at a
+given step (the error estimate stored in every dataset), over the pilot window or, with
+``solver.error_check: run``, over the whole run.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.stepper import make_stepper
-from flexmm.errors import PlanError
 
 SAFETY = 0.3
 CAP = 0.8  # largest step as a fraction of the linear stability limit
 FLOOR = 1e-3  # smallest step as a fraction of it (an accuracy out of reach is reported, not chased)
-GROWTH_POWER = 2.0  # pilot error growth t^β beyond this is taken as exponential (chaotic dynamics)
-LONG_PILOT_SHARE = 0.1  # a pilot over the whole duration is run when it costs at most this share of the run
 SATURATED = 0.1  # a pilot error this large is outside the h^p regime: the prediction is uncertain
 PILOT_FRACTION = 0.1
 PILOT_MIN_STEPS = 400
+SAMPLES = 512  # samples of a trace over its window (fewer when the window has fewer steps)
+MAX_SITES = 2048  # sites a trace keeps per field (a larger lattice is sampled at a stride)
+PASSED = 0.9  # a wave has passed a site once the site's |q − q0| is below this fraction of its peak
+SITE_FLOOR = 0.2  # sites whose peak is below this fraction of the field's largest are left out
+SKIP_ORDER_RUN = 0.01  # no h1/4 pilot run when err(h1) is below this fraction of the target
 #: force evaluations per step for methods whose registry entry does not say
 FORCE_EVALS = {"velocity_verlet": 1, "rk4": 4, "pefrl": 4, "forest_ruth": 3, "yoshida4": 3,
                "suzuki5": 5, "omelyan_pefrl": 4}
@@ -77,11 +90,8 @@ def candidates(problem, only: str | None = None) -> list:
     for name, spec in INTEGRATORS.items():
         if only is not None and name != only or allowed is not None and name not in allowed:
             continue
-        lim = getattr(spec, "stability_limit", None)
-        if lim is None or not math.isfinite(lim) or lim <= 0:
-            continue  # implicit or unconditionally stable: not costed here
-        if getattr(spec, "adaptive", False) or getattr(spec, "implicit", False):
-            continue
+        if not spec.explicit_limit or spec.stability_limit <= 0:
+            continue  # adaptive, implicit or unconditionally stable: not costed here
         if damped and not getattr(spec, "velocity_dependent_forces", False):
             continue
         if force_evals(spec) is None:
@@ -122,7 +132,7 @@ def _peaks(system, q) -> np.ndarray:
 
 
 def state_error(system, q: np.ndarray, q_ref: np.ndarray, peaks: np.ndarray) -> float:
-    """Relative error of a final state (module docstring); fields that never move are skipped."""
+    """Relative error of a state: max over moving fields of max_i |q − q_ref| / the field's peak."""
     n = system.n_sites
     top = float(np.max(peaks)) if peaks.size else 0.0
     err = 0.0
@@ -132,6 +142,139 @@ def state_error(system, q: np.ndarray, q_ref: np.ndarray, peaks: np.ndarray) -> 
         d = np.max(np.abs(q[k * n : (k + 1) * n] - q_ref[k * n : (k + 1) * n]))
         err = max(err, float(d / peaks[k]))
     return err if np.all(np.isfinite(q)) else math.inf
+
+
+@dataclass
+class Trace:
+    """The lattice fields' change from t = 0, |q(t) − q(0)|, at ``SAMPLES`` + 1 uniform times of a
+    window: ``x`` (n_samples + 1, n_fields, n_kept_sites), ``dt`` the sample interval."""
+
+    x: np.ndarray
+    dt: float
+    steps: int
+    finite: bool = True
+
+
+def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
+    """Run ``n_steps`` equal steps to ``t_end`` (a multiple of ``n_samples``) and sample every
+    ``n_steps/n_samples`` steps (``Trace``)."""
+    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False)
+    n, nf = st.system.n_sites, len(st.system.fields)
+    stride = max(1, math.ceil(n / MAX_SITES))
+    idx = (np.arange(nf)[:, None] * n + np.arange(0, n, stride)[None, :])
+    q0 = st.q[idx].copy()
+    x = np.zeros((n_samples + 1, nf, idx.shape[1]))
+    k = [0]
+
+    def sample(s) -> None:
+        k[0] += 1
+        x[k[0]] = np.abs(s.q[idx] - q0)
+
+    out = st.run([n_steps // n_samples] * n_samples, sample)
+    ok = out.ok and k[0] == n_samples and bool(np.all(np.isfinite(x)))
+    return Trace(x, t_end / n_samples, n_steps, ok)
+
+
+def _crossings(x: np.ndarray, level: np.ndarray, dt: float) -> np.ndarray:
+    """First time each column of ``x`` (samples × sites) reaches ``level`` (NaN: never, or at t = 0)."""
+    above = x >= level[None, :]
+    k = np.argmax(above, axis=0)
+    cols = np.arange(x.shape[1])
+    hit = above[k, cols] & (k > 0)
+    k = np.maximum(k, 1)
+    lo, hi = x[k - 1, cols], x[k, cols]
+    frac = np.clip((level - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
+    return np.where(hit, (k - 1 + frac) * dt, np.nan)
+
+
+def _peak(x: np.ndarray) -> np.ndarray:
+    """Largest value along axis 0, refined by the parabola through the largest sample and its
+    neighbours (a crest's sampled height would otherwise depend on where the samples fall)."""
+    k = np.clip(np.argmax(x, axis=0), 1, max(x.shape[0] - 2, 1))
+    y0, y1, y2 = (np.take_along_axis(x, (k + j)[None], axis=0)[0] for j in (-1, 0, 1))
+    curv = 2 * y1 - y0 - y2
+    vertex = y1 + (y0 - y2) ** 2 / (8 * np.where(curv > 0, curv, 1.0))
+    return np.maximum(x.max(axis=0), np.where((curv > 0) & (y1 >= y0) & (y1 >= y2), vertex, 0.0))
+
+
+@dataclass(frozen=True)
+class QuantityError:
+    """Error of the reported quantities of one trace against a reference (module docstring)."""
+
+    amplitude: float
+    speed: float
+
+    @property
+    def total(self) -> float:
+        return max(self.amplitude, self.speed)
+
+
+def quantity_error(a: Trace, ref: Trace) -> QuantityError:
+    """Amplitude and speed error of ``a`` against ``ref`` (same window and sample grid)."""
+    if not (a.finite and ref.finite):
+        return QuantityError(math.inf, math.inf)
+    peak_a, peak_r = _peak(a.x), _peak(ref.x)  # (fields, sites)
+    top_all = float(peak_r.max()) if peak_r.size else 0.0
+    e_amp = e_c = 0.0
+    for f in range(peak_r.shape[0]):
+        top = float(peak_r[f].max())
+        if top <= 1e-12 * top_all or top == 0.0:
+            continue  # a field that does not move
+        sel = peak_r[f] >= SITE_FLOOR * top
+        # amplitudes of the waves that have passed: the peak before the window's last tenth and
+        # fallen from since (at a site a wave is still reaching, the peak measures the timing)
+        x_r = ref.x[:, f, :]
+        done = sel & (np.argmax(x_r, axis=0) <= 0.9 * (x_r.shape[0] - 1)) & (x_r[-1] <= PASSED * peak_r[f])
+        if np.any(done):
+            e_amp = max(e_amp, float(np.max(np.abs(peak_a[f, done] - peak_r[f, done]))) / top)
+        level = 0.5 * peak_r[f, sel]
+        t_a = _crossings(a.x[:, f, sel], level, a.dt)
+        t_r = _crossings(ref.x[:, f, sel], level, ref.dt)
+        ok = np.isfinite(t_a) & np.isfinite(t_r)
+        if np.any(ok):
+            e_c = max(e_c, float(np.sum(np.abs(t_a[ok] - t_r[ok]) * t_r[ok]) / np.sum(t_r[ok] ** 2)))
+        elif np.any(np.isfinite(t_a) != np.isfinite(t_r)):
+            e_c = math.inf  # a wave that reaches sites in one run and not in the other
+    return QuantityError(e_amp, e_c)
+
+
+def window_grid(t_end: float, h: float) -> tuple[int, int]:
+    """(steps, samples) for a window: samples ≤ SAMPLES, steps a multiple of them with step ≤ h."""
+    n_samples = max(1, min(SAMPLES, math.ceil(t_end / h - 1e-9)))
+    per = max(1, math.ceil(t_end / (h * n_samples) - 1e-9))
+    return per * n_samples, n_samples
+
+
+def richardson(d: float, p: float) -> float:
+    """Error of the coarser of two steps h, h/2 from their difference d (order p)."""
+    return d * 2**p / (2**p - 1)
+
+
+def _pilot_errors(problem, spec, h1: float, t_p: float, accuracy: float) -> tuple[float, float, int, QuantityError]:
+    """Error of steps h1 over [0, t_p], the observed order, the steps taken, and the components.
+
+    Runs at h1 and h1/2 and, unless err(h1) is far below ``accuracy``, h1/4: the observed order
+    p_obs = log2(d(h1, h1/2) / d(h1/2, h1/4)) (clipped to [1, p]) catches order reduction — a kink
+    in a prescribed drive, a contact opening."""
+    n1, n_samples = window_grid(t_p, h1)
+    runs = [trace(problem, spec, n1 * 2**k, t_p, n_samples) for k in range(2)]
+    p = spec.order
+    d1 = quantity_error(runs[0], runs[1])
+    if richardson(d1.total, p) > SKIP_ORDER_RUN * accuracy:
+        runs.append(trace(problem, spec, n1 * 4, t_p, n_samples))
+        d2 = quantity_error(runs[1], runs[2]).total
+        if d1.total > 0 and d2 > 0 and math.isfinite(d1.total / d2):
+            p = min(max(math.log2(d1.total / d2), 1.0), p)
+    rich = 2**p / (2**p - 1)
+    parts = QuantityError(d1.amplitude * rich, d1.speed * rich)
+    return parts.total, p, sum(r.steps for r in runs), parts
+
+
+def _step_for(accuracy: float, err1: float, h1: float, p: float, h_stab: float, T: float) -> float:
+    """The step for ``accuracy``, never above the pilot's largest step h1: the h^p law was only
+    observed below it (above it a high-order method's error grows faster than h^p)."""
+    h = h1 * (SAFETY * accuracy / err1) ** (1.0 / p) if err1 > 0 else CAP * h_stab
+    return min(max(h, FLOOR * h_stab), CAP * h_stab, h1, T)
 
 
 @dataclass
@@ -145,7 +288,7 @@ class Choice:
     pilot_time: float  # nondimensional duration of the pilot
     table: list[dict] = field(default_factory=list)  # one row per candidate
     reachable: bool = True  # False: even the smallest step allowed is predicted to miss
-    order: float = 2.0  # order observed in the pilot (≤ the method's; used by the check)
+    order: float = 2.0  # order observed in the pilot (≤ the method's)
 
 
 def _drive_end(problem) -> float:
@@ -170,48 +313,10 @@ def stable_step(problem, spec) -> float:
     return min(h, problem.stable_dt * spec.stability_limit / own)
 
 
-def extrapolate(errors: tuple[float, float], t_p: float, T: float) -> tuple[float, float]:
-    """Error at T from the pilot's errors at t_p/2 and t_p: (error, growth exponent β).
-
-    β = log2(e(t_p)/e(t_p/2)); up to GROWTH_POWER the error is taken to grow like t^max(β, 1),
-    beyond it (errors amplified by the dynamics) exponentially, e(t_p) exp(λ (T − t_p)),
-    λ = ln(e(t_p)/e(t_p/2)) / (t_p/2).
-    """
-    e_half, e_full = errors
-    if e_full <= 0:
-        return 0.0, 1.0
-    beta = math.log2(e_full / e_half) if e_half > 0 else 1.0
-    if T <= t_p:
-        return e_full, beta
-    if beta <= GROWTH_POWER:
-        return e_full * (T / t_p) ** max(beta, 1.0), beta
-    lam = math.log(e_full / e_half) / (0.5 * t_p)
-    return e_full * math.exp(min(lam * (T - t_p), 700.0)), beta
-
-
-def _pilot_errors(problem, spec, h1: float, t_p: float) -> tuple[tuple[float, float], float, int]:
-    """Errors of steps h1 at t_p/2 and t_p, the observed order, and the steps taken.
-
-    Runs at h1, h1/2 and h1/4: the observed order p_obs = log2(|q₁ − q₂| / |q₂ − q₄|) (clipped to
-    [1, p]) catches order reduction — a kink in a prescribed drive, a contact opening — and the
-    Richardson error is |q₁ − q₂| 2^p_obs/(2^p_obs − 1).
-    """
-    runs = [integrate(problem, spec, h1 / 2**k, t_p, checkpoints=(0.5, 1.0)) for k in range(3)]
-    pk = np.maximum.reduce([r[1] for r in runs])
-    s = problem.system
-    d = [[state_error(s, runs[k][0][j], runs[k + 1][0][j], pk) for j in (0, 1)] for k in (0, 1)]
-    p = spec.order
-    p_obs = math.log2(d[0][1] / d[1][1]) if d[1][1] > 0 and d[0][1] > 0 else p
-    p_obs = min(max(p_obs, 1.0), p)
-    rich = 2**p_obs / (2**p_obs - 1)
-    return (d[0][0] * rich, d[0][1] * rich), p_obs, sum(r[2] for r in runs)
-
-
-def _step_for(accuracy: float, err1: float, h1: float, p: int, h_stab: float, T: float) -> float:
-    """The step for ``accuracy``, never above the pilot's largest step h1: the h^p law was only
-    observed below it (above it a high-order method's error grows faster than h^p)."""
-    h = h1 * (SAFETY * accuracy / err1) ** (1.0 / p) if err1 > 0 else CAP * h_stab
-    return min(max(h, FLOOR * h_stab), CAP * h_stab, h1, T)
+def pilot_window(problem, h: float) -> float:
+    """Duration of a pilot: PILOT_FRACTION of the run, at least PILOT_MIN_STEPS steps and past the drives."""
+    T = problem.duration
+    return min(T, max(PILOT_FRACTION * T, PILOT_MIN_STEPS * h, 1.5 * _drive_end(problem)))
 
 
 def choose(problem, accuracy: float, only: str | None = None) -> Choice:
@@ -219,70 +324,79 @@ def choose(problem, accuracy: float, only: str | None = None) -> Choice:
     if problem.omega_max <= 0:
         raise PlanError("cannot choose a step: the system has no linear frequency (ω_max = 0)")
     T = problem.duration
-    rows, best = [], None
+    rows, best, best_row = [], None, None
     for spec in candidates(problem, only):
-        p = spec.order
         h_stab = stable_step(problem, spec)
         h1 = min(0.5 * h_stab, T / 8)
-        t_p = min(T, max(PILOT_FRACTION * T, PILOT_MIN_STEPS * h1, 1.5 * _drive_end(problem)))
-        errs, p, n_pilot = _pilot_errors(problem, spec, h1, t_p)
-        err1, beta = extrapolate(errs, t_p, T)
+        t_p = pilot_window(problem, h1)
+        t0 = time.perf_counter()
+        err1, p, n_pilot, parts = _pilot_errors(problem, spec, h1, t_p, accuracy)
         h = _step_for(accuracy, err1, h1, p, h_stab, T)
-        h_long = 7 * h / LONG_PILOT_SHARE
-        if t_p < T and h_long <= h1:  # a pilot over all of T costs ≤ LONG_PILOT_SHARE of the run
-            t_p, h1 = T, h_long
-            errs, p, n_long = _pilot_errors(problem, spec, h1, T)
-            n_pilot += n_long
-            err1, beta = errs[1], math.log2(errs[1] / errs[0]) if errs[0] > 0 else 1.0
-            h = _step_for(accuracy, err1, h1, p, h_stab, T)
         predicted = err1 * (h / h1) ** p
         why = "" if predicted <= accuracy else f"even {FLOOR:g} x the stable step is predicted to give {predicted:.2g}"
         uncertain = (f"pilot error {err1:.2g} at {h1 / h:.0f}x the chosen step is outside the h^{p:.1f} regime"
                      if err1 >= SATURATED else "")
         cost = force_evals(spec) * math.ceil(T / h)
-        rows.append(dict(integrator=spec.name, order=spec.order, observed_order=p, dt=h, stable_dt=h_stab, pilot_error=errs[1],
-                         growth=beta, predicted_error=predicted, cost=cost,
-                         pilot_cost=force_evals(spec) * n_pilot,
+        rows.append(dict(integrator=spec.name, order=spec.order, observed_order=p, dt=h, stable_dt=h_stab,
+                         pilot_dt=h1, pilot_wall_s=time.perf_counter() - t0,
+                         pilot_error=err1, amplitude_error=parts.amplitude, speed_error=parts.speed,
+                         predicted_error=predicted, cost=cost, pilot_cost=force_evals(spec) * n_pilot,
                          reachable=not why, why=why, uncertain=uncertain))
-        better = best is None or (rows[-1]["reachable"], -cost) > (best_row["reachable"], -best.cost)
-        if better:
-            best, best_row = Choice(spec.name, h, rows[-1]["predicted_error"], cost, t_p, order=p), rows[-1]
+        if best is None or (rows[-1]["reachable"], -cost) > (best_row["reachable"], -best.cost):
+            best, best_row = Choice(spec.name, h, predicted, cost, t_p, order=p), rows[-1]
     if best is None:
         raise PlanError("no registered integrator can be costed for this scene")
+    if best.dt < 0.5 * best_row["pilot_dt"]:
+        _refine(problem, accuracy, best, best_row)
     best.table = rows
     best.reachable = best_row["reachable"]
     return best
 
 
-@dataclass
-class Check:
-    """Step-doubling (or halving) estimate of the error of a finished run."""
+def _refine(problem, accuracy: float, choice: Choice, row: dict) -> None:
+    """Measure the error at a step predicted far below the pilot's (the pilot's observed order,
+    pre-asymptotic at ½ h_stab, extrapolates pessimistically or optimistically over a large
+    ratio): step doubling at that step over the same window, then the step rescaled by the
+    method's order by at most 2× up or 4× down (``choice`` and ``row`` updated in place)."""
+    spec = INTEGRATORS[choice.integrator]
+    t0 = time.perf_counter()
+    est = estimate(problem, spec, choice.dt, window=choice.pilot_time)
+    p = spec.order
+    h = choice.dt
+    if est.error > 0:
+        h = min(max(h * (SAFETY * accuracy / est.error) ** (1.0 / p), 0.25 * h), 2 * h, row["pilot_dt"])
+    h = max(h, FLOOR * row["stable_dt"])
+    scale = (h / choice.dt) ** p
+    choice.predicted_error, choice.order = est.error * scale, p
+    row.update(dt=h, pilot_dt=choice.dt, observed_order=p, pilot_error=est.error, amplitude_error=est.amplitude,
+               speed_error=est.speed, predicted_error=choice.predicted_error, cost=force_evals(spec) * math.ceil(problem.duration / h),
+               pilot_wall_s=row["pilot_wall_s"] + time.perf_counter() - t0, refined=True)
+    choice.dt, choice.cost = h, row["cost"]
+    choice.reachable = row["reachable"] = choice.predicted_error <= accuracy
+    row["why"] = "" if choice.reachable else (f"the error measured at the smallest step tried is "
+                                              f"{est.error:.2g}, predicted {choice.predicted_error:.2g} at the step used")
 
-    estimate: float
-    companion_dt: float
-    method: str
+
+@dataclass
+class Estimate:
+    """Step-doubling estimate of the error of the reported quantities of a run with step h."""
+
+    error: float
+    amplitude: float
+    speed: float
+    window: float  # nondimensional duration the estimate covers
+    method: str  # 'step doubling on a pilot' or '... over the whole run'
     wall_s: float
 
 
-def check(problem, integrator: str, h: float, t_end: float, q: np.ndarray, order: float | None = None) -> Check:
-    """Error estimate of the final state ``q`` of a run with steps h, from a companion run.
-
-    ``order``: the order observed in the pilot (default: the method's).
-    """
-    import time
-
-    spec = INTEGRATORS[integrator]
-    p = spec.order if order is None else order
-    h_stab = stable_step(problem, spec)
+def estimate(problem, spec, h: float, whole_run: bool = False, window: float | None = None) -> Estimate:
+    """Step doubling at h: traces at h and h/2 over ``pilot_window`` (or the whole run, or
+    ``window``), Richardson with the method's order (module docstring). Costs 3 × window/h steps."""
     t0 = time.perf_counter()
-    if 2 * h <= CAP * h_stab:
-        n2 = max(1, round(t_end / (2 * h)))
-        h2, how = t_end / n2, "step doubling"
-    else:
-        n2 = max(1, round(t_end / (h / 2)))
-        h2, how = t_end / n2, "step halving"
-    q2, _, peaks, _ = integrate(problem, spec, h2, t_end)
-    ratio = (h2 / h) ** p
-    diff = state_error(problem.system, q, q2, peaks)
-    est = diff / abs(ratio - 1.0)  # |q_h − q_h2| ≈ |ratio − 1| err(h)
-    return Check(est, h2, how, time.perf_counter() - t0)
+    t_w = problem.duration if whole_run else window if window is not None else pilot_window(problem, h)
+    n, n_samples = window_grid(t_w, h)
+    a, b = trace(problem, spec, n, t_w, n_samples), trace(problem, spec, 2 * n, t_w, n_samples)
+    d = quantity_error(a, b)
+    amp, speed = richardson(d.amplitude, spec.order), richardson(d.speed, spec.order)
+    how = "step doubling over the whole run" if whole_run else "step doubling on a pilot"
+    return Estimate(max(amp, speed), amp, speed, t_w, how, time.perf_counter() - t0)

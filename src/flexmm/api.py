@@ -62,7 +62,7 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
         if plan.skip_discrete:
             result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=plan.attrs(), log=log)
         else:
-            problem = prepare(plan)
+            problem = prepare(plan, lambda steps, dt_s, n: check_steps(steps, dt_s, n, force_limits))
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
             result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),

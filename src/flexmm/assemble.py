@@ -18,7 +18,7 @@ from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, MODE_FRICTION, SHAPES, Terms, empty_terms
 from flexmm.models import MODELS, System
 from flexmm.models.predeform import INWARD
-from flexmm.stability import omega_max, resolve_dt
+from flexmm.stability import omega_max, reached_state, resolve_dt
 
 
 @dataclass
@@ -401,6 +401,9 @@ def _build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> P
     rest = system.rest_state  # predeformed equilibrium: linearise about it
     q_ref = None if rest is None else np.concatenate([rest, system.q0[rest.size:]])
     w_max = omega_max(system, terms, q_ref)
+    q_hit = reached_state(system, terms, q_ref)  # a striker compresses the lattice: its stiffness there
+    if q_hit is not None:
+        w_max = max(w_max, omega_max(system, terms, q_hit))
     if not math.isfinite(w_max):
         raise SceneError(f"ω_max = {w_max} is not finite: lattice parameters out of floating-point range")
     sc = system.scales

@@ -59,20 +59,152 @@ class RunResult:
         return 0.0 if self.wall_s <= 0 else self.n_steps * self.n_units / self.wall_s
 
     n_units: int = 0
+    #: the run's error estimate and target (dataset attrs ``accuracy_*``), empty without one
+    accuracy: dict = field(default_factory=dict)
+
+    @property
+    def accuracy_missed(self) -> bool:
+        """True when the run's error estimate exceeds its target."""
+        return bool(self.accuracy) and not self.accuracy.get("accuracy_met", 1)
 
 
-def schedule(duration: float, dt: float, n_frames: int, every: float | None) -> tuple[float, list[int]]:
-    """Uniform step ``h ≤ dt`` and the step counts between successive frames."""
+@dataclass(frozen=True)
+class Schedule:
+    """Step and frames of a run: ``h`` the step used, ``chunks`` the steps between successive
+    frames, ``interval`` the frame interval (nondimensional), ``notes`` what was rounded and why."""
+
+    h: float
+    chunks: list[int]
+    interval: float
+    notes: list[str]
+
+    @property
+    def t_end(self) -> float:
+        return self.h * sum(self.chunks)
+
+
+def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, exact: bool = False,
+             time_s: float = 1.0) -> Schedule:
+    """Frames at multiples of the step ``dt`` (the step is never bent to the frames).
+
+    The frame interval (``every`` or duration/(n_frames − 1)) is rounded to the nearest whole
+    number of steps (at least one) and every frame interval is that long; the duration is rounded
+    up to whole frame intervals (so the frame count may differ from ``n_frames`` by the rounding);
+    both roundings are noted (a step the accuracy pilots chose already divides the interval:
+    ``flexmm.prepare``). ``exact=True`` (``output.exact_frame_times``) instead keeps the frame times and takes the largest step ≤ dt that divides the
+    interval (noted when it differs from dt). ``time_s`` only scales the notes to seconds.
+    """
+    asked_every = every is not None
     if every is None:
         every = duration / (n_frames - 1)
-    spf = max(1, math.ceil(every / dt - 1e-9))
-    h = every / spf
-    n_full = int(math.floor(duration / every + 1e-9))
-    chunks = [spf] * n_full
-    rest = duration - n_full * every
-    if rest > 1e-9 * every:
-        chunks.append(max(1, round(rest / h)))
-    return h, chunks
+    notes: list[str] = []
+    if exact:
+        spf = max(1, math.ceil(every / dt - 1e-9))
+        h = every / spf
+        if abs(h - dt) > 1e-9 * dt:
+            notes.append(f"step {dt * time_s:.6g} s reduced to {h * time_s:.6g} s so frames fall on whole steps "
+                         f"({spf} steps per frame interval of {every * time_s:.6g} s)")
+        n_full = int(math.floor(duration / every + 1e-9))
+        chunks = [spf] * n_full
+        rest = duration - n_full * every
+        if rest > 1e-9 * every:
+            chunks.append(max(1, round(rest / h)))
+        return Schedule(h, chunks, every, notes)
+    h = dt
+    n_steps = max(1, math.ceil(duration / h - 1e-9))
+    spf = max(1, round(every / h))  # the frame interval: the nearest whole number of steps
+    interval = spf * h
+    if abs(interval - every) > 1e-9 * every:
+        notes.append(f"frame interval {every * time_s:.6g} s rounded to {interval * time_s:.6g} s "
+                     f"= {spf} steps of {h * time_s:.6g} s (output.exact_frame_times: true keeps the frame "
+                     "times and shortens the step instead)")
+    n_int = max(1, math.ceil(n_steps / spf - 1e-9))  # uniform frames; the run ends on the last one
+    if abs(n_int * spf * h - duration) > 1e-9 * duration:
+        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_int} frame intervals = "
+                     f"{n_int * spf} steps = {n_int * spf * h * time_s:.6g} s")
+    return Schedule(h, [spf] * n_int, interval, notes)
+
+
+#: the step is reduced when it exceeds this fraction of the current state's stable limit ...
+STIFF_TRIGGER = 0.9
+#: ... to at most this fraction of it (frames stay where they were: the step becomes h0/m)
+STIFF_TARGET = 0.7
+#: the checks take at most this share of the time spent advancing (frames are skipped to keep it)
+STIFF_SHARE = 0.05
+STIFF_FLOOR_S = 0.05  # ... or this many seconds in all (a small run checks most frames)
+#: a step reduced more than this many times is a diagnosis, not a run
+STIFF_MAX_REDUCTION = 1000
+
+
+class _StepFollower:
+    """The step follows the stiffness: at every frame, ω_max of the current state
+    (``stability.StiffnessTracker``, warm-started Lanczos); when the step exceeds ``STIFF_TRIGGER``
+    of the state's stable limit, a symplectic method's step is reduced to h0/m ≤ ``STIFF_TARGET``
+    × that limit for the rest of the run (frames keep their times; logged, in attrs), any other
+    fixed-step method stops with a diagnosis (time, step, stable limit). Frames are the cadence
+    (a resolved run changes its stiffness little within a frame interval; each check costs
+    2 × iters force evaluations plus Python overhead), thinned so the checks take at most
+    ``STIFF_SHARE`` of the advancing time (count and seconds reported). Off for adaptive
+    and A-stable methods and with ``solver.allow_unstable``.
+    """
+
+    def __init__(self, problem: Problem, spec, stepper: Stepper, say: Callable[[str], None]):
+        self.problem, self.spec, self.say = problem, spec, say
+        self.h0, self.m = stepper.h, 1
+        self.on = spec.explicit_limit and not problem.scene.solver.allow_unstable and problem.omega_max > 0
+        self.tracker = None
+        if self.on:
+            from flexmm.stability import StiffnessTracker
+
+            self.tracker = StiffnessTracker(problem.system, problem.terms)
+        self.w_top, self.checks, self.reductions = problem.omega_max, 0, 0
+        self.failure = ""
+
+    def chunks(self, chunks):
+        for n in chunks:
+            yield n * self.m
+
+    def check(self, st: Stepper) -> bool:
+        """True to stop the run (failure set)."""
+        if not self.on:
+            return False
+        if self.checks and self.tracker.seconds > max(STIFF_SHARE * st.wall_s, STIFF_FLOOR_S):
+            return False  # over its budget: wait until the run has advanced further
+        w = self.tracker.omega(st.q)
+        self.checks += 1
+        self.w_top = max(self.w_top, w)
+        lim = self.spec.stability_limit / w if w > 0 else math.inf
+        if st.h <= STIFF_TRIGGER * lim:
+            return False
+        ts = self.problem.system.scales.time_s
+        at = (f"at t = {st.t * ts:.6g} s the state's stable limit is {lim * ts:.4g} s "
+              f"(ω_max {w / ts:.4g} rad/s, {w / self.problem.omega_max:.3g} x its value at the start)")
+        m = max(self.m + 1, math.ceil(self.h0 / (STIFF_TARGET * lim)))
+        if not self.spec.symplectic or m > STIFF_MAX_REDUCTION:
+            why = ("it is not symplectic: its step is not changed within a run" if not self.spec.symplectic
+                   else f"the step would have to shrink {m} times")
+            self.failure = (f"stopped: {at}, below the step dt = {st.h * ts:.4g} s of {self.spec.name}, and {why}; "
+                            "use a symplectic method or a smaller solver.dt_s")
+            return True
+        self.m = m
+        st.h = self.h0 / m
+        self.reductions += 1
+        self.say(f"step reduced: {at}; dt {self.h0 * ts:.4g} s -> {st.h * ts:.4g} s (h0/{m}) from here on")
+        return False
+
+    def summary(self) -> None:
+        if self.on and self.checks:
+            ts = self.problem.system.scales.time_s
+            self.say(f"stiffness tracked at {self.checks} frames: largest ω_max {self.w_top / ts:.4g} rad/s "
+                     f"({self.w_top / self.problem.omega_max:.3g} x the start), {self.tracker.seconds:.3f} s")
+
+    def attrs(self, wall: float) -> dict:
+        if not self.on:
+            return {}
+        ts = self.problem.system.scales.time_s
+        return {"dt_min_s": self.h0 / self.m * ts, "step_reductions": self.reductions,
+                "stiffness_checks": self.checks, "stiffness_check_s": self.tracker.seconds,
+                "omega_max_run_rad_s": self.w_top / ts}
 
 
 class _Observer:
@@ -156,7 +288,7 @@ def run_problem(
 ) -> RunResult:
     """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up.
 
-    ``on_finish(q, v, h, say) -> dict`` (if given) sees the final state of a finished run
+    ``on_finish(q, v, h, say, t) -> dict`` (if given) sees the final state of a finished run
     and returns extra attrs (used by flexmm.plan for its accuracy check).
     """
     scene, s = problem.scene, problem.system
@@ -174,9 +306,13 @@ def run_problem(
     every = scene.output.every_s / sc.time_s if scene.output.every_s else None
     if spec.adaptive:  # one call per frame; the method picks its own steps in between
         frame_dt = every if every is not None else problem.duration / (scene.output.n_frames - 1)
-        h, chunks = schedule(problem.duration, frame_dt, scene.output.n_frames, every)
+        plan = schedule(problem.duration, frame_dt, scene.output.n_frames, every, exact=True)
     else:
-        h, chunks = schedule(problem.duration, problem.dt, scene.output.n_frames, every)
+        plan = schedule(problem.duration, problem.dt, scene.output.n_frames, every,
+                        exact=scene.output.exact_frame_times, time_s=sc.time_s)
+    h, chunks = plan.h, plan.chunks
+    for note in plan.notes:
+        say(note)
     n_frames = len(chunks) + 1
     obs = _Observer(problem, run_dir / "dataset.nc", n_frames)
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
@@ -192,6 +328,7 @@ def run_problem(
         + (f", {threads} threads" if threads > 1 else ""))
 
     compile_s = stepper.warm_up()
+    track = _StepFollower(problem, spec, stepper, say)
     obs.frame(stepper)
     prog = _progress(len(chunks), progress)
     write_error: list[tuple[float, OSError]] = []
@@ -203,18 +340,20 @@ def run_problem(
         except OSError as exc:  # disk full, quota, I/O error: stop, keep the frames written
             write_error.append((st.t, exc))
             return True
+        if track.check(st):
+            return True
         if prog:
             prog.advance(prog.task_ids[0])
         elif log is not None and _time.monotonic() - last_line[0] >= PROGRESS_EVERY_S:
             last_line[0] = _time.monotonic()
-            frac = st.t / problem.duration
+            frac = min(st.t / problem.duration, 1.0)
             eta = st.wall_s * (1 - frac) / frac if frac > 0 else float("nan")
             log(f"progress: t = {st.t * sc.time_s:.4g} s of {problem.duration * sc.time_s:.4g} s "
                 f"({100 * frac:.1f} %), {st.steps} steps, {st.wall_s:.0f} s elapsed, ~{eta:.0f} s left")
         return False
 
     try:
-        outcome = stepper.run(chunks, on_frame)
+        outcome = stepper.run(track.chunks(chunks), on_frame)
     finally:
         if prog:
             prog.stop()
@@ -226,6 +365,8 @@ def run_problem(
                   f"({outcome.reason}) with dt = {h * sc.time_s:.4g} s; "
                   f"stable limit {problem.stable_dt * sc.time_s:.4g} s; "
                   f"last good time {outcome.t_good * sc.time_s:.6g} s kept")
+    if track.failure and status == "finished":
+        status, reason = "failed", track.failure
     if write_error:
         t_bad, exc = write_error[0]
         status = "failed"
@@ -241,8 +382,9 @@ def run_problem(
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
     if reason:
         say(reason)
+    track.summary()
     if on_finish is not None and status == "finished":
-        extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say)}
+        extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say, t)}
     counters = stepper.ledger.counters()
     solver_attrs = {"threads": threads, "force_evaluations": counters["force_evaluations"]}
     if spec.adaptive:
@@ -258,10 +400,13 @@ def run_problem(
         "model": s.model,
         "integrator": spec.name,
         "dt_s": h * sc.time_s,
+        "frame_interval_s": plan.interval * sc.time_s,
+        "exact_frame_times": int(bool(scene.output.exact_frame_times)),
         "stable_dt_s": problem.stable_dt * sc.time_s,
         "omega_max_rad_s": problem.omega_max / sc.time_s,
         "n_steps": n_steps,
         **solver_attrs,
+        **track.attrs(wall),
         "compile_time_s": compile_s,
         "wall_time_s": wall,
         "status": status,
@@ -275,4 +420,6 @@ def run_problem(
     }
     path = obs.writer.close(attrs)
     return RunResult(status, reason, path, n_steps, obs.writer.n_written, t * sc.time_s, h * sc.time_s,
-                     problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites)
+                     problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites,
+                     accuracy={k: v for k, v in attrs.items() if k.startswith("accuracy_")
+                               and "accuracy_estimate" in attrs})

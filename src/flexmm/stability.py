@@ -39,11 +39,45 @@ def _contact_stiffness(system: System, terms: Terms) -> list[tuple[int, int, flo
         if p == 1.0:
             out.append((int(i), int(j), float(k)))
             continue
-        # overlap when all striker kinetic energy is stored: ½ M v² = k δ^(p+1)/(p+1)
-        e_kin = 0.5 * system.mass[i] * system.v0[i] ** 2
-        delta = ((p + 1.0) * e_kin / k) ** (1.0 / (p + 1.0)) if e_kin > 0 else 0.0
+        delta = _peak_overlap(system, k, p, int(i))  # all the striker's kinetic energy stored
         out.append((int(i), int(j), float(p * k * delta ** (p - 1.0))))
     return out
+
+
+def _peak_overlap(system: System, k: float, p: float, i: int) -> float:
+    """Overlap of a power-law contact when all the striker's kinetic energy is stored in it:
+    ½ M v² = k δ^(p+1)/(p+1)."""
+    e_kin = 0.5 * system.mass[i] * system.v0[i] ** 2
+    return ((p + 1.0) * e_kin / k) ** (1.0 / (p + 1.0)) if e_kin > 0 else 0.0
+
+
+def reached_state(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> np.ndarray | None:
+    """The compressed state a stiffening striker contact (exponent > 1) drives the lattice to, or None.
+
+    Every longitudinal bond is given the striker's peak overlap δ (energy balance,
+    ``_peak_overlap``): u_m = u_ref,m − d δ (x_m − x_j)/a from the struck site j, d the contact's
+    direction. A lattice whose stiffness vanishes at rest (a Hertz chain: a sonic vacuum) has its
+    fastest mode there, not at rest; for other lattices the uniform compression is a bound on what
+    the wave can reach (docs/physics.md §3).
+    """
+    best = None
+    for (i, j), (k, p, d) in zip(terms.con_ij, terms.con_prm):
+        if p <= 1.0:
+            continue
+        delta = _peak_overlap(system, k, p, int(i))
+        if delta > 0 and (best is None or delta > best[0]):
+            best = (delta, int(j), d)
+    if best is None:
+        return None
+    delta, j, d = best
+    n = system.n_sites
+    f = system.field_index(system.longitudinal_field)
+    if j >= system.ndof or j // n != f or f * n + n > system.ndof:
+        return None
+    x = np.asarray(system.site_coords.get("x", np.arange(n) * system.spacing_m), float)
+    q = np.zeros(system.ndof) if q_ref is None else np.array(q_ref, float)
+    q[f * n : (f + 1) * n] -= d * delta * (x - x[j - f * n]) / system.spacing_m
+    return q
 
 
 def hessian_operator(system: System, terms: Terms, q_ref: np.ndarray | None = None):
@@ -326,3 +360,49 @@ def resolve_dt(spec, w_max: float, solver, time_s: float, rate_limit: float = 0.
     basis = "stable limit" if math.isfinite(stable) else f"2/ω_max ({spec.name} has no stability limit)"
     notes.append(f"dt chosen as {solver.dt_fraction} x {basis} = {dt * time_s:.4g} s")
     return dt, stable, notes
+
+
+class StiffnessTracker:
+    """ω_max of the current state along a run, cheaply: a few Lanczos iterations (``iters``, 2 force
+    evaluations each) on M^{-1/2} K(q) M^{-1/2}, warm-started from the previous top Ritz vector.
+
+    The stiffness changes on the time scale of the motion (a contact closing, a wave front
+    passing), slow against a frame interval of a resolved run, so the top mode of the last frame
+    is a good start and a handful of iterations tracks it (the top Ritz value is a lower bound that
+    the warm start makes tight: tests/integrators/test_stiffness_tracking.py compares it with the
+    dense ω_max). ``seconds`` is the time spent, reported with the run.
+    """
+
+    def __init__(self, system: System, terms: Terms, iters: int = 6, seed: int = 0):
+        self.system, self.terms, self.iters = system, terms, iters
+        self.w = np.sqrt(np.maximum(system.inv_mass, 0.0))
+        self.x = np.random.default_rng(seed).standard_normal(system.ndof) * self.w
+        self.seconds = 0.0
+
+    def omega(self, q: np.ndarray) -> float:
+        import time
+
+        t0 = time.perf_counter()
+        kx = hessian_operator(self.system, self.terms, q)
+        w = self.w
+        n = w.size
+        m = max(2, min(self.iters, int(np.count_nonzero(w))))
+        basis = np.zeros((m, n))
+        alpha, beta = np.zeros(m), np.zeros(m)
+        x = self.x / max(math.sqrt(float(np.sum(self.x * self.x))), 1e-300)
+        k_used = m
+        for k in range(m):
+            basis[k] = x
+            r = w * kx(w * x)
+            alpha[k] = float(np.sum(r * x))
+            r -= basis[: k + 1].T @ (basis[: k + 1] @ r)  # full reorthogonalisation (m is small)
+            beta[k] = math.sqrt(float(np.sum(r * r)))
+            if beta[k] <= 1e-14 * max(abs(alpha[k]), 1e-300):
+                k_used = k + 1
+                break
+            x = r / beta[k]
+        t = np.diag(alpha[:k_used]) + np.diag(beta[: k_used - 1], 1) + np.diag(beta[: k_used - 1], -1)
+        lam, vec = np.linalg.eigh(t)
+        self.x = basis[:k_used].T @ vec[:, -1]
+        self.seconds += time.perf_counter() - t0
+        return float(math.sqrt(max(lam[-1], 0.0)))

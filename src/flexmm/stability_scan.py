@@ -107,11 +107,11 @@ def trial(problem, spec, h: float, *, t_end: float | None = None, growth_thresho
           q0=None, v0=None) -> tuple[bool, float]:
     """(stable, growth per step) of one fixed-step run at step ``h`` (see the module docstring)."""
     if growth_threshold is None:
-        tr = integrate(problem, spec, h=h, t_end=t_end, n_frames=11, q0=q0, v0=v0)
+        tr = integrate(problem, spec, h=h, t_end=t_end, n_frames=11, q0=q0, v0=v0, ledger=False)
         return tr.ok, math.nan
     per_frame = math.ceil(GROWTH_SPAN / growth_threshold / (GROWTH_FRAMES - 1))
     tr = integrate(problem, spec, h=h, t_end=h * per_frame * (GROWTH_FRAMES - 1), n_frames=GROWTH_FRAMES,
-                   q0=q0, v0=v0)
+                   q0=q0, v0=v0, ledger=False)
     if not tr.ok:
         return False, math.inf
     rest = energy(problem, np.zeros_like(tr.q[0]), np.zeros_like(tr.v[0]))

@@ -32,7 +32,7 @@ def test_run_scene_with_each_integrator(name, tmp_path) -> None:
     ds = open_run(result.path)
     assert ds.attrs["integrator"] == name and ds.sizes["time"] == 41
     assert ds.attrs["force_evaluations"] > 0 and ds.attrs["threads"] == 1
-    np.testing.assert_allclose(ds.time.values[-1], 0.01, rtol=1e-9)
+    assert 0.01 * (1 - 1e-9) <= ds.time.values[-1] < 0.01 + ds.attrs["dt_s"]  # whole steps of dt
     # energy ledger: E(t) + dissipated = E(0) to the method's accuracy (no drive)
     e = ds.total_energy.values + ds.dissipated_energy.values
     assert np.max(np.abs(e - e[0])) < 5e-3 * e[0]
@@ -43,8 +43,9 @@ def test_run_scene_with_each_integrator(name, tmp_path) -> None:
 def test_all_integrators_agree_on_the_impact(tmp_path) -> None:
     def final_theta(name, damped):
         solver = {"rtol": 1e-9} if INTEGRATORS[name].adaptive else {"dt_fraction": 0.05}
-        result = run_scene(scene_from_dict(impact_scene(name, damped, **solver)),
-                           run_dir=tmp_path / f"{name}_{damped}")
+        scene = impact_scene(name, damped, **solver)
+        scene["output"]["exact_frame_times"] = True  # compare at the same times: steps fitted to the frames
+        result = run_scene(scene_from_dict(scene), run_dir=tmp_path / f"{name}_{damped}")
         return open_run(result.path).theta.values[-1]
 
     refs = {}

@@ -172,7 +172,7 @@ def test_fused_chain_verlet_equals_unfused(threads, chain, variant) -> None:
     out = _advance(fused, problem, q0, v0, 45)
     assert_same_run(out, ref)
     assert (ref[4][ACC_DISSIPATED] != 0.0) == ("viscous" in variant)
-    assert (ref[4][ACC_WORK] != 0.0) == ("shaker" in variant)
+    assert (ref[4][ACC_WORK] != 0.0) == ("shaker" in variant or variant == "prescribed")  # a prescribed end works too
 
 
 @pytest.mark.parametrize("variant", ["undamped", "shaker+viscous"])

@@ -75,7 +75,8 @@ def test_local_sweep_runs_every_point_and_combines(local_run):
         assert dataset_status(pd / "dataset.nc") == "finished"
         done = json.loads((pd / "done.json").read_text())
         assert done["config_sha256"] == p.hash and done["numba_threads"] == 1
-        assert open_run(pd).attrs["config_sha256"] == p.hash
+        # the point's config as declared (the run's own config is the planned one: its dt chosen)
+        assert open_run(pd).attrs["plan_source_config_sha256"] == p.hash
 
 
 def test_second_run_does_no_work(local_run):

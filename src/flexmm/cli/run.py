@@ -19,6 +19,8 @@ def run(
     force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit or the run "
                                                        "exceeds the memory, output, disk or step limits."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path (no label)."),
+    strict: bool = typer.Option(False, "--strict", help="Exit with status 3 when the run's error estimate "
+                                                         "exceeds its target (solver.accuracy)."),
     fidelity: str = FidelityOption,
     analysis: str = AnalysisOption,
     from_run: str = typer.Option(None, "--from", help="Continue RUN: start from its last frame "
@@ -63,9 +65,31 @@ def run(
     if not result.ok:
         typer.echo(f"status: {result.status}: {result.reason}", err=True)
         raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
+    _print_error_estimate(result.accuracy, quiet)
+    if strict and result.accuracy_missed:
+        raise typer.Exit(EXIT_INACCURATE)
     if quiet:
         return
     _print_summary(result.path, analysis)
+
+
+#: exit status of ``--strict`` when the error estimate exceeds the target
+EXIT_INACCURATE = 3
+
+
+def _print_error_estimate(acc: dict, quiet: bool) -> None:
+    """One line with the run's error estimate (stdout), a warning on stderr when it misses the target."""
+    if not acc:
+        return
+    est, target = acc["accuracy_estimate"], acc.get("accuracy_requested")
+    parts = (f"amplitudes {acc['accuracy_estimate_amplitude']:.2g}, speeds {acc['accuracy_estimate_speed']:.2g}; "
+             if "accuracy_estimate_speed" in acc else "")
+    line = (f"error estimate: {est:.3g} of the wave amplitudes and speeds (target {target:g}; {parts}"
+            f"{acc.get('accuracy_check', '')})")
+    if not quiet:
+        typer.echo(line)
+    if not acc.get("accuracy_met", 1):
+        typer.echo(f"warning: the estimated error {est:.3g} exceeds the target {target:g}", err=True)
 
 
 def _print_summary(path, analysis: str | None = None) -> None:

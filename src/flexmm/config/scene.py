@@ -61,6 +61,10 @@ class RandomRotation(Strict):
 ImperfectionConfig = Annotated[Union[RotationSeed, RandomRotation], Field(discriminator="kind")]
 
 
+#: the default ``solver.accuracy``: relative error of the wave speeds and amplitudes a run
+#: reports (``flexmm.accuracy``), well under 0.1 %
+DEFAULT_ACCURACY = 1e-4
+
 #: integrators with error control (``IntegratorSpec.adaptive``); they take rtol/atol
 ADAPTIVE_INTEGRATORS = frozenset({"dopri5"})
 
@@ -91,11 +95,20 @@ class Solver(Strict):
     threads: int | None = Field(
         None, ge=1, le=1024, description="threads for parallel kernels (default: all cores for ≥ 1e5 units, else 1)"
     )
-    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit")
+    dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit "
+                               "(with solver.accuracy: null; otherwise the accuracy pilots choose dt)")
     duration_s: Positive
     allow_unstable: bool = Field(False, description="run even if dt exceeds the stable limit")
     accuracy: Positive | None = Field(
-        None, lt=1, description="target relative error of the final state: picks integrator and dt (flexmm.plan)"
+        DEFAULT_ACCURACY, lt=1,
+        description="target relative error of the wave speeds and amplitudes the run reports: pilots pick dt "
+        "(and, when the scene sets the target without an integrator, the integrator); an explicit dt_s is honoured "
+        "and its error estimated. Every run stores its estimate. null: no error control (dt = dt_fraction x the "
+        "stable limit, no estimate)",
+    )
+    error_check: Literal["pilot", "run"] = Field(
+        "pilot", description="how the error estimate is made: 'pilot' (step doubling over the pilot window, a "
+        "tenth of the run: ~0.3 runs of cost) or 'run' (step doubling over the whole run after it: ~3 runs of cost)",
     )
 
     @model_validator(mode="after")
@@ -120,6 +133,9 @@ class Output(Strict):
     velocities: bool = True
     every_s: Positive | None = Field(None, description="output interval; default from n_frames")
     n_frames: int = Field(201, ge=2, le=10_000_000)
+    exact_frame_times: bool = Field(
+        False, description="keep frames exactly at every_s (or duration/(n_frames-1)) by shortening the step to "
+        "divide the interval; default: the step is kept and the interval rounded to whole steps (both reported)")
     site_stride: int = Field(1, ge=1)
     energy: bool = True
 

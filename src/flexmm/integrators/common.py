@@ -34,7 +34,7 @@ MODE_FRICTION = 2
 #: Slots of the accumulator ``acc`` every ``advance`` updates (``IntegratorSpec.new_acc`` makes
 #: it: ``ACC_HEADER`` slots, plus the state of an adaptive method; ``Accumulators`` reads it).
 ACC_DISSIPATED = 0  # energy removed by damping, dashpots since t = 0
-ACC_WORK = 1  # work of applied forces (and ground friction) since t = 0
+ACC_WORK = 1  # work of the drives since t = 0: applied forces, ground friction, prescribed displacements
 ACC_FEVALS = 2  # model-force evaluations
 ACC_STEPS = 3  # steps taken (accepted steps for adaptive methods)
 ACC_REJECTED = 4  # rejected steps (adaptive) / Newton iterations (implicit)
@@ -160,11 +160,15 @@ def velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm):
 
 
 @jit
-def applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm):
-    """Power of the applied forces and of ground friction at (v, t) (the 'applied work' rate)."""
+def applied_power(v, f, t, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Power fed in by the drives at (v, t) (the 'applied work' rate): applied forces, ground
+    friction, and prescribed displacements, which work against the force ``f`` the rest of the
+    system exerts on their DOF (−f·v; ``f`` the current total force, v the imposed rate)."""
     power = 0.0
     for d in range(drv_dof.shape[0]):
-        if drv_mode[d] == 1:
+        if drv_mode[d] == 0:
+            power -= f[drv_dof[d]] * v[drv_dof[d]]
+        elif drv_mode[d] == 1:
             g, _ = waveform(drv_shape[d], drv_prm[d], t)
             power += g * v[drv_dof[d]]
         elif drv_mode[d] == 2:
@@ -178,7 +182,7 @@ def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_m
     """Add contact, dashpot, applied and friction forces to ``f``; return the applied power."""
     position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
     velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
-    return applied_power(v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+    return applied_power(v, f, t, drv_dof, drv_mode, drv_shape, drv_prm)
 
 
 @jit

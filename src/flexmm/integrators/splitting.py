@@ -117,9 +117,9 @@ def _kick(v, f, minv, damp, terms, tau, vdep, damped, factors, work):
 
 
 @jit
-def _ledger_rates(v, t, cd, terms, dissipative):
+def _ledger_rates(v, f, t, cd, terms, dissipative):
     diss = damping_power(v, cd, terms.dash_ij, terms.dash_c) if dissipative else 0.0
-    return diss, applied_power(v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    return diss, applied_power(v, f, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
 
 
 def _kick_slots(kicks: tuple) -> tuple[tuple, tuple]:
@@ -174,7 +174,7 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
             for j in range(NSLOT):
                 factors[j, 0], factors[j, 1] = _kick_factors(minv, damp, VALUES[j] * h)
         work = np.empty((6, n if vdep else 0))
-        d0, p0 = _ledger_rates(v, t, cd, terms, dissipative)
+        d0, p0 = _ledger_rates(v, f, t, cd, terms, dissipative)
         if FSAL:
             apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
             model_force(q, args, f)
@@ -197,7 +197,7 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
                 _kick(v, f, minv, damp, terms, KICKS[M] * h, vdep, damped, factors[SLOT[M]], work)
             t += h
             apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-            d1, p1 = _ledger_rates(v, t, cd, terms, dissipative)
+            d1, p1 = _ledger_rates(v, f, t, cd, terms, dissipative)
             acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
             acc[ACC_WORK] += 0.5 * h * (p0 + p1)
             d0, p0 = d1, p1

@@ -26,7 +26,7 @@ from flexmm._signals import signal_of
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
 from flexmm.integrators.parallel import advance_kernel, choose_threads
-from flexmm.integrators.runaway import RunawayGuard
+from flexmm.integrators.runaway import DRIFT_TOL, RunawayGuard, drift_allowance
 from flexmm.models.kernels import model_energy
 
 #: relative tolerance of adaptive integrators when none is given
@@ -61,7 +61,7 @@ class Stepper:
     def __init__(self, spec: IntegratorSpec, system, terms: Terms, damp: np.ndarray, h: float, *,
                  threads: int = 1, q0: np.ndarray | None = None, v0: np.ndarray | None = None,
                  t0: float = 0.0, rtol: float | None = None, atol: float | None = None,
-                 max_step: float | None = None, check_energy: bool = True):
+                 max_step: float | None = None, check_energy: bool = True, drift_tol: float = DRIFT_TOL):
         self.spec, self.system, self.terms, self.damp = spec, system, terms, damp
         self.args = system.args
         self.h = float(h)
@@ -79,7 +79,9 @@ class Stepper:
         apply_prescribed(self.q, self.v, self.t, *terms.drives)
         spec.init(self.args, self.q, self.v, self.t, self.f, terms)
         self.last_energies: tuple[float, float] | None = self.energies()  # of the last checked state
-        self.guard = RunawayGuard(system, terms, sum(self.last_energies))
+        self._held_mass = np.where(system.inv_mass > 0, 0.0, system.mass)
+        e0 = sum(self.last_energies) - 0.5 * float(np.dot(self._held_mass, self.v * self.v))
+        self.guard = RunawayGuard(system, terms, e0, drift_tol)
 
     # -- one call into compiled code -------------------------------------------------------
     def warm_up(self) -> float:
@@ -123,6 +125,12 @@ class Stepper:
             e = sum(self.last_energies)
             if self.guard.runaway(e, self.ledger.work):
                 return "runaway energy"
+            # the ledger is about the DOFs that move freely: a prescribed DOF's imposed motion
+            # is not the system's energy (its work on the rest is in ledger.work)
+            e_free = e - 0.5 * float(np.dot(self._held_mass, self.v * self.v)) if self._held_mass.any() else e
+            why = self.guard.unbalanced(e_free, self.ledger.work, self.ledger.dissipated, self.steps)
+            if why is not None:
+                return why
             self.guard.record(self.steps, e)
         return None
 
@@ -159,19 +167,22 @@ def frame_chunks(t_end: float, h: float, n_frames: int) -> tuple[float, list[int
 def make_stepper(problem, integrator: str | IntegratorSpec | None = None, *, h: float | None = None,
                  rtol: float | None = None, atol: float | None = None, max_step: float | None = None,
                  threads: int | None = None, q0: np.ndarray | None = None, v0: np.ndarray | None = None,
-                 check_energy: bool = True, warm: bool = True) -> Stepper:
+                 check_energy: bool = True, warm: bool = True, drift_tol: float | None = None) -> Stepper:
     """The Stepper of a built problem (``assemble.Problem``).
 
     ``integrator`` defaults to the scene's; ``h`` to the problem's dt (for an adaptive method
     with ``rtol``, h is the interval between calls); ``threads`` None chooses by size
     (``parallel.choose_threads``). ``warm`` compiles before returning, so timings exclude it.
+    ``drift_tol`` the energy-ledger tolerance (default ``runaway.drift_allowance``; inf: off).
     """
     spec = (INTEGRATORS[problem.scene.solver.integrator] if integrator is None
             else INTEGRATORS[integrator] if isinstance(integrator, str) else integrator)
     s = problem.system
     stepper = Stepper(spec, s, problem.terms, problem.damp, problem.dt if h is None else h,
                       threads=choose_threads(s.n_sites, threads), q0=q0, v0=v0, rtol=rtol,
-                      atol=atol, max_step=max_step, check_energy=check_energy)
+                      atol=atol, max_step=max_step, check_energy=check_energy,
+                      drift_tol=drift_allowance(spec, problem.dt if h is None else h, problem.omega_max)
+                      if drift_tol is None else drift_tol)
     if warm:
         stepper.warm_up()
     return stepper

@@ -34,6 +34,7 @@ from flexmm.integrators.common import (
     ACC_WORK,
     ACC_FEVALS,
     ACC_STEPS,
+    MODE_DISPLACEMENT,
     MODE_FORCE,
     MODE_FRICTION,
     _friction,
@@ -136,11 +137,15 @@ def _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g):
 
 
 @jit
-def _applied_power(v, g, drv_dof, drv_mode, drv_prm):
-    """``common.applied_power`` with the applied forces' values g."""
+def _applied_power(v, f, g, drv_dof, drv_mode, drv_prm, prescribed=True):
+    """``common.applied_power`` with the applied forces' values g (``prescribed=False``: without
+    the work of the prescribed displacements, −f·v, for a caller whose ``f`` is not current yet)."""
     power = 0.0
     for d in range(drv_dof.shape[0]):
-        if drv_mode[d] == MODE_FORCE:
+        if drv_mode[d] == MODE_DISPLACEMENT:
+            if prescribed:
+                power -= f[drv_dof[d]] * v[drv_dof[d]]
+        elif drv_mode[d] == MODE_FORCE:
             power += g[d] * v[drv_dof[d]]
         elif drv_mode[d] == MODE_FRICTION:
             vel = v[drv_dof[d]]
@@ -167,7 +172,7 @@ def _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep):
         f_model[:] = f
     _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode)
     velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
-    power = _applied_power(v, g, drv_dof, drv_mode, drv_prm)
+    power = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)
     if vdep:  # re-evaluate velocity-dependent forces at the predicted v'
         for k in range(q.shape[0]):
             v_pred[k] = (v[k] + kick[k] * f[k]) * post[k]
@@ -206,7 +211,7 @@ def verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
     _start(q, v, f, kick, pre, h, damped)
     for s in range(nsteps):
-        power0 = _applied_power(v, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
+        power0 = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         model_force(q, args, f)
@@ -249,7 +254,7 @@ def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
         lo, hi = b * n // nb, (b + 1) * n // nb
         _start(q[lo:hi], v[lo:hi], f[lo:hi], kick[lo:hi], pre[lo:hi], h, damped)
     for s in range(nsteps):
-        power0 = _applied_power(v, g, drv_dof, drv_mode, drv_prm)
+        power0 = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         model_force_parallel(q, args, f)
@@ -400,15 +405,18 @@ def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         xsig = ysig = np.empty(0)
     fkick = _field_kicks(kick, n, damped)
     g = np.zeros(drv_dof.shape[0])  # applied forces at t
+    rate = np.zeros(drv_dof.shape[0])
     _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
     _start(q, v, f, kick, pre, h, damped)
     for s in range(nsteps):
         last = s == nsteps - 1
-        power0 = _applied_power(v, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
+        power0 = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
         t += h
         apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
         _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
-        power = _applied_power(v, g, drv_dof, drv_mode, drv_prm)
+        power = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm, False)  # f is not at t yet
+        for d in range(drv_dof.shape[0]):  # the imposed rates at t, for the prescribed work below
+            rate[d] = v[drv_dof[d]]
         # one sweep: angles and horizontal hinges run ahead (to a row past the vertical block),
         # then the block's vertical hinges, then its sites (all forces in) are kicked and drifted
         carry = (0.0, 0.0, 0.0, 0.0)
@@ -431,6 +439,9 @@ def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
             _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, xs, n, carry, uni, xsig)
         diss += _sheet_sites_step(q, v, f, kick, pre, post, cd, h, n, done, n, last, damped, drv_dof, drv_mode, g,
                                   fkick)
+        for d in range(drv_dof.shape[0]):  # prescribed displacements work against f at t
+            if drv_mode[d] == MODE_DISPLACEMENT:
+                power -= f[drv_dof[d]] * rate[d]
         if damped:
             acc[ACC_DISSIPATED] += h * diss
         acc[ACC_WORK] += 0.5 * h * (power0 + power)

@@ -357,11 +357,11 @@ def _dissipation(vu, vt, cdu, cdt, x, m):
 
 
 @jit
-def _has_force(drives, a, m):
-    """Whether an applied-force drive acts on sites a..a+m−1."""
-    dof, mode, n = drives[0], drives[1], drives[3]
+def _has_drive(drives, a, m):
+    """Whether a drive (applied force or prescribed displacement) acts on sites a..a+m−1."""
+    dof, n = drives[0], drives[3]
     for d in range(dof.shape[0]):
-        if mode[d] == MODE_FORCE and a <= dof[d] % n < a + m:
+        if a <= dof[d] % n < a + m:
             return True
     return False
 
@@ -373,7 +373,7 @@ def _block_body(qu, qt, vu, vt, fou, fot, prm, fac, w, a, m, right, ub, tb, th0_
     ``fac`` = (kick u, kick θ, pre u, pre θ, post u, post θ, c u, c θ), columns or uniform."""
     fr, gbr = chain_block_hinges(qu, qt, prm, w, m, right, ub, tb, th0_next, fl_left, gb_left, with_kg)
     ku, kt, preu, pret, postu, postt, cdu, cdt = fac
-    if not damped and not _has_force(drives, a, m):
+    if not damped and not _has_drive(drives, a, m):
         _force_kick(w[W_FL], w[W_GA], w[W_GB], w[W_FT], qu, qt, vu, vt, ku, kt, h, m, fou, fot, last)
         return fr, gbr, 0.0
     fu, ft = w[W_X], w[W_FT]
@@ -386,6 +386,13 @@ def _block_body(qu, qt, vu, vt, fou, fot, prm, fac, w, a, m, right, ub, tb, th0_
                 fu[i] += gvals[d]
             else:
                 ft[i] += gvals[d]
+    for d in range(dof.shape[0]):  # keep f current on prescribed DOFs: their work is −f·v
+        i = dof[d] % n - a
+        if mode[d] == MODE_DISPLACEMENT and 0 <= i < m:
+            if dof[d] < n:
+                fou[i] = fu[i]
+            else:
+                fot[i] = ft[i]
     diss = 0.0
     if damped:
         diss = _dissipation(vu, vt, cdu, cdt, w[W_Y], m)
@@ -540,10 +547,43 @@ def _ledger(acc, h, damped, diss, p0, p1):
 
 
 @jit
-def _start_drives(drives, t, gvals, state, lo, hi, p0):
-    """Before a step from t: applied-force power at t (v½) on sites lo..hi−1."""
+def _prescribed_power(drives, f, state, lo, hi, out):
+    """Power −f·v of each prescribed displacement on sites lo..hi−1 into out[d]: the work it does
+    against the rest of the chain (``common.applied_power``); ``_block_body`` keeps f current on
+    those DOFs, ``state`` holds site i at index i."""
+    dof, mode, n = drives[0], drives[1], drives[3]
+    for d in range(dof.shape[0]):
+        i = dof[d] % n
+        if mode[d] == MODE_DISPLACEMENT and lo <= i < hi:
+            out[d] = -(f[dof[d]] * state[2 + (0 if dof[d] < n else 1)][i])
+
+
+@jit
+def _hold_rates(drives, state, lo, hi, out):
+    """The imposed rates of the prescribed displacements on sites lo..hi−1 into out[d], right
+    after ``_prescribe`` (``_against`` makes them powers once the step's forces are in)."""
+    dof, mode, n = drives[0], drives[1], drives[3]
+    for d in range(dof.shape[0]):
+        i = dof[d] % n
+        if mode[d] == MODE_DISPLACEMENT and lo <= i < hi:
+            out[d] = state[2 + (0 if dof[d] < n else 1)][i]
+
+
+@jit
+def _against(drives, f, lo, hi, out):
+    """out[d] ← −f·out[d] for the prescribed displacements on sites lo..hi−1 (``_hold_rates``)."""
+    dof, mode, n = drives[0], drives[1], drives[3]
+    for d in range(dof.shape[0]):
+        if mode[d] == MODE_DISPLACEMENT and lo <= dof[d] % n < hi:
+            out[d] = -(f[dof[d]] * out[d])
+
+
+@jit
+def _start_drives(drives, t, gvals, state, f, lo, hi, p0):
+    """Before a step from t: the drives' power at t (v½; f the force at t) on sites lo..hi−1."""
     _drive_values(drives, t, gvals)
     _power(drives, gvals, state, 0, lo, hi, p0)
+    _prescribed_power(drives, f, state, lo, hi, p0)
 
 
 # ------------------------------------------------------------------ time blocks over ranges
@@ -578,19 +618,21 @@ def _range_steps(q, v, f, tables, w, halo, hf, drives, gvals, p0, p1, diss, n, l
     R = (halo[1, 0], halo[1, 1], halo[1, 2], halo[1, 3])
     for s in range(k):
         last = s == last_step
-        _start_drives(drives, t, gvals, G, lo, hi, p0[s])
+        _start_drives(drives, t, gvals, G, f, lo, hi, p0[s])
         t += h
         _prescribe(drives, t, L, wl, wl, lo)
         _prescribe(drives, t, G, 0, lo, hi)
         _prescribe(drives, t, R, hi, hi, wr)
         _drive_values(drives, t, gvals)
         _power(drives, gvals, G, 0, lo, hi, p1[s])
+        _hold_rates(drives, G, lo, hi, p1[s])
         fl, gb = 0.0, 0.0
         if lo > 0:
             fl, gb, _ = _segment(L[0], L[1], L[2], L[3], hf[0], hf[1], wl, wl, lo, q[lo], q[n + lo], True, 0.0, 0.0,
                                  tables, w, h, last, damped, drives, gvals)
         fl, gb, diss[s] = _segment(G[0], G[1], G[2], G[3], f[:n], f[n:], 0, lo, hi, R[0][0], R[1][0], hi < n, fl, gb,
                                    tables, w, h, last, damped, drives, gvals)
+        _against(drives, f, lo, hi, p1[s])
         if hi < n and not last:
             _segment(R[0], R[1], R[2], R[3], hf[0], hf[1], hi, hi, wr, 0.0, 0.0, False, fl, gb, tables, w, h, last,
                      damped, drives, gvals)

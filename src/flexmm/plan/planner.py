@@ -57,6 +57,7 @@ class Plan:
     accuracy: float | None = None
     plan_s: float = 0.0
     built: tuple | None = None  # (scene, system, terms) the domain step built (``built_for``)
+    error_check: str | None = None  # 'pilot' or 'run', once ``flexmm.prepare`` has decided (None: no estimate)
 
     @property
     def skip_discrete(self) -> bool:
@@ -213,7 +214,8 @@ def _accuracy(scene):
     """The accuracy step as planned: pilots choose integrator and dt at run time (``flexmm.prepare``)."""
     target = scene.solver.accuracy
     if scene.solver.dt_s is not None:
-        raise PlanError("solver.accuracy chooses dt: remove solver.dt_s (or solver.accuracy)")
+        return PlanStep("accuracy", "pending", [f"accuracy {target:g}: solver.dt_s = {scene.solver.dt_s:.4g} s "
+                                                f"({scene.solver.integrator}) is honoured and its error estimated"])
     return PlanStep("accuracy", "pending", [f"accuracy {target:g}: integrator and dt chosen by pilot runs "
                                             "before the run (flexmm.prepare)"])
 
