@@ -880,7 +880,7 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
                 old = build_problem(replace_section(plan.scene, "solver", integrator="velocity_verlet", dt_s=None,
                                                     accuracy=None, dt_fraction=old_scene.solver.dt_fraction))
                 T = row["window_s"] / prob.system.scales.time_s
-                n, S = window_grid(T, prob.dt)
+                n, S, T = window_grid(T, prob.dt)
                 ref = trace(prob, spec, n * ref_factor, T, S)
                 row["error_new"] = quantity_error(trace(prob, spec, n, T, S), ref).total
                 n_old = S * max(1, math.ceil(T / (old.dt * S) - 1e-9))
