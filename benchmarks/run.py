@@ -493,7 +493,7 @@ def memory(n_units: int = 1_000_000, duration_s: float = 0.01, n_frames: int = 1
 
 def sheet(target_error: float = 1e-6, repeats: int = 7) -> dict:
     """The 2D target: 40 x 20 sheet to t = 40 with final error ≤ 1e-6; cheapest method found."""
-    from flexmm import workprecision as wp
+    from flexmm.diagnostics import workprecision as wp
     from flexmm.assemble import build_problem
     from flexmm.config import load_scene
     from flexmm.integrators import INTEGRATORS
