@@ -3,7 +3,8 @@
 The Hessian-vector product against the Hessian from second differences of the energy (not of
 the force it differentiates); ω_max, the fastest mode and the warm-started Lanczos against the
 dense mass-weighted eigenproblem, on every model kind's example lattice; the Bloch bands of
-1D and 2D cells against the eigenvalues of finite periodic lattices assembled directly.
+1D and 2D cells (synthetic spring lattices, the rotating-squares sheet's cell, plan.domain's bands)
+against the eigenvalues of finite periodic lattices.
 """
 
 from __future__ import annotations
@@ -12,13 +13,16 @@ import math
 
 import numpy as np
 import pytest
+from conftest import EXAMPLE_LATTICES
 from scipy.linalg import eigh
 
 from flexmm import linalg
 from flexmm._blas import single_blas_thread
 from flexmm.integrators.common import empty_terms
+from flexmm.linear.sheet import squares_cell
 from flexmm.models import MODELS
-from flexmm.stability import dynamical_operator, omega_max, top_mode
+from flexmm.plan.domain import bloch_dispersion
+from flexmm.stability import dynamical_operator, hessian_operator, omega_max, top_mode
 
 H_E = 1e-4  # step of the energy's second differences (model units)
 
@@ -168,3 +172,33 @@ def test_bloch_bands_of_a_2d_cell_are_the_periodic_sheet_spectrum() -> None:
     ks = np.array([[2 * math.pi * a / nx, 2 * math.pi * b / ny] for a in range(nx) for b in range(ny)])
     bands = linalg.bloch_eigen(cell, ks)  # each torus mode appears twice (two sites per cell)
     assert np.sort(bands.ravel()) == pytest.approx(np.repeat(_spectrum(K, mass_site), 2), abs=1e-12)
+
+
+def _periodic_squares_sheet(make_scene, scene_dict, theta0: float, n: int):
+    lattice = dict(EXAMPLE_LATTICES["rotating_squares_sheet"]["theta0-3x4"]["lattice"], n_rows=n, n_cols=n,
+                   theta0_rad=theta0, left="periodic", right="periodic", bottom="periodic", top="periodic")
+    lat = make_scene(scene_dict(lattice)).lattice
+    system = MODELS[lat.kind].build(lat)
+    K = linalg.dense_matrix(hessian_operator(system, empty_terms()), system.ndof)
+    return lat, system, _spectrum(K, system.mass)
+
+
+@pytest.mark.parametrize("theta0", [0.0, 0.2])
+def test_squares_sheet_bloch_cell_gives_the_periodic_sheet_spectrum(theta0, make_scene, scene_dict) -> None:
+    """The two-unit cell of the rotating-squares sheet (linear.sheet) at the wave vectors of a
+    6 × 6 torus: its eigenfrequencies, each twice (k and k + (π, π)/a fold onto the same modes)."""
+    lat, system, lam = _periodic_squares_sheet(make_scene, scene_dict, theta0, 6)
+    h = system.spacing_m / system.scales.length_m
+    ks = np.array([[2 * math.pi * a / (6 * h), 2 * math.pi * b / (6 * h)] for a in range(6) for b in range(6)])
+    bands = np.sort(linalg.bloch_eigen(squares_cell(lat), ks).ravel())
+    np.testing.assert_allclose(bands, np.repeat(lam, 2), rtol=1e-6, atol=1e-7 * lam.max())
+
+
+def test_plan_dispersion_bands_are_periodic_sheet_eigenvalues(make_scene, scene_dict) -> None:
+    """plan.domain's bands along x (k_y = 0) at the torus's k_x are eigenvalues of the periodic sheet."""
+    _, system, lam = _periodic_squares_sheet(make_scene, scene_dict, 0.15, 8)
+    disp = bloch_dispersion(system, empty_terms(), n_k=5)  # k = 0, π/4, …, π: allowed on 8 columns
+    w2 = disp.omega.ravel() ** 2
+    gap = np.min(np.abs(w2[:, None] - lam[None, :]), axis=1)
+    assert np.max(gap) < 1e-6 * lam.max()
+    assert disp.omega.shape == (5, 12) and disp.stable
