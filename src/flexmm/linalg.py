@@ -6,7 +6,7 @@ the fastest mode, ``linear`` and ``plan.domain`` for dispersion.
 
 Hessian-vector product. For a force F = −∇E (or a gradient g = ∇E) the Hessian times x is the
 central difference K x ≈ −(F(q + εx) − F(q − εx)) / 2ε with ε = ``FD_STEP`` / max|x| (error
-O(ε²) from the third derivatives, O(u/ε) from round-off u).
+O(ε²) from the third derivatives, O(u max|F| / ε) from round-off u).
 
 Top eigenvalue. Small symmetric operators are assembled column by column and diagonalised
 densely; larger ones by plain Lanczos (the top Ritz value, a lower bound converging like 1/m² in
