@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from flexmm.linalg import central_difference
 from flexmm.models import laws as lw
 from flexmm.models.base import FieldSpec, GroundFriction, System
 from flexmm.models.mass_kernels import MassArgs, mass_energy, mass_force
@@ -143,7 +144,6 @@ def relax(args: tuple, q: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, flo
     from scipy.optimize import minimize
 
     f = np.zeros_like(q)
-    fp, fm = np.zeros_like(q), np.zeros_like(q)
     work = q.copy()
 
     def energy(y):
@@ -156,17 +156,7 @@ def relax(args: tuple, q: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, flo
         return -f[free]
 
     def hessp(y, p):
-        scale = np.max(np.abs(p))
-        if scale == 0.0:
-            return np.zeros_like(p)
-        eps = 1e-6 / scale
-        base = q.copy()
-        base[free] = y
-        base[free] += eps * p
-        mass_force(base, args, fp)
-        base[free] -= 2 * eps * p
-        mass_force(base, args, fm)
-        return -(fp[free] - fm[free]) / (2 * eps)
+        return central_difference(grad, y, p)
 
     if free.size:
         res = minimize(energy, q[free], jac=grad, hessp=hessp, method="trust-ncg",
