@@ -64,7 +64,7 @@ class Random(Strict):
     std: NonNegative | None = None
     relative_std: NonNegative | None = None
     distribution: Literal["normal", "uniform"] = "normal"
-    seed: int = 0
+    seed: int = Field(0, ge=0)
 
     @model_validator(mode="after")
     def _one(self):
