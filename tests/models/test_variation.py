@@ -20,10 +20,12 @@ M = 0.004  # kg, base site mass of every lattice below
 RIGID = {"a_m": 0.016, "k_long_n_per_m": 7.0e4, "k_shear_n_per_m": 1.3e3, "k_rot_n_m_per_rad": 7e-4,
          "mass_kg": M, "inertia_kg_m2": 9e-8}
 MASSES = {"spacing_m": 0.01, "mass_kg": M, "bond": {"law": "linear", "k_n_per_m": 100.0}, "relax": False}
-#: (rigid lattice, mass lattice) of the same shape: a chain of 10 and a 5-column × 3-row sheet/grid
-SHAPES = {
-    "chain": ({"kind": "rotating_squares_chain", "n_units": 10}, {"kind": "mass_chain", "n_units": 10}),
-    "sheet": ({"kind": "rotating_squares_sheet", "n_rows": 3, "n_cols": 5}, {"kind": "mass_grid", "nx": 5, "ny": 3}),
+#: lattices of the same shape in each family: a chain of 10 and a 5-column × 3-row sheet/grid
+SHAPES = {  # rotating squares, rotating triangles, masses
+    "chain": ({"kind": "rotating_squares_chain", "n_units": 10}, {"kind": "rotating_triangles_chain", "n_units": 10},
+              {"kind": "mass_chain", "n_units": 10}),
+    "sheet": ({"kind": "rotating_squares_sheet", "n_rows": 3, "n_cols": 5},
+              {"kind": "rotating_triangles_sheet", "n_rows": 3, "n_cols": 5}, {"kind": "mass_grid", "nx": 5, "ny": 3}),
 }
 SHARED = {  # mass_kg variations valid on both shapes
     "chain": [
@@ -48,13 +50,15 @@ def _site_masses_kg(lattice: dict) -> np.ndarray:
 
 
 @pytest.mark.parametrize("shape", sorted(SHAPES))
-def test_one_yaml_variation_gives_the_same_values_in_both_families(shape):
-    rigid, masses = SHAPES[shape]
+def test_one_yaml_variation_gives_the_same_values_in_every_family(shape):
+    squares, triangles, masses = SHAPES[shape]
     variation = SHARED[shape]
-    m_rigid = _site_masses_kg({**RIGID, **rigid, "variation": variation})
+    m_squares = _site_masses_kg({**RIGID, **squares, "variation": variation})
+    m_triangles = _site_masses_kg({**RIGID, **triangles, "variation": variation})
     m_masses = _site_masses_kg({**MASSES, **masses, "variation": variation})
-    np.testing.assert_array_equal(m_rigid, m_masses)
-    assert np.ptp(m_rigid) > 0.005  # the variations did act
+    np.testing.assert_array_equal(m_squares, m_masses)
+    np.testing.assert_array_equal(m_triangles, m_masses)
+    assert np.ptp(m_squares) > 0.005  # the variations did act
 
 
 def test_the_values_follow_the_documented_rules_on_a_grid():
@@ -177,3 +181,35 @@ def test_a_bad_entry_is_reported_at_its_file_line_and_field(tmp_path, lattice, e
         load_scene(path)
     assert f"{path}:{line}: lattice.variation.1.{field}:" in str(err.value)
     assert message in str(err.value)
+
+
+def test_a_triangle_hinge_stiffness_variation_reaches_the_energy():
+    """Two triangles, one hinge: scaling its k_l, k_s and k_θ by 3 triples the energy of any state."""
+    def energy(variation):
+        cfg = scene_from_dict({"name": "t", "lattice": {**RIGID, "kind": "rotating_triangles_chain", "n_units": 2,
+                                                        "theta0_rad": 0.1, "variation": variation},
+                               "solver": {"duration_s": 1e-3}}).lattice
+        system = MODELS[cfg.kind].build(cfg)
+        q = np.array([0.0, 0.03, 0.0, -0.02, 0.0, 0.05])  # (u, v, θ) of both, nondimensional
+        return system.energy(q, system.args)
+
+    scaled = [{"kind": "defects", "target": t, "sites": [1], "factor": 3.0}
+              for t in ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad")]
+    base = energy([])
+    assert base > 0
+    assert energy(scaled) == pytest.approx(3.0 * base, rel=1e-12)
+
+
+def test_a_varied_triangle_lattice_gets_no_uniform_bloch_speed():
+    from types import SimpleNamespace
+
+    from flexmm.analysis.predict_triangles import pulse
+
+    def rows(variation):
+        lattice = {**RIGID, "kind": "rotating_triangles_chain", "n_units": 8, "k_shear_n_per_m": 7.0e3,
+                   "k_rot_n_m_per_rad": 0.05, "variation": variation}  # a gapped twist branch
+        scene = scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}})
+        return pulse(SimpleNamespace(scene=lambda: scene), SimpleNamespace(field="u", speed_m_s=1.0))
+
+    assert len(rows([])) == 1
+    assert rows([{"kind": "gradient", "target": "mass_kg", "start": 0.004, "end": 0.008}]) == []
