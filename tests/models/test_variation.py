@@ -152,22 +152,19 @@ def test_interface_bond_across_takes_the_mean():
     np.testing.assert_array_equal(values["k"], [1, 1, 3, 5, 5])
 
 
+_SQUARES_8 = "  kind: rotating_squares_chain\n  n_units: 8\n" + "".join(f"  {k}: {v}\n" for k, v in RIGID.items())
+_MASSES = "  spacing_m: 0.01\n  mass_kg: 0.004\n  bond: {law: linear, k_n_per_m: 100.0}\n"
 BAD = [  # (lattice lines, the bad entry, field reported, message part)
-    ("  kind: rotating_squares_chain\n  n_units: 8\n" + "".join(f"  {k}: {v}\n" for k, v in RIGID.items()),
-     "{kind: gradient, target: mass_kg, start: 1, end: 2, first: 4, last: 9}", "last",
+    (_SQUARES_8, "{kind: gradient, target: mass_kg, start: 1, end: 2, first: 4, last: 9}", "last",
      "a gradient needs first < last < 8"),
-    ("  kind: rotating_squares_chain\n  n_units: 8\n" + "".join(f"  {k}: {v}\n" for k, v in RIGID.items()),
-     "{kind: interface, target: k_rot_n_m_per_rad, position: 8, value: 1}", "position",
+    (_SQUARES_8, "{kind: interface, target: k_rot_n_m_per_rad, position: 8, value: 1}", "position",
      "1 ≤ position ≤ 7"),
-    ("  kind: mass_grid\n  nx: 4\n  ny: 3\n  spacing_m: 0.01\n  mass_kg: 0.004\n"
-     "  bond: {law: linear, k_n_per_m: 100.0}\n",
+    ("  kind: mass_grid\n  nx: 4\n  ny: 3\n" + _MASSES,
      "{kind: defects, target: bond.k_n_per_m, box: [0, 1, 2, 3], value: 1}", "box", "j0 ≤ j1 < 3"),
-    ("  kind: mass_chain\n  n_units: 8\n  spacing_m: 0.01\n  mass_kg: 0.004\n"
-     "  bond: {law: linear, k_n_per_m: 100.0}\n",
-     "{kind: random, target: bond.k9, std: 0.1}", "target", "not a parameter of this lattice"),
-    ("  kind: mass_chain\n  n_units: 8\n  spacing_m: 0.01\n  mass_kg: 0.004\n"
-     "  bond: {law: linear, k_n_per_m: 100.0}\n",
-     "{kind: gradient, target: mass_kg, start: 1, end: 2, axis: y}", "axis", "single row"),
+    ("  kind: mass_chain\n  n_units: 8\n" + _MASSES, "{kind: random, target: bond.k9, std: 0.1}", "target",
+     "not a parameter of this lattice"),
+    ("  kind: mass_chain\n  n_units: 8\n" + _MASSES, "{kind: gradient, target: mass_kg, start: 1, end: 2, axis: y}",
+     "axis", "single row"),
 ]
 
 

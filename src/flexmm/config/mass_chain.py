@@ -227,6 +227,7 @@ class _MassLattice(Strict):
         return [f"{prefix}.{f}" for prefix, law in (("bond", self.bond), ("bond2", self.bond2))
                 if law is not None for f in law_numeric_fields(law)]
 
+
 def law_numeric_fields(law) -> list[str]:
     """Numeric (scalar float) fields of a law config."""
     return [k for k, v in law if isinstance(v, float) and not isinstance(v, bool)]
