@@ -210,3 +210,21 @@ def test_a_varied_triangle_lattice_gets_no_uniform_bloch_speed():
 
     assert len(rows([])) == 1
     assert rows([{"kind": "gradient", "target": "mass_kg", "start": 0.004, "end": 0.008}]) == []
+
+
+def test_the_documented_clamped_ramp_recipe():
+    """docs/scenes.md: base A, an interface at `last` with B, then the gradient A -> B over first..last
+    gives the clamped ramp, on the units and on the hinges (sampled at their midpoints)."""
+    n, first, last = 12, 3, 7
+    i = np.arange(n)
+    values = {"m": np.full(n, 1.0), "k": np.full(n - 1, 1.0)}
+    for t in ("m", "k"):
+        apply_variations(values, [Interface(kind="interface", target=t, position=last, value=2.0),
+                                  Gradient(kind="gradient", target=t, start=1.0, end=2.0, first=first, last=last)],
+                         i, 0 * i, lambda t: (i[:-1], i[1:]) if t == "k" else None)
+
+    def clamped(x):
+        return 1.0 + np.clip((x - first) / (last - first), 0.0, 1.0)
+
+    np.testing.assert_allclose(values["m"], clamped(i), rtol=1e-15)
+    np.testing.assert_allclose(values["k"], clamped(i[:-1] + 0.5), rtol=1e-15)
