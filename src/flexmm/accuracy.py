@@ -3,8 +3,9 @@
 Accuracy is the relative error of the quantities a run reports — how fast waves travel and how
 large they are — not of the final state (whose error grows without bound once a wave field turns
 chaotic after reflections, while the speeds and amplitudes a run measures stay good). Over a
-window [0, T_w] the lattice fields q_f,i(t) − q_f,i(0) are sampled on a fixed time grid
-(``Trace``); against a reference trace q* (a finer step), for each field f
+window [0, T_w] the lattice fields q_f,i(t) − q_f,i(0) — and, for models without rotations, whose
+runs report the strain, the strain q_{i+1} − q_i of the displacement — are sampled on a fixed
+time grid (``Trace``); against a reference trace q* (a finer step), for each field f
 
     amplitude error  e_A = max_i |P_i − P*_i| / max_i P*_i,   P_i = max_t |q_f,i(t) − q_f,i(0)|,
                      over the sites a wave has passed (peak before the window's last tenth, and
@@ -16,7 +17,9 @@ t_i the first time site i reaches half its peak P*_i (linear interpolation betwe
 same grid for both traces, so the interpolation cancels to first order): a wave whose speed is
 off by δc/c arrives at every site late by t δc/c, and e_c = δc/c. Sites below ``SITE_FLOOR`` of
 the field's largest peak (tails ahead of the waves) and sites already displaced at t = 0 are left
-out. err = max_f max(e_A, e_c). Both are intensive — a steady pulse's speed error does not grow
+out, and so is the ``TRIM`` tenth of the sites with the largest deviation (a site at a collision
+or at a snapping threshold has an ill-conditioned timing; an integration error moves every site
+alike). err = max_f max(e_A, e_c). Both are intensive — a steady pulse's speed error does not grow
 along the run — so the window is a pilot of ``PILOT_FRACTION`` of the run (at least
 ``PILOT_MIN_STEPS`` steps and past the drives) and no extrapolation in time is needed.
 
@@ -58,6 +61,7 @@ PILOT_MIN_STEPS = 400
 SAMPLES = 512  # samples of a trace over its window (fewer when the window has fewer steps)
 MAX_SITES = 2048  # sites a trace keeps per field (a larger lattice is sampled at a stride)
 PASSED = 0.9  # a wave has passed a site once the site's |q − q0| is below this fraction of its peak
+TRIM = 0.1  # fraction of sites with the largest deviations left out (``_kept``)
 SITE_FLOOR = 0.2  # sites whose peak is below this fraction of the field's largest are left out
 #: force evaluations per step for methods whose registry entry does not say
 FORCE_EVALS = {"velocity_verlet": 1, "rk4": 4, "pefrl": 4, "forest_ruth": 3, "yoshida4": 3,
@@ -146,8 +150,9 @@ def state_error(system, q: np.ndarray, q_ref: np.ndarray, peaks: np.ndarray) -> 
 
 @dataclass
 class Trace:
-    """The lattice fields' change from t = 0, |q(t) − q(0)|, at ``SAMPLES`` + 1 uniform times of a
-    window: ``x`` (n_samples + 1, n_fields, n_kept_sites), ``dt`` the sample interval."""
+    """The lattice fields' change from t = 0, |q(t) − q(0)| (and the strain's, for models whose
+    runs report it), at ``SAMPLES`` + 1 uniform times of a window: ``x`` (n_samples + 1, fields,
+    n_kept_sites), ``dt`` the sample interval."""
 
     x: np.ndarray
     dt: float
@@ -155,24 +160,50 @@ class Trace:
     finite: bool = True
 
 
+def _sampled(system) -> tuple[np.ndarray, np.ndarray | None]:
+    """Indices into q of the sampled sites of every field (fields × sites), and for a model
+    without rotations — whose runs report the strain of the displacement — the (i, i + 1) pairs
+    of the first field's strain (2 × sites), as ``analysis.fields`` takes it, else None."""
+    n, nf = system.n_sites, len(system.fields)
+    stride = max(1, math.ceil(n / MAX_SITES))
+    sites = np.arange(0, n, stride)
+    idx = np.arange(nf)[:, None] * n + sites[None, :]
+    if any(f.name == "theta" for f in system.fields) or n < 2:
+        return idx, None
+    i = np.minimum(sites, n - 2)
+    return idx, np.stack([i, i + 1])
+
+
 def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
     """Run ``n_steps`` equal steps to ``t_end`` (a multiple of ``n_samples``) and sample every
-    ``n_steps/n_samples`` steps (``Trace``)."""
+    ``n_steps/n_samples`` steps (``Trace``: the fields, and the strain where runs report it)."""
     st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False)
-    n, nf = st.system.n_sites, len(st.system.fields)
-    stride = max(1, math.ceil(n / MAX_SITES))
-    idx = (np.arange(nf)[:, None] * n + np.arange(0, n, stride)[None, :])
-    q0 = st.q[idx].copy()
-    x = np.zeros((n_samples + 1, nf, idx.shape[1]))
+    idx, pairs = _sampled(st.system)
+
+    def values(q: np.ndarray) -> np.ndarray:
+        v = q[idx]
+        return v if pairs is None else np.vstack([v, (q[pairs[1]] - q[pairs[0]])[None, :]])
+
+    x0 = values(st.q)
+    x = np.zeros((n_samples + 1, *x0.shape))
     k = [0]
 
     def sample(s) -> None:
         k[0] += 1
-        x[k[0]] = np.abs(s.q[idx] - q0)
+        x[k[0]] = np.abs(values(s.q) - x0)
 
     out = st.run([n_steps // n_samples] * n_samples, sample)
     ok = out.ok and k[0] == n_samples and bool(np.all(np.isfinite(x)))
     return Trace(x, t_end / n_samples, n_steps, ok)
+
+
+def _kept(dev: np.ndarray) -> np.ndarray:
+    """The sites a measurement keeps: all but the ``TRIM`` fraction with the largest deviation
+    (sites at a collision or a threshold whose timing is ill-conditioned; an integration error
+    moves every site alike, and a measured speed or amplitude is a fit over many sites)."""
+    if dev.size < 1 / TRIM:
+        return np.ones(dev.size, bool)
+    return dev <= np.quantile(dev, 1.0 - TRIM)
 
 
 def _crossings(x: np.ndarray, level: np.ndarray, dt: float) -> np.ndarray:
@@ -226,13 +257,16 @@ def quantity_error(a: Trace, ref: Trace) -> QuantityError:
         x_r = ref.x[:, f, :]
         done = sel & (np.argmax(x_r, axis=0) <= 0.9 * (x_r.shape[0] - 1)) & (x_r[-1] <= PASSED * peak_r[f])
         if np.any(done):
-            e_amp = max(e_amp, float(np.max(np.abs(peak_a[f, done] - peak_r[f, done]))) / top)
+            dev = np.abs(peak_a[f, done] - peak_r[f, done]) / top
+            e_amp = max(e_amp, float(np.max(dev[_kept(dev)])))
         level = 0.5 * peak_r[f, sel]
         t_a = _crossings(a.x[:, f, sel], level, a.dt)
         t_r = _crossings(ref.x[:, f, sel], level, ref.dt)
-        ok = np.isfinite(t_a) & np.isfinite(t_r)
+        ok = np.isfinite(t_a) & np.isfinite(t_r) & (t_r > 0)
         if np.any(ok):
-            e_c = max(e_c, float(np.sum(np.abs(t_a[ok] - t_r[ok]) * t_r[ok]) / np.sum(t_r[ok] ** 2)))
+            dt, tr = np.abs(t_a[ok] - t_r[ok]), t_r[ok]
+            keep = _kept(dt / tr)
+            e_c = max(e_c, float(np.sum(dt[keep] * tr[keep]) / np.sum(tr[keep] ** 2)))
         elif np.any(np.isfinite(t_a) != np.isfinite(t_r)):
             e_c = math.inf  # a wave that reaches sites in one run and not in the other
     return QuantityError(e_amp, e_c)
@@ -338,11 +372,12 @@ def choose(problem, accuracy: float, only: str | None = None, every: float | Non
     if best.dt == best_row["pilot_dt"]:
         best.estimate = pilots[best.integrator]  # measured at the step itself
     else:
-        verify(problem, accuracy, best, best_row, every)
+        verify(problem, accuracy, best, best_row, every, pilots[best.integrator])
     best.predicted_error = best.estimate.error
     best.reachable = best.estimate.error <= accuracy
     if not best.reachable:
-        best_row.update(reachable=False, why=f"the error measured at the step used is {best.estimate.error:.2g}")
+        best_row.update(reachable=False, why=best_row["why"] or f"the error measured at the step used is "
+                        f"{best.estimate.error:.2g}")
     best.table = rows
     return best
 
@@ -351,19 +386,33 @@ def choose(problem, accuracy: float, only: str | None = None, every: float | Non
 VERIFY_TRIES = 3
 
 
-def verify(problem, accuracy: float, choice: Choice, row: dict, every: float | None) -> None:
+def verify(problem, accuracy: float, choice: Choice, row: dict, every: float | None, pilot: Estimate) -> None:
     """Measure the error at the chosen step by step doubling over the pilot window and shorten the
     step until the measurement meets ``accuracy`` (at most ``VERIFY_TRIES`` steps, each as the h^p
-    law asks but between 1.2× and 4× shorter than the last, never below FLOOR × the stable step); a first measurement far below the target tries one step up to 2× longer. The pilot's error at h₁ is often pre-asymptotic, so its h^p extrapolation
-    can be off either way; the estimate stored is the one measured at the step used."""
+    law asks but between 1.2× and 4× shorter than the last, never below FLOOR × the stable step).
+    The pilot's error at h₁ is often pre-asymptotic, so its h^p extrapolation can be off either
+    way; the estimate stored is the one measured at the step used.
+
+    An error that does not halve when the step shrinks is not the integrator's: the measured
+    quantities do not converge (a timing at a threshold or collision that step doubling cannot
+    resolve). Then the longer of the two steps is kept, and the plan says so (``row['why']``),
+    rather than paying for ever smaller steps."""
     spec = INTEGRATORS[choice.integrator]
     p, h = spec.order, choice.dt
     floor = FLOOR * row["stable_dt"]
     t0 = time.perf_counter()
+    prev = (row["pilot_dt"], pilot)
     for k in range(VERIFY_TRIES):
         est = estimate(problem, spec, h, window=choice.pilot_time)
+        if prev[0] > h and est.error > 0.5 * prev[1].error and est.error > accuracy:
+            row["why"] = (f"the error estimate does not shrink with the step ({prev[1].error:.2g} at "
+                          f"{prev[0]:.3g}, {est.error:.2g} at {h:.3g}, nondimensional): what the run reports "
+                          "is not converging in the step (a threshold or a collision)")
+            h, est = prev
+            break
         if est.error <= accuracy or h <= floor or k == VERIFY_TRIES - 1:
             break
+        prev = (h, est)
         law = h * (SAFETY * accuracy / est.error) ** (1.0 / p)
         h = divides(max(min(h / 1.2, law), h / 4, floor), every)
     choice.dt, choice.estimate = h, est

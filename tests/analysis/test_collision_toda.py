@@ -23,7 +23,7 @@ def test_equal_solitons_shift_by_ln_cosh_over_kappa():
 def test_toda_head_on_collision_shifts_match_the_exact_solution(tmp_path):
     k1, k2, a = 1.0, 0.7, 0.01
     sc = scene_from_dict({
-        "name": "toda_collision", "solver": {"duration_s": 1.6, "dt_fraction": 0.05}, "output": {"n_frames": 1601},
+        "name": "toda_collision", "solver": {"duration_s": 1.6, "accuracy": 1e-6}, "output": {"n_frames": 1601},
         "lattice": {"kind": "mass_chain", "n_units": 300, "spacing_m": a, "mass_kg": 0.01,
                     "bond": {"law": "toda", "a_n": 1.0, "b_per_m": 100.0}},
         "initial": {"launch": [{"kind": "toda_soliton", "kappa": k1, "center_site": 60, "direction": 1},
