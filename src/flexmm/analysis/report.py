@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import get_args
 
 from flexmm.analysis.collisions import Collision, find_collisions
 from flexmm.analysis.compare import (
@@ -27,9 +28,11 @@ from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
 from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.analysis.transients import mark_transients
+from flexmm.config.analysis import AnalysisKind
 from flexmm.errors import FlexmmError
 
-KINDS = ("auto", "pulse", "front", "driven", "modes")
+#: the analysis kinds, from the options model (``flexmm.config.analysis``)
+KINDS = get_args(AnalysisKind)
 
 
 class RunNotFound(FlexmmError):
