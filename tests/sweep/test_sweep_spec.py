@@ -260,6 +260,18 @@ def test_cli_reports_errors_with_exit_code_2(tmp_path):
     assert res.exit_code == 2 and "--vary" in res.output
 
 
+def test_cli_validate_checks_the_spec_and_every_point(tmp_path):
+    res = CliRunner().invoke(app, ["validate", str(REPO / "sweeps" / "lego_speed_vs_amplitude.yaml")])
+    assert res.exit_code == 0 and "ok — sweep lego_speed_vs_amplitude: 22 points" in res.output
+    bad_spec = write(tmp_path, f"base: {LEGO}\nvary: {{grid: {{lattice.n_units: [40]}}}}\nanalysis: {{kind: x}}\n")
+    res = CliRunner().invoke(app, ["validate", str(bad_spec)])
+    assert res.exit_code == 2 and f"{bad_spec}:3: analysis.kind: got 'x' (str)" in res.output
+    bad_point = write(tmp_path, f"base: {LEGO}\nvary: {{grid: {{lattice.n_units: [40, 1]}}}}\n", "p.yaml")
+    res = CliRunner().invoke(app, ["validate", str(bad_point)])
+    assert res.exit_code == 2 and f"{bad_point}:2: lattice.n_units: got 1 (int)" in res.output
+    assert "[at point lattice.n_units=1]" in res.output and "Traceback" not in res.output
+
+
 def test_cli_dry_run_lists_points_without_running(tmp_path):
     out = tmp_path / "out"
     res = CliRunner().invoke(app, ["sweep", str(LEGO), "--vary", "excitation.velocity_m_s=1:3:3",

@@ -96,7 +96,7 @@ def _duplicate_keys(node: yaml.Node, path: Path_ = ()) -> list[tuple[Path_, int,
     return out
 
 
-#: a scene file larger than this, or expanding (through YAML aliases) to more values, is refused
+#: a config file larger than this, or expanding (through YAML aliases) to more values, is refused
 MAX_CONFIG_BYTES = 1_000_000
 MAX_CONFIG_NODES = 200_000
 
@@ -124,7 +124,7 @@ def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
     except OSError as exc:
         raise ConfigError([ConfigIssue(src, None, "", f"cannot read file: {exc.strerror}")]) from None
     if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError([ConfigIssue(src, None, "", f"file of {len(raw):,} bytes; a scene config is at most "
+        raise ConfigError([ConfigIssue(src, None, "", f"file of {len(raw):,} bytes; a config file is at most "
                                                       f"{MAX_CONFIG_BYTES:,} (is this the right file?)")])
     try:
         text = raw.decode("utf-8")
@@ -145,7 +145,7 @@ def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
         what = getattr(exc, "problem", None) or str(exc)
         raise ConfigError([ConfigIssue(src, line, "", f"invalid YAML: {what}")]) from None
     if not isinstance(data, dict):
-        raise ConfigError([ConfigIssue(src, 1, "", "expected a mapping of sections (name, lattice, ...)")])
+        raise ConfigError([ConfigIssue(src, 1, "", "expected a mapping of sections (a scene: name, lattice, ...; a sweep spec: base, vary, ...)")])
     dups = _duplicate_keys(node)
     if dups:
         raise ConfigError([ConfigIssue(src, line, ".".join(map(str, keys)), f"duplicate key (first given at line {first})")

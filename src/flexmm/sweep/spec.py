@@ -211,6 +211,11 @@ def _check_axes(axes: tuple[Axis, ...], mode: str, source: str, line: int | None
         raise ConfigError(issues)
 
 
+def is_sweep_spec(data: dict) -> bool:
+    """True if a YAML file's data is a sweep spec (it has ``base`` or ``vary``), not a scene."""
+    return "vary" in data or "base" in data
+
+
 def load_sweep(path: str | Path, *, overrides: list[str] | None = None) -> SweepSpec:
     """Read a sweep YAML file (a ``SweepFile``, see the module docstring); one ConfigError with
     file:line, field and what was expected for every problem of the spec and its base file."""
