@@ -48,7 +48,7 @@ from flexmm.config.loader import (
     validate,
 )
 from flexmm.config.scene import Scene
-from flexmm.config.sweep import INLINE_FORMS, SweepFile, VaryValues
+from flexmm.config.sweep import INLINE_FORMS, SweepFile, Vary, VaryValues
 from flexmm.io.provenance import config_hash
 
 
@@ -189,26 +189,16 @@ def spec_from_scene(config: str | Path, vary: list[str], *, zip_axes: bool = Fal
     if not axes:
         raise ConfigError([ConfigIssue("--vary", None, "", "give at least one --vary PATH=VALUES")])
     mode = "zip" if zip_axes else "grid"
-    _check_axes(axes, mode, "--vary")
+    twice = sorted({a.path for a in axes if sum(b.path == a.path for b in axes) > 1})
+    if twice:
+        raise ConfigError([ConfigIssue("--vary", None, p, "varied twice") for p in twice])
+    # the rules on the set of axes (zipped lists of equal lengths) are those of a sweep file's vary:
+    validate(Vary, {mode: {a.path: {"values": list(a.values)} for a in axes}}, source="--vary")
     scene_name = data.get("name") if isinstance(data.get("name"), str) else Path(config).stem
     return SweepSpec(
         name=name or f"{scene_name}_sweep", source=str(config), base_data=data, base_lines=lines,
         base_source=str(config), axes=axes, mode=mode, fixed=_fixed_from_strings(overrides or []),
     )
-
-
-def _check_axes(axes: tuple[Axis, ...], mode: str, source: str, line: int | None = None) -> None:
-    issues = []
-    seen = set()
-    for a in axes:
-        if a.path in seen:
-            issues.append(ConfigIssue(source, line, a.path, "varied twice"))
-        seen.add(a.path)
-    if mode == "zip" and len({len(a.values) for a in axes}) > 1:
-        lens = ", ".join(f"{a.path}: {len(a.values)}" for a in axes)
-        issues.append(ConfigIssue(source, line, "vary.zip", f"zipped lists must have equal lengths (got {lens})"))
-    if issues:
-        raise ConfigError(issues)
 
 
 def is_sweep_spec(data: dict) -> bool:
