@@ -1,7 +1,10 @@
-"""Read a scene from YAML, apply ``--set`` overrides, validate, and report errors by file:line.
+"""Read configs from YAML, apply ``--set`` overrides, validate, and report errors by file:line.
 
-Every error names the file and line, the dotted field path, what was given and what was
-expected; the CLI prints them and exits with status 2 (no traceback).
+One loader for every config of flexmm: scenes, sweep specs (``config.sweep``), design and fit
+specs, and analysis options given on the command line (``config.analysis``) are Pydantic models
+validated by ``validate``. Every error names the file and line (or the option the value came
+from), the dotted field path, what was given and what was expected (an unknown key: the keys
+expected there); the CLI prints them and exits with status 2 (no traceback).
 """
 
 from __future__ import annotations
