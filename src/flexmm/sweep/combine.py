@@ -24,6 +24,7 @@ from flexmm.sweep.observe import OBSERVABLES
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
 
+
 def parameter_units(path: str) -> str:
     """Units of a config field from its unit-suffixed name ('' if it has none)."""
     return units_from_name(path.rsplit(".", 1)[-1]) or ""
