@@ -193,8 +193,7 @@ def analyze(
             console.print(f"[bold yellow]{r}: PARTIAL[/] {note}: measured on the frames it kept")
             errors.append({"run": str(r), "error": f"partial: {note}"})
         try:
-            res = report.analyze_run(r, field_spec=options.field, kind=options.kind, row=options.row,
-                                     threshold_fraction=options.threshold_fraction, jump=options.jump)
+            res = report.analyze_with(r, options)
         except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups,
                 report.RestStateMissing) as exc:
             if quiet:

@@ -70,13 +70,13 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
 
 
 def _full(path, kind: str, opts) -> dict:
-    from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound, analyze_run
+    from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound
     from flexmm.analysis.oblique import NoWaveGroups
+    from flexmm.analysis.report import analyze_with
     from flexmm.analysis.summary import principal
 
     try:
-        a = analyze_run(path, field_spec=opts.field, kind=kind, row=opts.row,
-                        threshold_fraction=opts.threshold_fraction, jump=opts.jump)
+        a = analyze_with(path, opts.model_copy(update={"kind": kind}))
     except (PulseNotFound, FrontNotFound, NotDriven, NoWaveGroups, FieldError) as exc:
         return _nan_result(kind, opts.field or "", "", f"no {kind}: {exc}")
     out = _nan_result(a.kind, a.view.spec, a.view.units, "")
