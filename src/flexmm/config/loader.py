@@ -319,8 +319,14 @@ def _issue(err: dict, data: dict, lines: dict, source: str, root: type[BaseModel
 def validation_issues(exc: ValidationError, data: dict, lines: dict, source: str,
                       root: type[BaseModel] | None = None) -> list[ConfigIssue]:
     """The file:line issues of a pydantic ValidationError of any config read with ``read_yaml``;
-    ``root``: the model validated (unknown keys then list the keys expected there)."""
-    return [_issue(e, data, lines, source, root) for e in exc.errors()]
+    ``root``: the model validated (unknown keys then list the keys expected there). In the
+    order of the file's lines (then those given elsewhere, e.g. by --set)."""
+    return in_line_order([_issue(e, data, lines, source, root) for e in exc.errors()])
+
+
+def in_line_order(issues: list[ConfigIssue]) -> list[ConfigIssue]:
+    """Issues sorted by line (stable), those without one (--set, options) last."""
+    return sorted(issues, key=lambda i: (i.line is None, i.line or 0))
 
 
 M = TypeVar("M", bound=BaseModel)

@@ -42,6 +42,7 @@ from flexmm.config.loader import (
     ConfigError,
     ConfigIssue,
     apply_overrides,
+    in_line_order,
     parse_overrides,
     read_yaml,
     scene_from_dict,
@@ -218,7 +219,7 @@ def load_sweep(path: str | Path, *, overrides: list[str] | None = None) -> Sweep
         issues += exc.issues
     base_data, base_lines, base_source = _base(data.get("base"), lines, Path(path), issues)
     if issues:
-        raise ConfigError(issues)
+        raise ConfigError(in_line_order(issues))
     mode = spec.vary.mode
     axes = tuple(Axis(key, vals.expand(), f"{src}:{_line(lines, ('vary', mode, key))}", vals.scale)
                  for key, vals in spec.vary.axes.items())
