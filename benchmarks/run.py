@@ -493,7 +493,7 @@ def memory(n_units: int = 1_000_000, duration_s: float = 0.01, n_frames: int = 1
 
 def sheet(target_error: float = 1e-6, repeats: int = 7) -> dict:
     """The 2D target: 40 x 20 sheet to t = 40 with final error ≤ 1e-6; cheapest method found."""
-    from flexmm import workprecision as wp
+    from flexmm.diagnostics import workprecision as wp
     from flexmm.assemble import build_problem
     from flexmm.config import load_scene
     from flexmm.integrators import INTEGRATORS
@@ -880,7 +880,7 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
                 old = build_problem(replace_section(plan.scene, "solver", integrator="velocity_verlet", dt_s=None,
                                                     accuracy=None, dt_fraction=old_scene.solver.dt_fraction))
                 T = row["window_s"] / prob.system.scales.time_s
-                n, S = window_grid(T, prob.dt)
+                n, S, T = window_grid(T, prob.dt)
                 ref = trace(prob, spec, n * ref_factor, T, S)
                 row["error_new"] = quantity_error(trace(prob, spec, n, T, S), ref).total
                 n_old = S * max(1, math.ceil(T / (old.dt * S) - 1e-9))

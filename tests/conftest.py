@@ -125,6 +125,12 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
         "negative-theta0-periodic": {"lattice": dict(_TRI, kind="rotating_triangles_chain", n_units=6,
                                                      theta0_rad=-0.35, left="periodic", right="periodic"),
                                      "translation_invariant": True},
+        "varied": {"lattice": dict(_TRI, kind="rotating_triangles_chain", n_units=7, theta0_rad=0.2, variation=[
+            {"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 0.02, "end": 0.08},
+            {"kind": "interface", "target": "k_long_n_per_m", "position": 4, "value": 9.0e4},
+            {"kind": "defects", "target": "k_shear_n_per_m", "sites": [3], "factor": 3.0},
+            {"kind": "random", "target": "mass_kg", "relative_std": 0.1, "seed": 2}]),
+                   "translation_invariant": True},
     },
     "rotating_triangles_sheet": {
         "theta0-3x4": {"lattice": dict(_TRI, kind="rotating_triangles_sheet", n_rows=3, n_cols=4, theta0_rad=0.25),
@@ -132,6 +138,12 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
         "periodic-4x4": {"lattice": dict(_TRI, kind="rotating_triangles_sheet", n_rows=4, n_cols=4, theta0_rad=-0.1,
                                          left="periodic", right="periodic", bottom="periodic", top="periodic"),
                          "translation_invariant": True},
+        "varied-3x4": {"lattice": dict(_TRI, kind="rotating_triangles_sheet", n_rows=3, n_cols=4, theta0_rad=0.25,
+                                       variation=[
+            {"kind": "gradient", "target": "k_long_n_per_m", "start": 6e4, "end": 9e4, "axis": "y"},
+            {"kind": "defects", "target": "inertia_kg_m2", "box": [1, 2, 0, 1], "factor": 2.0},
+            {"kind": "random", "target": "k_rot_n_m_per_rad", "std": 0.005, "seed": 1}]),
+                       "translation_invariant": True},
     },
     "bistable_linkage": {
         "six-bars": {

@@ -5,7 +5,7 @@ On small matrices the threads cost far more than they save, and more still on a 
 where they spin-wait for cores that other work holds. A 400 × 400 ``numpy.linalg.eigvalsh``
 on a 2-core machine with two busy processes beside it (61 calls): median 26 ms, worst 4.3 s
 with the default two threads; median 18 ms, worst 34 ms on one thread.
-flexmm's dense problems are small (the dynamical matrix up to ``stability.DENSE_LIMIT`` DOFs,
+flexmm's dense problems are small (the dynamical matrix up to ``linalg.DENSE_LIMIT`` DOFs,
 Bloch matrices of a cell, least-squares lines), so they run on one BLAS thread::
 
     from flexmm._blas import single_blas_thread

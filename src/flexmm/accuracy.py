@@ -20,20 +20,20 @@ out. err = max_f max(e_A, e_c). Both are intensive — a steady pulse's speed er
 along the run — so the window is a pilot of ``PILOT_FRACTION`` of the run (at least
 ``PILOT_MIN_STEPS`` steps and past the drives) and no extrapolation in time is needed.
 
-For a method of order p, err(h) ≈ C h^p. A pilot runs each candidate at h₁ = ½ h_stab and h₁/2
-(and h₁/4 unless the error is already far below the target): the observed order p (≤ the
-method's: a kink in a drive reduces it) and Richardson give err(h₁) ≈ d(h₁, h₁/2) 2^p/(2^p − 1),
-d the error of one trace against the other, and
+For a method of order p, err(h) ≈ C h^p. A pilot runs each candidate at h₁ = h_stab/3 (``PILOT_STEP``) and h₁/2
+over the window; Richardson gives err(h₁) ≈ d(h₁, h₁/2) 2^p/(2^p − 1), d the error of one trace
+against the other (``estimate``), and
 
     h = h₁ (S · accuracy / err(h₁))^{1/p},   S = SAFETY,
 
-between FLOOR × the stable step h_stab = stability_limit/ω_max and h₁ (no extrapolation to steps
-larger than the pilot's: a sixth-order method's error grows faster than h^6 there). If even
-FLOOR·h_stab is predicted to miss, the plan says the accuracy is out of reach; if the pilot's
-error is O(1) (no h^p regime) it says the prediction is uncertain. The cost of a method is its
-force evaluations per step × T/h; the cheapest wins. ``estimate`` is the same step doubling at a
-given step (the error estimate stored in every dataset), over the pilot window or, with
-``solver.error_check: run``, over the whole run.
+between FLOOR × the stable step h_stab = stability_limit/ω_max and min(2 h₁, CAP × h_stab),
+shortened so that it divides the frame interval. The cost of a method
+is its force evaluations per step × T/h; the cheapest wins. At h₁ the error is often not
+yet in its h^p regime (a kink in a drive lowers the order, high-frequency content raises the
+apparent one), so a step other than h₁ is measured again by the same step doubling (``verify``)
+and shortened until the measurement meets the target: the estimate every dataset stores is the one
+measured at the step used. If even FLOOR·h_stab misses, the plan says the accuracy is out of
+reach. With ``solver.error_check: run`` the estimate covers the whole run instead of the window.
 """
 
 from __future__ import annotations
@@ -49,6 +49,7 @@ from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.stepper import make_stepper
 
 SAFETY = 0.3
+PILOT_STEP = 1 / 3  # the pilot's step as a fraction of the stable step (near where a 4th-order method lands)
 CAP = 0.8  # largest step as a fraction of the linear stability limit
 FLOOR = 1e-3  # smallest step as a fraction of it (an accuracy out of reach is reported, not chased)
 SATURATED = 0.1  # a pilot error this large is outside the h^p regime: the prediction is uncertain
@@ -58,7 +59,6 @@ SAMPLES = 512  # samples of a trace over its window (fewer when the window has f
 MAX_SITES = 2048  # sites a trace keeps per field (a larger lattice is sampled at a stride)
 PASSED = 0.9  # a wave has passed a site once the site's |q − q0| is below this fraction of its peak
 SITE_FLOOR = 0.2  # sites whose peak is below this fraction of the field's largest are left out
-SKIP_ORDER_RUN = 0.01  # no h1/4 pilot run when err(h1) is below this fraction of the target
 #: force evaluations per step for methods whose registry entry does not say
 FORCE_EVALS = {"velocity_verlet": 1, "rk4": 4, "pefrl": 4, "forest_ruth": 3, "yoshida4": 3,
                "suzuki5": 5, "omelyan_pefrl": 4}
@@ -238,11 +238,13 @@ def quantity_error(a: Trace, ref: Trace) -> QuantityError:
     return QuantityError(e_amp, e_c)
 
 
-def window_grid(t_end: float, h: float) -> tuple[int, int]:
-    """(steps, samples) for a window: samples ≤ SAMPLES, steps a multiple of them with step ≤ h."""
-    n_samples = max(1, min(SAMPLES, math.ceil(t_end / h - 1e-9)))
-    per = max(1, math.ceil(t_end / (h * n_samples) - 1e-9))
-    return per * n_samples, n_samples
+def window_grid(t_end: float, h: float) -> tuple[int, int, float]:
+    """(steps, samples, window) for steps of exactly h covering at least ``t_end``: at most
+    SAMPLES samples, every ``steps/samples`` steps (the window is rounded up to whole samples)."""
+    n = max(1, math.ceil(t_end / h - 1e-9))
+    per = max(1, math.ceil(n / SAMPLES))
+    n_samples = max(1, math.ceil(n / per))
+    return per * n_samples, n_samples, per * n_samples * h
 
 
 def richardson(d: float, p: float) -> float:
@@ -250,31 +252,11 @@ def richardson(d: float, p: float) -> float:
     return d * 2**p / (2**p - 1)
 
 
-def _pilot_errors(problem, spec, h1: float, t_p: float, accuracy: float) -> tuple[float, float, int, QuantityError]:
-    """Error of steps h1 over [0, t_p], the observed order, the steps taken, and the components.
-
-    Runs at h1 and h1/2 and, unless err(h1) is far below ``accuracy``, h1/4: the observed order
-    p_obs = log2(d(h1, h1/2) / d(h1/2, h1/4)) (clipped to [1, p]) catches order reduction — a kink
-    in a prescribed drive, a contact opening."""
-    n1, n_samples = window_grid(t_p, h1)
-    runs = [trace(problem, spec, n1 * 2**k, t_p, n_samples) for k in range(2)]
-    p = spec.order
-    d1 = quantity_error(runs[0], runs[1])
-    if richardson(d1.total, p) > SKIP_ORDER_RUN * accuracy:
-        runs.append(trace(problem, spec, n1 * 4, t_p, n_samples))
-        d2 = quantity_error(runs[1], runs[2]).total
-        if d1.total > 0 and d2 > 0 and math.isfinite(d1.total / d2):
-            p = min(max(math.log2(d1.total / d2), 1.0), p)
-    rich = 2**p / (2**p - 1)
-    parts = QuantityError(d1.amplitude * rich, d1.speed * rich)
-    return parts.total, p, sum(r.steps for r in runs), parts
-
-
 def _step_for(accuracy: float, err1: float, h1: float, p: float, h_stab: float, T: float) -> float:
-    """The step for ``accuracy``, never above the pilot's largest step h1: the h^p law was only
-    observed below it (above it a high-order method's error grows faster than h^p)."""
-    h = h1 * (SAFETY * accuracy / err1) ** (1.0 / p) if err1 > 0 else CAP * h_stab
-    return min(max(h, FLOOR * h_stab), CAP * h_stab, h1, T)
+    """The step for ``accuracy`` by the h^p law from the pilot's error at h1: at most 2 h1 (the law
+    is trusted over a small ratio only, and ``verify`` measures the result) and CAP × h_stab."""
+    h = h1 * (SAFETY * accuracy / err1) ** (1.0 / p) if err1 > 0 else 2 * h1
+    return min(max(h, FLOOR * h_stab), CAP * h_stab, 2 * h1, T)
 
 
 @dataclass
@@ -287,8 +269,9 @@ class Choice:
     cost: float  # force evaluations for the whole run
     pilot_time: float  # nondimensional duration of the pilot
     table: list[dict] = field(default_factory=list)  # one row per candidate
-    reachable: bool = True  # False: even the smallest step allowed is predicted to miss
-    order: float = 2.0  # order observed in the pilot (≤ the method's)
+    reachable: bool = True  # False: even the smallest step allowed misses
+    order: float = 2.0  # the method's order
+    estimate: Estimate | None = None  # step doubling measured at ``dt`` (``verify``)
 
 
 def _drive_end(problem) -> float:
@@ -319,62 +302,74 @@ def pilot_window(problem, h: float) -> float:
     return min(T, max(PILOT_FRACTION * T, PILOT_MIN_STEPS * h, 1.5 * _drive_end(problem)))
 
 
-def choose(problem, accuracy: float, only: str | None = None) -> Choice:
-    """Cheapest (integrator, dt) expected to meet ``accuracy`` (see module docstring)."""
+def divides(h: float, every: float | None) -> float:
+    """The largest step ≤ h that divides the frame interval ``every`` (h itself without one)."""
+    return every / math.ceil(every / h - 1e-9) if every is not None and every > h else h
+
+
+def choose(problem, accuracy: float, only: str | None = None, every: float | None = None) -> Choice:
+    """Cheapest (integrator, dt) that meets ``accuracy`` (module docstring); ``every`` the frame
+    interval the step must divide (nondimensional; None: any step)."""
     if problem.omega_max <= 0:
         raise PlanError("cannot choose a step: the system has no linear frequency (ω_max = 0)")
     T = problem.duration
-    rows, best, best_row = [], None, None
+    rows, best, best_row, pilots = [], None, None, {}
     for spec in candidates(problem, only):
         h_stab = stable_step(problem, spec)
-        h1 = min(0.5 * h_stab, T / 8)
+        h1 = divides(min(PILOT_STEP * h_stab, T / 8), every)
         t_p = pilot_window(problem, h1)
         t0 = time.perf_counter()
-        err1, p, n_pilot, parts = _pilot_errors(problem, spec, h1, t_p, accuracy)
-        h = _step_for(accuracy, err1, h1, p, h_stab, T)
-        predicted = err1 * (h / h1) ** p
-        why = "" if predicted <= accuracy else f"even {FLOOR:g} x the stable step is predicted to give {predicted:.2g}"
-        uncertain = (f"pilot error {err1:.2g} at {h1 / h:.0f}x the chosen step is outside the h^{p:.1f} regime"
-                     if err1 >= SATURATED else "")
+        est1 = estimate(problem, spec, h1, window=t_p)
+        p = spec.order
+        h = divides(_step_for(accuracy, est1.error, h1, p, h_stab, T), every)
+        predicted = est1.error * (h / h1) ** p
         cost = force_evals(spec) * math.ceil(T / h)
-        rows.append(dict(integrator=spec.name, order=spec.order, observed_order=p, dt=h, stable_dt=h_stab,
-                         pilot_dt=h1, pilot_wall_s=time.perf_counter() - t0,
-                         pilot_error=err1, amplitude_error=parts.amplitude, speed_error=parts.speed,
-                         predicted_error=predicted, cost=cost, pilot_cost=force_evals(spec) * n_pilot,
-                         reachable=not why, why=why, uncertain=uncertain))
-        if best is None or (rows[-1]["reachable"], -cost) > (best_row["reachable"], -best.cost):
+        pilots[spec.name] = est1
+        rows.append(dict(integrator=spec.name, order=p, dt=h, stable_dt=h_stab, pilot_dt=h1, pilot_error=est1.error,
+                         amplitude_error=est1.amplitude, speed_error=est1.speed, predicted_error=predicted,
+                         cost=cost, pilot_cost=force_evals(spec) * 3 * math.ceil(t_p / h1),
+                         pilot_wall_s=time.perf_counter() - t0, reachable=True, why="",
+                         uncertain=(f"pilot error {est1.error:.2g} at {h1 / h:.0f}x the chosen step is outside "
+                                    f"the h^{p} regime" if est1.error >= SATURATED else "")))
+        if best is None or cost < best.cost:
             best, best_row = Choice(spec.name, h, predicted, cost, t_p, order=p), rows[-1]
     if best is None:
         raise PlanError("no registered integrator can be costed for this scene")
-    if best.dt < 0.5 * best_row["pilot_dt"]:
-        _refine(problem, accuracy, best, best_row)
+    if best.dt == best_row["pilot_dt"]:
+        best.estimate = pilots[best.integrator]  # measured at the step itself
+    else:
+        verify(problem, accuracy, best, best_row, every)
+    best.predicted_error = best.estimate.error
+    best.reachable = best.estimate.error <= accuracy
+    if not best.reachable:
+        best_row.update(reachable=False, why=f"the error measured at the step used is {best.estimate.error:.2g}")
     best.table = rows
-    best.reachable = best_row["reachable"]
     return best
 
 
-def _refine(problem, accuracy: float, choice: Choice, row: dict) -> None:
-    """Measure the error at a step predicted far below the pilot's (the pilot's observed order,
-    pre-asymptotic at ½ h_stab, extrapolates pessimistically or optimistically over a large
-    ratio): step doubling at that step over the same window, then the step rescaled by the
-    method's order by at most 2× up or 4× down (``choice`` and ``row`` updated in place)."""
+#: steps tried by ``verify`` before the accuracy is reported out of reach
+VERIFY_TRIES = 3
+
+
+def verify(problem, accuracy: float, choice: Choice, row: dict, every: float | None) -> None:
+    """Measure the error at the chosen step by step doubling over the pilot window and shorten the
+    step until the measurement meets ``accuracy`` (at most ``VERIFY_TRIES`` steps, each as the h^p
+    law asks but between 1.2× and 4× shorter than the last, never below FLOOR × the stable step); a first measurement far below the target tries one step up to 2× longer. The pilot's error at h₁ is often pre-asymptotic, so its h^p extrapolation
+    can be off either way; the estimate stored is the one measured at the step used."""
     spec = INTEGRATORS[choice.integrator]
+    p, h = spec.order, choice.dt
+    floor = FLOOR * row["stable_dt"]
     t0 = time.perf_counter()
-    est = estimate(problem, spec, choice.dt, window=choice.pilot_time)
-    p = spec.order
-    h = choice.dt
-    if est.error > 0:
-        h = min(max(h * (SAFETY * accuracy / est.error) ** (1.0 / p), 0.25 * h), 2 * h, row["pilot_dt"])
-    h = max(h, FLOOR * row["stable_dt"])
-    scale = (h / choice.dt) ** p
-    choice.predicted_error, choice.order = est.error * scale, p
-    row.update(dt=h, pilot_dt=choice.dt, observed_order=p, pilot_error=est.error, amplitude_error=est.amplitude,
-               speed_error=est.speed, predicted_error=choice.predicted_error, cost=force_evals(spec) * math.ceil(problem.duration / h),
-               pilot_wall_s=row["pilot_wall_s"] + time.perf_counter() - t0, refined=True)
-    choice.dt, choice.cost = h, row["cost"]
-    choice.reachable = row["reachable"] = choice.predicted_error <= accuracy
-    row["why"] = "" if choice.reachable else (f"the error measured at the smallest step tried is "
-                                              f"{est.error:.2g}, predicted {choice.predicted_error:.2g} at the step used")
+    for k in range(VERIFY_TRIES):
+        est = estimate(problem, spec, h, window=choice.pilot_time)
+        if est.error <= accuracy or h <= floor or k == VERIFY_TRIES - 1:
+            break
+        law = h * (SAFETY * accuracy / est.error) ** (1.0 / p)
+        h = divides(max(min(h / 1.2, law), h / 4, floor), every)
+    choice.dt, choice.estimate = h, est
+    choice.cost = force_evals(spec) * math.ceil(problem.duration / h)
+    row.update(dt=h, cost=choice.cost, predicted_error=est.error, verified_error=est.error,
+               verify_tries=k + 1, pilot_wall_s=row["pilot_wall_s"] + time.perf_counter() - t0)
 
 
 @dataclass
@@ -394,7 +389,7 @@ def estimate(problem, spec, h: float, whole_run: bool = False, window: float | N
     ``window``), Richardson with the method's order (module docstring). Costs 3 × window/h steps."""
     t0 = time.perf_counter()
     t_w = problem.duration if whole_run else window if window is not None else pilot_window(problem, h)
-    n, n_samples = window_grid(t_w, h)
+    n, n_samples, t_w = window_grid(t_w, h)
     a, b = trace(problem, spec, n, t_w, n_samples), trace(problem, spec, 2 * n, t_w, n_samples)
     d = quantity_error(a, b)
     amp, speed = richardson(d.amplitude, spec.order), richardson(d.speed, spec.order)

@@ -100,37 +100,27 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     """Pilot runs choose integrator and dt (``accuracy.choose``); plan and problem follow the choice."""
     scene = plan.scene
     target = scene.solver.accuracy
-    try:
-        choice = acc.choose(problem, target, only)
-    except ValueError as exc:
-        raise PlanError(f"solver.accuracy: {exc}") from None
     ts = problem.system.scales.time_s
     out = scene.output
     every = out.every_s / ts if out.every_s else problem.duration / (out.n_frames - 1)
-    if every > choice.dt:  # the chosen step, shortened a little so that frames fall on whole steps
-        dt = every / math.ceil(every / choice.dt - 1e-9)
-        choice.predicted_error *= (dt / choice.dt) ** choice.order
-        choice.dt = dt
+    try:
+        choice = acc.choose(problem, target, only, every=every)
+    except ValueError as exc:
+        raise PlanError(f"solver.accuracy: {exc}") from None
     planned = replace_section(scene, "solver", integrator=choice.integrator, dt_s=choice.dt * ts, accuracy=None)
     rows = "; ".join(f"{r['integrator']}: dt {r['dt'] * ts:.3g} s, {r['cost']:.3g} force evals"
                      for r in choice.table)
     notes = [f"accuracy {target:g}: {choice.integrator} with dt = {choice.dt * ts:.4g} s "
-             f"(predicted error {choice.predicted_error:.2g}, pilot over {choice.pilot_time * ts:.3g} s) — {rows}"]
+             f"(pilot over {choice.pilot_time * ts:.3g} s) — {rows}"]
     row = next(r for r in choice.table if r["integrator"] == choice.integrator)
     if not choice.reachable:
         notes.append(f"WARNING: accuracy {target:g} looks out of reach ({row['why']}); the run uses the step "
                      "above and its error estimate is reported")
-    elif row["uncertain"]:
-        notes.append(f"prediction uncertain: {row['uncertain']}")
     attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
              "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable)}
-    if mode == "pilot":  # the pilot's step doubling, carried to the chosen step by h^p, is the estimate
-        scale = (choice.dt / row["pilot_dt"]) ** choice.order
-        amp, speed = row["amplitude_error"] * scale, row["speed_error"] * scale
-        est = acc.Estimate(max(amp, speed), amp, speed, choice.pilot_time, "step doubling on the pilot",
-                           row["pilot_wall_s"])
-        attrs.update(_estimate_attrs(target, est, ts))
-        notes.append(_estimate_line(target, est, ts))
+    if mode == "pilot":  # step doubling over the pilot window at the step used is the estimate
+        attrs.update(_estimate_attrs(target, choice.estimate, ts))
+        notes.append(_estimate_line(target, choice.estimate, ts))
     plan.error_check = mode
     plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "chosen", notes, attrs)]
     plan.scene, plan.choice = planned, choice

@@ -2,10 +2,10 @@
 
 ω_max² is the largest eigenvalue of M^{-1/2} K M^{-1/2} over the free DOFs, with K the
 Hessian of the energy at a reference state (rest by default), obtained from central
-differences of the compiled force: K x ≈ −(F(q + εx) − F(q − εx)) / 2ε. One-sided contacts (a
+differences of the compiled force (``flexmm.linalg.force_hessian``). One-sided contacts (a
 striker) enter with their stiffness at the expected peak overlap, p k δ^(p−1), since a Hertz
-contact stiffens with overlap. Small systems are diagonalised densely; larger ones by Lanczos
-(the top Ritz value, a lower bound converging like 1/m² in the m iterations at a band edge).
+contact stiffens with overlap. The eigenvalue itself is ``flexmm.linalg.top_eigenvalue``: dense
+for small systems, Lanczos otherwise.
 
 A fixed-step explicit method is linearly stable while h ω_max ≤ its ``stability_limit``
 (harmonic oscillator; ``harmonic_limit`` recomputes it from the compiled method).
@@ -18,18 +18,18 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import eigvalsh_tridiagonal
 
-from flexmm._blas import single_blas_thread
-from flexmm._jit import jit
 from flexmm.errors import FlexmmError
-from flexmm.models.base import System
 from flexmm.integrators.common import Terms
-from flexmm.models.kernels import model_force
+from flexmm.linalg import (
+    DENSE_LIMIT,
+    force_hessian,
+    top_eigenpair,
+    top_eigenvalue,
+    warm_lanczos,
+)
+from flexmm.models.base import System
 
-DENSE_LIMIT = 400
-LANCZOS_MAX_ITER = 600
-LANCZOS_RTOL = 1e-6
 GRID_STEP = 2e-4  # scan of h·ω in ``harmonic_limit``: Blanes–Moan's band at hω ≈ π is 9e-4 wide
 
 
@@ -81,20 +81,16 @@ def reached_state(system: System, terms: Terms, q_ref: np.ndarray | None = None)
 
 
 def hessian_operator(system: System, terms: Terms, q_ref: np.ndarray | None = None):
-    """Matrix-free Hessian-vector product K x at ``q_ref`` (default: rest)."""
+    """Matrix-free Hessian-vector product K x at ``q_ref`` (default: rest), contacts included."""
     q_ref = np.zeros(system.ndof) if q_ref is None else q_ref
-    fp, fm = np.zeros(system.ndof), np.zeros(system.ndof)
+    kx = force_hessian(system.force, system.args, q_ref)
     contacts = _contact_stiffness(system, terms)
+    if not contacts:
+        return kx
 
     def matvec(x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, float).ravel()
-        scale = np.max(np.abs(x))
-        if scale == 0:
-            return np.zeros_like(x)
-        eps = 1e-6 / scale
-        system.force(q_ref + eps * x, system.args, fp)
-        system.force(q_ref - eps * x, system.args, fm)
-        y = -(fp - fm) / (2 * eps)
+        y = kx(x)
         for i, j, k in contacts:
             d = x[i] - x[j]
             y[i] += k * d
@@ -104,153 +100,30 @@ def hessian_operator(system: System, terms: Terms, q_ref: np.ndarray | None = No
     return matvec
 
 
-def lanczos_max(op, n: int, *, max_iter: int = LANCZOS_MAX_ITER, rtol: float = LANCZOS_RTOL,
-                seed: int = 0) -> float:
-    """Largest eigenvalue of the symmetric operator ``op`` (n × n), by plain Lanczos.
-
-    No reorthogonalisation: the top Ritz value still converges to λ_max (lost orthogonality
-    only adds copies). Stops when it changes by less than ``rtol`` (relative) over 10
-    iterations, or after ``max_iter`` iterations. ``op`` is either a Python callable or a
-    tuple ``(step, state)`` for the compiled form used by ``omega_max``.
-    """
-    rng = np.random.default_rng(seed)
-    x = rng.standard_normal(n)
-    x /= math.sqrt(np.sum(x * x))
-    x_prev = np.zeros(n)
-    alpha, beta = np.zeros(max_iter), np.zeros(max_iter)
-    b, history, it = 0.0, [], 0
-    while it < min(max_iter, n):
-        k1 = min(it + 10, max_iter, n)
-        if callable(op):
-            for k in range(it, k1):
-                w = op(x) - b * x_prev
-                alpha[k] = float(np.sum(w * x))  # np.sum, not BLAS: a threaded dot spin-waits
-                w -= alpha[k] * x
-                b = beta[k] = math.sqrt(float(np.sum(w * w)))
-                if b == 0.0:
-                    k1 = k + 1
-                    break
-                x_prev, x = x, w / b
-        else:
-            step, state = op
-            b, k1 = step(*state, x, x_prev, b, alpha, beta, it, k1)
-        it = k1
-        top = float(eigvalsh_tridiagonal(alpha[:it], beta[: it - 1], select="i",
-                                         select_range=(it - 1, it - 1))[0])
-        history.append(top)
-        if b <= 1e-14 * abs(top) or (len(history) > 1 and abs(top - history[-2]) <= rtol * abs(top)):
-            break
-    return history[-1]
-
-
-@jit
-def _lanczos_steps(args, q_ref, w, con_ij, con_k, fp, fm, qt, r, x, x_prev, b, alpha, beta, k0, k1):
-    """Lanczos iterations k0..k1−1 on W K W (W = M^{-1/2}, K by central differences of force)."""
-    n = x.shape[0]
-    for it in range(k0, k1):
-        scale = 0.0
-        for k in range(n):
-            r[k] = w[k] * x[k]
-            scale = max(scale, abs(r[k]))
-        eps = 1e-6 / scale if scale > 0.0 else 1.0
-        for k in range(n):
-            qt[k] = q_ref[k] + eps * r[k]
-        model_force(qt, args, fp)
-        for k in range(n):
-            qt[k] = q_ref[k] - eps * r[k]
-        model_force(qt, args, fm)
-        for c in range(con_ij.shape[0]):
-            i, j = con_ij[c, 0], con_ij[c, 1]
-            d = con_k[c] * (r[i] - r[j]) * 2.0 * eps
-            fp[i] -= d
-            fp[j] += d
-        a = 0.0
-        for k in range(n):
-            r[k] = -w[k] * (fp[k] - fm[k]) / (2.0 * eps) - b * x_prev[k]
-            a += r[k] * x[k]
-        bb = 0.0
-        for k in range(n):
-            r[k] -= a * x[k]
-            bb += r[k] * r[k]
-        alpha[it] = a
-        b = np.sqrt(bb)
-        beta[it] = b
-        if b == 0.0:
-            return b, it + 1
-        for k in range(n):
-            x_prev[k] = x[k]
-            x[k] = r[k] / b
-    return b, k1
-
-
-def _dense_dynamical_matrix(system: System, terms: Terms, free: np.ndarray, q_ref=None) -> np.ndarray:
-    """M^{-1/2} K M^{-1/2} over the free DOFs (n_free, n_free), symmetrised, column by column."""
-    w = np.sqrt(system.inv_mass[free])
+def dynamical_operator(system: System, terms: Terms, q_ref: np.ndarray | None = None):
+    """(x ↦ M^{-1/2} K M^{-1/2} x on all DOFs, the free DOFs): zero weight on held DOFs, so its
+    spectrum is that over the free DOFs plus zeros."""
+    w = np.sqrt(np.maximum(system.inv_mass, 0.0))
     kx = hessian_operator(system, terms, q_ref)
-    full = np.zeros(system.ndof)
-
-    def column(y):
-        full[:] = 0.0
-        full[free] = w * y
-        return w * kx(full)[free]
-
-    a = np.column_stack([column(e) for e in np.eye(free.size)])
-    return 0.5 * (a + a.T)
+    return (lambda x: w * kx(w * x)), np.flatnonzero(system.inv_mass > 0)
 
 
 def omega_max(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> float:
     """Largest angular frequency of small oscillations about ``q_ref`` (nondimensional)."""
-    free = np.flatnonzero(system.inv_mass > 0)
-    if free.size == 0:
-        return 0.0
-    n = free.size
-    if n <= DENSE_LIMIT:
-        with single_blas_thread():  # small dense problem: BLAS threads only cost
-            lam = np.linalg.eigvalsh(_dense_dynamical_matrix(system, terms, free, q_ref))[-1]
-    else:
-        # full-size operator W K W with W = M^{-1/2} (0 on held DOFs): same top eigenvalue,
-        # no gathers (held DOFs only add zero eigenvalues)
-        w = np.sqrt(np.maximum(system.inv_mass, 0.0))
-        contacts = _contact_stiffness(system, terms)
-        con_ij = np.array([[i, j] for i, j, _ in contacts], np.int64).reshape(-1, 2)
-        con_k = np.array([k for _, _, k in contacts], float)
-        q0 = np.zeros(system.ndof) if q_ref is None else np.asarray(q_ref, float)
-        scratch = [np.zeros(system.ndof) for _ in range(4)]
-        state = (system.args, q0, w, con_ij, con_k, *scratch)
-        lam = lanczos_max((_lanczos_steps, state), system.ndof)
+    op, free = dynamical_operator(system, terms, q_ref)
+    lam = top_eigenvalue(op, system.ndof, free, DENSE_LIMIT)
     return float(np.sqrt(max(lam, 0.0)))
 
 
 def top_mode(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """(ω_max, shape (ndof,)): the fastest small-oscillation mode about ``q_ref`` (default rest).
 
-    The shape x solves K x = ω_max² M x (held DOFs 0), scaled to max |x| = 1. Dense for small
-    systems, else ARPACK (``eigsh``) on the matrix-free M^{-1/2} K M^{-1/2}. Exciting this mode
+    The shape x solves K x = ω_max² M x (held DOFs 0), scaled to max |x| = 1. Exciting this mode
     alone is the sharpest test of a method's linear stability limit (``stability_scan``).
     """
-    from scipy.sparse.linalg import LinearOperator, eigsh
-
-    free = np.flatnonzero(system.inv_mass > 0)
-    w = np.sqrt(system.inv_mass[free])
-    if free.size <= DENSE_LIMIT:
-        with single_blas_thread():
-            lam, vec = np.linalg.eigh(_dense_dynamical_matrix(system, terms, free, q_ref))
-        lam, y = lam[-1], vec[:, -1]
-    else:
-        kx = hessian_operator(system, terms, q_ref)
-        full = np.zeros(system.ndof)
-
-        def matvec(y):
-            full[:] = 0.0
-            full[free] = w * np.ravel(y)
-            return w * kx(full)[free]
-
-        op = LinearOperator((free.size, free.size), matvec=matvec, dtype=float)
-        v0 = np.random.default_rng(0).standard_normal(free.size)  # not orthogonal to a staggered mode
-        lam, vec = eigsh(op, k=1, which="LA", tol=1e-10, v0=v0)
-        lam, y = lam[0], vec[:, 0]
-    shape = np.zeros(system.ndof)
-    shape[free] = w * y
+    op, free = dynamical_operator(system, terms, q_ref)
+    lam, y = top_eigenpair(op, system.ndof, free, DENSE_LIMIT)
+    shape = np.sqrt(np.maximum(system.inv_mass, 0.0)) * y
     return float(np.sqrt(max(lam, 0.0))), shape / np.max(np.abs(shape))
 
 
@@ -385,24 +258,7 @@ class StiffnessTracker:
         t0 = time.perf_counter()
         kx = hessian_operator(self.system, self.terms, q)
         w = self.w
-        n = w.size
         m = max(2, min(self.iters, int(np.count_nonzero(w))))
-        basis = np.zeros((m, n))
-        alpha, beta = np.zeros(m), np.zeros(m)
-        x = self.x / max(math.sqrt(float(np.sum(self.x * self.x))), 1e-300)
-        k_used = m
-        for k in range(m):
-            basis[k] = x
-            r = w * kx(w * x)
-            alpha[k] = float(np.sum(r * x))
-            r -= basis[: k + 1].T @ (basis[: k + 1] @ r)  # full reorthogonalisation (m is small)
-            beta[k] = math.sqrt(float(np.sum(r * r)))
-            if beta[k] <= 1e-14 * max(abs(alpha[k]), 1e-300):
-                k_used = k + 1
-                break
-            x = r / beta[k]
-        t = np.diag(alpha[:k_used]) + np.diag(beta[: k_used - 1], 1) + np.diag(beta[: k_used - 1], -1)
-        lam, vec = np.linalg.eigh(t)
-        self.x = basis[:k_used].T @ vec[:, -1]
+        lam, self.x = warm_lanczos(lambda x: w * kx(w * x), self.x, m)
         self.seconds += time.perf_counter() - t0
-        return float(math.sqrt(max(lam[-1], 0.0)))
+        return float(math.sqrt(max(lam, 0.0)))

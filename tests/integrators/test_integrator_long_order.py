@@ -56,7 +56,7 @@ def test_verlet_on_the_soliton_bench_saturates_then_converges_at_order_2() -> No
 
     from flexmm.assemble import build_problem
     from flexmm.config import load_scene
-    from flexmm.workprecision import lattice_dofs
+    from flexmm.diagnostics.workprecision import lattice_dofs
 
     root = Path(__file__).resolve().parents[2]
     problem = build_problem(load_scene(root / "benchmarks" / "configs" / "lego_soliton.yaml"))

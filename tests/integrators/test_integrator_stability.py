@@ -20,7 +20,7 @@ from integrator_helpers import chain_problem
 
 from flexmm.integrators import INTEGRATORS, dopri5
 from flexmm.integrators.runner import integrate
-from flexmm.stability_scan import GROWTH_THRESHOLD, measure_limit, mode_state, trial
+from flexmm.diagnostics.stability_scan import GROWTH_THRESHOLD, measure_limit, mode_state, trial
 
 FIXED_STEP = [k for k, v in INTEGRATORS.items() if v.explicit_limit] + ["dopri5"]
 

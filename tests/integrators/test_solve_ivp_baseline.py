@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from integrator_helpers import chain_problem
 
-from flexmm import baseline
+from flexmm.diagnostics import baseline
 from flexmm.integrators.runner import integrate
 
 

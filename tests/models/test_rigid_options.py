@@ -9,50 +9,22 @@ import pytest
 
 from flexmm.assemble import build_problem
 from flexmm.config import ConfigError, scene_from_dict
-from flexmm.config.rigid import ParameterDefects, ParameterGradient, ParameterInterface, ParameterRandom
 from flexmm.integrators.common import MODE_DISPLACEMENT
 from flexmm.models import MODELS
 from flexmm.models.magnets import MU0_OVER_4PI, face_magnets
-from flexmm.models.variation import parameter_arrays
 
 LEGO = {"kind": "rotating_squares_chain", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
         "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
 MAGNET_SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.02, "k_long_n_per_m": 5e4, "k_shear_n_per_m": 5e4,
                 "k_rot_n_m_per_rad": 0.01, "mass_kg": 0.005,
                 "magnets": {"moment_a_m2": 0.253, "recess_m": 0.003}}
-BASE = {"theta0_rad": 0.1, "mass_kg": 1.0, "inertia_kg_m2": 2.0, "k_long_n_per_m": 10.0,
-        "k_shear_n_per_m": 3.0, "k_rot_n_m_per_rad": 5.0}
 
 
 def scene(lattice, **sections):
     return scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}, **sections})
 
 
-# ---------------------------------------------------------------- variation
-def arrays(variations, n=6):
-    col, row = np.arange(n), np.zeros(n, int)
-    ha = np.arange(n - 1)
-    return parameter_arrays(BASE, variations, col, row, ha, ha + 1)
-
-
-def test_gradient_interface_random_defects_values():
-    sites, hinges = arrays([
-        ParameterGradient(kind="gradient", target="theta0_rad", start=0.0, end=0.5, first=1, last=5),
-        ParameterInterface(kind="interface", target="k_rot_n_m_per_rad", position=3, value=9.0),
-        ParameterDefects(kind="defects", target="mass_kg", sites=[2], factor=3.0),
-        ParameterDefects(kind="defects", target="k_long_n_per_m", sites=[5], value=1.0),
-    ])
-    np.testing.assert_allclose(sites["theta0_rad"], [0.0, 0.0, 0.125, 0.25, 0.375, 0.5])
-    np.testing.assert_allclose(hinges["k_rot_n_m_per_rad"], [5, 5, 7, 9, 9])  # the crossing hinge: mean
-    np.testing.assert_allclose(sites["mass_kg"], [1, 1, 3, 1, 1, 1])
-    np.testing.assert_allclose(hinges["k_long_n_per_m"], [10, 10, 10, 10, 1])  # hinges touching unit 5
-    np.testing.assert_allclose(sites["inertia_kg_m2"], 2.0)
-    noisy = [ParameterRandom(kind="random", target="k_shear_n_per_m", relative_std=0.1, seed=4)]
-    a, b = arrays(noisy)[1]["k_shear_n_per_m"], arrays(noisy)[1]["k_shear_n_per_m"]
-    np.testing.assert_array_equal(a, b)  # reproducible from the seed
-    assert np.std(a) > 0 and np.all(np.abs(a / 3.0 - 1) < 0.5)
-
-
+# ---------------------------------------------------------------- variation (rules: tests/models/test_variation.py)
 def test_chain_variation_reaches_the_tables():
     lattice = dict(LEGO, n_units=5, variation=[
         {"kind": "interface", "target": "k_long_n_per_m", "position": 3, "value": 2 * 71690.0},
@@ -67,7 +39,7 @@ def test_chain_variation_reaches_the_tables():
 
 @pytest.mark.parametrize("variation, message", [
     ({"kind": "gradient", "target": "mass_kg", "start": 1, "end": 2, "first": 4, "last": 2}, "first < last"),
-    ({"kind": "interface", "target": "mass_kg", "position": 9, "value": 1}, "position 9 outside"),
+    ({"kind": "interface", "target": "mass_kg", "position": 9, "value": 1}, "1 ≤ position ≤ 7"),
     ({"kind": "defects", "target": "mass_kg", "sites": [12], "value": 1}, "outside 0..7"),
     ({"kind": "random", "target": "mass_kg", "seed": 1}, "exactly one of std or relative_std"),
     ({"kind": "gradient", "target": "spring", "start": 1, "end": 2}, "theta0_rad"),

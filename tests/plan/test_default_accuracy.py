@@ -35,7 +35,7 @@ def test_error_control_on_a_strongly_struck_chain_meets_its_target() -> None:
     assert err.total < DEFAULT_ACCURACY
     attrs = plan.attrs()
     assert attrs["accuracy_requested"] == DEFAULT_ACCURACY and attrs["accuracy_met"] == 1
-    assert attrs["accuracy_check"] == "step doubling on the pilot"
+    assert attrs["accuracy_check"] == "step doubling on a pilot"
     assert err.total / 10 < attrs["accuracy_estimate"] < 10 * max(err.total, 1e-6)  # the estimate is informative
 
 

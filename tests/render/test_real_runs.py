@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import EXAMPLE_LATTICES
-from render_helpers import hinge_points_drawn, polygons
+from render_helpers import NOT_RENDERED, hinge_points_drawn, polygons
 from test_kinematics import expected_hinge_points
 
 from flexmm.api import run_scene
@@ -18,7 +18,8 @@ from flexmm.config import scene_from_dict
 from flexmm.io.dataset import open_run
 from flexmm.render.api import RenderOptions, render_run, still_figure
 
-FIRST = {kind: next(iter(examples.values()))["lattice"] for kind, examples in EXAMPLE_LATTICES.items()}
+FIRST = {kind: next(iter(examples.values()))["lattice"] for kind, examples in EXAMPLE_LATTICES.items()
+         if kind not in NOT_RENDERED}  # kinds flexmm.render does not draw yet
 KICK = {"rotating_squares_chain": {"angular_velocity_rad_s": 80.0, "velocity_x_m_s": 0.5},
         "rotating_squares_sheet": {"angular_velocity_rad_s": 80.0, "velocity_y_m_s": 0.3},
         "bistable_linkage": {"angular_velocity_rad_s": 80.0}}

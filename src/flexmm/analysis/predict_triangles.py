@@ -1,7 +1,8 @@
 """Predictions for the rotating-triangles chain and kagome sheet (docs/physics.md §1.6) from a
 run's config: longitudinal pulses (u, its rate and strain) against the linear long-wave speed of
 the Bloch analysis (``flexmm.linear.triangles``), converted with c0 = a sqrt(k_l/m). Rotation
-and transverse pulses (no theory of their nonlinear waves yet) get no prediction.
+and transverse pulses (no theory of their nonlinear waves yet) and lattices with a ``variation``
+get no prediction.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ def pulse(ctx, p_meas) -> list[Comparison]:
     """The speed row of a longitudinal pulse (a sheet's: a planar wave along x)."""
     from flexmm.linear.triangles import chain_long_wave_speed, sheet_long_wave_speeds
 
-    if p_meas.field not in _LONGITUDINAL:
-        return []
     lat = ctx.scene().lattice
+    if p_meas.field not in _LONGITUDINAL or lat.variation:  # the Bloch speed is a uniform lattice's
+        return []
     if lat.kind == "rotating_triangles_chain":
         c, what = chain_long_wave_speed(lat), "chain"
     else:

@@ -30,8 +30,8 @@ def bench(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
 ) -> None:
     """Chart error against cost for each integrator and for solve_ivp on the same equations."""
-    from flexmm import baseline
-    from flexmm import workprecision as wp
+    from flexmm.diagnostics import baseline
+    from flexmm.diagnostics import workprecision as wp
     from flexmm.assemble import build_problem
     from flexmm.integrators import INTEGRATORS
     from flexmm.io.cf import write_netcdf

@@ -4,7 +4,7 @@ Prints predicted (from ω_max at rest and along a pilot run) against measured li
 writes ``stability.txt``, ``stability.json`` and ``stability.png`` to the output directory. On
 the scene a trial is unstable when it blows up; with ``--linear`` the scene's fastest linear mode
 alone is excited and a trial is unstable when its amplitude grows faster than
-``--growth-threshold`` per step (``flexmm.stability_scan``: the criterion is printed with the table).
+``--growth-threshold`` per step (``flexmm.diagnostics.stability_scan``: the criterion is printed with the table).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def stability(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
 ) -> None:
     """Measure each integrator's largest stable dt on a scene and compare with the prediction."""
-    from flexmm import stability_scan
+    from flexmm.diagnostics import stability_scan
     from flexmm.assemble import build_problem
     from flexmm.integrators import INTEGRATORS
 

@@ -258,14 +258,17 @@ def _describe(value: Any) -> str:
     return f"{text} ({type(value).__name__})"
 
 
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*")
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(?:\.(?:[A-Za-z_][A-Za-z0-9_]*|[0-9]+))*")
 
 
 def _given(data: Any, keys: tuple) -> bool:
     for k in keys:
-        if not (isinstance(data, dict) and k in data):
+        if isinstance(data, list) and isinstance(k, int) and k < len(data):
+            data = data[k]
+        elif isinstance(data, dict) and k in data:
+            data = data[k]
+        else:
             return False
-        data = data[k]
     return True
 
 
@@ -273,12 +276,13 @@ def _rule_path(path: tuple, message: str, data: dict) -> tuple:
     """Locate a cross-field rule (a model validator has no location of its own).
 
     The rule's message names the fields it checks ('lattice.left is ...', 'give exactly one of
-    amplitude_m or amplitude_n'): the first dotted name, else the first plain name, that is a
-    key given in the config (relative to the validated mapping, or absolute) becomes the path.
+    amplitude_m or amplitude_n', 'variation.2.last ...'; a number is a list index): the first
+    dotted name, else the first plain name, that is a key given in the config (relative to the
+    validated mapping, or absolute) becomes the path.
     """
     names = _NAME.findall(message)
     for name in [n for n in names if "." in n] + [n for n in names if "." not in n]:
-        keys = tuple(name.split("."))
+        keys = tuple(int(k) if k.isdigit() else k for k in name.split("."))
         for cand in (path + keys, keys):
             if _given(data, cand):
                 return cand

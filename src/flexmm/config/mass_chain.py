@@ -15,6 +15,7 @@ from typing import ClassVar, Annotated, Literal, Union
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from flexmm.config.base import EndCondition, Finite, NonNegative, Positive, Strict, exactly_one
+from flexmm.config.variation import Variation, check_variations
 
 
 # ---------------------------------------------------------------- laws
@@ -173,53 +174,6 @@ Law = Annotated[
 ]
 
 
-# ---------------------------------------------------------------- variation
-class Gradient(Strict):
-    """Linear ramp of ``target`` over elements first..last (default all), from ``start`` to ``end``."""
-
-    kind: Literal["gradient"]
-    target: str
-    start: Finite
-    end: Finite
-    first: int | None = Field(None, ge=0)
-    last: int | None = Field(None, ge=0)
-
-
-class RandomVariation(Strict):
-    """Multiply ``target`` by 1 + ε, ε normal (std) or uniform (± std·√3), reproducible by seed."""
-
-    kind: Literal["random"]
-    target: str
-    relative_std: Positive
-    distribution: Literal["normal", "uniform"] = "normal"
-    seed: int = 0
-
-
-class Defects(Strict):
-    """Set ``target`` to ``value`` (or multiply it by ``factor``) on listed elements.
-
-    ``sites`` are element indices (bond indices for bond targets); on a grid, ``box`` =
-    [i0, i1, j0, j1] (inclusive) selects sites by column i and row j.
-    """
-
-    kind: Literal["defects"]
-    target: str
-    sites: list[Annotated[int, Field(ge=0)]] = Field(default_factory=list)
-    box: list[Annotated[int, Field(ge=0)]] | None = Field(None, min_length=4, max_length=4)
-    value: Finite | None = None
-    factor: Finite | None = None
-
-    @model_validator(mode="after")
-    def _what(self):
-        exactly_one(self, "value", "factor")
-        if not self.sites and self.box is None:
-            raise ValueError("give sites or box")
-        return self
-
-
-Variation = Annotated[Union[Gradient, RandomVariation, Defects], Field(discriminator="kind")]
-
-
 class Friction(Strict):
     """Regularised Coulomb friction with the ground, F = −F_c tanh(v/v_ε) on every site.
 
@@ -251,24 +205,27 @@ class _MassLattice(Strict):
     variation: list[Variation] = Field(default_factory=list)
 
     @model_validator(mode="after")
-    def _targets(self):
-        valid = self.variation_targets()
-        for v in self.variation:
-            if v.target not in valid:
-                raise ValueError(f"variation target {v.target!r} unknown; valid: {', '.join(valid)}")
+    def _variation(self):
+        n_cols, n_rows = self.variation_lines()
+        check_variations(self.variation, n_cols=n_cols, n_rows=n_rows, site_targets=self.site_targets(),
+                         bond_targets=self.bond_targets())
         return self
 
-    def variation_targets(self) -> list[str]:
-        """Names a variation may target: per-site and per-bond numeric fields."""
+    def variation_lines(self) -> tuple[int, int]:
+        """(columns, rows) that variations address; a chain or network: its sites in one row."""
+        return self.n_sites, 1
+
+    def site_targets(self) -> list[str]:
+        """Per-site variation targets: mass, initial displacement, friction, on-site law fields."""
         out = ["mass_kg", "initial_displacement_m"]
         if self.friction is not None:
             out.append("friction.force_n")
-        for prefix, law in [("bond", self.bond), ("bond2", self.bond2)] + [
-            (f"onsite.{k}", law) for k, law in enumerate(self.onsite)
-        ]:
-            if law is not None:
-                out += [f"{prefix}.{f}" for f in law_numeric_fields(law)]
-        return out
+        return out + [f"onsite.{k}.{f}" for k, law in enumerate(self.onsite) for f in law_numeric_fields(law)]
+
+    def bond_targets(self) -> list[str]:
+        """Per-bond variation targets: the numeric fields of the bond laws."""
+        return [f"{prefix}.{f}" for prefix, law in (("bond", self.bond), ("bond2", self.bond2))
+                if law is not None for f in law_numeric_fields(law)]
 
 
 def law_numeric_fields(law) -> list[str]:
@@ -386,6 +343,10 @@ class MassGrid(_MassLattice):
         """The same grid cut to at most about ``n`` sites (for cheap estimates; not validated)."""
         side = max(2, int(n**0.5))
         return self.model_copy(update={"nx": min(self.nx, side), "ny": min(self.ny, side), "variation": []})
+
+    def variation_lines(self) -> tuple[int, int]:
+        """(columns, rows) that variations address: the grid's nx × ny."""
+        return self.nx, self.ny
 
 
 MASS_LATTICES = (MassChain, MassNetwork, MassGrid)

@@ -2,8 +2,8 @@
 
 Options shared by the rotating-squares chain and sheet:
 
-- ``variation``: per-unit (θ0, mass, inertia) and per-hinge (k_l, k_s, k_θ) parameter fields —
-  gradient, interface between two lattices, random with a seed, list of defects;
+- ``variation``: per-unit (θ0, mass, inertia) and per-hinge (k_l, k_s, k_θ) parameter fields
+  (``flexmm.config.variation``, the schema every lattice shares);
 - ``predeform``: static equilibrium under an applied strain or load, used as the initial state;
 - ``magnets`` (sheet only): point dipoles fixed in the units (multistable rotating squares).
 """
@@ -11,90 +11,16 @@ Options shared by the rotating-squares chain and sheet:
 from __future__ import annotations
 
 import math
-from typing import ClassVar, Annotated, Literal, Union
+from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
 
 from flexmm.config.base import EdgeCondition, EndCondition, Finite, NonNegative, Positive, Strict, exactly_one
+from flexmm.config.variation import Variation, check_variations
 
-Axis = Literal["x", "y"]
-
-#: parameters a variation may target, and where they live
+#: parameters a variation may target (flexmm.config.variation): per unit, and per hinge
 SITE_TARGETS = ("theta0_rad", "mass_kg", "inertia_kg_m2")
 HINGE_TARGETS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad")
-TARGETS = SITE_TARGETS + HINGE_TARGETS
-Target = Literal["theta0_rad", "mass_kg", "inertia_kg_m2", "k_long_n_per_m", "k_shear_n_per_m",
-                 "k_rot_n_m_per_rad"]
-
-
-# ---------------------------------------------------------------- variation
-class ParameterGradient(Strict):
-    """Linear ramp of ``target`` from ``start`` (at index ``first``) to ``end`` (at ``last``).
-
-    The index is the column (axis x) or row (axis y) of a unit; a hinge takes the mean of its
-    two units. Outside first..last the end values hold.
-    """
-
-    kind: Literal["gradient"]
-    target: Target
-    start: Finite
-    end: Finite
-    axis: Axis = "x"
-    first: int | None = Field(None, ge=0)
-    last: int | None = Field(None, ge=0)
-
-
-class ParameterInterface(Strict):
-    """Two lattices joined at ``position``: units with index ≥ position get ``value``.
-
-    A hinge across the interface takes the mean of its two units.
-    """
-
-    kind: Literal["interface"]
-    target: Target
-    position: int = Field(ge=1, description="first column (axis x) or row (axis y) of the second lattice")
-    value: Finite
-    axis: Axis = "x"
-
-
-class ParameterRandom(Strict):
-    """Independent noise on every unit or hinge, reproducible from ``seed``.
-
-    ``std`` adds a normal deviate (in the target's unit); ``relative_std`` multiplies by 1 + ε.
-    """
-
-    kind: Literal["random"]
-    target: Target
-    std: NonNegative | None = None
-    relative_std: NonNegative | None = None
-    seed: int = 0
-
-    @model_validator(mode="after")
-    def _one(self):
-        return exactly_one(self, "std", "relative_std")
-
-
-class ParameterDefects(Strict):
-    """Set ``target`` to ``value`` (or multiply it by ``factor``) on the listed units.
-
-    For hinge targets, every hinge touching a listed unit is changed.
-    """
-
-    kind: Literal["defects"]
-    target: Target
-    sites: list[Annotated[int, Field(ge=0)]] = Field(min_length=1)
-    value: Finite | None = None
-    factor: Finite | None = None
-
-    @model_validator(mode="after")
-    def _one(self):
-        return exactly_one(self, "value", "factor")
-
-
-ParameterVariation = Annotated[
-    Union[ParameterGradient, ParameterInterface, ParameterRandom, ParameterDefects],
-    Field(discriminator="kind"),
-]
 
 
 # ---------------------------------------------------------------- predeformation
@@ -146,7 +72,7 @@ class Magnets(Strict):
 
 
 class RigidOptions(Strict):
-    variation: list[ParameterVariation] = Field(default_factory=list)
+    variation: list[Variation] = Field(default_factory=list)
     predeform: Predeform | None = None
 
 
@@ -187,7 +113,8 @@ class RotatingSquaresChain(RigidOptions):
     def _geometry(self):
         if not abs(self.theta0_rad) < math.pi / 4:
             raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
-        check_variation(self.variation, self.n_units, 1, self.n_units)
+        check_variations(self.variation, n_cols=self.n_units, n_rows=1, site_targets=SITE_TARGETS,
+                         bond_targets=HINGE_TARGETS)
         return self
 
 
@@ -256,7 +183,8 @@ class RotatingSquaresSheet(RigidOptions):
                                  "parity, or the wrap joins two units of the same checkerboard colour")
             if self.magnets is not None:
                 raise ValueError("magnets are not supported on a skew-periodic sheet (skew_cols ≠ 0)")
-        check_variation(self.variation, self.n_cols, self.n_rows, self.n_units)
+        check_variations(self.variation, n_cols=self.n_cols, n_rows=self.n_rows, site_targets=SITE_TARGETS,
+                         bond_targets=HINGE_TARGETS)
         return self
 
     @property
@@ -317,19 +245,3 @@ class BistableLinkage(Strict):
     @property
     def n_units(self) -> int:
         return 2 * self.n_cols
-
-
-def check_variation(variation, n_cols: int, n_rows: int, n_units: int) -> None:
-    """Cross-field checks of a variation list against the lattice size."""
-    for v in variation:
-        size = n_rows if getattr(v, "axis", "x") == "y" else n_cols
-        if v.kind == "gradient":
-            first, last = v.first or 0, size - 1 if v.last is None else v.last
-            if not first < last < size:
-                raise ValueError(f"gradient of {v.target}: need first < last < {size}, got {first}, {last}")
-        elif v.kind == "interface" and v.position >= size:
-            raise ValueError(f"interface of {v.target}: position {v.position} outside 1..{size - 1}")
-        elif v.kind == "defects":
-            bad = [s for s in v.sites if s >= n_units]
-            if bad:
-                raise ValueError(f"defects of {v.target}: sites {bad} outside 0..{n_units - 1}")

@@ -13,9 +13,13 @@ from typing import ClassVar, Literal
 from pydantic import Field, model_validator
 
 from flexmm.config.base import EdgeCondition, Finite, NonNegative, Positive, Strict
+from flexmm.config.rigid import HINGE_TARGETS
+from flexmm.config.variation import Variation, check_variations
 
 #: the hexagonal pores of the kagome close when neighbouring triangles have turned by 2|θ0| = 120°
 MAX_TWIST_RAD = math.pi / 3
+#: per-triangle variation targets (the twist θ0 is the lattice's geometry: uniform); per hinge: HINGE_TARGETS
+UNIT_TARGETS = ("mass_kg", "inertia_kg_m2")
 
 
 class _TriangleUnits(Strict):
@@ -30,6 +34,9 @@ class _TriangleUnits(Strict):
     inertia_kg_m2: Positive | None = Field(
         None, description="rotational inertia J of one triangle about its centroid (kg m²); default m a²/12 "
         "(a solid equilateral triangle)")
+    variation: list[Variation] = Field(
+        default_factory=list, description="per-triangle mass_kg, inertia_kg_m2 and per-hinge k_long_n_per_m, "
+        "k_shear_n_per_m, k_rot_n_m_per_rad (docs/scenes.md, Parameter variation)")
 
     @property
     def unit_inertia_kg_m2(self) -> float:
@@ -38,6 +45,10 @@ class _TriangleUnits(Strict):
     def _check_twist(self) -> None:
         if not abs(self.theta0_rad) < MAX_TWIST_RAD:
             raise ValueError(f"theta0_rad must satisfy |θ0| < π/3 (the pores close at π/3), got {self.theta0_rad}")
+
+    def _check_variation(self, n_cols: int, n_rows: int) -> None:
+        check_variations(self.variation, n_cols=n_cols, n_rows=n_rows, site_targets=UNIT_TARGETS,
+                         bond_targets=HINGE_TARGETS)
 
 
 def _check_periodic(cfg, a: str, b: str, n: int, what: str) -> None:
@@ -67,12 +78,13 @@ class RotatingTrianglesChain(_TriangleUnits):
     def small_copy(self, n: int):
         """The same chain with at most ``n`` units (for cheap estimates; not validated)."""
         m = min(self.n_units, n)
-        return self.model_copy(update={"n_units": m + (m % 2 if self.left == "periodic" else 0)})
+        return self.model_copy(update={"n_units": m + (m % 2 if self.left == "periodic" else 0), "variation": []})
 
     @model_validator(mode="after")
     def _check(self):
         self._check_twist()
         _check_periodic(self, "left", "right", self.n_units, "n_units")
+        self._check_variation(self.n_units, 1)
         return self
 
 
@@ -105,11 +117,13 @@ class RotatingTrianglesSheet(_TriangleUnits):
         """The same sheet cut to at most about ``n`` units (for cheap estimates; not validated)."""
         side = max(2, int(n**0.5))
         side += side % 2
-        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side)})
+        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side),
+                                       "variation": []})
 
     @model_validator(mode="after")
     def _check(self):
         self._check_twist()
         _check_periodic(self, "left", "right", self.n_cols, "n_cols")
         _check_periodic(self, "bottom", "top", self.n_rows, "n_rows")
+        self._check_variation(self.n_cols, self.n_rows)
         return self

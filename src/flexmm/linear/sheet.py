@@ -11,9 +11,10 @@ couple nearest neighbours only). The two lowest branches are acoustic: at long w
 phase speeds ω/|k| along a direction φ are the speeds of the two in-plane polarisations. For
 θ0 = 0 they are x- and y-polarised with c_x² = cos²φ + K_s sin²φ and c_y² = K_s cos²φ + sin²φ
 (in c0 = a sqrt(k_l/m)): an oblique pulse (0 < φ < 45°, K_s ≠ 1) separates into two pulses.
-Everything is nondimensional (length a, time sqrt(m/k_l)). ``cell_couplings`` and
-``cell_frequencies`` serve any periodic sheet with a two-unit cell of (u, v, θ) units (the kagome
-of rotating triangles too, ``linear.triangles``).
+Everything is nondimensional (length a, time sqrt(m/k_l)). ``squares_cell`` reads the cell of
+this sheet, ``cell_couplings`` that of any periodic sheet with a two-unit cell of (u, v, θ) units
+(the kagome of rotating triangles too, ``linear.triangles``); ``flexmm.linalg.bloch_frequencies``
+gives their bands.
 """
 
 from __future__ import annotations
@@ -21,11 +22,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import eigh
 
-from flexmm._blas import single_blas_thread
 from flexmm.config.rigid import RotatingSquaresSheet
 from flexmm.integrators.common import empty_terms
+from flexmm.linalg import BlochCell, bloch_eigen, read_cell
 from flexmm.stability import hessian_operator
 
 #: rows and columns of the periodic sheet the couplings are read from (even, ≥ 4 for minimum image)
@@ -41,13 +41,9 @@ def _periodic_copy(lat: RotatingSquaresSheet) -> RotatingSquaresSheet:
     })
 
 
-def bloch_matrices(lat: RotatingSquaresSheet) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Coupling data of the two-unit cell: (K (2, 3, N, 3), offsets (N, 2), sublattice (N,), mass (6,)).
-
-    K[a, f, j, g] is the Hessian entry of unit a's field f (0: σ = +1 at row 0, col 0; 1: its right
-    neighbour) against unit j's field g (u, v, θ); offsets are the minimum-image rest positions of the units relative to
-    unit a = 0 in units of a.
-    """
+def squares_cell(lat: RotatingSquaresSheet) -> BlochCell:
+    """The ``BlochCell`` of the sheet's two-unit cell (``cell_couplings``; unit 0: σ = +1 at row 0,
+    col 0, unit 1 its right neighbour), offsets in units of a."""
     from flexmm.models.rotating_sheet import build
 
     system = build(_periodic_copy(lat))
@@ -59,49 +55,22 @@ def bloch_matrices(lat: RotatingSquaresSheet) -> tuple[np.ndarray, np.ndarray, n
     return cell_couplings(system, offsets, (row + col) % 2)
 
 
-def cell_couplings(system, offsets: np.ndarray, sublattice: np.ndarray):
-    """(K, offsets, sublattice, mass) of a periodic sheet whose primitive cell holds units 0 and 1
-    (sublattices 0 and 1), three fields each: its Hessian at rest, read column by column.
+def cell_couplings(system, offsets: np.ndarray, sublattice: np.ndarray) -> BlochCell:
+    """The ``BlochCell`` of a periodic sheet whose primitive cell holds units 0 and 1 (sublattices
+    0 and 1), three fields each (cell DOF order (u, v, θ) of unit 0, then unit 1): its Hessian at
+    rest, read from the columns of the cell's DOFs.
 
     ``offsets`` (N, 2): every unit's minimum-image rest position relative to unit 0 (units of the
     model's length); the couplings must reach less than half the periodic box.
     """
     n = system.n_sites
     kx = hessian_operator(system, empty_terms())
-    hess = np.column_stack([kx(np.eye(1, 3 * n, j).ravel()) for j in range(3 * n)])
-    units = (0, 1)
-    K = np.array([hess[[f * n + s for f in range(3)]].reshape(3, 3, n).transpose(0, 2, 1) for s in units])
-    mass = np.concatenate([system.mass[[f * n + s for f in range(3)]] for s in units])
-    return K, offsets, np.asarray(sublattice), mass
-
-
-def _bloch_matrix(data, k: np.ndarray) -> np.ndarray:
-    """D(k) (6 × 6, Hermitian) of the two-unit cell; DOF order (u, v, θ) of unit 0, then unit 1."""
-    K, offsets, sub, _ = data
-    D = np.zeros((6, 6), complex)
-    for a in range(2):
-        phase = np.exp(1j * ((offsets - offsets[a]) @ k))  # unit 1 is one column right of unit 0
-        for b in range(2):
-            sel = sub == b
-            D[3 * a:3 * a + 3, 3 * b:3 * b + 3] = np.einsum("fjg,j->fg", K[a][:, sel, :], phase[sel])
-    return 0.5 * (D + D.conj().T)
-
-
-def bloch_frequencies(lat: RotatingSquaresSheet, kvec: np.ndarray) -> np.ndarray:
-    """The six ω(k) (ascending, nondimensional) for each wave vector in ``kvec`` (…, 2)."""
-    return cell_frequencies(bloch_matrices(lat), kvec)
-
-
-def cell_frequencies(data, kvec: np.ndarray) -> np.ndarray:
-    """The six ω(k) (ascending) of the two-unit cell ``data`` (``cell_couplings``) at each wave
-    vector in ``kvec`` (…, 2)."""
-    kv = np.asarray(kvec, float)
-    out = np.empty(kv.shape[:-1] + (6,))
-    with single_blas_thread():  # 6 × 6 eigenproblems: BLAS threads only add overhead
-        for idx in np.ndindex(kv.shape[:-1]):
-            lam = eigh(_bloch_matrix(data, kv[idx]), np.diag(data[3]), eigvals_only=True)
-            out[idx] = np.sqrt(np.clip(lam, 0.0, None))
-    return out
+    sub = np.asarray(sublattice)
+    dof = np.arange(system.ndof)
+    cls = np.where(dof < 3 * n, 3 * sub[dof % n] + dof // n, -1)
+    cell_dofs = [f * n + s for s in (0, 1) for f in range(3)]
+    return read_cell(kx, system.ndof, cell_dofs, cls, np.asarray(offsets, float)[dof % n],
+                     system.mass[cell_dofs])
 
 
 def acoustic_modes(lat: RotatingSquaresSheet, phi: float, k: float = 1e-3) -> list[tuple[float, float]]:
@@ -110,9 +79,7 @@ def acoustic_modes(lat: RotatingSquaresSheet, phi: float, k: float = 1e-3) -> li
     ψ is the direction of the mode's in-plane displacement measured from the propagation
     direction, folded into [−90, 90) (0: longitudinal, −90: transverse).
     """
-    data = bloch_matrices(lat)
-    with single_blas_thread():
-        lam, vec = eigh(_bloch_matrix(data, np.array([k * math.cos(phi), k * math.sin(phi)])), np.diag(data[3]))
+    lam, vec = bloch_eigen(squares_cell(lat), np.array([k * math.cos(phi), k * math.sin(phi)]), vectors=True)
     out = []
     for j in range(2):
         uv = vec[[0, 1], j] + vec[[3, 4], j]       # both units move alike at long wavelength

@@ -1,7 +1,8 @@
 """Linear waves of the rotating-triangles chain and kagome sheet (docs/physics.md §1.6), from the
-Hessian of the built model: the chain with ``linear.dispersion`` (two units per cell), the sheet
-with the two-unit cell of ``linear.sheet`` (an up and a down triangle). Nondimensional: length a
-(the side of a triangle), time sqrt(m/k_l).
+Hessian of the built model: the chain's cell with ``linear.dispersion`` (two units per cell), the
+sheet's with the two-unit cell of ``linear.sheet`` (an up and a down triangle); their bands from
+``flexmm.linalg.bloch_frequencies``. Nondimensional: length a (the side of a triangle), time
+sqrt(m/k_l).
 """
 
 from __future__ import annotations
@@ -11,9 +12,16 @@ import math
 import numpy as np
 
 from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
-from flexmm.linear.dispersion import bloch_frequencies
-from flexmm.linear.sheet import cell_couplings, cell_frequencies
-from flexmm.models.rotating_triangles import HALF, build_chain, build_sheet, centroids, sublattice_sign
+from flexmm.linalg import BlochCell, bloch_frequencies
+from flexmm.linear.dispersion import chain_cell
+from flexmm.linear.sheet import cell_couplings
+from flexmm.models.rotating_triangles import (
+    HALF,
+    build_chain,
+    build_sheet,
+    centroids,
+    sublattice_sign,
+)
 
 #: units of the open chain the Bloch blocks are read from (cells of two, away from the ends)
 _CHAIN_UNITS = 24
@@ -26,7 +34,7 @@ _LONG_WAVE_Q = 1e-3
 def chain_bands(lat: RotatingTrianglesChain, q: np.ndarray) -> np.ndarray:
     """ω(q) (…, 6) of the chain, ascending, q the phase per two-unit cell (length 2 a cos θ0)."""
     small = build_chain(lat.model_copy(update={"n_units": _CHAIN_UNITS, "left": "free", "right": "free"}))
-    return bloch_frequencies(small, q, cell_sites=2)
+    return bloch_frequencies(chain_cell(small, cell_sites=2), q)
 
 
 def _acoustic(w: np.ndarray, q: float) -> np.ndarray:
@@ -45,15 +53,15 @@ def chain_long_wave_speed(lat: RotatingTrianglesChain) -> float:
     return float(w[1] / _LONG_WAVE_Q * 2.0 * math.cos(lat.theta0_rad))
 
 
-def sheet_cell(lat: RotatingTrianglesSheet):
-    """Coupling data of the kagome's two-triangle cell (``linear.sheet.cell_couplings``), read from
-    a small fully periodic copy of the sheet."""
+def sheet_cell(lat: RotatingTrianglesSheet) -> BlochCell:
+    """The ``BlochCell`` of the kagome's two-triangle cell (``linear.sheet.cell_couplings``), read
+    from a small fully periodic copy of the sheet."""
     periodic = lat.model_copy(update={"n_rows": _CELL_SHEET, "n_cols": _CELL_SHEET, "left": "periodic",
                                       "right": "periodic", "bottom": "periodic", "top": "periodic"})
     system = build_sheet(periodic)
     n, nc = system.n_sites, _CELL_SHEET
     row, col = np.divmod(np.arange(n), nc)
-    wrap = lambda d: (d + nc // 2) % nc - nc // 2  # noqa: E731 - minimum image on the torus
+    wrap = lambda d: (d + nc // 2) % nc - nc // 2
     x, y = centroids(nc, nc, lat.theta0_rad)
     d = 2.0 * HALF * math.cos(lat.theta0_rad)
     sigma = sublattice_sign(nc, nc)
@@ -63,7 +71,7 @@ def sheet_cell(lat: RotatingTrianglesSheet):
 
 def sheet_bands(lat: RotatingTrianglesSheet, kvec: np.ndarray) -> np.ndarray:
     """The six ω(k) (ascending) of the kagome sheet at each wave vector in ``kvec`` (…, 2), units 1/a."""
-    return cell_frequencies(sheet_cell(lat), kvec)
+    return bloch_frequencies(sheet_cell(lat), kvec)
 
 
 def sheet_long_wave_speeds(lat: RotatingTrianglesSheet, phi: float) -> tuple[float, float]:

@@ -5,7 +5,7 @@
 One scalar displacement x per site (field ``u``). Bonds (nearest, optional second neighbours)
 and on-site terms are elements with a law code and a parameter row (``flexmm.models.laws``):
 the kernels below lift the scalar law over the index arrays; geometry (``mass_topology``),
-parameters (``mass_params``) and variation (``mass_variation``) only build those arrays.
+parameters (``mass_params``) and variation (``variation``) only build those arrays.
 
 Nondimensional units: length = site spacing a, mass = site mass m, time = sqrt(m/k_ref) with
 k_ref the bond law's rest stiffness (or ``reference_stiffness_n_per_m``), so speeds are in
@@ -22,12 +22,13 @@ import math
 
 import numpy as np
 
+from flexmm.linalg import central_difference
 from flexmm.models import laws as lw
 from flexmm.models.base import FieldSpec, GroundFriction, System
 from flexmm.models.mass_kernels import MassArgs, mass_energy, mass_force
 from flexmm.models.mass_params import law_rows, rest_stiffness
 from flexmm.models.mass_topology import Topology, build_topology
-from flexmm.models.mass_variation import apply_variation
+from flexmm.models.variation import mass_values
 from flexmm.units import Scales
 
 FIELDS = (FieldSpec("u", "length", "displacement"),)
@@ -58,23 +59,7 @@ def scales_of(cfg) -> Scales:
 
 def element_values(cfg, topo: Topology) -> dict[str, np.ndarray]:
     """Every variable quantity per element (SI), after the config's variations."""
-    n = topo.n_sites
-    vals = {"mass_kg": np.full(n, cfg.mass_kg),
-            "initial_displacement_m": np.full(n, cfg.initial_displacement_m)}
-    if cfg.friction is not None:
-        vals["friction.force_n"] = np.full(n, cfg.friction.force_n)
-    sizes = {"bond": len(topo.bonds), "bond2": len(topo.bonds2)}
-    for prefix, law in [("bond", cfg.bond), ("bond2", cfg.bond2)] + [
-        (f"onsite.{k}", law) for k, law in enumerate(cfg.onsite)
-    ]:
-        if law is None:
-            continue
-        for name, value in law:
-            if isinstance(value, float):
-                vals[f"{prefix}.{name}"] = np.full(sizes.get(prefix, n), value)
-    for var in cfg.variation:
-        apply_variation(vals, var, topo.grid_shape)
-    return vals
+    return mass_values(cfg, topo.n_sites, topo.bonds, topo.bonds2, topo.grid_shape)
 
 
 def _tables(rows_list, tab_list) -> np.ndarray:
@@ -143,7 +128,6 @@ def relax(args: tuple, q: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, flo
     from scipy.optimize import minimize
 
     f = np.zeros_like(q)
-    fp, fm = np.zeros_like(q), np.zeros_like(q)
     work = q.copy()
 
     def energy(y):
@@ -156,17 +140,7 @@ def relax(args: tuple, q: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, flo
         return -f[free]
 
     def hessp(y, p):
-        scale = np.max(np.abs(p))
-        if scale == 0.0:
-            return np.zeros_like(p)
-        eps = 1e-6 / scale
-        base = q.copy()
-        base[free] = y
-        base[free] += eps * p
-        mass_force(base, args, fp)
-        base[free] -= 2 * eps * p
-        mass_force(base, args, fm)
-        return -(fp[free] - fm[free]) / (2 * eps)
+        return central_difference(grad, y, p)
 
     if free.size:
         res = minimize(energy, q[free], jac=grad, hessp=hessp, method="trust-ncg",

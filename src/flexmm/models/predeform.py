@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm.linalg import force_hessian, top_eigenvalue
 from flexmm.models.base import Predeformation, System
 from flexmm.models.hinge import ChainArgs
 from flexmm.models.kernels import model_force
@@ -94,21 +95,10 @@ def fire_relax(args, q, free, dt0, dt_max, tol, max_steps):
     return max_steps, resid
 
 
-def _stiffest(system: System, q: np.ndarray, free: np.ndarray, iters: int = 30) -> float:
-    """Largest Hessian eigenvalue over the free DOFs at q (power iteration, force differences)."""
-    rng = np.random.default_rng(0)
-    x = rng.normal(size=q.size) * free
-    fp, fm = np.zeros(q.size), np.zeros(q.size)
-    lam = 1.0
-    for _ in range(iters):
-        x /= np.linalg.norm(x)
-        eps = 1e-6
-        system.force(q + eps * x, system.args, fp)
-        system.force(q - eps * x, system.args, fm)
-        y = -(fp - fm) / (2 * eps) * free
-        lam = float(np.dot(x, y))
-        x = y
-    return abs(lam)
+def _stiffest(system: System, q: np.ndarray, free: np.ndarray) -> float:
+    """Largest Hessian eigenvalue over the free DOFs (``free`` a 0/1 mask) at q."""
+    kx = force_hessian(system.force, system.args, q)
+    return top_eigenvalue(lambda x: free * kx(free * x), q.size, np.flatnonzero(free))
 
 
 def relax(system: System, cfg) -> Predeformation:

@@ -23,6 +23,7 @@ from flexmm.models.base import FieldSpec, System
 from flexmm.models.rotating_sheet import edge_sites
 from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN, N_HINGE_PARAMS
 from flexmm.models.triangle_kernels import TriangleArgs
+from flexmm.models.variation import parameter_arrays
 from flexmm.units import Scales
 
 FIELDS = (
@@ -99,7 +100,17 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
     n = n_rows * n_cols
     periodic_y = getattr(cfg, "bottom", "free") == "periodic"
     args = triangle_args(n_rows, n_cols, cfg.theta0_rad, nd["Ks"], nd["Ktheta"], cfg.left == "periodic", periodic_y)
+    row, col = np.divmod(np.arange(n), n_cols)
     mass = np.concatenate([np.ones(2 * n), np.full(n, nd["alpha2"])])
+    if cfg.variation:  # per-triangle m, J and per-hinge k_l, k_s, k_θ (docs/scenes.md, Parameter variation)
+        m, J, kl, a = cfg.mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
+        base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": J, "k_long_n_per_m": kl,
+                "k_shear_n_per_m": cfg.k_shear_n_per_m, "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}
+        units, hinges = parameter_arrays(base, cfg.variation, col, row, args.hinge_a, args.hinge_b)
+        mass = np.concatenate([units["mass_kg"] / m, units["mass_kg"] / m, units["inertia_kg_m2"] / (m * a**2)])
+        args.hinge_prm[:, H_KL] = hinges["k_long_n_per_m"] / kl
+        args.hinge_prm[:, H_KS] = hinges["k_shear_n_per_m"] / kl
+        args.hinge_prm[:, H_KT] = hinges["k_rot_n_m_per_rad"] / (kl * a**2)
     inv_mass = 1.0 / mass
     for end, sites in ends.items():
         if getattr(cfg, end) == "fixed":
@@ -107,7 +118,6 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
                 inv_mass[f * n + np.asarray(sites)] = 0.0
     a = cfg.a_m
     x, y = centroids(n_rows, n_cols, cfg.theta0_rad)
-    row, col = np.divmod(np.arange(n), n_cols)
     rows = np.flatnonzero(args.axis_sin < 1.0)  # the hinges along the rows (not the vertical ones)
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n,

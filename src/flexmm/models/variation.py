@@ -1,64 +1,131 @@
-"""Per-unit and per-hinge parameter arrays of the rigid-unit lattices from ``variation`` configs.
+"""Per-element parameter arrays from a lattice's ``variation`` list: the one engine of every lattice.
 
-Units carry θ0, mass and inertia; hinges carry k_l, k_s, k_θ (``flexmm.config.rigid``). Each
-variation in the list acts in order on the current values:
+The semantics are those of ``flexmm.config.variation`` (docs/scenes.md, Parameter variation):
+entries act in order on the current values; sites are located by their column or row (``line``);
+a bond belongs to the two sites it joins (``ends``):
 
-- gradient: linear ramp in the column (axis x) or row (axis y) index, a hinge takes the mean of
-  its two units;
-- interface: units with index ≥ position take the new value, a hinge across takes the mean;
-- random: adds N(0, std) or multiplies by 1 + N(0, relative_std), independently per element;
-- defects: sets (or scales) the value on listed units, or on every hinge touching them.
+- gradient: sites on lines first..last take the ramp, others keep their value; a bond takes the
+  mean over its two sites of (the ramp if that site is in range, else the bond's current value);
+- interface: the same with the constant ``value`` on the lines ≥ position;
+- random: ``default_rng([seed, crc32(target)])`` draws one ε per element in element order;
+- defects: listed sites (and ``box``) are set or scaled; a bond target changes the bonds touching them.
+
+Used by the rotating-squares chain and sheet, the chains, networks and grids of masses, and the
+render layer (which reads a run's config); so one YAML entry gives the same values everywhere.
 """
 
 from __future__ import annotations
+
+import math
+import zlib
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 from flexmm.config.rigid import HINGE_TARGETS, SITE_TARGETS
 
+#: ``ends(target)``: None for a per-site target, else the (a, b) site pairs of the target's bonds
+Ends = Callable[[str], "tuple[np.ndarray, np.ndarray] | None"]
 
-def _ramp(v, idx: np.ndarray, size: int) -> np.ndarray:
-    """Gradient values at unit indices ``idx``: start at ``first``, end at ``last``, flat outside."""
+
+def noise(v, n: int) -> np.ndarray:
+    """The ε of a Random entry for ``n`` elements (reproducible from its seed and target)."""
+    rng = np.random.default_rng([v.seed, zlib.crc32(v.target.encode())])
+    sigma = v.std if v.std is not None else v.relative_std
+    if v.distribution == "normal":
+        return rng.normal(0.0, sigma, n)
+    return rng.uniform(-1.0, 1.0, n) * sigma * math.sqrt(3.0)
+
+
+def _on_lines(v, line: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(new value, selected) per site of a gradient or interface entry."""
+    if v.kind == "interface":
+        return np.full(line.shape, float(v.value)), line >= v.position
     first = v.first or 0
     last = size - 1 if v.last is None else v.last
-    return v.start + (v.end - v.start) * np.clip((idx - first) / (last - first), 0.0, 1.0)
+    # as np.linspace over first..last: exact ``start`` at first and ``end`` at last
+    ramp = np.where(line == last, v.end, (line - first) * ((v.end - v.start) / (last - first)) + v.start)
+    return ramp, (line >= first) & (line <= last)
 
 
-def _apply(v, values: np.ndarray, idx_units: tuple[np.ndarray, ...], size: int, key: int, touches) -> np.ndarray:
-    """One variation on one array; ``idx_units``: unit indices along the axis (1 array for units,
-    2 for hinges, whose value is the mean over their two units)."""
-    if v.kind == "gradient":
-        return sum(_ramp(v, i, size) for i in idx_units) / len(idx_units)
-    if v.kind == "interface":
-        w = sum((i >= v.position).astype(float) for i in idx_units) / len(idx_units)
-        return values * (1.0 - w) + v.value * w
+def _selected_sites(v, col: np.ndarray, row: np.ndarray) -> np.ndarray:
+    """Boolean per site: the sites a Defects entry lists, plus its box."""
+    hit = np.zeros(col.size, bool)
+    hit[np.asarray(v.sites, np.int64)] = True
+    if v.box is not None:
+        i0, i1, j0, j1 = v.box
+        hit |= (col >= i0) & (col <= i1) & (row >= j0) & (row <= j1)
+    return hit
+
+
+def vary(v, old: np.ndarray, col: np.ndarray, row: np.ndarray, pair) -> np.ndarray:
+    """The values of one target after one entry; ``pair`` = (a, b) of a bond target, else None."""
     if v.kind == "random":
-        rng = np.random.default_rng([v.seed, key])
-        eps = rng.normal(0.0, v.std if v.std is not None else v.relative_std, values.size)
-        return values + eps if v.std is not None else values * (1.0 + eps)
-    out = values.copy()
-    mask = touches(np.asarray(v.sites))
-    out[mask] = v.value if v.value is not None else values[mask] * v.factor
-    return out
+        eps = noise(v, old.size)
+        return old + eps if v.std is not None else old * (1.0 + eps)
+    if v.kind == "defects":
+        hit = _selected_sites(v, col, row)
+        mask = hit if pair is None else hit[pair[0]] | hit[pair[1]]
+        out = old.copy()
+        out[mask] = v.value if v.value is not None else old[mask] * v.factor
+        return out
+    line = row if v.axis == "y" else col
+    new, sel = _on_lines(v, line, int(line.max()) + 1)
+    if pair is None:
+        return np.where(sel, new, old)
+    a, b = pair
+    return 0.5 * (np.where(sel[a], new[a], old) + np.where(sel[b], new[b], old))
 
 
-def parameter_arrays(base: dict[str, float], variations, col: np.ndarray, row: np.ndarray,
-                     ha: np.ndarray, hb: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Per-unit (N,) and per-hinge (H,) arrays of every target, in SI, after the variations.
+def apply_variations(values: dict[str, np.ndarray], variations, col: np.ndarray, row: np.ndarray,
+                     ends: Ends) -> None:
+    """Apply a variation list in order to ``values`` (target -> per-element array, SI), in place.
 
-    ``base`` maps each target to its uniform value; ``col``, ``row`` are the units' indices;
-    ``ha``, ``hb`` the hinges' unit pairs.
+    ``col``, ``row``: each site's column and row (a chain or network: its index and 0).
     """
-    n, nh = col.size, ha.size
-    sites = {k: np.full(n, float(base[k])) for k in SITE_TARGETS}
-    hinges = {k: np.full(nh, float(base[k])) for k in HINGE_TARGETS}
-    for key, v in enumerate(variations):
-        axis = row if getattr(v, "axis", "x") == "y" else col
-        size = int(axis.max()) + 1
-        if v.target in SITE_TARGETS:
-            sites[v.target] = _apply(v, sites[v.target], (axis,), size, key,
-                                     lambda s: np.isin(np.arange(n), s))
-        else:
-            hinges[v.target] = _apply(v, hinges[v.target], (axis[ha], axis[hb]), size, key,
-                                      lambda s: np.isin(ha, s) | np.isin(hb, s))
-    return sites, hinges
+    for v in variations:
+        values[v.target] = vary(v, np.asarray(values[v.target], float), col, row, ends(v.target))
+
+
+def site_lines(n_sites: int, grid_shape: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(column, row) of every site: i, j of site i + nx·j on an (nx, ny) grid; else the index, 0."""
+    idx = np.arange(n_sites)
+    if grid_shape is None:
+        return idx, np.zeros_like(idx)
+    return idx % grid_shape[0], idx // grid_shape[0]
+
+
+def mass_values(cfg, n_sites: int, bonds: np.ndarray, bonds2: np.ndarray,
+                grid_shape: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
+    """Every variation target of a lattice of masses per element (SI), after its variations.
+
+    Per site: mass, initial displacement, friction and on-site law fields; per bond of ``bonds``
+    (B, 2) the ``bond.*`` fields, per bond of ``bonds2`` the ``bond2.*`` fields.
+    """
+    pairs = {"bond": (bonds[:, 0], bonds[:, 1]), "bond2": (bonds2[:, 0], bonds2[:, 1])}
+    vals = {"mass_kg": np.full(n_sites, cfg.mass_kg),
+            "initial_displacement_m": np.full(n_sites, cfg.initial_displacement_m)}
+    if cfg.friction is not None:
+        vals["friction.force_n"] = np.full(n_sites, cfg.friction.force_n)
+    for prefix, law in [("bond", cfg.bond), ("bond2", cfg.bond2)] + [(f"onsite.{k}", law)
+                                                                     for k, law in enumerate(cfg.onsite)]:
+        if law is not None:
+            size = len(pairs[prefix][0]) if prefix in pairs else n_sites
+            vals |= {f"{prefix}.{name}": np.full(size, value) for name, value in law
+                     if isinstance(value, float)}
+    col, row = site_lines(n_sites, grid_shape)
+    apply_variations(vals, cfg.variation, col, row, lambda target: pairs.get(target.split(".")[0]))
+    return vals
+
+
+def parameter_arrays(base: Mapping[str, float], variations, col: np.ndarray, row: np.ndarray,
+                     ha: np.ndarray, hb: np.ndarray) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Per-unit (N,) and per-hinge (H,) arrays of a rigid-unit lattice's targets, in SI.
+
+    ``base`` maps each target to its uniform value; ``col``, ``row`` are the units' column and
+    row; ``ha``, ``hb`` the hinges' unit pairs.
+    """
+    values = {k: np.full(col.size, float(base[k])) for k in SITE_TARGETS}
+    values |= {k: np.full(ha.size, float(base[k])) for k in HINGE_TARGETS}
+    apply_variations(values, variations, col, row, lambda t: (ha, hb) if t in HINGE_TARGETS else None)
+    return {k: values[k] for k in SITE_TARGETS}, {k: values[k] for k in HINGE_TARGETS}

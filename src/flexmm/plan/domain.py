@@ -3,7 +3,8 @@
 Group speed. The lattice is linearised about a reference state (rest, or a uniform strain the
 excitation is expected to impose, so that contacts without preload — a Hertz chain — get their
 loaded stiffness). Hessian columns of a probe cell of 2 sites along x (2×2 in a sheet) come
-from ``stability.hessian_operator``; Bloch sums over the sites of each parity class give
+from ``stability.hessian_operator``; Bloch sums over the sites of each parity class
+(``flexmm.linalg.read_cell`` and ``bloch_eigen``) give
 
     K(k) x = ω² M x,   K_{(g,c'),(f,c)}(k) = Σ_{j ∈ c'} H_{(g,j),(f,c)} exp(i k·(n_j − n_c)),
 
@@ -24,11 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexmm._blas import single_blas_thread
+from flexmm.errors import PlanError
 from flexmm.integrators.common import Terms
+from flexmm.linalg import bloch_eigen, read_cell
 from flexmm.models.base import System
 from flexmm.stability import hessian_operator
-from flexmm.errors import PlanError
 
 MARGIN = 0.10
 PAD = 20
@@ -83,34 +84,17 @@ def bloch_dispersion(system: System, terms: Terms, q_ref: np.ndarray | None = No
     two_d = iy.max() > 0
     cell = _probe_cell(ix, iy)
     cls = (ix % 2) + (2 * (iy % 2) if two_d else 0)
-    kx_op = hessian_operator(system, terms, q_ref)
-    nb = nf * len(cell)
-    cols = []  # (row dofs g, row sites j, values) per probe dof
-    e = np.zeros(system.ndof)
-    for c in cell:
-        for f in range(nf):
-            e[:] = 0.0
-            e[f * n + c] = 1.0
-            col = kx_op(e)[: nf * n]
-            tol = 1e-9 * max(np.max(np.abs(col)), 1e-300)
-            hit = np.flatnonzero(np.abs(col) > tol)
-            cols.append((c, f, hit // n, hit % n, col[hit]))
-    mass = np.array([system.mass[f * n + c] for c in cell for f in range(nf)])
-    w = 1.0 / np.sqrt(mass)
+    dof = np.arange(system.ndof)
+    site = dof % n
+    dof_class = np.where(dof < nf * n, cls[site] * nf + dof // n, -1)
+    cell_dofs = [f * n + c for c in cell for f in range(nf)]
+    bloch = read_cell(hessian_operator(system, terms, q_ref), system.ndof, cell_dofs, dof_class,
+                      np.stack([ix[site], iy[site]], axis=1), system.mass[cell_dofs], tol=1e-9)
     k = np.linspace(0.0, math.pi, n_k)
     kys = np.linspace(0.0, math.pi, n_ky) if two_d else np.zeros(1)
     omega_all, group, lam_min, lam_max = [], [], 0.0, 0.0
     for ky in kys:
-        mat = np.zeros((n_k, nb, nb), complex)
-        for c, f, g, j, val in cols:
-            col_idx = cell.index(c) * nf + f
-            row_idx = cls[j] * nf + g
-            phase = np.exp(1j * (np.outer(k, ix[j] - ix[c]) + ky * (iy[j] - iy[c])))  # (n_k, hits)
-            for r in np.unique(row_idx):
-                mat[:, r, col_idx] += (phase[:, row_idx == r] * val[row_idx == r]).sum(axis=1)
-        mat = 0.5 * (mat + np.conj(np.swapaxes(mat, 1, 2)))
-        with single_blas_thread():  # n_k small dense eigenproblems: BLAS threads only cost
-            lam = np.linalg.eigvalsh(w[None, :, None] * mat * w[None, None, :])
+        lam = bloch_eigen(bloch, np.stack([k, np.full(n_k, ky)], axis=1))
         lam_min, lam_max = min(lam_min, lam[:, 0].min()), max(lam_max, lam[:, -1].max())
         om = np.sqrt(np.clip(lam, 0.0, None))
         omega_all.append(om)

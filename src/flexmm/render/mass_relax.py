@@ -13,6 +13,7 @@ import warnings
 
 import numpy as np
 
+from flexmm.linalg import central_difference
 from flexmm.render.laws import law_energy_j
 
 
@@ -99,11 +100,7 @@ def relaxed_initial(p) -> np.ndarray:
         return model.gradient(full(y))[free] * a / scale
 
     def hessp(y, v):
-        m = np.max(np.abs(v))
-        if m == 0.0:
-            return np.zeros_like(v)
-        eps = 1e-6 / m
-        return (jac(y + eps * v) - jac(y - eps * v)) / (2 * eps)
+        return central_difference(jac, y, v)
 
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -21,6 +21,7 @@ from itertools import pairwise
 
 import numpy as np
 
+from flexmm.models.variation import mass_values
 from flexmm.render.laws import barriers, law_energy_j
 from flexmm.render.mass_relax import relaxed_initial
 
@@ -154,29 +155,6 @@ def _numeric(law) -> list[tuple[str, float]]:
     return [(k, v) for k, v in law if isinstance(v, float) and not isinstance(v, bool)]
 
 
-def _vary(values: dict, var, grid_shape) -> None:
-    """One Gradient, RandomVariation or Defects config on ``values[var.target]`` (models' rules)."""
-    a = values[var.target]
-    n = a.size
-    if var.kind == "gradient":
-        first = 0 if var.first is None else var.first
-        last = n - 1 if var.last is None else var.last
-        a[first : last + 1] = np.linspace(var.start, var.end, last - first + 1)
-    elif var.kind == "random":
-        rng = np.random.default_rng(var.seed)
-        eps = (rng.normal(0.0, var.relative_std, n) if var.distribution == "normal"
-               else rng.uniform(-1.0, 1.0, n) * var.relative_std * np.sqrt(3.0))
-        a *= 1.0 + eps
-    else:
-        idx = list(var.sites)
-        if var.box is not None:
-            nx = grid_shape[0]
-            i0, i1, j0, j1 = var.box
-            idx += [i + nx * j for j in range(j0, j1 + 1) for i in range(i0, i1 + 1)]
-        idx = np.unique(np.asarray(idx, np.int64))
-        a[idx] = var.value if var.value is not None else a[idx] * var.factor
-
-
 def mass_params(lat, rest: tuple[np.ndarray, np.ndarray] | None = None) -> MassParams:
     """The MassParams of a mass_chain, mass_network or mass_grid config.
 
@@ -199,16 +177,7 @@ def mass_params(lat, rest: tuple[np.ndarray, np.ndarray] | None = None) -> MassP
         dirs = np.tile([1.0, 0.0], (n, 1))
     else:
         raise ValueError(f"not a mass lattice: {lat.kind!r}")
-    vals = {"mass_kg": np.full(n, lat.mass_kg), "initial_displacement_m": np.full(n, lat.initial_displacement_m)}
-    if lat.friction is not None:
-        vals["friction.force_n"] = np.full(n, lat.friction.force_n)
-    sizes = {"bond": len(bonds), "bond2": len(bonds2)}
-    for prefix, law in [("bond", lat.bond), ("bond2", lat.bond2)] + [(f"onsite.{k}", l) for k, l in enumerate(lat.onsite)]:
-        if law is not None:
-            for name, value in _numeric(law):
-                vals[f"{prefix}.{name}"] = np.full(sizes.get(prefix, n), value)
-    for var in lat.variation:
-        _vary(vals, var, grid_shape)
+    vals = mass_values(lat, n, bonds, bonds2, grid_shape)
     groups = network_groups(lat) if lat.kind == "mass_network" else {}
     for j in getattr(lat, "junctions", []):
         if j.mass_kg is not None:

@@ -3,7 +3,7 @@
 The render layer does not rebuild models (docs/architecture.md, layers); what it needs of a lattice
 — rest rotations θ0 per unit, masses and inertias, hinge stiffnesses, the hinge list — is computed
 here from the validated lattice config, following the builders' conventions (site = row · n_cols +
-col, hinges horizontal first then vertical, variations applied in order with the same seeds).
+col, hinges horizontal first then vertical, variations by the models' engine ``models.variation``).
 ``tests/render/test_params.py`` checks every array against the built model.
 """
 
@@ -13,8 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SITE_TARGETS = ("theta0_rad", "mass_kg", "inertia_kg_m2")
-HINGE_TARGETS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad")
+from flexmm.models.variation import parameter_arrays
 
 
 @dataclass
@@ -54,45 +53,6 @@ class RigidParams:
     def n_units(self) -> int:
         """Number of units."""
         return self.theta0_rad.size
-
-
-def _ramp(v, idx: np.ndarray, size: int) -> np.ndarray:
-    first = v.first or 0
-    last = size - 1 if v.last is None else v.last
-    return v.start + (v.end - v.start) * np.clip((idx - first) / (last - first), 0.0, 1.0)
-
-
-def _apply(v, values, idx_units, size, key, touches) -> np.ndarray:
-    """One variation (gradient, interface, random, defects) on one array (models.variation rules)."""
-    if v.kind == "gradient":
-        return sum(_ramp(v, i, size) for i in idx_units) / len(idx_units)
-    if v.kind == "interface":
-        w = sum((i >= v.position).astype(float) for i in idx_units) / len(idx_units)
-        return values * (1.0 - w) + v.value * w
-    if v.kind == "random":
-        rng = np.random.default_rng([v.seed, key])
-        eps = rng.normal(0.0, v.std if v.std is not None else v.relative_std, values.size)
-        return values + eps if v.std is not None else values * (1.0 + eps)
-    out = values.copy()
-    mask = touches(np.asarray(v.sites))
-    out[mask] = v.value if v.value is not None else values[mask] * v.factor
-    return out
-
-
-def varied(base: dict, variations, col, row, ha, hb) -> tuple[dict, dict]:
-    """Per-unit and per-hinge arrays of every target after the config's variations (SI)."""
-    n, nh = col.size, ha.size
-    sites = {k: np.full(n, float(base[k])) for k in SITE_TARGETS}
-    hinges = {k: np.full(nh, float(base[k])) for k in HINGE_TARGETS}
-    for key, v in enumerate(variations):
-        axis = row if getattr(v, "axis", "x") == "y" else col
-        size = int(axis.max()) + 1
-        if v.target in SITE_TARGETS:
-            sites[v.target] = _apply(v, sites[v.target], (axis,), size, key, lambda s: np.isin(np.arange(n), s))
-        else:
-            hinges[v.target] = _apply(v, hinges[v.target], (axis[ha], axis[hb]), size, key,
-                                      lambda s: np.isin(ha, s) | np.isin(hb, s))
-    return sites, hinges
 
 
 def sheet_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, skew: int = 0):
@@ -144,7 +104,7 @@ def _base(lat, mass: float, inertia: float) -> dict:
 def _chain(lat) -> RigidParams:
     n = lat.n_units
     ha = np.arange(n - 1, dtype=np.int64)
-    sites, hinges = varied(_base(lat, lat.mass_kg, lat.inertia_kg_m2), lat.variation,
+    sites, hinges = parameter_arrays(_base(lat, lat.mass_kg, lat.inertia_kg_m2), lat.variation,
                            np.arange(n), np.zeros(n, np.int64), ha, ha + 1)
     return RigidParams(
         lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], np.where(np.arange(n) % 2 == 0, 1.0, -1.0),
@@ -157,7 +117,7 @@ def _sheet(lat) -> RigidParams:
     nr, nc = lat.n_rows, lat.n_cols
     ha, hb, axis, wrap = sheet_hinges(nr, nc, lat.left == "periodic", lat.bottom == "periodic", lat.skew_cols)
     row, col = np.divmod(np.arange(nr * nc), nc)
-    sites, hinges = varied(_base(lat, lat.unit_mass_kg, lat.unit_inertia_kg_m2), lat.variation, col, row, ha, hb)
+    sites, hinges = parameter_arrays(_base(lat, lat.unit_mass_kg, lat.unit_inertia_kg_m2), lat.variation, col, row, ha, hb)
     magnets = None if lat.magnets is None else (lat.magnets.recess_m, lat.magnets.polarity)
     return RigidParams(
         lat.kind, nr, nc, lat.a_m / 2, sites["theta0_rad"], checkerboard(nr, nc), sites["mass_kg"],
@@ -208,4 +168,4 @@ def lateral_energy_j(p: RigidParams, theta) -> np.ndarray:
 
 
 __all__ = ["RigidParams", "checkerboard", "joint_energy_j", "joint_stiffness_j", "lateral_energy_j",
-           "rigid_params", "sheet_hinges", "varied"]
+           "rigid_params", "sheet_hinges"]

@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from flexmm import baseline
+from flexmm.diagnostics import baseline
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.runner import integrate
 

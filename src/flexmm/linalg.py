@@ -1,0 +1,279 @@
+"""The linear algebra of small oscillations, once: Hessian-vector products, top eigenpairs, Bloch bands.
+
+Everything here works on operators given as functions, so it knows nothing about models and sits
+low in the layering (docs/architecture.md): models use it to relax, ``stability`` for ω_max and
+the fastest mode, ``linear`` and ``plan.domain`` for dispersion.
+
+Hessian-vector product. For a force F = −∇E (or a gradient g = ∇E) the Hessian times x is the
+central difference K x ≈ −(F(q + εx) − F(q − εx)) / 2ε with ε = ``FD_STEP`` / max|x| (error
+O(ε²) from the third derivatives, O(u max|F| / ε) from round-off u).
+
+Top eigenvalue. Small symmetric operators are assembled column by column and diagonalised
+densely; larger ones by plain Lanczos (the top Ritz value, a lower bound converging like 1/m² in
+the m iterations at a band edge), the top eigenvector by ARPACK. ``warm_lanczos`` is a few
+fully reorthogonalised Lanczos steps from a given start (tracking a slowly changing top mode).
+
+Bloch bands. A periodic lattice whose cell holds d DOFs couples DOF a of a cell to DOF b of the
+cell displaced by r with the Hessian entry K; summing over partners,
+
+    D_ab(k) = Σ K_{a, (b, r)} e^{i k·r},    D(k) x = ω² M x,
+
+M the cell's diagonal mass (docs/physics.md §1.4 is its closed form for the rotating-squares
+chain). ``read_cell`` collects those entries from Hessian columns, ``bloch_frequencies`` solves
+the eigenproblem for wave vectors of any dimension.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import eigvalsh_tridiagonal
+
+from flexmm._blas import single_blas_thread
+
+FD_STEP = 1e-6  # central-difference step, relative to max |x|
+DENSE_LIMIT = 400  # at most this many DOFs: assemble and diagonalise densely
+LANCZOS_MAX_ITER = 600
+LANCZOS_RTOL = 1e-6
+UNSTABLE_TOL = 1e-10  # ω² below −UNSTABLE_TOL·max(1, max|ω²|) is an unstable mode (NaN frequency)
+
+Operator = Callable[[np.ndarray], np.ndarray]
+
+
+def fd_step(v: np.ndarray) -> float:
+    """The central-difference step ε = FD_STEP / max|v| along v (0 for v = 0)."""
+    scale = float(np.max(np.abs(v))) if np.size(v) else 0.0
+    return FD_STEP / scale if scale > 0 else 0.0
+
+
+def central_difference(fn: Operator, y: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(fn(y + εv) − fn(y − εv)) / 2ε, ε = ``fd_step(v)``: the derivative of ``fn`` along v (a
+    Hessian-vector product when ``fn`` is a gradient). Zero for v = 0."""
+    eps = fd_step(v)
+    if eps == 0:
+        return np.zeros(np.shape(y))
+    return (fn(y + eps * v) - fn(y - eps * v)) / (2 * eps)
+
+
+def force_hessian(force, args, q_ref: np.ndarray) -> Operator:
+    """x ↦ K x at ``q_ref`` for a compiled ``force(q, args, out)`` (F = −∇E): the central
+    difference −(F(q + εx) − F(q − εx)) / 2ε of ``central_difference``, into reused buffers."""
+    q_ref = np.asarray(q_ref, float)
+    fp, fm = np.zeros(q_ref.size), np.zeros(q_ref.size)
+
+    def matvec(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, float).ravel()
+        eps = fd_step(x)
+        if eps == 0:
+            return np.zeros_like(x)
+        force(q_ref + eps * x, args, fp)
+        force(q_ref - eps * x, args, fm)
+        return -(fp - fm) / (2 * eps)
+
+    return matvec
+
+
+def dense_matrix(op: Operator, n: int, index: np.ndarray | None = None) -> np.ndarray:
+    """The symmetric operator ``op`` on R^n assembled over ``index`` (default all), column by column,
+    and symmetrised: shape (len(index), len(index))."""
+    index = np.arange(n) if index is None else np.asarray(index)
+    e = np.zeros(n)
+    cols = []
+    for j in index:
+        e[j] = 1.0
+        cols.append(op(e)[index])
+        e[j] = 0.0
+    a = np.column_stack(cols) if cols else np.zeros((0, 0))
+    return 0.5 * (a + a.T)
+
+
+def lanczos_max(op: Operator, n: int, *, max_iter: int = LANCZOS_MAX_ITER, rtol: float = LANCZOS_RTOL,
+                seed: int = 0) -> float:
+    """Largest eigenvalue of the symmetric operator ``op`` (n × n), by plain Lanczos.
+
+    No reorthogonalisation: the top Ritz value still converges to λ_max (lost orthogonality only
+    adds copies). Stops when it changes by less than ``rtol`` (relative) over 10 iterations, or
+    after ``max_iter`` iterations.
+    """
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal(n)
+    x /= math.sqrt(np.sum(x * x))
+    x_prev = np.zeros(n)
+    alpha, beta = np.zeros(max_iter), np.zeros(max_iter)
+    b, history, it = 0.0, [], 0
+    while it < min(max_iter, n):
+        k1 = min(it + 10, max_iter, n)
+        for k in range(it, k1):
+            w = op(x) - b * x_prev
+            alpha[k] = float(np.sum(w * x))  # np.sum, not BLAS: a threaded dot spin-waits
+            w -= alpha[k] * x
+            b = beta[k] = math.sqrt(float(np.sum(w * w)))
+            if b == 0.0:
+                k1 = k + 1
+                break
+            x_prev, x = x, w / b
+        it = k1
+        top = float(eigvalsh_tridiagonal(alpha[:it], beta[: it - 1], select="i",
+                                         select_range=(it - 1, it - 1))[0])
+        history.append(top)
+        if b <= 1e-14 * abs(top) or (len(history) > 1 and abs(top - history[-2]) <= rtol * abs(top)):
+            break
+    return history[-1]
+
+
+def top_eigenvalue(op: Operator, n: int, index: np.ndarray | None = None,
+                   dense_limit: int = DENSE_LIMIT) -> float:
+    """Largest eigenvalue of the symmetric ``op`` restricted to the DOFs ``index`` (default all).
+
+    ``op`` must vanish outside ``index`` (a mass-weighted operator with zero weight on held DOFs),
+    so that Lanczos on the full space sees the same top eigenvalue (the rest adds zeros).
+    """
+    index = np.arange(n) if index is None else np.asarray(index)
+    if index.size == 0:
+        return 0.0
+    if index.size <= dense_limit:
+        with single_blas_thread():  # small dense problem: BLAS threads only cost
+            return float(np.linalg.eigvalsh(dense_matrix(op, n, index))[-1])
+    return lanczos_max(op, n)
+
+
+def top_eigenpair(op: Operator, n: int, index: np.ndarray | None = None,
+                  dense_limit: int = DENSE_LIMIT) -> tuple[float, np.ndarray]:
+    """(λ_max, unit eigenvector (n,), zero outside ``index``) of the symmetric ``op`` on ``index``:
+    dense for small problems, else ARPACK (``eigsh``) on the restricted operator."""
+    from scipy.sparse.linalg import LinearOperator, eigsh
+
+    index = np.arange(n) if index is None else np.asarray(index)
+    if index.size <= dense_limit:
+        with single_blas_thread():
+            lam, vec = np.linalg.eigh(dense_matrix(op, n, index))
+        lam, y = lam[-1], vec[:, -1]
+    else:
+        full = np.zeros(n)
+
+        def matvec(y):
+            full[:] = 0.0
+            full[index] = np.ravel(y)
+            return op(full)[index]
+
+        sub = LinearOperator((index.size, index.size), matvec=matvec, dtype=float)
+        v0 = np.random.default_rng(0).standard_normal(index.size)  # not orthogonal to a staggered mode
+        lam, vec = eigsh(sub, k=1, which="LA", tol=1e-10, v0=v0)
+        lam, y = lam[0], vec[:, 0]
+    out = np.zeros(n)
+    out[index] = y
+    return float(lam), out
+
+
+def warm_lanczos(op: Operator, x0: np.ndarray, iters: int) -> tuple[float, np.ndarray]:
+    """(top Ritz value, its Ritz vector) after ``iters`` (≥ 2) Lanczos steps on ``op`` from ``x0``.
+
+    Full reorthogonalisation (``iters`` is small). A start close to the top eigenvector makes the
+    Ritz value, always a lower bound of λ_max, tight after a few steps.
+    """
+    n = x0.size
+    m = max(2, iters)
+    basis = np.zeros((m, n))
+    alpha, beta = np.zeros(m), np.zeros(m)
+    x = x0 / max(math.sqrt(float(np.sum(x0 * x0))), 1e-300)
+    k_used = m
+    for k in range(m):
+        basis[k] = x
+        r = op(x)
+        alpha[k] = float(np.sum(r * x))
+        r -= basis[: k + 1].T @ (basis[: k + 1] @ r)
+        beta[k] = math.sqrt(float(np.sum(r * r)))
+        if beta[k] <= 1e-14 * max(abs(alpha[k]), 1e-300):
+            k_used = k + 1
+            break
+        x = r / beta[k]
+    t = np.diag(alpha[:k_used]) + np.diag(beta[: k_used - 1], 1) + np.diag(beta[: k_used - 1], -1)
+    lam, vec = np.linalg.eigh(t)
+    return float(lam[-1]), basis[:k_used].T @ vec[:, -1]
+
+
+@dataclass(frozen=True)
+class BlochCell:
+    """The couplings of a periodic lattice's cell of d DOFs: entry e couples cell DOF ``rows[e]`` to
+    DOF ``cols[e]`` of the cell displaced by ``offsets[e]`` (dim,) with Hessian value ``values[e]``;
+    ``mass`` (d,) the cell's diagonal mass."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    offsets: np.ndarray
+    values: np.ndarray
+    mass: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return int(self.mass.size)
+
+    @property
+    def dim(self) -> int:
+        return int(self.offsets.shape[1])
+
+
+def read_cell(hessian: Operator, n: int, cell_dofs, dof_class: np.ndarray, positions: np.ndarray,
+              mass, *, tol: float = 0.0, keep: Callable[[np.ndarray], np.ndarray] | None = None) -> BlochCell:
+    """The ``BlochCell`` of a periodic lattice from the Hessian columns of one cell's DOFs.
+
+    ``cell_dofs`` (d,): the DOF indices of the cell (their order is the cell's DOF order);
+    ``dof_class`` (n,): the cell DOF (0..d−1) each DOF of the lattice is a copy of, −1 for DOFs
+    outside the lattice; ``positions`` (n, dim): where each DOF sits (only differences count);
+    ``mass`` (d,). Entries with |K| ≤ ``tol`` × max|column| are dropped (finite-difference noise),
+    and so are partners for which ``keep(offsets)`` is False.
+    """
+    positions = np.asarray(positions, float).reshape(n, -1)
+    e = np.zeros(n)
+    rows, cols, offs, vals = [], [], [], []
+    for a, dof in enumerate(cell_dofs):
+        e[dof] = 1.0
+        col = hessian(e)
+        e[dof] = 0.0
+        hit = np.flatnonzero((np.abs(col) > tol * max(np.max(np.abs(col)), 1e-300)) & (dof_class >= 0))
+        off = positions[hit] - positions[dof]
+        if keep is not None:
+            sel = keep(off)
+            hit, off = hit[sel], off[sel]
+        rows.append(np.full(hit.size, a))
+        cols.append(dof_class[hit])
+        offs.append(off)
+        vals.append(col[hit])
+    return BlochCell(np.concatenate(rows), np.concatenate(cols), np.concatenate(offs),
+                     np.concatenate(vals), np.asarray(mass, float))
+
+
+def bloch_matrices(cell: BlochCell, k) -> np.ndarray:
+    """D(k), Hermitian (…, d, d), at wave vectors ``k`` (…, dim); for dim = 1, ``k`` (…) are phases."""
+    k = np.asarray(k, float)
+    if cell.dim == 1:
+        k = k[..., None]
+    d = cell.size
+    phase = np.exp(1j * (k.reshape(-1, cell.dim) @ cell.offsets.T)) * cell.values  # (n_k, entries)
+    scatter = np.zeros((cell.values.size, d * d))
+    scatter[np.arange(cell.values.size), cell.rows * d + cell.cols] = 1.0
+    mat = (phase @ scatter).reshape(-1, d, d)
+    mat = 0.5 * (mat + np.conj(np.swapaxes(mat, 1, 2)))
+    return mat.reshape(k.shape[:-1] + (d, d))
+
+
+def bloch_eigen(cell: BlochCell, k, vectors: bool = False):
+    """ω² (…, d) ascending at wave vectors ``k`` (see ``bloch_matrices``), and with ``vectors`` the
+    mass-normalised mode shapes (…, d, d) (columns, x^H M x = 1)."""
+    w = 1.0 / np.sqrt(cell.mass)
+    a = w[:, None] * bloch_matrices(cell, k) * w[None, :]
+    with single_blas_thread():  # small dense eigenproblems: BLAS threads only add overhead
+        if not vectors:
+            return np.linalg.eigvalsh(a)
+        lam, vec = np.linalg.eigh(a)
+    return lam, w[:, None] * vec
+
+
+def bloch_frequencies(cell: BlochCell, k) -> np.ndarray:
+    """ω(k) (…, d) ascending, from ``bloch_eigen``; unstable modes (ω² < 0 beyond round-off) are NaN."""
+    lam = bloch_eigen(cell, k)
+    floor = -UNSTABLE_TOL * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
+    return np.where(lam >= floor, np.sqrt(np.clip(lam, 0.0, None)), np.nan)
