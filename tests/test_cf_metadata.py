@@ -135,6 +135,9 @@ def test_units_come_from_the_name_and_given_attributes_win():
     assert units_from_name("pulse_speed_m_s") == "m/s" and units_from_name("k_long_n_per_m") == "N/m"
     assert units_from_name("attenuation_per_m") == "1/m" and units_from_name("wall_s") == "s"
     assert units_from_name("n_sites_fitted") is None
+    # compound units are not read as their tail (N s/m is not 1/m, N m s is not m/s)
+    assert units_from_name("coefficient_n_s_per_m") == "N s/m" and units_from_name("k_rot_n_m_per_rad") == "N m/rad"
+    assert units_from_name("c_n_m_s") == "N m s" and units_from_name("velocity_m_s") == "m/s"
     assert variable_attrs("width_m", {})["units"] == "m"
     assert variable_attrs("width_m", {"units": "mm", "long_name": "w"}) == {"units": "mm", "long_name": "w"}
     assert variable_attrs("status", {}, np.dtype("U8"))["units"] == "1"

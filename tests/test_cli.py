@@ -137,6 +137,18 @@ def test_schema_is_json_with_lattice():
     assert "lattice" in schema["properties"] and "solver" in schema["required"]
 
 
+def test_schema_of_sweep_specs():
+    from flexmm.analysis.report import KINDS
+
+    result = invoke("schema", "sweep")
+    assert result.exit_code == 0
+    schema = json.loads(result.output)
+    assert {"base", "vary"} <= set(schema["required"]) and "analysis" in schema["properties"]
+    assert schema["$defs"]["AnalysisOptions"]["properties"]["kind"]["enum"] == list(KINDS)
+    result = invoke("schema", "scenes")
+    assert result.exit_code == 2 and "choose scene or sweep" in result.output
+
+
 def test_unstable_dt_exits_2_and_forced_blow_up_exits_1(short_lego, tmp_path):
     result = invoke("run", short_lego, "--out", tmp_path / "r", "--fidelity", "full", "--set", "solver.dt_s=1e-3")
     assert result.exit_code == 2 and "stable limit" in result.output

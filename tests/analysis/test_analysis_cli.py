@@ -94,7 +94,13 @@ def test_generic_model_without_theory(tmp_path):
     (["does/not/exist"], "no such run directory"),
     (["{empty}"], "no dataset.nc"),
     (["{run}", "-f", "nonsense"], "no field 'nonsense'"),
-    (["{run}", "--analysis", "bogus"], "unknown analysis"),
+    (["{run}", "--analysis", "bogus"], ("--analysis bogus: kind: got 'bogus' (str); expected: input should be "
+                                       "'auto', 'pulse', 'front', 'driven' or 'modes'")),
+    (["{run}", "--threshold", "2"], ("--threshold 2.0: threshold_fraction: got 2.0 (float); expected: input "
+                                    "should be less than or equal to 1")),
+    (["{run}", "--row", "-1"], "--row -1: row: got -1 (int); expected: input should be greater than or equal to 0"),
+    (["{run}", "-f", "theta;u"], ("--field theta;u: field: got 'theta;u' (str); expected: a field name: theta, u, "
+                                 "u_dot, strain[:NAME] or velocity[:NAME]")),
 ])
 def test_user_errors_exit_2_without_traceback(tmp_path, args, message):
     (tmp_path / "empty").mkdir()

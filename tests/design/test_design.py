@@ -95,6 +95,13 @@ def test_spec_errors_name_file_and_line(tmp_path):
     line = next(i for i, t in enumerate(text.splitlines(), 1) if "peak_forse" in t)
     assert f"{path}:{line}" in str(err.value)
 
+    path = _spec(tmp_path, ["peak_force"], optimizer={"max_iteration": 3})  # unknown keys list the expected ones
+    with pytest.raises(ConfigError) as err:
+        load_design(path)
+    line = next(i for i, t in enumerate(path.read_text().splitlines(), 1) if "max_iteration:" in t)
+    assert str(err.value) == (f"{path}:{line}: optimizer.max_iteration: unknown key; did you mean 'max_iterations'? "
+                              "expected one of: max_iterations, sample_every, tolerance")
+
 
 @pytest.mark.slow
 def test_impact_mitigation_showcase(tmp_path):

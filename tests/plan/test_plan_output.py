@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from flexmm.config import scene_from_dict
+from flexmm.config import ConfigError, scene_from_dict
 from flexmm.plan.output import AnalysisRequest, output_plan, parse_analysis
 
 FIELDS = ("u", "theta")
@@ -24,8 +24,13 @@ def test_parse():
     assert parse_analysis("pulse") == AnalysisRequest("pulse")
     assert parse_analysis("front:u") == AnalysisRequest("front", "u")
     assert parse_analysis("none") is None and parse_analysis(None) is None
-    with pytest.raises(ValueError, match="valid"):
+    assert parse_analysis("pulse:velocity:u") == AnalysisRequest("pulse", "velocity:u")
+    with pytest.raises(ConfigError) as exc:
         parse_analysis("spectrum")
+    assert str(exc.value) == ("--analysis spectrum: kind: got 'spectrum' (str); expected: input should be "
+                              "'pulse', 'front' or 'energy'")
+    with pytest.raises(ConfigError, match=r"--analysis pulse:a b: field: got 'a b' \(str\); expected: a field name"):
+        parse_analysis("pulse:a b")
 
 
 def test_pulse_keeps_its_field_and_cadence():

@@ -54,6 +54,21 @@ def local_run(tmp_path_factory):
     return spec, tmp / "sweep", report
 
 
+def test_analysis_options_reach_the_measurement(local_run):
+    """A spec's ``analysis:`` (an AnalysisOptions, carried to workers as a dict) decides what is measured."""
+    from flexmm.config.analysis import AnalysisOptions
+    from flexmm.sweep.observe import observe_run
+
+    spec, d, _ = local_run
+    point = SweepStore(d).point_dir(spec.points()[1].hash)
+    auto = observe_run(point)
+    assert auto["kind"] == "pulse" and auto["field"] == "theta" and auto["amplitude_units"] == "rad"
+    u = observe_run(point, {"field": "u_dot"})
+    assert u["kind"] == "pulse" and u["field"] == "u_dot" and u["amplitude_units"] == "m/s"
+    front = observe_run(point, AnalysisOptions(kind="front"))  # fronts are measured on the displacement
+    assert front["kind"] == "front" and front["field"] == "u" and front["amplitude_units"] == "m"
+
+
 def test_local_sweep_runs_every_point_and_combines(local_run):
     spec, d, report = local_run
     assert report.ok and report.n_run == 3 and report.n_cached == 0

@@ -91,11 +91,14 @@ def test_inline_vary_forms(text, values, scale):
 
 @pytest.mark.parametrize("raw, message", [
     ("excitation.velocity_m_s", "expected PATH="),
-    ("excitation.velocity_m_s=1:2", "expected start:stop:num"),
-    ("excitation.velocity_m_s=log:0:1:3", "log range needs start > 0"),
-    ("excitation.velocity_m_s=1:2:0", "num must be an integer >= 1"),
-    ("excitation.velocity_m_s=a:2:3", "start must be numbers"),
+    ("excitation.velocity_m_s=1:2", ("excitation.velocity_m_s: got '1:2' (str); expected: start:stop:num, "
+                                    "log:start:stop:num or a,b,c")),
+    ("excitation.velocity_m_s=log:0:1:3", "expected: a log range with start > 0 and stop > 0"),
+    ("excitation.velocity_m_s=1:2:0", ("excitation.velocity_m_s.num: got 0 (int); expected: input should be greater "
+                                      "than or equal to 1")),
+    ("excitation.velocity_m_s=a:2:3", "excitation.velocity_m_s.start: got 'a' (str); expected: a finite number"),
     ("excitation..velocity_m_s=1,2", "empty key"),
+    ("excitation.velocity_m_s=1,,2", "expected: a list without empty values"),
 ])
 def test_inline_vary_errors(raw, message):
     with pytest.raises(ConfigError) as exc:
@@ -173,22 +176,79 @@ def test_spec_structure_errors(tmp_path):
     with pytest.raises(ConfigError) as exc:
         load_sweep(path)
     msgs = issues(exc)
+    assert [i.line for i in exc.value.issues] == [1, 2, 5, 6], msgs  # all of them, in the file's order
     assert any(m.startswith(f"{path}:1: base:") and "cannot read file" in m for m in msgs)
-    assert any(m.startswith(f"{path}:2: colour:") and "unknown key" in m for m in msgs)
-    assert any(m.startswith(f"{path}:5:") and "range needs num" in m for m in msgs)
-    assert any(m.startswith(f"{path}:6:") and "unknown key" in m for m in msgs)
+    assert f"{path}:2: colour: unknown key; expected one of: analysis, base, description, name, set, vary" in msgs
+    assert any(m.startswith(f"{path}:5: vary.grid.excitation.velocity_m_s:")
+               and "expected: num, which a range also needs (or explicit values: [...])" in m for m in msgs)
+    assert (f"{path}:6: analysis.feild: unknown key; did you mean 'field'? expected one of: "
+            "field, jump, kind, row, threshold_fraction") in msgs
 
 
-@pytest.mark.parametrize("vary, message", [
-    ("{}", "required: a mapping with `grid:` or `zip:`"),
-    ("{grid: {a.b: [1]}, zip: {c.d: [1]}}", "exactly one of `grid` or `zip`"),
-    ("{product: {a.b: [1]}}", "expected `grid` or `zip`"),
-    ("{zip: {excitation.velocity_m_s: [1, 2], lattice.n_units: [40]}}", "equal lengths"),
+GRID = "vary: {grid: {lattice.n_units: [40]}}\n"
+ENTRY = "vary:\n  grid:\n    excitation.velocity_m_s: "
+
+
+@pytest.mark.parametrize("body, where, message", [
+    # the vary section
+    ("vary: {}", "2: vary", "expected: exactly one of grid (a Cartesian product) or zip (paired lists)"),
+    ("vary: {grid: {a.b: [1]}, zip: {c.d: [1]}}", "2: vary.grid", "expected: exactly one of grid"),
+    ("vary: {product: {a.b: [1]}}", "2: vary.product", "unknown key; expected one of: grid, zip"),
+    ("vary: {zip: {excitation.velocity_m_s: [1, 2], lattice.n_units: [40]}}", "2: vary",
+     "expected: zipped lists of equal lengths (got excitation.velocity_m_s: 2, lattice.n_units: 1)"),
+    ("vary: {grid: {a..b: [1]}}", "2: vary.grid", "expected: dotted paths of non-empty keys (got 'a..b')"),
+    ("vary: {grid: {}}", "2: vary.grid", "expected: dictionary should have at least 1 item"),
+    # the values of one parameter
+    (ENTRY + "{start: 1, stop: 2, num: three}", "4: vary.grid.excitation.velocity_m_s.num",
+     "got 'three' (str); expected: input should be a valid integer"),
+    (ENTRY + "{start: 1, stop: fast, num: 3}", "4: vary.grid.excitation.velocity_m_s.stop",
+     "got 'fast' (str); expected: a finite number"),
+    (ENTRY + "{start: 1, stop: 2, num: 3, scale: logarithmic}", "4: vary.grid.excitation.velocity_m_s.scale",
+     "got 'logarithmic' (str); expected: input should be 'linear' or 'log'"),
+    (ENTRY + "{start: 0, stop: 2, num: 3, scale: log}", "4: vary.grid.excitation.velocity_m_s.start",
+     "expected: a log range with start > 0 and stop > 0 (got 0, 2)"),
+    (ENTRY + "{values: [1, 2], num: 3}", "4: vary.grid.excitation.velocity_m_s.values",
+     "expected: either values or start, stop and num"),
+    (ENTRY + "{start: 1, stop: 2, num: 3, step: 1}", "4: vary.grid.excitation.velocity_m_s.step",
+     "unknown key; did you mean 'stop'? expected one of: num, scale, start, stop, values"),
+    (ENTRY + "{values: []}", "4: vary.grid.excitation.velocity_m_s.values",
+     "expected: list should have at least 1 item"),
+    (ENTRY + '"1:2"', "4: vary.grid.excitation.velocity_m_s", "expected: start:stop:num, log:start:stop:num or a,b,c"),
+    # the other sections
+    (GRID + "analysis: {kind: pulses}", "3: analysis.kind",
+     "got 'pulses' (str); expected: input should be 'auto', 'pulse', 'front', 'driven' or 'modes'"),
+    (GRID + "analysis: {threshold_fraction: 2}", "3: analysis.threshold_fraction",
+     "got 2 (int); expected: input should be less than or equal to 1"),
+    (GRID + "analysis: {field: 'theta; rm'}", "3: analysis.field",
+     "got 'theta; rm' (str); expected: a field name: theta, u, u_dot, strain[:NAME] or velocity[:NAME]"),
+    (GRID + "analysis: theta", "3: analysis", "got 'theta' (str); expected: input should be a valid dictionary"),
+    (GRID + "name: my sweep", "3: name", "got 'my sweep' (str); expected: string should match pattern"),
+    (GRID + "set: [lattice.n_units]", "3: set",
+     "got ['lattice.n_units'] (list); expected: input should be a valid dictionary"),
+    ("base: 3\n" + GRID, "1: base",
+     "got 3 (int); expected: a scene file path (relative to this file) or an inline scene mapping"),
 ])
-def test_vary_section_errors(tmp_path, vary, message):
-    with pytest.raises(ConfigError, match="vary") as exc:
-        load_sweep(write(tmp_path, f"base: {LEGO}\nvary: {vary}\n"))
-    assert message in str(exc.value)
+def test_spec_errors_name_line_field_and_expectation(tmp_path, body, where, message):
+    path = write(tmp_path, body + "\n" if body.startswith("base:") else f"base: {LEGO}\n{body}\n")
+    with pytest.raises(ConfigError) as exc:
+        load_sweep(path)
+    [msg] = issues(exc)
+    assert msg.startswith(f"{path}:{where}: ") and message in msg, msg
+
+
+def test_analysis_kinds_are_those_the_analysis_dispatches_on():
+    from flexmm.analysis.report import KINDS
+    from flexmm.config.analysis import AnalysisOptions
+
+    assert AnalysisOptions.model_json_schema()["properties"]["kind"]["enum"] == list(KINDS)
+
+
+@pytest.mark.parametrize("spec", sorted((REPO / "sweeps").glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_shipped_sweep_validates(spec):
+    sw = load_sweep(spec)
+    points = sw.points()
+    assert len(points) == sw.n_points > 1 and sw.name == spec.stem
+    assert all(len(a.values) > 1 for a in sw.axes)
 
 
 def test_cli_reports_errors_with_exit_code_2(tmp_path):
@@ -198,6 +258,18 @@ def test_cli_reports_errors_with_exit_code_2(tmp_path):
     assert f"{path}:2: excitation.velocity_m_s" in res.output
     res = CliRunner().invoke(app, ["sweep", str(LEGO)])
     assert res.exit_code == 2 and "--vary" in res.output
+
+
+def test_cli_validate_checks_the_spec_and_every_point(tmp_path):
+    res = CliRunner().invoke(app, ["validate", str(REPO / "sweeps" / "lego_speed_vs_amplitude.yaml")])
+    assert res.exit_code == 0 and "ok — sweep lego_speed_vs_amplitude: 22 points" in res.output
+    bad_spec = write(tmp_path, f"base: {LEGO}\nvary: {{grid: {{lattice.n_units: [40]}}}}\nanalysis: {{kind: x}}\n")
+    res = CliRunner().invoke(app, ["validate", str(bad_spec)])
+    assert res.exit_code == 2 and f"{bad_spec}:3: analysis.kind: got 'x' (str)" in res.output
+    bad_point = write(tmp_path, f"base: {LEGO}\nvary: {{grid: {{lattice.n_units: [40, 1]}}}}\n", "p.yaml")
+    res = CliRunner().invoke(app, ["validate", str(bad_point)])
+    assert res.exit_code == 2 and f"{bad_point}:2: lattice.n_units: got 1 (int)" in res.output
+    assert "[at point lattice.n_units=1]" in res.output and "Traceback" not in res.output
 
 
 def test_cli_dry_run_lists_points_without_running(tmp_path):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import get_args
 
 from flexmm.analysis.collisions import Collision, find_collisions
 from flexmm.analysis.compare import (
@@ -27,9 +28,11 @@ from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
 from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.analysis.transients import mark_transients
+from flexmm.config.analysis import AnalysisKind, AnalysisOptions
 from flexmm.errors import FlexmmError
 
-KINDS = ("auto", "pulse", "front", "driven", "modes")
+#: the analysis kinds, from the options model (``flexmm.config.analysis``)
+KINDS = get_args(AnalysisKind)
 
 
 class RunNotFound(FlexmmError):
@@ -160,6 +163,12 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     return out
 
 
+def analyze_with(path: str | Path, options: AnalysisOptions) -> RunAnalysis:
+    """``analyze_run`` with the options of ``flexmm analyze`` or a sweep's ``analysis:`` block."""
+    return analyze_run(path, field_spec=options.field, kind=options.kind, row=options.row,
+                       threshold_fraction=options.threshold_fraction, jump=options.jump)
+
+
 def measure_run(path: str | Path, *, field_spec: str | None = None,
                 kind: str = "auto") -> tuple[RunAnalysis | None, str | None]:
     """``analyze_run``, or (None, why) when the run is fine but there is nothing (or no such field)
@@ -172,7 +181,8 @@ def measure_run(path: str | Path, *, field_spec: str | None = None,
         return None, str(exc)
 
 
-__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "choose_kind", "measure_run", "open_dataset",
+__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "analyze_with", "choose_kind", "measure_run",
+           "open_dataset",
            "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound", "RestStateMissing"]
 
 

@@ -116,13 +116,28 @@ def _csv_text(results) -> str:
     return buf.getvalue()
 
 
+#: the command-line option of each field of ``AnalysisOptions``
+OPTION_OF = {"kind": "analysis", "field": "field", "row": "row", "threshold_fraction": "threshold", "jump": "jump"}
+
+
+def analysis_options(**given):
+    """The ``AnalysisOptions`` of the options given (None: not given), validated like a config
+    (a mistake names the option, the field and what was expected: a ConfigError)."""
+    from flexmm.config.analysis import AnalysisOptions
+    from flexmm.config.loader import validate
+
+    data = {f: given[o] for f, o in OPTION_OF.items() if given[o] is not None}
+    lines = {(f,): f"--{OPTION_OF[f]} {v}" for f, v in data.items()}
+    return validate(AnalysisOptions, data, lines=lines, source="flexmm analyze")
+
+
 def analyze(
     runs: list[str] = typer.Argument(..., help="Run directories (or dataset.nc files)."),
     field: str = typer.Option(None, "--field", "-f", help="Field: theta, u, u_dot, strain[:NAME], velocity[:NAME]."),
     analysis: str = typer.Option("auto", "--analysis", "-a", help="auto, pulse, front, driven or modes (oblique plane waves on a skew-periodic sheet)."),
     row: int = typer.Option(None, "--row", help="Row of a 2D lattice to analyse (default: middle)."),
-    threshold: float = typer.Option(0.25, "--threshold", min=0.01, max=1.0,
-                                    help="Pulse detection level, fraction of the peak."),
+    threshold: float = typer.Option(None, "--threshold",
+                                    help="Pulse detection level, fraction of the peak, 0.01 to 1 (default 0.25)."),
     jump: float = typer.Option(None, "--jump", help="Well-to-well jump of a front (default: measured)."),
     json_out: str = typer.Option(None, "--json", help="Write a JSON summary to this file ('-': stdout)."),
     csv_out: str = typer.Option(None, "--csv", help="Write the measured/predicted table as CSV ('-': stdout)."),
@@ -146,8 +161,7 @@ def analyze(
     from flexmm.analysis import report
     from flexmm.sweep import is_sweep
 
-    if analysis not in report.KINDS:
-        raise error(f"unknown analysis {analysis!r}; choose one of {', '.join(report.KINDS)}")
+    options = analysis_options(analysis=analysis, field=field, row=row, threshold=threshold, jump=jump)
     data_to_stdout = json_out == "-" or csv_out == "-"
     console = Console(stderr=data_to_stdout, highlight=False, quiet=quiet)
 
@@ -179,8 +193,7 @@ def analyze(
             console.print(f"[bold yellow]{r}: PARTIAL[/] {note}: measured on the frames it kept")
             errors.append({"run": str(r), "error": f"partial: {note}"})
         try:
-            res = report.analyze_run(r, field_spec=field, kind=analysis, row=row,
-                                     threshold_fraction=threshold, jump=jump)
+            res = report.analyze_with(r, options)
         except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups,
                 report.RestStateMissing) as exc:
             if quiet:

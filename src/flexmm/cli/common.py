@@ -46,7 +46,8 @@ def user_error_message(exc: FlexmmError, ctx: typer.Context | None = None) -> st
     issues = getattr(exc, "issues", None)
     if issues:
         n = len(issues)
-        what = "sweep" if ctx is not None and ctx.command.name == "sweep" else "config"
+        what = ("command-line options" if all(i.source.startswith("--") for i in issues)
+                else "sweep" if ctx is not None and ctx.command.name == "sweep" else "config")
         return "\n".join([f"error: {n} problem{'s' if n > 1 else ''} in the {what}:"]
                          + [f"  {issue}" for issue in issues])
     config = ctx.params.get("config") if ctx is not None else None
@@ -101,13 +102,11 @@ def load_or_exit(path: str, overrides: list[str] | None) -> Scene:
 
 
 def analysis_request(spec: str | None):
-    """Parse ``--analysis`` (pulse[:FIELD], front[:FIELD], energy, none); UsageError if unknown."""
+    """Parse ``--analysis`` (pulse[:FIELD], front[:FIELD], energy, none); a ConfigError (a user
+    error naming the option, the field and what was expected) if it is none of them."""
     from flexmm.plan.output import parse_analysis
 
-    try:
-        return parse_analysis(spec)
-    except ValueError as exc:
-        raise UsageError(f"--analysis: {exc}") from None
+    return parse_analysis(spec)
 
 
 def check_output_dir(path: str | Path) -> Path:

@@ -13,10 +13,10 @@ from flexmm.cli.common import (
 
 def _load(path: str, vary: list[str], zip_axes: bool, overrides: list[str]):
     from flexmm.config.loader import read_yaml
-    from flexmm.sweep.spec import load_sweep, spec_from_scene
+    from flexmm.sweep.spec import is_sweep_spec, load_sweep, spec_from_scene
 
     data, _ = read_yaml(path)
-    if "vary" in data or "base" in data:
+    if is_sweep_spec(data):
         if vary:
             raise error(f"{path} is a sweep file with its own `vary:`; --vary goes with a scene config")
         return load_sweep(path, overrides=overrides)

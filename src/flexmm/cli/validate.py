@@ -8,17 +8,24 @@ from flexmm.cli.common import OverrideOption, load_or_exit
 
 
 def validate(
-    config: str = typer.Argument(..., help="Scene YAML file."),
+    config: str = typer.Argument(..., help="Scene YAML file, or a sweep spec (every point is validated)."),
     overrides: list[str] = OverrideOption,
     build: bool = typer.Option(True, help="Also find the time step (checked against the stable limit) "
                                           "and estimate the run's cost."),
 ) -> None:
-    """Validate a scene config (schema, cross-field rules and, by default, the step and the cost).
+    """Validate a scene config (schema, cross-field rules and, by default, the step and the cost),
+    or a sweep spec (its schema and every point's scene; nothing is built).
 
     The step comes from the scene built (small scenes) or from a small copy of its lattice, so
     a lattice of any size validates in about a second; a run beyond the limits on memory,
     output size, free disk or steps is reported as an error (flexmm.plan.cost).
     """
+    from flexmm.config.loader import read_yaml
+    from flexmm.sweep.spec import is_sweep_spec
+
+    if is_sweep_spec(read_yaml(config)[0]):
+        _validate_sweep(config, overrides)
+        return
     scene = load_or_exit(config, overrides)
     if not build:
         typer.echo(f"{config}: ok")
@@ -38,3 +45,12 @@ def validate(
     if problems:
         raise ResourceError("a run would be refused: " + "; ".join(problems) + " (flexmm run --force runs it anyway)")
     typer.echo(f"{config}: ok — {scene.lattice.kind}, {cost.ndof:,} DOFs, {dt}")
+
+
+def _validate_sweep(path: str, overrides: list[str] | None) -> None:
+    from flexmm.sweep.spec import load_sweep
+
+    spec = load_sweep(path, overrides=overrides)
+    points = spec.points()  # one ConfigError listing every point that does not validate
+    typer.echo(f"{path}: ok — sweep {spec.name}: {len(points)} points, {spec.mode} of "
+               f"{', '.join(a.path for a in spec.axes)}")

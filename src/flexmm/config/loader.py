@@ -1,7 +1,10 @@
-"""Read a scene from YAML, apply ``--set`` overrides, validate, and report errors by file:line.
+"""Read configs from YAML, apply ``--set`` overrides, validate, and report errors by file:line.
 
-Every error names the file and line, the dotted field path, what was given and what was
-expected; the CLI prints them and exits with status 2 (no traceback).
+One loader for every config of flexmm: scenes, sweep specs (``config.sweep``), design and fit
+specs, and analysis options given on the command line (``config.analysis``) are Pydantic models
+validated by ``validate``. Every error names the file and line (or the option the value came
+from), the dotted field path, what was given and what was expected (an unknown key: the keys
+expected there); the CLI prints them and exits with status 2 (no traceback).
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ import difflib
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -96,7 +99,7 @@ def _duplicate_keys(node: yaml.Node, path: Path_ = ()) -> list[tuple[Path_, int,
     return out
 
 
-#: a scene file larger than this, or expanding (through YAML aliases) to more values, is refused
+#: a config file larger than this, or expanding (through YAML aliases) to more values, is refused
 MAX_CONFIG_BYTES = 1_000_000
 MAX_CONFIG_NODES = 200_000
 
@@ -124,7 +127,7 @@ def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
     except OSError as exc:
         raise ConfigError([ConfigIssue(src, None, "", f"cannot read file: {exc.strerror}")]) from None
     if len(raw) > MAX_CONFIG_BYTES:
-        raise ConfigError([ConfigIssue(src, None, "", f"file of {len(raw):,} bytes; a scene config is at most "
+        raise ConfigError([ConfigIssue(src, None, "", f"file of {len(raw):,} bytes; a config file is at most "
                                                       f"{MAX_CONFIG_BYTES:,} (is this the right file?)")])
     try:
         text = raw.decode("utf-8")
@@ -145,7 +148,7 @@ def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
         what = getattr(exc, "problem", None) or str(exc)
         raise ConfigError([ConfigIssue(src, line, "", f"invalid YAML: {what}")]) from None
     if not isinstance(data, dict):
-        raise ConfigError([ConfigIssue(src, 1, "", "expected a mapping of sections (name, lattice, ...)")])
+        raise ConfigError([ConfigIssue(src, 1, "", "expected a mapping of sections (a scene: name, lattice, ...; a sweep spec: base, vary, ...)")])
     dups = _duplicate_keys(node)
     if dups:
         raise ConfigError([ConfigIssue(src, line, ".".join(map(str, keys)), f"duplicate key (first given at line {first})")
@@ -205,34 +208,45 @@ def _yaml_path(loc: tuple, data: Any) -> tuple:
     return tuple(out)
 
 
-def _model_at(path: tuple, data: dict) -> type[BaseModel] | None:
-    """The pydantic model class that describes the mapping at ``path``."""
-    from typing import get_args
-
-    cls: Any = Scene
+def _model_at(path: tuple, data: dict, root: type[BaseModel]) -> type[BaseModel] | None:
+    """The pydantic model class that describes the mapping at ``path`` of a ``root`` config
+    (through fields, discriminated unions and ``dict[str, Model]`` sections)."""
+    cls: Any = root
     node: Any = data
     for part in path:
-        if not (isinstance(cls, type) and issubclass(cls, BaseModel)) or part not in cls.model_fields:
+        if _is_model(cls):
+            if part not in cls.model_fields:
+                return None
+            ann = cls.model_fields[part].annotation
+        elif get_origin(cls) is dict:
+            ann = get_args(cls)[1]
+        else:
             return None
         node = node.get(part) if isinstance(node, dict) else None
-        cls = _pick_model(cls.model_fields[part].annotation, node, get_args)
-    return cls if isinstance(cls, type) and issubclass(cls, BaseModel) else None
+        cls = _narrow(ann, node)
+    return cls if _is_model(cls) else None
 
 
-def _pick_model(ann, node, get_args):
-    models = []
+def _is_model(a: Any) -> bool:
+    return isinstance(a, type) and not get_args(a) and issubclass(a, BaseModel)
+
+
+def _narrow(ann, node):
+    """The model (or ``dict[str, Model]`` type) of an annotation that describes ``node``: the only
+    one it names, else the union member whose ``kind`` Literal holds the node's kind."""
+    found = []
     stack = [ann]
     while stack:
         a = stack.pop()
-        if isinstance(a, type) and issubclass(a, BaseModel):
-            models.append(a)
+        if _is_model(a) or (get_origin(a) is dict and _is_model(get_args(a)[1])):
+            found.append(a)
         else:
             stack.extend(get_args(a))
-    if len(models) == 1:
-        return models[0]
+    if len(found) == 1:
+        return found[0]
     kind = node.get("kind") if isinstance(node, dict) else None
-    for m in models:
-        f = m.model_fields.get("kind")
+    for m in found:
+        f = m.model_fields.get("kind") if _is_model(m) else None
         if f is not None and kind in get_args(f.annotation):
             return m
     return None
@@ -275,7 +289,7 @@ def _rule_path(path: tuple, message: str, data: dict) -> tuple:
     return path
 
 
-def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
+def _issue(err: dict, data: dict, lines: dict, source: str, root: type[BaseModel] | None) -> ConfigIssue:
     path = _yaml_path(err["loc"], data)
     etype, msg = err["type"], err["msg"]
     if etype == "value_error":
@@ -293,11 +307,11 @@ def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
     if isinstance(line, str):  # from --set
         where, line = line, None
     if etype == "extra_forbidden":
-        model = _model_at(path[:-1], data)
+        model = _model_at(path[:-1], data, root) if root is not None else None
         valid = sorted(model.model_fields) if model else []
         close = difflib.get_close_matches(str(path[-1]), valid, n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""
-        text = f"unknown key{hint} expected one of: {', '.join(valid)}" if valid else "unknown key"
+        text = f"unknown key{hint or ';'} expected one of: {', '.join(valid)}" if valid else "unknown key"
     elif etype == "missing":
         text = "required field is missing"
     else:
@@ -306,10 +320,35 @@ def _issue(err: dict, data: dict, lines: dict, source: str) -> ConfigIssue:
     return ConfigIssue(where, line, dotted, text)
 
 
-def validation_issues(exc: ValidationError, data: dict, lines: dict, source: str) -> list[ConfigIssue]:
-    """The file:line issues of a pydantic ValidationError of any config read with ``read_yaml``
-    (design and fit specs use it too; key hints for unknown keys are given for scenes)."""
-    return [_issue(e, data, lines, source) for e in exc.errors()]
+def validation_issues(exc: ValidationError, data: dict, lines: dict, source: str,
+                      root: type[BaseModel] | None = None) -> list[ConfigIssue]:
+    """The file:line issues of a pydantic ValidationError of any config read with ``read_yaml``;
+    ``root``: the model validated (unknown keys then list the keys expected there). In the
+    order of the file's lines (then those given elsewhere, e.g. by --set)."""
+    return in_line_order([_issue(e, data, lines, source, root) for e in exc.errors()])
+
+
+def in_line_order(issues: list[ConfigIssue]) -> list[ConfigIssue]:
+    """Issues sorted by line (stable), those without one (--set, options) last."""
+    return sorted(issues, key=lambda i: (i.line is None, i.line or 0))
+
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def validate(cls: type[M], data: Any, *, lines: dict | None = None, source: str = "<config>",
+             context: dict | None = None) -> M:
+    """Validate ``data`` as the config model ``cls``; a ConfigError naming file:line, the field and
+    what was expected if it does not validate (every config of flexmm is read through this:
+    scenes, sweep specs, design and fit specs, analysis options).
+
+    ``lines``: the key-path -> line map of ``read_yaml`` (a value that is a string instead of a
+    line names where the value came from, e.g. ``--set a.b=1`` or ``--analysis front``).
+    """
+    try:
+        return cls.model_validate(data, context=context)
+    except ValidationError as exc:
+        raise ConfigError(validation_issues(exc, data, lines or {}, source, cls)) from None
 
 
 def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<config>",
@@ -319,11 +358,8 @@ def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<co
     ``base_dir``: the directory relative data-file paths in the scene are relative to (the
     config file's; None: the working directory).
     """
-    lines = lines or {}
-    try:
-        return Scene.model_validate(data, context={"base_dir": base_dir} if base_dir is not None else None)
-    except ValidationError as exc:
-        raise ConfigError([_issue(e, data, lines, source) for e in exc.errors()]) from None
+    return validate(Scene, data, lines=lines, source=source,
+                    context={"base_dir": base_dir} if base_dir is not None else None)
 
 
 def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:

@@ -9,9 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TypeVar
 
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel
 
-from flexmm.config.loader import ConfigError, ConfigIssue, read_yaml, scene_from_dict, validation_issues
+from flexmm.config.loader import ConfigError, ConfigIssue, read_yaml, scene_from_dict, validate
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -19,10 +19,7 @@ M = TypeVar("M", bound=BaseModel)
 def load_spec(path: str | Path, cls: type[M]) -> tuple[M, dict, Path]:
     """(validated spec, its raw dict, its directory)."""
     data, lines = read_yaml(path)
-    try:
-        spec = cls.model_validate(data)
-    except ValidationError as exc:
-        raise ConfigError(validation_issues(exc, data, lines, str(path))) from None
+    spec = validate(cls, data, lines=lines, source=str(path))
     return spec, data, Path(path).resolve().parent
 
 

@@ -28,6 +28,7 @@ AXES = {"time": "T", "x": "X", "y": "Y"}
 
 #: name suffix -> units, longest suffixes first (``_m_s`` before ``_s``)
 SUFFIX_UNITS = (
+    ("_n_m_per_rad", "N m/rad"), ("_n_s_per_m", "N s/m"), ("_n_m_s", "N m s"),
     ("_rad_per_s", "rad/s"), ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_n_per_m", "N/m"), ("_per_m", "1/m"),
     ("_kg_m2", "kg m2"), ("_n_m", "N m"), ("_kg", "kg"), ("_hz", "Hz"), ("_deg", "degree"),
     ("_rad", "rad"), ("_j", "J"), ("_n", "N"), ("_m", "m"), ("_s", "s"),

@@ -11,32 +11,21 @@ saved sites per FWHM. Choices the user made in ``output`` (keys they set) are ne
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from flexmm.errors import PlanError
+from typing import get_args
+
+from flexmm.config.analysis import AnalysisRequest, RunPurpose
 
 FRAMES_PER_PASSAGE = 10
 SITES_PER_WIDTH = 8
 MIN_FRAMES, MAX_FRAMES = 21, 20_001
-KINDS = ("pulse", "front", "energy", "none")
-
-
-@dataclass(frozen=True)
-class AnalysisRequest:
-    kind: str
-    field: str | None = None
-
-    def __str__(self) -> str:
-        return self.kind + (f":{self.field}" if self.field else "")
+#: what ``--analysis`` may ask for (``none``: output as declared)
+KINDS = (*get_args(RunPurpose), "none")
 
 
 def parse_analysis(spec: str | None) -> AnalysisRequest | None:
-    """``pulse``, ``pulse:theta``, ``front:u``, ``energy``, ``none`` (or None) -> request."""
-    if spec is None:
-        return None
-    kind, _, fld = spec.strip().partition(":")
-    if kind not in KINDS:
-        raise PlanError(f"unknown analysis {kind!r}; valid: {', '.join(KINDS)}")
-    return None if kind == "none" else AnalysisRequest(kind, fld or None)
+    """``pulse``, ``pulse:theta``, ``front:u``, ``energy``, ``none`` (or None) -> request; a
+    ConfigError naming ``--analysis``, the field and what was expected otherwise."""
+    return AnalysisRequest.parse(spec)
 
 
 def default_field(request: AnalysisRequest, model_fields: tuple[str, ...]) -> str:

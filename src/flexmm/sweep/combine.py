@@ -19,22 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from flexmm.io.cf import write_netcdf
+from flexmm.io.cf import units_from_name, write_netcdf
 from flexmm.sweep.observe import OBSERVABLES
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
 
-UNIT_SUFFIXES = (
-    ("_n_m_per_rad", "N m/rad"), ("_n_per_m", "N/m"), ("_n_s_per_m", "N s/m"), ("_n_m_s", "N m s"),
-    ("_rad_s", "rad/s"), ("_m_s", "m/s"), ("_kg_m2", "kg m2"), ("_kg", "kg"), ("_hz", "Hz"),
-    ("_rad", "rad"), ("_m", "m"), ("_s", "s"), ("_n", "N"),
-)
-
 
 def parameter_units(path: str) -> str:
     """Units of a config field from its unit-suffixed name ('' if it has none)."""
-    name = path.rsplit(".", 1)[-1]
-    return next((u for suffix, u in UNIT_SUFFIXES if name.endswith(suffix)), "")
+    return units_from_name(path.rsplit(".", 1)[-1]) or ""
 
 
 def dim_names(spec: SweepSpec) -> list[str]:

@@ -116,7 +116,7 @@ def prepare(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = Fals
     points = spec.points()
     store = SweepStore(sweep_dir)
     states, tasks = {}, []
-    analysis = dict(spec.analysis)
+    analysis = spec.analysis.model_dump(exclude_defaults=True)  # plain data for the workers
     for p in points:
         if p.hash in states:
             continue

@@ -10,9 +10,8 @@ front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
   predicted speed (fronts), from the model's theory (``analysis.compare.theory_for``).
 
-Options (``analysis:`` block): ``kind`` (auto, pulse, front, driven, modes), ``field``,
-``threshold_fraction`` (``trim_fraction`` is accepted and unused: the pulse fit leaves out the
-ends by itself).
+Options: the sweep spec's ``analysis:`` block, a ``flexmm.config.analysis.AnalysisOptions``
+(``kind``, ``field``, ``row``, ``threshold_fraction``, ``jump``), the options of ``flexmm analyze``.
 """
 
 from __future__ import annotations
@@ -47,18 +46,21 @@ def _nan_result(kind: str, field: str, units: str, note: str) -> dict:
             "amplitude_units": units, "note": note}
 
 
-def observe_run(path: str | Path, options: dict | None = None) -> dict:
-    """Observables of the run at ``path`` (run directory) as plain floats plus kind/field/note."""
+def observe_run(path: str | Path, options=None) -> dict:
+    """Observables of the run at ``path`` (run directory) as plain floats plus kind/field/note.
+
+    ``options``: an ``AnalysisOptions``, or its fields as a dict (what a sweep task carries).
+    """
     from flexmm.analysis.compare import RunContext
     from flexmm.analysis.report import choose_kind
+    from flexmm.config.analysis import AnalysisOptions
     from flexmm.io.dataset import open_run
 
-    opts = dict(options or {})
+    opts = options if isinstance(options, AnalysisOptions) else AnalysisOptions.model_validate(options or {})
     ds = open_run(path)
     ctx = RunContext.from_dataset(ds)
-    kind = opts.get("kind", "auto")
-    kind = choose_kind(ctx) if kind == "auto" else kind
-    return _full(path, kind, opts.get("field"), opts)
+    kind = choose_kind(ctx) if opts.kind == "auto" else opts.kind
+    return _full(path, kind, opts)
 
 
 def _speed_theory(ctx, units: str, amplitude: float) -> float:
@@ -67,16 +69,16 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
     return float(speed_at(ctx.config, units, [amplitude])[0])
 
 
-def _full(path, kind: str, field: str | None, opts: dict) -> dict:
-    from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound, analyze_run
+def _full(path, kind: str, opts) -> dict:
+    from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound
     from flexmm.analysis.oblique import NoWaveGroups
+    from flexmm.analysis.report import analyze_with
     from flexmm.analysis.summary import principal
 
-    kw = {k: opts[k] for k in ("threshold_fraction",) if k in opts}
     try:
-        a = analyze_run(path, field_spec=field, kind=kind, **kw)
+        a = analyze_with(path, opts.model_copy(update={"kind": kind}))
     except (PulseNotFound, FrontNotFound, NotDriven, NoWaveGroups, FieldError) as exc:
-        return _nan_result(kind, field or "", "", f"no {kind}: {exc}")
+        return _nan_result(kind, opts.field or "", "", f"no {kind}: {exc}")
     out = _nan_result(a.kind, a.view.spec, a.view.units, "")
     item, m = principal(a)  # the feature flexmm run prints and analyze lists
     if a.kind == "pulse":

@@ -15,12 +15,13 @@ A sweep YAML file::
         lattice.n_units: [100, 200]        # explicit values
         excitation.velocity_m_s: "log:0.25:6:12"   # the inline syntax also works here
         solver.dt_fraction: {values: [0.05, 0.1, 0.2], scale: log}   # explicit, plotted on log axes
-    analysis: {field: theta}               # options of flexmm.sweep.observe (kind, field, ...)
+    analysis: {field: theta}               # flexmm.config.analysis.AnalysisOptions (kind, field, ...)
 
-Inline (``flexmm sweep CONFIG --vary PATH=VALUES``) VALUES is ``start:stop:num`` (linear, both
-ends included), ``log:start:stop:num`` (geometric) or ``a,b,c`` (explicit, read as YAML scalars).
-Range values are rounded to 12 significant digits so a point's config (and its hash) does not
-depend on floating-point noise in the range arithmetic.
+The file is a ``flexmm.config.sweep.SweepFile``, validated by ``flexmm.config.loader`` like a
+scene: a mistake is reported at its line with the field and what was expected. Inline
+(``flexmm sweep CONFIG --vary PATH=VALUES``) VALUES is ``start:stop:num`` (linear, both ends
+included), ``log:start:stop:num`` (geometric) or ``a,b,c`` (explicit, read as YAML scalars),
+the values of ``flexmm.config.sweep.VaryValues``.
 
 Every point is the base with ``set`` then its own values applied through
 ``flexmm.config.loader`` — validated exactly like ``--set``; a bad value is reported at the
@@ -32,27 +33,24 @@ from __future__ import annotations
 import copy
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-
+from flexmm.config.analysis import AnalysisOptions
 from flexmm.config.loader import (
     ConfigError,
     ConfigIssue,
     apply_overrides,
+    in_line_order,
     parse_overrides,
     read_yaml,
     scene_from_dict,
+    validate,
 )
 from flexmm.config.scene import Scene
+from flexmm.config.sweep import INLINE_FORMS, SweepFile, Vary, VaryValues
 from flexmm.io.provenance import config_hash
-from flexmm.sweep.values import parse_values, values_of
-
-SPEC_KEYS = ("name", "description", "base", "set", "vary", "analysis")
-MODES = ("grid", "zip")
-ANALYSIS_KEYS = ("kind", "field", "threshold_fraction", "trim_fraction")
-ANALYSIS_KINDS = ("auto", "pulse", "front", "driven", "modes")
 
 
 @dataclass(frozen=True)
@@ -96,7 +94,7 @@ class SweepSpec:
     mode: str = "grid"
     fixed: tuple = ()
     description: str = ""
-    analysis: dict = field(default_factory=dict)
+    analysis: AnalysisOptions = field(default_factory=AnalysisOptions)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -165,15 +163,16 @@ def _grouped_issue(key: tuple, labels: list[str], n_total: int) -> ConfigIssue:
 def parse_vary(raw: str) -> Axis:
     """One ``--vary PATH=VALUES`` argument as an Axis; ConfigError if malformed."""
     if "=" not in raw:
-        raise ConfigError([ConfigIssue("--vary", None, raw, "expected PATH=start:stop:num, PATH=log:start:stop:num or PATH=a,b,c")])
+        raise ConfigError([ConfigIssue("--vary", None, raw, f"expected PATH=VALUES, VALUES one of {INLINE_FORMS}")])
     path, text = raw.split("=", 1)
     path = path.strip()
     if not path or any(not k for k in path.split(".")):
         raise ConfigError([ConfigIssue("--vary", None, raw, "empty key in the dotted path")])
-    vals, scale, err = parse_values(text)
-    if err:
-        raise ConfigError([ConfigIssue("--vary", None, path, f"{err} (in {raw!r})")])
-    return Axis(path, vals, f"--vary {raw}", scale)
+    try:
+        values = validate(VaryValues, text, lines={(): f"--vary {raw}"}, source="--vary")
+    except ConfigError as exc:
+        raise ConfigError([replace(i, path=".".join(filter(None, (path, i.path)))) for i in exc.issues]) from None
+    return Axis(path, values.expand(), f"--vary {raw}", values.scale)
 
 
 # ---------------------------------------------------------------- building specs
@@ -191,7 +190,11 @@ def spec_from_scene(config: str | Path, vary: list[str], *, zip_axes: bool = Fal
     if not axes:
         raise ConfigError([ConfigIssue("--vary", None, "", "give at least one --vary PATH=VALUES")])
     mode = "zip" if zip_axes else "grid"
-    _check_axes(axes, mode, "--vary")
+    twice = sorted({a.path for a in axes if sum(b.path == a.path for b in axes) > 1})
+    if twice:
+        raise ConfigError([ConfigIssue("--vary", None, p, "varied twice") for p in twice])
+    # the rules on the set of axes (zipped lists of equal lengths) are those of a sweep file's vary:
+    validate(Vary, {mode: {a.path: {"values": list(a.values)} for a in axes}}, source="--vary")
     scene_name = data.get("name") if isinstance(data.get("name"), str) else Path(config).stem
     return SweepSpec(
         name=name or f"{scene_name}_sweep", source=str(config), base_data=data, base_lines=lines,
@@ -199,54 +202,33 @@ def spec_from_scene(config: str | Path, vary: list[str], *, zip_axes: bool = Fal
     )
 
 
-def _check_axes(axes: tuple[Axis, ...], mode: str, source: str, line: int | None = None) -> None:
-    issues = []
-    seen = set()
-    for a in axes:
-        if a.path in seen:
-            issues.append(ConfigIssue(source, line, a.path, "varied twice"))
-        seen.add(a.path)
-    if mode == "zip" and len({len(a.values) for a in axes}) > 1:
-        lens = ", ".join(f"{a.path}: {len(a.values)}" for a in axes)
-        issues.append(ConfigIssue(source, line, "vary.zip", f"zipped lists must have equal lengths (got {lens})"))
-    if issues:
-        raise ConfigError(issues)
+def is_sweep_spec(data: dict) -> bool:
+    """True if a YAML file's data is a sweep spec (it has ``base`` or ``vary``), not a scene."""
+    return "vary" in data or "base" in data
 
 
 def load_sweep(path: str | Path, *, overrides: list[str] | None = None) -> SweepSpec:
-    """Read a sweep YAML file (see the module docstring); ConfigError with file:line on problems."""
+    """Read a sweep YAML file (a ``SweepFile``, see the module docstring); one ConfigError with
+    file:line, field and what was expected for every problem of the spec and its base file."""
     src = str(path)
     data, lines = read_yaml(path)
     issues: list[ConfigIssue] = []
-
-    def bad(keys: tuple, message: str) -> None:
-        issues.append(ConfigIssue(src, _line(lines, keys), ".".join(map(str, keys)), message))
-
-    for k in data:
-        if k not in SPEC_KEYS:
-            bad((k,), f"unknown key; expected one of: {', '.join(SPEC_KEYS)}")
-    base_data, base_lines, base_source = _base(data, lines, Path(path), bad)
-    fixed = _fixed_from_mapping(data.get("set"), lines, src, bad)
-    mode, axes = _axes(data.get("vary"), lines, src, bad)
-    analysis = data.get("analysis") or {}
-    if not isinstance(analysis, dict):
-        bad(("analysis",), "expected a mapping, e.g. {field: theta}")
-        analysis = {}
-    for k in analysis:
-        if k not in ANALYSIS_KEYS:
-            bad(("analysis", k), f"unknown key; expected one of: {', '.join(ANALYSIS_KEYS)}")
-    if analysis.get("kind", "auto") not in ANALYSIS_KINDS:
-        bad(("analysis", "kind"), f"expected one of: {', '.join(ANALYSIS_KINDS)} (got {analysis['kind']!r})")
-    name = data.get("name", Path(path).stem)
-    if not isinstance(name, str) or not name.replace("_", "").replace("-", "").replace(".", "").isalnum():
-        bad(("name",), f"expected a name of letters, digits, '_', '-' or '.' (got {name!r})")
+    try:
+        spec = validate(SweepFile, data, lines=lines, source=src)
+    except ConfigError as exc:
+        issues += exc.issues
+    base_data, base_lines, base_source = _base(data.get("base"), lines, Path(path), issues)
     if issues:
-        raise ConfigError(issues)
-    _check_axes(axes, mode, src, _line(lines, ("vary",)))
+        raise ConfigError(in_line_order(issues))
+    mode = spec.vary.mode
+    axes = tuple(Axis(key, vals.expand(), f"{src}:{_line(lines, ('vary', mode, key))}", vals.scale)
+                 for key, vals in spec.vary.axes.items())
+    fixed = tuple((tuple(key.split(".")), val, f"{key}={val!r}", f"{src}:{_line(lines, ('set', key))}")
+                  for key, val in spec.set.items())
     return SweepSpec(
-        name=name, source=src, base_data=base_data, base_lines=base_lines, base_source=base_source,
-        axes=axes, mode=mode, fixed=fixed + _fixed_from_strings(overrides or []),
-        description=str(data.get("description", "")), analysis=dict(analysis),
+        name=spec.name or Path(path).stem, source=src, base_data=base_data, base_lines=base_lines,
+        base_source=base_source, axes=axes, mode=mode, fixed=fixed + _fixed_from_strings(overrides or []),
+        description=spec.description, analysis=spec.analysis,
     )
 
 
@@ -257,69 +239,22 @@ def _line(lines: dict, keys: tuple) -> int | None:
     return None
 
 
-def _base(data: dict, lines: dict, path: Path, bad) -> tuple[dict, dict, str]:
-    base = data.get("base")
+def _base(base: Any, lines: dict, path: Path, issues: list[ConfigIssue]) -> tuple[dict, dict, str]:
+    """(scene data, its line map, its source) of the spec's ``base``: a file read (its problems
+    added to ``issues``) or the inline mapping (the spec's lines); {} if neither."""
     if isinstance(base, str):
         file = (path.parent / base) if not Path(base).is_absolute() else Path(base)
         try:
             bdata, blines = read_yaml(file)
         except ConfigError as exc:
-            bad(("base",), f"base config {str(file)!r}: " + "; ".join(i.message for i in exc.issues))
+            issues.append(ConfigIssue(str(path), _line(lines, ("base",)), "base",
+                                      f"base config {str(file)!r}: " + "; ".join(i.message for i in exc.issues)))
             return {}, {}, str(file)
         return bdata, blines, str(file)
     if isinstance(base, dict):
         blines = {k[1:]: v for k, v in lines.items() if k[:1] == ("base",)}
         return copy.deepcopy(base), blines, str(path)
-    bad(("base",), "expected a scene file path (relative to this file) or an inline scene mapping"
-        if base is not None else "required: a base scene file path or an inline scene mapping")
     return {}, {}, str(path)
-
-
-def _fixed_from_mapping(section: Any, lines: dict, src: str, bad) -> tuple:
-    if section is None:
-        return ()
-    if not isinstance(section, dict):
-        bad(("set",), "expected a mapping of dotted.path: value")
-        return ()
-    out = []
-    for key, val in section.items():
-        keys = tuple(k for k in str(key).split(".") if k)
-        if not keys:
-            bad(("set", key), "empty key path")
-            continue
-        out.append((keys, val, f"{key}={val!r}", f"{src}:{_line(lines, ('set', key))}"))
-    return tuple(out)
-
-
-def _axes(vary: Any, lines: dict, src: str, bad) -> tuple[str, tuple[Axis, ...]]:
-    if not isinstance(vary, dict) or not vary:
-        bad(("vary",), "required: a mapping with `grid:` or `zip:` of dotted.path: values")
-        return "grid", ()
-    modes = [m for m in vary if m in MODES]
-    for m in vary:
-        if m not in MODES:
-            bad(("vary", m), "unknown key; expected `grid` or `zip` (then dotted.path: values)")
-    if len(modes) != 1:
-        if not any(m not in MODES for m in vary):
-            bad(("vary",), "give exactly one of `grid` or `zip`")
-        return "grid", ()
-    mode = modes[0]
-    section = vary[mode]
-    if not isinstance(section, dict) or not section:
-        bad(("vary", mode), "expected a mapping of dotted.path: values")
-        return mode, ()
-    axes = []
-    for key, spec in section.items():
-        keys = ("vary", mode, key)
-        origin = f"{src}:{_line(lines, keys)}"
-        vals, scale, err = values_of(spec)
-        if err:
-            bad(keys, err)
-        elif not vals:
-            bad(keys, "no values")
-        else:
-            axes.append(Axis(str(key), vals, origin, scale))
-    return mode, tuple(axes)
 
 
 def spec_summary(spec: SweepSpec) -> dict:
@@ -331,5 +266,5 @@ def spec_summary(spec: SweepSpec) -> dict:
         "mode": spec.mode,
         "set": {".".join(k): v for k, v, _, _ in spec.fixed},
         "vary": {a.path: {"values": list(a.values), "scale": a.scale} for a in spec.axes},
-        "analysis": spec.analysis,
+        "analysis": spec.analysis.model_dump(exclude_defaults=True),
     }
