@@ -55,6 +55,9 @@ class IntegratorSpec:
     advance_parallel: Callable | None = None  # same scheme with threaded DOF passes
     state_size: Callable[[int], int] | None = None  # extra accumulator slots for ndof DOFs
     description: str = ""
+    #: order in h of the work and dissipation it accumulates (the energy ledger); a splitting
+    #: accumulates the power of its last stage's force over each drift: first order
+    ledger_order: int = 2
 
     @property
     def explicit_limit(self) -> bool:
@@ -88,13 +91,13 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
     "pefrl": IntegratorSpec(
         name="pefrl", order=4, symplectic=True, stability_limit=2.9894,
         velocity_dependent_forces=True, advance=pefrl_advance, init=total_force,
-        force_evals=4.0,
+        force_evals=4.0, ledger_order=1,
         description="4th-order symplectic splitting (Omelyan PEFRL), exact damped kicks",
     ),
     "blanes_moan6": IntegratorSpec(
         name="blanes_moan6", order=6, symplectic=True, stability_limit=3.141436,
         velocity_dependent_forces=False, advance=make_splitting_advance(*composition.blanes_moan_6()),
-        init=total_force, force_evals=11.0,
+        init=total_force, force_evals=11.0, ledger_order=1,
         description="6th-order symplectic RKN splitting (Blanes & Moan 2002, SRKN11b), forces of q only",
     ),
     "rk4": IntegratorSpec(

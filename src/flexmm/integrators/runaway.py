@@ -32,7 +32,7 @@ def drift_allowance(spec, h: float, omega_max: float) -> float:
     lim = getattr(spec, "stability_limit", math.inf)
     if not (math.isfinite(lim) and omega_max > 0) or getattr(spec, "adaptive", False):
         return DRIFT_TOL
-    return DRIFT_TOL + min(1.0, h * omega_max / lim) ** spec.order
+    return DRIFT_TOL + min(1.0, h * omega_max / lim) ** getattr(spec, "ledger_order", min(spec.order, 2))
 
 
 class RunawayGuard:
