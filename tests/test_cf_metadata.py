@@ -23,7 +23,7 @@ from typer.testing import CliRunner
 from flexmm.cli import app
 from flexmm.design.fit import synthetic_table, write_table
 from flexmm.io.cf import CONVENTIONS, global_attrs, history_line, units_from_name, variable_attrs
-from flexmm.io.dataset import REFERENCES
+from flexmm.io.run_dataset import REFERENCES
 
 REPO = Path(__file__).resolve().parents[1]
 runner = CliRunner()

@@ -15,7 +15,7 @@ from flexmm.analysis import leading_pulse
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
 from flexmm.stability import UnstableStepError
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.theory import RotatingChainND, soliton_speed
 
 # A stiff single-row chain where θ0 ≠ 0 couples u and θ strongly but the long-wave regime is

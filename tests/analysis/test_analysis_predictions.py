@@ -11,8 +11,8 @@ import pytest
 import xarray as xr
 
 from flexmm.analysis import analyze_run
-from flexmm.analysis.compare import RunContext, bands_for, theory_for
-from flexmm.analysis.dataset import write_dataset
+from flexmm.analysis.theory_comparison import RunContext, bands_for, theory_for
+from flexmm.analysis.export import write_dataset
 from flexmm.config import scene_from_dict
 from flexmm.config.lattice import RotatingSquaresChain
 from flexmm.io.provenance import config_text

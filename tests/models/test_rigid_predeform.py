@@ -14,7 +14,7 @@ from scipy import optimize
 from flexmm.api import run_scene
 from flexmm.assemble import SceneError, build_problem
 from flexmm.config import scene_from_dict
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.models import MODELS
 
 LEGO = {"kind": "rotating_squares_chain", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,

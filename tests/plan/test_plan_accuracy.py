@@ -11,7 +11,7 @@ import pytest
 from flexmm.api import run_scene
 from flexmm.config import load_scene, scene_from_dict
 from flexmm.integrators import INTEGRATORS
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.prepare import prepare
 from flexmm.plan import make_plan
 from flexmm.accuracy import Trace, quantity_error, state_error, trace

@@ -59,7 +59,7 @@ def test_compare_full_and_continuum(tmp_path):
 
 
 def test_run_records_the_plan(tmp_path):
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     cfg = write(tmp_path, {"name": "r", "lattice": {**LEGO, "n_units": 400, "left": "driven"},
                            "excitation": {"kind": "impact", "velocity_m_s": 1.0, "angular_velocity_rad_s": 100.0},

@@ -50,7 +50,7 @@ def test_impact_needs_the_amplitude():
 
 def test_continuum_fidelity_writes_the_travelling_wave(tmp_path):
     from flexmm.analysis import leading_pulse
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     sc = soliton_scene(duration=0.3)
     res = run_scene(sc, run_dir=tmp_path, fidelity="continuum")

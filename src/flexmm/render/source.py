@@ -13,7 +13,7 @@ from typing import Self
 import numpy as np
 
 from flexmm.errors import UsageError
-from flexmm.io.dataset import REST_SUFFIX
+from flexmm.io.run_dataset import REST_SUFFIX
 
 #: bytes of field data read per block of frames
 BLOCK_BYTES = 16 * 2**20

@@ -8,7 +8,7 @@ front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says
   among pulses fitted over ≥ 10 sites, the front that switched most sites, the fastest group of
   an oblique plane wave, the driven response);
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
-  predicted speed (fronts), from the model's theory (``analysis.compare.theory_for``).
+  predicted speed (fronts), from the model's theory (``analysis.theory_comparison.theory_for``).
 
 Options (``analysis:`` block): ``kind`` (auto, pulse, front, driven, modes), ``field``,
 ``threshold_fraction`` (``trim_fraction`` is accepted and unused: the pulse fit leaves out the
@@ -49,9 +49,9 @@ def _nan_result(kind: str, field: str, units: str, note: str) -> dict:
 
 def observe_run(path: str | Path, options: dict | None = None) -> dict:
     """Observables of the run at ``path`` (run directory) as plain floats plus kind/field/note."""
-    from flexmm.analysis.compare import RunContext
+    from flexmm.analysis.theory_comparison import RunContext
     from flexmm.analysis.report import choose_kind
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     opts = dict(options or {})
     ds = open_run(path)
