@@ -2,7 +2,7 @@
 reduction to the chain, ends and dataset coordinates.
 
 Kernel oracles (−∇E, numpy reference, Σ F = 0) run on the sheet examples of tests/conftest.py via
-tests/test_hinge_kernel.py.
+tests/models/test_hinge_kernel.py.
 """
 
 import math
