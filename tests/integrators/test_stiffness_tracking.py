@@ -4,7 +4,6 @@ sonic-vacuum chain, and the controller's step reduction (or stop) when the stiff
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from flexmm.assemble import build_problem
 from flexmm.config import load_scene

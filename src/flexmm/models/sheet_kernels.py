@@ -101,15 +101,6 @@ def _hinges(q, args, out, want_force, lo, hi):
 
 
 @jit
-def _all_equal(x, y, m):
-    """x[:m] == y[:m] everywhere (integer arrays; vectorised)."""
-    bad = False
-    for k in range(m):
-        bad |= x[k] != y[k]
-    return not bad
-
-
-@jit
 def grid_layout(ha, hb, hax, n):
     """(n_cols, end of the horizontal rows, start and end of the vertical block) if the hinge
     list starts as ``rotating_sheet.hinge_pairs`` makes it, else n_cols = 0."""
