@@ -168,13 +168,6 @@ class RunSource:
                 yield int(i), float(self.time[i]), {n: block[n][i - i0] for n in names}
             k = j
 
-    def column_series(self, name: str, indices, columns: np.ndarray) -> np.ndarray:
-        """(len(indices), len(columns)) of one field at the given frames and dataset columns."""
-        out = np.empty((len(indices), len(columns)))
-        for k, (_, _, frame) in enumerate(self.frames(indices, [name])):
-            out[k] = frame[name][columns]
-        return out
-
     def close(self) -> None:
         """Close the file."""
         self.file.close()
