@@ -47,8 +47,8 @@ class SheetArgs(NamedTuple):
 
     ``hinge_a``/``hinge_b`` (H,) joined units, ``hinge_axis`` (H,) 0 for an x hinge, 1 for y,
     ``hinge_prm`` (H, 7) law parameters, ``theta0`` (N,) rest angles, ``cos``/``sin`` (N,)
-    scratch, ``dipoles`` (``magnets.empty_dipoles``), ``joints`` (``linkage.empty_joints``),
-    ``loads`` (``predeform.empty_loads``: constant generalised forces).
+    scratch, ``dipoles`` (``magnets.empty_dipoles``), ``joints`` (``joints.empty_joints``),
+    ``loads`` (``loads.empty_loads``: constant generalised forces).
     """
 
     hinge_a: np.ndarray
