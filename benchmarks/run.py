@@ -839,7 +839,7 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
     from flexmm.assemble import build_problem
     from flexmm.config import load_scene
     from flexmm.integrators import INTEGRATORS
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
     from flexmm.plan import make_plan
     from flexmm.plan.planner import replace_section
     from flexmm.prepare import prepare

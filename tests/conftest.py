@@ -14,21 +14,26 @@ import pytest
 from flexmm.config import scene_from_dict
 from flexmm.models import MODELS
 
-# configs/lego_vector_soliton.yaml, as a dict (LEGO parameters of docs/physics.md §1.1).
-LEGO_LATTICE = {
-    "kind": "rotating_squares_chain",
-    "n_units": 200,
+#: The LEGO rotating-squares unit (docs/physics.md §1.1): the one source of these numbers for the
+#: tests (``from conftest import LEGO_PARAMETERS``); a test that needs other values overrides
+#: them, ``dict(LEGO_CHAIN, k_shear_n_per_m=...)``.
+LEGO_PARAMETERS = {
     "a_m": 0.016,
-    "theta0_rad": 0.0,
     "k_long_n_per_m": 71690.0,
     "k_shear_n_per_m": 1326.98,
     "k_rot_n_m_per_rad": 7.038e-4,
     "mass_kg": 4.52e-3,
     "inertia_kg_m2": 8.7814e-8,
-    "n_lateral": 1,
-    "left": "driven",
-    "right": "free",
 }
+#: a LEGO rotating-squares chain, one lateral neighbour (n_units, θ0 and ends left to the test)
+LEGO_CHAIN = {"kind": "rotating_squares_chain", **LEGO_PARAMETERS, "n_lateral": 1}
+#: a LEGO rotating-squares sheet (size, θ0 and edges left to the test)
+LEGO_SHEET = {"kind": "rotating_squares_sheet", **LEGO_PARAMETERS}
+#: stiff hinges on the LEGO chain (nondimensional K_s = 0.5, K_θ = 0.02): pulses a few sites wide
+LEGO_STIFF_HINGES = {"k_shear_n_per_m": 0.5 * LEGO_PARAMETERS["k_long_n_per_m"],
+                     "k_rot_n_m_per_rad": 0.02 * LEGO_PARAMETERS["k_long_n_per_m"] * LEGO_PARAMETERS["a_m"] ** 2}
+# configs/lego_vector_soliton.yaml, as a dict (tests/test_cli.py checks that they agree).
+LEGO_LATTICE = {**LEGO_CHAIN, "n_units": 200, "theta0_rad": 0.0, "left": "driven", "right": "free"}
 LEGO_SCENE = {
     "name": "lego_vector_soliton",
     "description": "LEGO rotating-squares chain struck at its left end; an elastic vector soliton forms.",
@@ -47,11 +52,10 @@ def _chain(**changes) -> dict:
     return lat
 
 
-_SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
-          "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
+_SHEET = LEGO_SHEET
 # rotating triangles (docs/physics.md §1.6): LEGO k_l, a stiffer shear spring (0.1 k_l) to couple the fields
-_TRI = {"a_m": 0.02, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 7169.0, "k_rot_n_m_per_rad": 0.05,
-        "mass_kg": 4.52e-3, "inertia_kg_m2": 1.2e-7}
+_TRI = {"a_m": 0.02, "k_long_n_per_m": LEGO_PARAMETERS["k_long_n_per_m"], "k_shear_n_per_m": 7169.0,
+        "k_rot_n_m_per_rad": 0.05, "mass_kg": LEGO_PARAMETERS["mass_kg"], "inertia_kg_m2": 1.2e-7}
 _MASS = {"spacing_m": 0.01, "mass_kg": 0.01,
          "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
 
@@ -67,8 +71,7 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
             "translation_invariant": True,
         },
         "single-row-stiff": {
-            "lattice": _chain(n_units=8, theta0_rad=0.3, n_lateral=0, k_shear_n_per_m=0.5 * 71690.0,
-                              k_rot_n_m_per_rad=0.02 * 71690.0 * 0.016**2),
+            "lattice": _chain(n_units=8, theta0_rad=0.3, n_lateral=0, **LEGO_STIFF_HINGES),
             "translation_invariant": True,
         },
         "precompressed-loads": {  # constant end loads (predeform): an extra linear energy term

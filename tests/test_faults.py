@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
@@ -102,19 +102,19 @@ def test_a_second_run_into_the_same_directory_is_refused(tmp_path) -> None:
 
 
 def test_disk_full_stops_the_run_and_keeps_the_frames_written(tmp_path, monkeypatch) -> None:
-    import flexmm.io.dataset as dataset
+    import flexmm.io.run_dataset as run_dataset
     from flexmm.api import run_scene
     from flexmm.config import load_scene
 
-    flush = dataset.DatasetWriter.flush
+    flush = run_dataset.DatasetWriter.flush
 
     def full_after_300(self) -> None:
         if self.n_written >= 300:
             raise OSError(errno.ENOSPC, "No space left on device")
         flush(self)
 
-    monkeypatch.setattr(dataset.DatasetWriter, "flush", full_after_300)
-    monkeypatch.setattr(dataset, "BUFFER_BYTES", 8 * 400 * 2 * 100)  # flush every 100 frames
+    monkeypatch.setattr(run_dataset.DatasetWriter, "flush", full_after_300)
+    monkeypatch.setattr(run_dataset, "BUFFER_BYTES", 8 * 400 * 2 * 100)  # flush every 100 frames
     res = run_scene(load_scene(DEMO), run_dir=tmp_path / "demo")
     assert res.status == "failed" and "No space left on device" in res.reason
     assert res.path == tmp_path / "demo.failed" / "dataset.nc" and not (tmp_path / "demo").exists()

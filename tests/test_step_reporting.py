@@ -46,7 +46,7 @@ def small_hertz():
 
 def test_requested_step_is_the_step_in_attrs_and_log(tmp_path, small_hertz) -> None:
     from flexmm.api import run_scene
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
     from flexmm.plan.planner import replace_section
 
     scene = replace_section(small_hertz, "solver", dt_s=3e-7)

@@ -17,7 +17,7 @@ import numpy as np
 from flexmm.assemble import build_problem
 from flexmm.controller import RunResult
 from flexmm.integrators.stepper import make_stepper
-from flexmm.io.dataset import DatasetWriter, add_state
+from flexmm.io.run_dataset import DatasetWriter, add_state
 from flexmm.io.provenance import provenance_attrs
 from flexmm.models import MODELS
 from flexmm.plan.continuum import (

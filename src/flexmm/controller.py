@@ -19,7 +19,7 @@ from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
-from flexmm.io.dataset import DatasetWriter, add_state, estimate_bytes
+from flexmm.io.run_dataset import DatasetWriter, add_state, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 

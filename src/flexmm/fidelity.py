@@ -98,7 +98,7 @@ def measure(path, kind: str, field_spec: str, x_range: tuple[float, float] | Non
     interior sites), robust to the secondary pulses an impact leaves behind; fronts:
     ``analysis.fronts.measure_fronts``, first front.
     """
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     ds = middle_row(open_run(path))
     if x_range is not None:
@@ -130,7 +130,7 @@ def measure(path, kind: str, field_spec: str, x_range: tuple[float, float] | Non
 def run_fidelity(scene, fidelity: str, run_dir: Path, request: AnalysisRequest, log=None) -> Observed:
     """Run one fidelity of a scene into ``run_dir`` and measure it."""
     from flexmm.api import run_scene
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
     from flexmm.models import model_fields
 
     res = run_scene(scene, run_dir=run_dir, fidelity=fidelity, analysis=str(request), log=log)
@@ -150,7 +150,7 @@ def run_fidelity(scene, fidelity: str, run_dir: Path, request: AnalysisRequest, 
 def _x_extent(path) -> tuple[float, float]:
     import numpy as np
 
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     x = np.asarray(middle_row(open_run(path))["x"].values, float)
     return float(x.min()), float(x.max())

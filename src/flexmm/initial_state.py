@@ -97,7 +97,7 @@ def _rest_shift(system: System, ds, name: str) -> np.ndarray | float:
 def _from_run(system: System, path: str) -> str:
     """Replace the state by the last frame of the run at ``path`` (the same positions, also when
     that run measured its fields from another rest state); a provenance note."""
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     ds = open_run(Path(path))
     t = float(ds["time"].values[-1])

@@ -51,7 +51,3 @@ class Scales:
     def generalised_force(self, kind: str) -> float:
         """Force for a length DOF (N), torque for an angle DOF (N m)."""
         return self.energy / self.coordinate(kind)
-
-    def generalised_mass(self, kind: str) -> float:
-        """Mass for a length DOF (kg), rotational inertia for an angle DOF (kg m^2)."""
-        return self.mass_kg if kind == "length" else self.inertia

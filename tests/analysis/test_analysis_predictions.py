@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import LEGO_CHAIN
 
 from flexmm.analysis import analyze_run
-from flexmm.analysis.compare import RunContext, bands_for, theory_for
-from flexmm.analysis.dataset import write_dataset
+from flexmm.analysis.export import write_dataset
+from flexmm.analysis.theory_comparison import RunContext, bands_for, theory_for
 from flexmm.config import scene_from_dict
 from flexmm.config.lattice import RotatingSquaresChain
 from flexmm.io.provenance import config_text
@@ -108,9 +109,8 @@ def test_rotating_chain_strain_pulse_rides_on_theta_soliton(tmp_path, lego_confi
 
 @pytest.mark.parametrize("theta0, n_v, s_v", [(0.0, 1, 0), (0.3, 1, 1), (-0.2, 2, 1), (0.25, 0, 0)])
 def test_bloch_dispersion_from_the_hessian_matches_the_closed_form(theta0, n_v, s_v):
-    cfg = RotatingSquaresChain(kind="rotating_squares_chain", n_units=24, a_m=0.016, theta0_rad=theta0,
-                               k_long_n_per_m=71690, k_shear_n_per_m=1326.98, k_rot_n_m_per_rad=7.038e-4,
-                               mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=n_v, lateral_stretch=bool(s_v))
+    cfg = RotatingSquaresChain(**dict(LEGO_CHAIN, n_units=24, theta0_rad=theta0, n_lateral=n_v,
+                                      lateral_stretch=bool(s_v)))
     system = MODELS[cfg.kind].build(cfg)
     nd = nondimensional(cfg)
     p = rt.RotatingChainND(theta0, nd["Ks"], nd["Ktheta"], nd["alpha2"], n_v, s_v)

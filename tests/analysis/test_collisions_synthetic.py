@@ -47,7 +47,7 @@ def test_head_on_collision_is_paired_with_its_shifts_and_changes(va, vb, wa, wb,
     # a speed change below arrivals.SPEED_CHANGE (2 %) is fitted with one slowness on both sides of
     # the collision, which moves the lines' meeting point by up to about half a site
     assert c.time_s == pytest.approx(t_c, abs=0.6) and c.position_m == pytest.approx(x_c, abs=0.6)
-    a, b = pulses[c.pulse_a], pulses[c.pulse_b]
+    a = pulses[c.pulse_a]
     if a.direction < 0:  # the pair is unordered: make a the right-moving one
         c_a, c_b = (c.shift_b_m, c.amplitude_change_b, c.speed_change_b), (c.shift_a_m, c.amplitude_change_a, c.speed_change_a)
     else:

@@ -23,7 +23,7 @@ from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.api import run_scene
 from flexmm.cli import app
 from flexmm.config import scene_from_dict
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "predeformed_rarefaction_soliton.yaml"
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import LEGO_CHAIN
 from typer.testing import CliRunner
 
 from flexmm.cli import app
@@ -16,9 +17,7 @@ from flexmm.design.optimize import check_gradient, load_design
 
 DESIGNS = Path(__file__).resolve().parents[2] / "designs"
 SCENE = {"name": "small_impact", "lattice": {
-    "kind": "rotating_squares_chain", "n_units": 8, "a_m": 0.016, "theta0_rad": 0.0, "k_long_n_per_m": 71690.0,
-    "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8,
-    "n_lateral": 1, "left": "driven", "right": "fixed"},
+    **LEGO_CHAIN, "n_units": 8, "theta0_rad": 0.0, "left": "driven", "right": "fixed"},
     "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 2.0, "angular_velocity_rad_s": 100.0,
                    "striker": {"mass_kg": 0.02, "contact_stiffness_n_per_m": 1.0e7, "exponent": 1.5}},
     "damping": {"viscous": {"damping_ratio": 0.02}},

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import LEGO_CHAIN
 from typer.testing import CliRunner
 
 from flexmm.cli import app
@@ -18,12 +19,10 @@ from flexmm.design.variables import finite_difference
 
 DESIGNS = Path(__file__).resolve().parents[2] / "designs"
 SCENE = {"name": "small", "lattice": {
-    "kind": "rotating_squares_chain", "n_units": 8, "a_m": 0.016, "theta0_rad": 0.0, "k_long_n_per_m": 71690.0,
-    "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8,
-    "n_lateral": 1, "left": "driven", "right": "free"},
+    **LEGO_CHAIN, "n_units": 8, "theta0_rad": 0.0, "left": "driven", "right": "free"},
     "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 3.0, "angular_velocity_rad_s": 300.0},
     "damping": {"viscous": {"damping_ratio": 0.01}}, "solver": {"duration_s": 0.01}}
-TRUE = {"k_rot": 7.038e-4, "zeta": 0.01}
+TRUE = {"k_rot": LEGO_CHAIN["k_rot_n_m_per_rad"], "zeta": 0.01}
 
 
 def _spec(tmp_path: Path, noise: float = 0.0, **changes) -> Path:

@@ -14,23 +14,20 @@ import copy
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN, LEGO_SHEET
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.design.gradient import GradientError, trajectory_of
-from flexmm.integrators.stepper import make_stepper
 from flexmm.integrators.common import SHAPES
+from flexmm.integrators.stepper import make_stepper
 from flexmm.models.hinge import H_SIGN
 
-CHAIN = {"kind": "rotating_squares_chain", "n_units": 6, "a_m": 0.016, "theta0_rad": 0.2,
-         "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-         "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+CHAIN = dict(LEGO_CHAIN, n_units=6, theta0_rad=0.2)
 MASS = {"kind": "mass_chain", "n_units": 6, "spacing_m": 0.01, "mass_kg": 0.01,
         "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
 
-SHEET = {"kind": "rotating_squares_sheet", "n_rows": 3, "n_cols": 4, "a_m": 0.016, "theta0_rad": 0.15,
-         "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-         "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
+SHEET = dict(LEGO_SHEET, n_rows=3, n_cols=4, theta0_rad=0.15)
 
 SCENES = {
     "sheet-tilted-pulse-damped": {

@@ -9,16 +9,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN, LEGO_SHEET
 
 from flexmm.assemble import build_system
 from flexmm.config import scene_from_dict
-from flexmm.design.kernels import model_adjoint, model_tangent, param_tables, with_tables
+from flexmm.design.kernels import (
+    model_adjoint,
+    model_tangent,
+    param_tables,
+    with_tables,
+)
 from flexmm.models.hinge import H_SIGN
 from flexmm.models.kernels import kernels_of, model_force
 
-CHAIN = {"kind": "rotating_squares_chain", "n_units": 7, "a_m": 0.016, "theta0_rad": 0.2,
-         "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-         "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1,
+CHAIN = {**LEGO_CHAIN, "n_units": 7, "theta0_rad": 0.2,
          "variation": [{"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 5e-4, "end": 9e-4}]}
 LAWS = {
     "polynomial": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5},
@@ -26,9 +30,7 @@ LAWS = {
     "hertz": {"law": "hertz", "stiffness_n_per_m_p": 1e7, "exponent": 1.5, "precompression_m": 1e-3},
     "sine": None,
 }
-SHEET = {"kind": "rotating_squares_sheet", "n_rows": 3, "n_cols": 4, "a_m": 0.016, "theta0_rad": 0.15,
-         "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-         "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8}
+SHEET = dict(LEGO_SHEET, n_rows=3, n_cols=4, theta0_rad=0.15)
 LATTICES = {"chain": CHAIN,
             "sheet": SHEET,
             "sheet-ligament": dict(SHEET, n_rows=2, ligament_length_m=0.002, theta0_rad=-0.2, bottom="periodic",

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+from conftest import LEGO_CHAIN
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 
 LEGO = {
-    "kind": "rotating_squares_chain", "n_units": 24, "a_m": 0.016, "theta0_rad": 0.0,
-    "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-    "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1, "left": "free", "right": "free",
+    **LEGO_CHAIN, "n_units": 24, "theta0_rad": 0.0, "left": "free", "right": "free",
 }
 
 #: damping/drive variants: everything integrators.common supports, one at a time and together

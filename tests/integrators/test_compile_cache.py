@@ -14,6 +14,7 @@ import subprocess
 import sys
 
 import pytest
+from conftest import LEGO_CHAIN
 
 SCRIPT = r"""
 import json, sys, warnings
@@ -25,9 +26,7 @@ import flexmm._jit as J
 
 integrator, model = sys.argv[1], sys.argv[2]
 if model == "chain":
-    lat = {"kind": "rotating_squares_chain", "n_units": 12, "a_m": 0.016, "k_long_n_per_m": 71690.0,
-           "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3,
-           "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+    lat = json.loads(sys.argv[3])  # the LEGO chain of tests/conftest.py, 12 units
     excitation = {"kind": "impact", "end": "left", "velocity_m_s": 1.0, "angular_velocity_rad_s": 50.0}
 else:  # the sheet, driven on its left column (Verlet fused with the sheet force)
     lat = {"kind": "rotating_squares_sheet", "n_rows": 5, "n_cols": 7, "a_m": 0.01, "theta0_rad": 0.35,
@@ -47,7 +46,8 @@ print(json.dumps({"hits": sum(stats.cache_hits.values()), "misses": sum(stats.ca
 
 
 def _run(integrator: str, env: dict, model: str = "chain") -> dict:
-    out = subprocess.run([sys.executable, "-c", SCRIPT, integrator, model], env=env, capture_output=True,
+    chain = json.dumps(dict(LEGO_CHAIN, n_units=12))
+    out = subprocess.run([sys.executable, "-c", SCRIPT, integrator, model, chain], env=env, capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return {**json.loads(out.stdout.strip().splitlines()[-1]), "stderr": out.stderr}

@@ -9,7 +9,7 @@ from integrator_helpers import LEGO
 from flexmm.api import run_scene
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 
 
 def impact_scene(integrator: str, damped: bool | None = None, **solver) -> dict:

@@ -4,7 +4,6 @@ sonic-vacuum chain, and the controller's step reduction (or stop) when the stiff
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from flexmm.assemble import build_problem
 from flexmm.config import load_scene
@@ -38,7 +37,7 @@ def test_tracker_follows_the_dense_omega_max_along_a_run() -> None:
 
 def test_symplectic_step_is_reduced_between_frames_and_reported(tmp_path) -> None:
     from flexmm.api import run_scene
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     res = run_scene(_hardening(2.0, "velocity_verlet", 0.6), run_dir=tmp_path / "r")
     assert res.ok, res.reason

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm.assemble import build_problem
-from flexmm.config import scene_from_dict, load_scene
+from flexmm.config import scene_from_dict
 from flexmm.integrators.runner import integrate
 
 
@@ -21,13 +21,6 @@ def run_in_memory(problem, n_frames: int = 400):
     tr = integrate(problem, problem.scene.solver.integrator, h=problem.dt, n_frames=n_frames + 1,
                    check_energy=False)
     return tr.t, tr.q, tr.v, tr.acc
-
-
-def run_config(path: str, overrides: list[str] | None = None, n_frames: int = 400):
-    """Load a scene file and integrate it in memory; returns (problem, t, q, v)."""
-    problem = build_problem(load_scene(path, overrides or []))
-    t, q, v, _ = run_in_memory(problem, n_frames)
-    return problem, t, q, v
 
 
 def crossing_times(t: np.ndarray, s: np.ndarray, level: float = 0.5) -> np.ndarray:

@@ -13,7 +13,7 @@ import yaml
 
 from flexmm.api import run_scene
 from flexmm.config import load_scene, scene_from_dict
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 
 from flexmm.analysis.context import RunContext
 from flexmm.analysis.rest import from_rest, rest_fields
@@ -10,9 +11,7 @@ from flexmm.config import scene_from_dict
 from flexmm.theory.prestressed import prestressed_chain
 from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
 
-LATTICE = {"kind": "rotating_squares_chain", "n_units": 100, "a_m": 0.016, "theta0_rad": 0.05,
-           "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-           "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1,
+LATTICE = {**LEGO_CHAIN, "n_units": 100, "theta0_rad": 0.05,
            "predeform": {"loads": [{"end": "left", "force_n": 0.2}, {"end": "right", "force_n": 0.2}],
                          "theta_guess_rad": 0.1}}
 

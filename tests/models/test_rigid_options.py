@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 
 from flexmm.assemble import build_problem
 from flexmm.config import ConfigError, scene_from_dict
@@ -13,8 +14,7 @@ from flexmm.integrators.common import MODE_DISPLACEMENT
 from flexmm.models import MODELS
 from flexmm.models.magnets import MU0_OVER_4PI, face_magnets
 
-LEGO = {"kind": "rotating_squares_chain", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
-        "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+LEGO = LEGO_CHAIN
 MAGNET_SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.02, "k_long_n_per_m": 5e4, "k_shear_n_per_m": 5e4,
                 "k_rot_n_m_per_rad": 0.01, "mass_kg": 0.005,
                 "magnets": {"moment_a_m2": 0.253, "recess_m": 0.003}}
@@ -27,13 +27,13 @@ def scene(lattice, **sections):
 # ---------------------------------------------------------------- variation (rules: tests/models/test_variation.py)
 def test_chain_variation_reaches_the_tables():
     lattice = dict(LEGO, n_units=5, variation=[
-        {"kind": "interface", "target": "k_long_n_per_m", "position": 3, "value": 2 * 71690.0},
-        {"kind": "defects", "target": "inertia_kg_m2", "sites": [0], "value": 2 * 8.7814e-8}])
+        {"kind": "interface", "target": "k_long_n_per_m", "position": 3, "value": 2 * LEGO["k_long_n_per_m"]},
+        {"kind": "defects", "target": "inertia_kg_m2", "sites": [0], "value": 2 * LEGO["inertia_kg_m2"]}])
     system = MODELS["rotating_squares_chain"].build(scene(lattice).lattice)
     hprm, sprm = system.args[2], system.args[3]
     np.testing.assert_allclose(hprm[:, 4], [1, 1, 1.5, 2])  # k_l per hinge / base k_l
     np.testing.assert_allclose(sprm[:, 1], 0.0)  # n_v = 1 but s_v = 0: no lateral stretch term
-    alpha2 = 8.7814e-8 / (4.52e-3 * 0.016**2)
+    alpha2 = LEGO["inertia_kg_m2"] / (LEGO["mass_kg"] * LEGO["a_m"] ** 2)
     np.testing.assert_allclose(system.mass[5:], [2 * alpha2] + [alpha2] * 4)
 
 

@@ -14,7 +14,7 @@ import pytest
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.controller import run_problem
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.theory.rotating import RotatingChainND, soliton_speed
 
 A_M, KL, M = 0.01, 1e4, 1e-3

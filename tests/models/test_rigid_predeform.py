@@ -9,16 +9,16 @@ import math
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 from scipy import optimize
 
 from flexmm.api import run_scene
 from flexmm.assemble import SceneError, build_problem
 from flexmm.config import scene_from_dict
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.models import MODELS
 
-LEGO = {"kind": "rotating_squares_chain", "a_m": 0.016, "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98,
-        "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+LEGO = LEGO_CHAIN
 SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
          "k_rot_n_m_per_rad": 2e-4, "areal_density_kg_m2": 20.0}
 

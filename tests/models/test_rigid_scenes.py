@@ -7,16 +7,29 @@ import math
 
 import numpy as np
 import pytest
-from rigid_scene_checks import (front_positions, row_fields, run, run_edited, sound_bullet, track,
-                                wall_position)
+from conftest import LEGO_PARAMETERS
+from rigid_scene_checks import (
+    front_positions,
+    row_fields,
+    run,
+    run_edited,
+    sound_bullet,
+    track,
+    wall_position,
+)
 
 from flexmm.analysis.oblique import fold_axis, wave_groups
-from flexmm.sweep.observe import observe_run
-from flexmm.theory.rotating import RotatingChainND, amplitude_gap, lego_parameters, soliton_speed
 from flexmm.linear.sheet import acoustic_modes
+from flexmm.sweep.observe import observe_run
+from flexmm.theory.rotating import (
+    RotatingChainND,
+    amplitude_gap,
+    lego_parameters,
+    soliton_speed,
+)
 
 pytestmark = pytest.mark.slow
-LEGO_T = (4.52e-3 / 71690) ** 0.5  # time unit sqrt(m/k_l) of the LEGO chain (s)
+LEGO_T = (LEGO_PARAMETERS["mass_kg"] / LEGO_PARAMETERS["k_long_n_per_m"]) ** 0.5  # time unit sqrt(m/k_l) of the LEGO chain (s)
 
 
 # ---------------------------------------------------------------- (a) 2D rotating squares
@@ -177,7 +190,7 @@ def test_scene_j_domain_wall_stays_put(tmp_path):
 def test_scene_k_linkage_deploys(tmp_path):
     scene, ds, _ = run("k_linkage_transition_wave", tmp_path)
     lat = scene.lattice
-    theta, t = ds["theta"].values, ds["time"].values
+    theta = ds["theta"].values
     nc = lat.n_cols
     switch = lat.theta_deployed_rad - lat.theta0_rad
     front = front_positions(theta[:, :nc], 0.5 * switch)

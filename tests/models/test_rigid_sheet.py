@@ -2,7 +2,7 @@
 reduction to the chain, ends and dataset coordinates.
 
 Kernel oracles (−∇E, numpy reference, Σ F = 0) run on the sheet examples of tests/conftest.py via
-tests/test_hinge_kernel.py.
+tests/models/test_hinge_kernel.py.
 """
 
 import math
@@ -12,7 +12,7 @@ import pytest
 
 from flexmm.api import run_scene
 from flexmm.config import ConfigError, scene_from_dict
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.models import MODELS
 
 SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,

@@ -5,7 +5,7 @@ meet), the closed-form long-wave speed of the straight strip, the eigenvalues of
 periodic lattice's Hessian against the Bloch dispersion of ``flexmm.linear``, the speed of a
 simulated small pulse against the Bloch long-wave speed, and the energy of undamped velocity
 Verlet (error bounded, ∝ dt²). The kernels' force = −∇E and compiled = reference checks run
-for every model kind in tests/test_hinge_kernel.py (examples in tests/conftest.py).
+for every model kind in tests/models/test_hinge_kernel.py (examples in tests/conftest.py).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import LEGO_PARAMETERS
 from scipy.linalg import eigh
 
 from flexmm.assemble import build_problem
@@ -32,9 +33,10 @@ from flexmm.models.rotating_triangles import centroids, sublattice_sign
 from flexmm.stability import hessian_operator
 
 A = 0.02
-KL = 71690.0
+KL = LEGO_PARAMETERS["k_long_n_per_m"]
 TRI = {"a_m": A, "k_long_n_per_m": KL, "k_shear_n_per_m": 0.1 * KL, "k_rot_n_m_per_rad": 0.02 * KL * A * A,
-       "mass_kg": 4.52e-3, "inertia_kg_m2": 4.52e-3 * A * A / 12}
+       "mass_kg": LEGO_PARAMETERS["mass_kg"],
+       "inertia_kg_m2": LEGO_PARAMETERS["mass_kg"] * A * A / 12}
 
 
 def chain(make_scene, scene_dict, **changes):

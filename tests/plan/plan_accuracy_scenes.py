@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from conftest import LEGO_PARAMETERS
+
 from flexmm.config.loader import read_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
-LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
-            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8)
+LEGO = dict(kind="rotating_squares_chain", **LEGO_PARAMETERS)
 
 
 def _config(name: str, **solver) -> dict:

@@ -41,7 +41,7 @@ def test_error_control_on_a_strongly_struck_chain_meets_its_target() -> None:
 
 def test_explicit_step_is_honoured_and_checked(tmp_path) -> None:
     from flexmm.api import run_scene
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     scene = load_scene("configs/b_lego_amplitude_gap.yaml", STRUCK + ["solver.dt_s=2e-5", "solver.integrator=pefrl"])
     res = run_scene(scene, run_dir=tmp_path / "r", fidelity="full")

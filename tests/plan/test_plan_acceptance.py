@@ -9,17 +9,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 
+from flexmm.accuracy import integrate, state_error
 from flexmm.assemble import build_problem
 from flexmm.config import load_scene, scene_from_dict
-from flexmm.integrators import INTEGRATORS
-from flexmm.models import MODELS
-from flexmm.prepare import prepare
-from flexmm.plan import make_plan
-from flexmm.integrators.stepper import frame_chunks, make_stepper
-from flexmm.accuracy import integrate, state_error
 from flexmm.fidelity import compare_fidelities
+from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.stepper import frame_chunks, make_stepper
+from flexmm.models import MODELS
+from flexmm.plan import make_plan
 from flexmm.plan.output import AnalysisRequest
+from flexmm.prepare import prepare
 
 ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.slow
@@ -43,8 +44,7 @@ def test_reduced_model_reproduces_speed_and_amplitude(tmp_path, config, override
 
 
 # ---------------------------------------------------------------- absorbing layer
-LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
-            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
+LEGO = LEGO_CHAIN
 
 
 def _states(problem, times):

@@ -7,17 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 
+from flexmm.accuracy import Trace, quantity_error, state_error, trace
 from flexmm.api import run_scene
 from flexmm.config import load_scene, scene_from_dict
 from flexmm.integrators import INTEGRATORS
-from flexmm.io.dataset import open_run
-from flexmm.prepare import prepare
+from flexmm.io.run_dataset import open_run
 from flexmm.plan import make_plan
-from flexmm.accuracy import Trace, quantity_error, state_error, trace
+from flexmm.prepare import prepare
 
-LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
-            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
+LEGO = LEGO_CHAIN
 
 
 def soliton_scene(accuracy=1e-4, **solver):

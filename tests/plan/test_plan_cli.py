@@ -5,14 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import yaml
+from conftest import LEGO_CHAIN
 from typer.testing import CliRunner
 
 from flexmm.cli import app
 
 ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
-LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
-            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
+LEGO = LEGO_CHAIN
 
 
 def write(tmp_path, data) -> str:
@@ -59,7 +59,7 @@ def test_compare_full_and_continuum(tmp_path):
 
 
 def test_run_records_the_plan(tmp_path):
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     cfg = write(tmp_path, {"name": "r", "lattice": {**LEGO, "n_units": 400, "left": "driven"},
                            "excitation": {"kind": "impact", "velocity_m_s": 1.0, "angular_velocity_rad_s": 100.0},

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
@@ -12,8 +13,7 @@ from flexmm.plan.continuum import NeedsAmplitude, NoContinuum, predict
 from flexmm.plan.fronts import solve_front
 from flexmm.theory.chains import bistable_front
 
-LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
-            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8, n_lateral=1)
+LEGO = LEGO_CHAIN
 
 
 def soliton_scene(n=200, center=50, direction=1, duration=0.05):
@@ -50,7 +50,7 @@ def test_impact_needs_the_amplitude():
 
 def test_continuum_fidelity_writes_the_travelling_wave(tmp_path):
     from flexmm.analysis import leading_pulse
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     sc = soliton_scene(duration=0.3)
     res = run_scene(sc, run_dir=tmp_path, fidelity="continuum")

@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import LEGO_PARAMETERS
 
-from flexmm.assemble import build_problem
+from flexmm.accuracy import integrate
+from flexmm.assemble import absorbing_damping, build_problem
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
-from flexmm.accuracy import integrate
-from flexmm.assemble import absorbing_damping
 from flexmm.plan.domain import bloch_dispersion, trim_scene, wave_reach
 from flexmm.theory.rotating import RotatingChainND, dispersion_chain
 
-LEGO = dict(kind="rotating_squares_chain", a_m=0.016, k_long_n_per_m=71690, k_shear_n_per_m=1326.98,
-            k_rot_n_m_per_rad=7.038e-4, mass_kg=4.52e-3, inertia_kg_m2=8.7814e-8)
+LEGO = dict(kind="rotating_squares_chain", **LEGO_PARAMETERS)
 
 
 def chain_scene(n=60, duration=0.01, excitation=None, **lattice):

@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 
 from flexmm.config import scene_from_dict
-from flexmm.io.dataset import DatasetWriter, add_state
+from flexmm.io.run_dataset import DatasetWriter, add_state
 from flexmm.models import MODELS
 
 #: model kinds flexmm.render does not draw or colour yet (their render tests are skipped)
@@ -45,7 +45,7 @@ def write_run(run_dir: Path, lattice: dict, system, fields: dict[str, np.ndarray
               state: bool = False) -> Path:
     """A dataset.nc with the given fields (all sites, or ``sites``), the site coordinates of the
     built model and the scene as its stored config; ``state``: with the system's rest and initial
-    state as a run stores them (``io.dataset.add_state``), else laid out as before they were stored."""
+    state as a run stores them (``io.run_dataset.add_state``), else laid out as before they were stored."""
     n_frames = next(iter(fields.values())).shape[0]
     times = np.linspace(0.0, 1e-3 * (n_frames - 1), n_frames) if times is None else np.asarray(times)
     sites = np.arange(system.n_sites) if sites is None else np.asarray(sites)

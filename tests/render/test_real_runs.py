@@ -15,7 +15,7 @@ from test_kinematics import expected_hinge_points
 
 from flexmm.api import run_scene
 from flexmm.config import scene_from_dict
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.render.api import RenderOptions, render_run, still_figure
 
 FIRST = {kind: next(iter(examples.values()))["lattice"] for kind, examples in EXAMPLE_LATTICES.items()

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import LEGO_CHAIN
 from PIL import Image
 from render_helpers import build, random_fields, write_run
 from typer.testing import CliRunner
@@ -21,9 +22,7 @@ from typer.testing import CliRunner
 from flexmm.cli import app
 from flexmm.render.api import RenderOptions, still_figure
 
-CHAIN = {"kind": "rotating_squares_chain", "n_units": 12, "a_m": 0.016, "theta0_rad": 0.1,
-         "k_long_n_per_m": 71690.0, "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4,
-         "mass_kg": 4.52e-3, "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+CHAIN = dict(LEGO_CHAIN, n_units=12, theta0_rad=0.1)
 BISTABLE = {"kind": "mass_chain", "n_units": 10, "spacing_m": 0.01, "mass_kg": 0.01,
             "bond": {"law": "linear", "k_n_per_m": 100.0},
             "onsite": [{"law": "bistable_cubic", "alpha_n_per_m3": 5e6, "beta": 0.3, "jump_m": 0.01}]}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 from flexmm.sweep import load_sweep, plot_sweep, run_sweep
 from flexmm.sweep.store import SweepStore, dataset_status
 

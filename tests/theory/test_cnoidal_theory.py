@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import LEGO_PARAMETERS
 from test_rotating_theory import G, d1, gam
 
 from flexmm.theory import cnoidal as cn
@@ -15,9 +16,10 @@ from flexmm.theory import rotating as rt
 from flexmm.theory.prestressed import prestressed_chain, static_rotation
 
 LEGO = rt.lego_parameters()
+F02 = 0.2 / (LEGO_PARAMETERS["k_long_n_per_m"] * LEGO_PARAMETERS["a_m"])  # a 0.2 N end load, nondimensional
 PRESTRESSED = prestressed_chain(rt.lego_parameters(theta0=0.05, n_v=1),
-                                static_rotation(rt.lego_parameters(theta0=0.05, n_v=1), 0.2 / (71690 * 0.016)))
-OMEGA_10HZ = 2 * math.pi * 10 * math.sqrt(4.52e-3 / 71690)
+                                static_rotation(rt.lego_parameters(theta0=0.05, n_v=1), F02))
+OMEGA_10HZ = 2 * math.pi * 10 * math.sqrt(LEGO_PARAMETERS["mass_kg"] / LEGO_PARAMETERS["k_long_n_per_m"])
 
 CASES = [  # (C0, C1, C2, C3), crest, kind
     ((0.0, 1.0, 0.0, -1.0), 1.2, "real"),  # dn

@@ -8,15 +8,21 @@ import math
 
 import numpy as np
 import pytest
+from conftest import LEGO_PARAMETERS
 from scipy import linalg
-from test_rotating_theory import G, S_of, D_phys, _track, d1, d2, gam
+from test_rotating_theory import D_phys, G, S_of, _track, d1, d2, gam
 
 from flexmm.theory import rotating as rt
-from flexmm.theory.prestressed import equilibrium_force, prestressed_chain, soliton_window, static_rotation
+from flexmm.theory.prestressed import (
+    equilibrium_force,
+    prestressed_chain,
+    soliton_window,
+    static_rotation,
+)
 from flexmm.theory.rotating import RotatingChainND
 
 LEGO05 = rt.lego_parameters(theta0=0.05, n_v=1)
-F02 = 0.2 / (71690 * 0.016)  # the scene's 0.2 N end load, nondimensional
+F02 = 0.2 / (LEGO_PARAMETERS["k_long_n_per_m"] * LEGO_PARAMETERS["a_m"])  # the scene's 0.2 N end load, nondimensional
 STRETCH = RotatingChainND(0.1, 0.5, 2e-3, 0.3, n_v=1, s_v=1)
 
 

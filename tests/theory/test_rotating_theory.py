@@ -22,6 +22,8 @@ SHEET = RotatingChainND(0.0, 2.0, 1e-2, 0.2, n_v=2, s_v=1)  # planar wave in a w
 LEGO = rt.lego_parameters()
 import os
 
+from conftest import LEGO_PARAMETERS
+
 HYP = settings(max_examples=int(os.environ.get("FLEXMM_HYP_EXAMPLES", 40)), deadline=None,
                suppress_health_check=[HealthCheck.too_slow])
 
@@ -94,7 +96,7 @@ def random_params(draw, theta0_zero=False):
 
 # ---------------------------------------------------------------- parameters
 def test_lego_and_from_si_agree_with_the_documented_values():
-    a, kl, m = 0.016, 71690.0, 4.52e-3
+    a, kl, m = (LEGO_PARAMETERS[k] for k in ("a_m", "k_long_n_per_m", "mass_kg"))
     p = RotatingChainND.from_si(a, 0.0, kl, 1.851e-2 * kl, 1.534e-4 / 4 * kl * a**2, m,
                                 m * a**2 / (4 * 1.815**2), n_v=1, s_v=0)
     q = rt.lego_parameters()

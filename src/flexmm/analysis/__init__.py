@@ -2,8 +2,8 @@
 
 ``analyze_run(run_dir)`` is the entry point (``flexmm analyze``); the pieces are usable alone:
 ``field_view`` picks a field, ``measure_pulses`` / ``measure_fronts`` / ``measure_driven`` /
-``energy_budget`` measure, ``compare.theory_for`` finds the predictions of the run's model kind and
-``analysis.dataset`` writes analysis.nc, JSON and CSV. ``summary.principal`` picks the feature
+``energy_budget`` measure, ``theory_comparison.theory_for`` finds the predictions of the run's model kind and
+``analysis.export`` writes analysis.nc, JSON and CSV. ``summary.principal`` picks the feature
 ``flexmm run`` prints (``summary.summary_lines``); ``leading_pulse`` is a quick single-pulse fit
 (work-precision and fidelity pilots).
 """

@@ -17,8 +17,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-ENERGY_VARS = ("kinetic_energy", "potential_energy", "total_energy", "dissipated_energy", "applied_work")
-
 
 @dataclass
 class EnergyBudget:

@@ -61,12 +61,6 @@ def front_kinetic_energy(ds, f_meas, m: float, dphi: float, eta: float, a: float
                        "J", "K = m v Δφ/(2 η a) at the measured v")]
 
 
-def linear_chain_bands_hz(k: float, m: float, k_onsite: float = 0.0) -> list[tuple[float, float]]:
-    """Pass band of the linear chain (Hz)."""
-    lo, hi = th.linear_chain_band(k, m, k_onsite)
-    return [(lo / (2 * math.pi), hi / (2 * math.pi))]
-
-
 def toda_kappa(strain_peak: float, b_per_m: float, spacing: float) -> float:
     """κ of the Toda soliton whose peak bond strain is ``strain_peak`` (< 0): e^(−b r_m) − 1 = sinh²κ."""
     r_m = strain_peak * spacing

@@ -3,9 +3,9 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of the model's theory (``compare.theory_for``), pairs colliding pulses (``analysis.collisions``), tells formation
+of the model's theory (``theory_comparison.theory_for``), pairs colliding pulses (``analysis.collisions``), tells formation
 transients from persistent pulses (``analysis.transients``; transients are not compared with
-theory), and returns a ``RunAnalysis`` that ``analysis.dataset`` writes out. Fields are
+theory), and returns a ``RunAnalysis`` that ``analysis.export`` writes out. Fields are
 measured from the rest state the dataset stores (``analysis.rest``; the model is never rebuilt).
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import get_args
 
 from flexmm.analysis.collisions import Collision, find_collisions
-from flexmm.analysis.compare import (
+from flexmm.analysis.theory_comparison import (
     Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, compare_transient,
     theory_for,
 )
@@ -189,7 +189,7 @@ __all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "analyze_with",
 def sweep_bands(results: list[RunAnalysis], pass_level: float = 0.1) -> dict | None:
     """Pass bands measured over a set of driven runs (transmission ≥ pass_level × max) and the
     linear theory's bands of the first run's model; None with fewer than two driven runs."""
-    from flexmm.analysis.compare import bands_for
+    from flexmm.analysis.theory_comparison import bands_for
     from flexmm.analysis.driven import pass_bands
 
     driven = [r for r in results if r.driven is not None]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm.errors import FlexmmError
-from flexmm.io.dataset import REST_SUFFIX
+from flexmm.io.run_dataset import REST_SUFFIX
 
 #: displacement field -> the site coordinate it moves
 AXES = {"u": "x", "v": "y"}

@@ -107,7 +107,7 @@ def _write_text(target: str, text: str) -> None:
 
 
 def _csv_text(results) -> str:
-    from flexmm.analysis import dataset as out_ds
+    from flexmm.analysis import export as out_ds
 
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=out_ds.CSV_COLUMNS)
@@ -156,7 +156,7 @@ def analyze(
     """
     from rich.console import Console
 
-    from flexmm.analysis import dataset as out_ds
+    from flexmm.analysis import export as out_ds
     from flexmm.analysis import figures as plots
     from flexmm.analysis import report
     from flexmm.sweep import is_sweep

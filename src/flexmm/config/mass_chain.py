@@ -347,6 +347,3 @@ class MassGrid(_MassLattice):
     def variation_lines(self) -> tuple[int, int]:
         """(columns, rows) that variations address: the grid's nx × ny."""
         return self.nx, self.ny
-
-
-MASS_LATTICES = (MassChain, MassNetwork, MassGrid)

@@ -17,7 +17,7 @@ replays one segment at a time, so a run of N steps keeps about 2√N states, plu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Callable
 
 import numpy as np
@@ -268,9 +268,3 @@ def trajectory_of(problem, nsteps: int | None = None, stride: int = 1, obs=None,
     obs = np.arange(s.ndof) if obs is None else obs
     traj = Trajectory(s.args, problem.terms, h, nsteps, stride, obs)
     return traj, raw_of(s, problem.terms, problem.damp)
-
-
-def with_raw(traj: Trajectory, raw: Raw) -> Trajectory:
-    """``traj`` whose fixed args/terms carry the tables of ``raw`` (e.g. to run a Stepper)."""
-    args, terms, *_ = traj.bind(raw)
-    return replace(traj, args=args, terms=terms)

@@ -197,18 +197,6 @@ def run_ivp(problem, ref: Reference, method: str, *, repeats: int = 1, budget_s:
     return rows
 
 
-def pareto(rows: list[Row], key: str = "wall_s") -> tuple[np.ndarray, np.ndarray]:
-    """(error, cost) of the cheapest run reaching each error level (sorted by error)."""
-    pts = sorted((r.final_error, getattr(r, key)) for r in rows if math.isfinite(r.final_error) and r.final_error > 0)
-    err, cost, best = [], [], math.inf
-    for e, c in sorted(pts, key=lambda p: -p[0]):
-        if c < best:
-            best = c
-        err.append(e)
-        cost.append(best)
-    return np.array(err), np.array(cost)
-
-
 def cheapest(rows: list[Row], error: float, key: str = "wall_s") -> float:
     """Cost of the cheapest run with final_error ≤ ``error`` (inf if none)."""
     costs = [getattr(r, key) for r in rows if r.final_error <= error]

@@ -15,7 +15,7 @@ A new method must provide, as compiled functions:
    (``common.ACC_*``), counts force evaluations and steps and holds any method state.
 2. ``init(args, q, v, t, f, terms)``: fill ``f`` with the total force at the start.
 3. Metadata below; ``stability_limit`` is max h·ω_max on the harmonic oscillator
-   (``stability.linear_limit`` recomputes it from the method), inf for A-stable methods.
+   (``stability.harmonic_limit`` recomputes it from the method), inf for A-stable methods.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ t + nsteps·h. The adaptive state (internal y, FSAL slopes, dense coefficients, 
 lives in ``acc[ACC_HEADER:]`` (``IntegratorSpec.new_acc``); the caller must not touch q, v
 between calls. With a bare ``acc`` (2 slots, or no rtol) the method takes fixed steps of
 size h — used by the order tests. Linear stability: |R(iy)| ≤ 1 only for y ≤ 0.997, and the
-growth stays below 1e-4 per step up to y ≈ 1.2 (``stability.linear_limit``); error control
+growth stays below 1e-4 per step up to y ≈ 1.2 (``stability.harmonic_limit``); error control
 keeps adaptive runs stable.
 """
 

@@ -34,9 +34,6 @@ SUFFIX_UNITS = (
     ("_rad", "rad"), ("_j", "J"), ("_n", "N"), ("_m", "m"), ("_s", "s"),
 )
 
-#: attrs h5netcdf/xarray manage themselves (never copied or overwritten)
-_INTERNAL = ("DIMENSION_LIST", "_Netcdf4Dimid", "REFERENCE_LIST", "CLASS", "NAME", "_FillValue")
-
 
 def units_from_name(name: str) -> str | None:
     """SI units a variable's name declares by its suffix (``speed_m_s`` -> ``m/s``), else None."""

@@ -215,15 +215,6 @@ class System:
         """Flat index of ``field_name`` at ``site``."""
         return self.field_index(field_name) * self.n_sites + site
 
-    def dof_kind(self, index: int) -> str:
-        """'length' or 'angle' for a flat DOF index."""
-        if index < len(self.fields) * self.n_sites:
-            return self.fields[index // self.n_sites].kind
-        for idx, kind in self.extra_dofs.values():
-            if idx == index:
-                return kind
-        raise IndexError(index)
-
     def kinetic_energy(self, v: np.ndarray) -> float:
         """½ Σ m v² (compiled, single-threaded: no BLAS call, whose threads contend on a busy
         machine, and the same sum in every process)."""

@@ -358,7 +358,7 @@ def chain_force(q, args, out):
     hinge_prm (H, 7), site_prm (N, 3), cos_scratch (N,), sin_scratch (N,)).
     DOFs beyond 2N (if any) are left at zero. Chain-ordered hinges (h joins h and h + 1, as
     ``rotating_chain.chain_tables`` builds them) take the vectorised block path
-    (``chain_block``); any other hinge list the general scattered loop (same result).
+    (``chain_block_hinges``); any other hinge list the general scattered loop (same result).
     """
     ha, hb, hprm, sprm, cs, sn = args
     n = sprm.shape[0]

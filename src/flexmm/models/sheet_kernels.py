@@ -47,8 +47,8 @@ class SheetArgs(NamedTuple):
 
     ``hinge_a``/``hinge_b`` (H,) joined units, ``hinge_axis`` (H,) 0 for an x hinge, 1 for y,
     ``hinge_prm`` (H, 7) law parameters, ``theta0`` (N,) rest angles, ``cos``/``sin`` (N,)
-    scratch, ``dipoles`` (``magnets.empty_dipoles``), ``joints`` (``linkage.empty_joints``),
-    ``loads`` (``predeform.empty_loads``: constant generalised forces).
+    scratch, ``dipoles`` (``magnets.empty_dipoles``), ``joints`` (``joints.empty_joints``),
+    ``loads`` (``loads.empty_loads``: constant generalised forces).
     """
 
     hinge_a: np.ndarray
@@ -98,15 +98,6 @@ def _hinges(q, args, out, want_force, lo, hi):
 # as in the scattered loop (a site is the B end of the hinge listed before the one it is the A
 # end of; missing hinges add exact zeros), so the forces are bit-identical to it; the wraps and
 # anything else run the scattered loop.
-
-
-@jit
-def _all_equal(x, y, m):
-    """x[:m] == y[:m] everywhere (integer arrays; vectorised)."""
-    bad = False
-    for k in range(m):
-        bad |= x[k] != y[k]
-    return not bad
 
 
 @jit

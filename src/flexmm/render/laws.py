@@ -3,8 +3,8 @@
 The same laws as ``flexmm.models.laws`` (docs/physics.md §2), written from the config's fields:
 ``law_energy_j(law, values, z)`` is E(z − offset) for a law config, with every numeric field
 given per element (``values[name]``, after variations) and ``z`` the elongation (bond) or the
-displacement (on site) in metres, broadcast over leading axes. ``wells`` finds the barriers of an
-on-site landscape numerically. ``tests/render/test_laws.py`` compares both with the models.
+displacement (on site) in metres, broadcast over leading axes. ``barriers`` finds the barriers of an
+on-site landscape numerically. ``tests/render/test_energy.py`` compares the energies with the models.
 """
 
 from __future__ import annotations

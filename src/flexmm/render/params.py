@@ -4,7 +4,7 @@ The render layer does not rebuild models (docs/architecture.md, layers); what it
 — rest rotations θ0 per unit, masses and inertias, hinge stiffnesses, the hinge list — is computed
 here from the validated lattice config, following the builders' conventions (site = row · n_cols +
 col, hinges horizontal first then vertical, variations by the models' engine ``models.variation``).
-``tests/render/test_params.py`` checks every array against the built model.
+``tests/render/test_energy.py`` checks every array against the built model.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from typing import Self
 import numpy as np
 
 from flexmm.errors import UsageError
-from flexmm.io.dataset import REST_SUFFIX
+from flexmm.io.run_dataset import REST_SUFFIX
 
 #: bytes of field data read per block of frames
 BLOCK_BYTES = 16 * 2**20
@@ -167,13 +167,6 @@ class RunSource:
             for i in indices[k:j]:
                 yield int(i), float(self.time[i]), {n: block[n][i - i0] for n in names}
             k = j
-
-    def column_series(self, name: str, indices, columns: np.ndarray) -> np.ndarray:
-        """(len(indices), len(columns)) of one field at the given frames and dataset columns."""
-        out = np.empty((len(indices), len(columns)))
-        for k, (_, _, frame) in enumerate(self.frames(indices, [name])):
-            out[k] = frame[name][columns]
-        return out
 
     def close(self) -> None:
         """Close the file."""

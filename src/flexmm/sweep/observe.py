@@ -8,7 +8,7 @@ front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says
   among pulses fitted over ≥ 10 sites, the front that switched most sites, the fastest group of
   an oblique plane wave, the driven response);
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
-  predicted speed (fronts), from the model's theory (``analysis.compare.theory_for``).
+  predicted speed (fronts), from the model's theory (``analysis.theory_comparison.theory_for``).
 
 Options: the sweep spec's ``analysis:`` block, a ``flexmm.config.analysis.AnalysisOptions``
 (``kind``, ``field``, ``row``, ``threshold_fraction``, ``jump``), the options of ``flexmm analyze``.
@@ -51,10 +51,10 @@ def observe_run(path: str | Path, options=None) -> dict:
 
     ``options``: an ``AnalysisOptions``, or its fields as a dict (what a sweep task carries).
     """
-    from flexmm.analysis.compare import RunContext
+    from flexmm.analysis.theory_comparison import RunContext
     from flexmm.analysis.report import choose_kind
     from flexmm.config.analysis import AnalysisOptions
-    from flexmm.io.dataset import open_run
+    from flexmm.io.run_dataset import open_run
 
     opts = options if isinstance(options, AnalysisOptions) else AnalysisOptions.model_validate(options or {})
     ds = open_run(path)

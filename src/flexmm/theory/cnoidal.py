@@ -168,9 +168,6 @@ class DrivenWave(NamedTuple):
     mean_stretch: float
     wave: CnoidalWave
 
-    def sites_per_time(self, eta: float) -> float:
-        return self.c / eta
-
 
 def wave_coefficients(p, c: float, mean_stretch: float) -> tuple[float, float, float, float]:
     """(C0, C1, C2, C3) of a periodic travelling wave whose time-averaged hinge force is that of rest.

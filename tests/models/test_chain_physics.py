@@ -9,19 +9,20 @@ import re
 
 import numpy as np
 import pytest
+from conftest import LEGO_PARAMETERS, LEGO_STIFF_HINGES
 from scipy.signal import peak_widths
 
 from flexmm.analysis import leading_pulse
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
+from flexmm.io.run_dataset import open_run
 from flexmm.stability import UnstableStepError
-from flexmm.io.dataset import open_run
 from flexmm.theory import RotatingChainND, soliton_speed
 
 # A stiff single-row chain where θ0 ≠ 0 couples u and θ strongly but the long-wave regime is
 # reached by pulses ~30 sites wide (Ks = 0.5, Kθ = 0.02, α² = 0.1 nondimensional).
-STIFF = {"k_shear_n_per_m": 0.5 * 71690.0, "k_rot_n_m_per_rad": 0.02 * 71690.0 * 0.016**2,
-         "inertia_kg_m2": 0.1 * 4.52e-3 * 0.016**2, "n_lateral": 0}
+STIFF = {**LEGO_STIFF_HINGES, "n_lateral": 0,
+         "inertia_kg_m2": 0.1 * LEGO_PARAMETERS["mass_kg"] * LEGO_PARAMETERS["a_m"] ** 2}
 
 
 def long_wave_speed_m_s(lat: dict) -> float:

@@ -11,9 +11,10 @@ analysis.nc layout (SI units, ``units``/``long_name`` on every variable):
 - oblique plane waves (analysis ``modes``): per group, every scalar of WaveGroup on ``group``;
 - driven: ``steady_amplitude`` (position), ``harmonic_amplitude`` (harmonic),
   ``far_spectrum`` (frequency) and scalars;
-- the comparison table (``item``, ``quantity``, ``measured``, ``predicted``, ``rel_diff``,
-  ``units``, ``note`` on ``comparison``; ``measured`` and ``predicted`` have one unit per row,
-  named by their ``units_variable``), energy budget scalars ``energy_*``;
+- the comparison table (``comparison_item``, ``_quantity``, ``_measured``, ``_predicted``,
+  ``_rel_diff``, ``_units``, ``_note`` on ``comparison``; ``comparison_measured`` and
+  ``comparison_predicted`` have one unit per row, named by their ``units_variable``), energy
+  budget scalars ``energy_*``;
 - attrs: source dataset, its config hash, model, analysis kind and field (measured from the run's
   rest state: ``field_reference``), flexmm version and commit, and the
   CF globals (``flexmm.io.cf``: every variable has ``long_name`` and ``units``).

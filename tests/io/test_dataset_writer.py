@@ -10,7 +10,7 @@ import h5netcdf
 import numpy as np
 import pytest
 
-from flexmm.io.dataset import DatasetWriter, open_run
+from flexmm.io.run_dataset import DatasetWriter, open_run
 
 
 @pytest.mark.parametrize("declared, written", [(6, 6), (6, 4), (6, 0), (None, 5)])

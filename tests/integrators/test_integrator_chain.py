@@ -15,7 +15,7 @@ from flexmm.integrators.stepper import make_stepper
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
 from flexmm.integrators import INTEGRATORS
-from flexmm.io.dataset import open_run
+from flexmm.io.run_dataset import open_run
 
 DAMPING = {
     "undamped": {},

@@ -18,19 +18,24 @@ import numpy as np
 import pytest
 import xarray as xr
 import yaml
+from conftest import LEGO_CHAIN
 from typer.testing import CliRunner
 
 from flexmm.cli import app
 from flexmm.design.fit import synthetic_table, write_table
-from flexmm.io.cf import CONVENTIONS, global_attrs, history_line, units_from_name, variable_attrs
-from flexmm.io.dataset import REFERENCES
+from flexmm.io.cf import (
+    CONVENTIONS,
+    global_attrs,
+    history_line,
+    units_from_name,
+    variable_attrs,
+)
+from flexmm.io.run_dataset import REFERENCES
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 
-CHAIN = {"kind": "rotating_squares_chain", "a_m": 0.016, "theta0_rad": 0.0, "k_long_n_per_m": 71690.0,
-         "k_shear_n_per_m": 1326.98, "k_rot_n_m_per_rad": 7.038e-4, "mass_kg": 4.52e-3,
-         "inertia_kg_m2": 8.7814e-8, "n_lateral": 1}
+CHAIN = dict(LEGO_CHAIN, theta0_rad=0.0)
 IMPACT = {"name": "small", "lattice": {**CHAIN, "n_units": 8, "left": "driven", "right": "free"},
           "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 3.0, "angular_velocity_rad_s": 300.0},
           "damping": {"viscous": {"damping_ratio": 0.01}}, "solver": {"duration_s": 0.004}}
