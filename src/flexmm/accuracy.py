@@ -63,17 +63,14 @@ MAX_SITES = 2048  # sites a trace keeps per field (a larger lattice is sampled a
 PASSED = 0.9  # a wave has passed a site once the site's |q − q0| is below this fraction of its peak
 TRIM = 0.1  # fraction of sites with the largest deviations left out (``_kept``)
 SITE_FLOOR = 0.2  # sites whose peak is below this fraction of the field's largest are left out
-#: force evaluations per step for methods whose registry entry does not say
-FORCE_EVALS = {"velocity_verlet": 1, "rk4": 4, "pefrl": 4, "forest_ruth": 3, "yoshida4": 3,
-               "suzuki5": 5, "omelyan_pefrl": 4}
 
 
 def force_evals(spec) -> float | None:
-    """Force evaluations per step of an integrator (registry metadata, else the table above)."""
+    """Force evaluations per step of an integrator (its registry entry; None if not known)."""
     val = getattr(spec, "force_evals", None)
     if isinstance(val, (int, float)) and math.isfinite(val) and val > 0:
         return float(val)
-    return FORCE_EVALS.get(spec.name)
+    return None
 
 
 def allowed_integrators() -> tuple[str, ...] | None:

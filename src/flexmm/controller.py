@@ -54,10 +54,6 @@ class RunResult:
             return None
         return int(signal.SIGTERM) if "SIGTERM" in self.reason else int(signal.SIGINT)
 
-    @property
-    def unit_steps_per_s(self) -> float:
-        return 0.0 if self.wall_s <= 0 else self.n_steps * self.n_units / self.wall_s
-
     n_units: int = 0
     #: the run's error estimate and target (dataset attrs ``accuracy_*``), empty without one
     accuracy: dict = field(default_factory=dict)
@@ -94,7 +90,6 @@ def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, 
     ``flexmm.prepare``). ``exact=True`` (``output.exact_frame_times``) instead keeps the frame times and takes the largest step ≤ dt that divides the
     interval (noted when it differs from dt). ``time_s`` only scales the notes to seconds.
     """
-    asked_every = every is not None
     if every is None:
         every = duration / (n_frames - 1)
     notes: list[str] = []
