@@ -72,7 +72,9 @@ class ModelTheory:
     bands_hz(ctx) -> [(f_lo, f_hi)] linear pass bands; analysis(ctx) -> 'pulse' or 'front', the
     default analysis of a run that is not driven (e.g. 'front' for multistable chains);
     collision(ctx, Collision) -> [Comparison] (e.g. the Toda head-on shifts);
-    reference_lines(ctx) -> {name: value}, scalar thresholds sweeps store and draw (``theory_*``).
+    reference_lines(ctx) -> {name: value}, scalar thresholds sweeps store and draw (``theory_*``);
+    pulse_field: the field whose pulses the theory predicts, measured when none is asked (None:
+    θ for models with rotations, else the strain).
     """
 
     pulse: Predictor | None = None
@@ -84,3 +86,4 @@ class ModelTheory:
     analysis: Callable[..., str] | None = None
     collision: Predictor | None = None
     reference_lines: Callable[..., dict] | None = None
+    pulse_field: str | None = None

@@ -31,4 +31,4 @@ def pulse(ctx, p_meas) -> list[Comparison]:
 
 
 #: the theory registered for both triangle kinds (``config.lattice.MODELS``)
-THEORY = ModelTheory(pulse=pulse)
+THEORY = ModelTheory(pulse=pulse, pulse_field="u")  # the Bloch long-wave speed is the longitudinal wave's

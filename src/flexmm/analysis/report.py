@@ -117,12 +117,19 @@ def choose_kind(ctx: RunContext) -> str:
         return "pulse"
 
 
-def default_field_for(kind: str, ds) -> str | None:
-    """Field used when none is given: displacement for fronts and drives, else θ or strain."""
+def default_field_for(kind: str, ds, ctx=None) -> str | None:
+    """Field used when none is given: displacement for fronts and drives; for pulses the field
+    the model's theory predicts (``ModelTheory.pulse_field``), else θ or strain."""
     from flexmm.analysis.fields import displacement_field
+    from flexmm.config import ConfigError
 
     if kind in ("front", "driven"):
         return displacement_field(ds)
+    if kind == "pulse" and ctx is not None:
+        try:
+            return theory_for(ctx).pulse_field
+        except (ConfigError, ValueError, AttributeError, KeyError):  # a stored config this version cannot read
+            return None
     return None
 
 
@@ -136,7 +143,7 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     ctx = RunContext.from_dataset(ds)
     ctx.ds = ds = from_rest(ds, rest_fields(ctx))  # measure what moves on the rest state (dataset only)
     kind = choose_kind(ctx) if kind == "auto" else kind
-    view = field_view(ds, field_spec or default_field_for(kind, ds), row=row)
+    view = field_view(ds, field_spec or default_field_for(kind, ds, ctx), row=row)
     out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
     if kind == "pulse":
         pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
