@@ -30,7 +30,8 @@ against the other (``estimate``), and
     h = h₁ (S · accuracy / err(h₁))^{1/p},   S = SAFETY,
 
 between FLOOR × the stable step h_stab = stability_limit/ω_max and min(2 h₁, CAP × h_stab),
-shortened so that it divides the frame interval. The cost of a method
+at most 1/``DRIVE_STEPS`` of the fastest drive's period (``drive_step``), shortened so that it
+divides the frame interval. The cost of a method
 is its force evaluations per step × T/h; the cheapest wins. At h₁ the error is often not
 yet in its h^p regime (a kink in a drive lowers the order, high-frequency content raises the
 apparent one), so a step other than h₁ is measured again by the same step doubling (``verify``)
@@ -319,6 +320,24 @@ def _drive_end(problem) -> float:
     return end
 
 
+#: steps per period of a harmonic drive, or per duration (per width, for a gaussian) of a pulse
+DRIVE_STEPS = 16
+
+
+def drive_step(problem) -> float:
+    """Largest step that resolves the drives: ``DRIVE_STEPS`` per period of the fastest harmonic
+    drive, per duration of a half-sine or smooth step, per width of a gaussian (inf without
+    drives). The pilot's measure leaves the driven sites' own prescribed motion out, so a drive
+    sampled by a few steps would otherwise go unnoticed."""
+    scales = []
+    for row, sh in zip(problem.terms.drv_prm, problem.terms.drv_shape):
+        if sh == 3 and row[1] > 0:
+            scales.append(2 * math.pi / row[1])
+        elif sh in (0, 1, 2) and row[1] > 0:
+            scales.append(row[1])
+    return min(scales) / DRIVE_STEPS if scales else math.inf
+
+
 def stable_step(problem, spec) -> float:
     """Largest stable step of ``spec`` for the problem: its limit / ω_max, and any other bound
     the build put on the step (explicit friction), rescaled from the problem's own method."""
@@ -347,12 +366,12 @@ def choose(problem, accuracy: float, only: str | None = None, every: float | Non
     rows, best, best_row, pilots = [], None, None, {}
     for spec in candidates(problem, only):
         h_stab = stable_step(problem, spec)
-        h1 = divides(min(PILOT_STEP * h_stab, T / 8), every)
+        h1 = divides(min(PILOT_STEP * h_stab, T / 8, drive_step(problem)), every)
         t_p = pilot_window(problem, h1)
         t0 = time.perf_counter()
         est1 = estimate(problem, spec, h1, window=t_p)
         p = spec.order
-        h = divides(_step_for(accuracy, est1.error, h1, p, h_stab, T), every)
+        h = divides(min(_step_for(accuracy, est1.error, h1, p, h_stab, T), drive_step(problem)), every)
         predicted = est1.error * (h / h1) ** p
         cost = force_evals(spec) * math.ceil(T / h)
         pilots[spec.name] = est1

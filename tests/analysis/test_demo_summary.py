@@ -22,7 +22,7 @@ def _run(tmp_path, *extra) -> list[str]:
     res = CliRunner().invoke(app, ["run", str(DEMO), "-o", str(tmp_path), *extra])
     assert res.exit_code == 0, res.output
     lines = res.output.splitlines()
-    return lines[next(i for i, ln in enumerate(lines) if ln.startswith("dataset:")) + 1:]
+    return lines[next(i for i, ln in enumerate(lines) if ln.startswith("pulse ")):]  # after the error estimate
 
 
 @pytest.mark.slow

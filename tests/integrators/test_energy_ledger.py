@@ -95,10 +95,14 @@ def test_an_imbalance_must_persist_before_a_run_fails() -> None:
     assert g.unbalanced(1.085e-14, 1e-14, 0.0, step=5) is None  # 8.5 % at the first frame
     assert g.unbalanced(1.0e-10, 1.001e-10, 0.0, step=10) is None  # balanced again: forgotten
     assert g.unbalanced(2.0, 1.0, 0.0, step=20) is None  # a real drift starts ...
+    assert g.unbalanced(2.0, 1.0, 0.0, step=20 + RUNAWAY_LAG_STEPS // 2) is None
     assert g.unbalanced(2.0, 1.0, 0.0, step=20 + RUNAWAY_LAG_STEPS - 1) is None
     why = g.unbalanced(2.0, 1.0, 0.0, step=20 + RUNAWAY_LAG_STEPS)  # ... and lasts
     assert why is not None and "imbalance of 1 of the energy budget" in why  # |2 − 0 − 1| / (0 + 1 + 0)
-    g = _guard()  # frequent checks: PERSIST_CHECKS in a row are enough
-    assert [g.unbalanced(2.0, 1.0, 0.0, step=k) is not None for k in range(1, PERSIST_CHECKS + 1)] == \
-        [False] * (PERSIST_CHECKS - 1) + [True]
+    g = _guard()  # frequent checks: PERSIST_CHECKS in a row within RUNAWAY_LAG_STEPS are not enough
+    assert all(g.unbalanced(2.0, 1.0, 0.0, step=k) is None for k in range(1, PERSIST_CHECKS + 3))
+    assert g.unbalanced(2.0, 1.0, 0.0, step=1 + RUNAWAY_LAG_STEPS) is not None
+    g = _guard()  # two checks far apart: not PERSIST_CHECKS
+    assert g.unbalanced(2.0, 1.0, 0.0, step=1) is None and g.unbalanced(2.0, 1.0, 0.0, step=500) is None
+    assert g.unbalanced(2.0, 1.0, 0.0, step=900) is not None
     assert _guard().unbalanced(2.0, 1.0, 0.0) is not None  # without a step count: at once

@@ -10,8 +10,9 @@ A run is a runaway when its energy exceeds ``RUNAWAY_FACTOR`` × a reference: th
 
 Its energy ledger does not balance when |E − E0 − W + D| exceeds ``drift_allowance`` of the
 budget |E0| + |W| + D (W the work of drives, prescribed displacements included, accumulated by
-the integrators; D the dissipated energy) at ``PERSIST_CHECKS`` consecutive checks, or at
-consecutive checks spanning ``RUNAWAY_LAG_STEPS`` steps (``RunawayGuard.unbalanced``).
+the integrators; D the dissipated energy) at ``PERSIST_CHECKS`` consecutive checks spanning at
+least ``RUNAWAY_LAG_STEPS`` steps (``RunawayGuard.unbalanced``): a drive's first steps give O(1)
+relative imbalances on a tiny budget, which a resolved run outgrows within that many steps.
 """
 
 from __future__ import annotations
@@ -23,8 +24,11 @@ import numpy as np
 
 RUNAWAY_FACTOR = 1e4
 RUNAWAY_LAG_STEPS = 100
-PERSIST_CHECKS = 3  # an imbalance fails a run once it lasts this many checks (or RUNAWAY_LAG_STEPS steps)
-DRIFT_TOL = 0.05  # largest ledger imbalance, as a fraction of the energy budget
+PERSIST_CHECKS = 3  # an imbalance fails a run once it lasts this many checks and RUNAWAY_LAG_STEPS steps
+DRIFT_TOL = 0.05
+#: the ledger's error is at most this × (h ω_max / limit)^ledger_order of the budget (PEFRL's
+#: first-order ledger measured 1.2 at half its stable step: a rotational shaker, 0.59)
+LEDGER_CONSTANT = 2.0  # largest ledger imbalance, as a fraction of the energy budget
 
 
 def drift_allowance(spec, h: float, omega_max: float) -> float:
@@ -32,7 +36,7 @@ def drift_allowance(spec, h: float, omega_max: float) -> float:
     lim = getattr(spec, "stability_limit", math.inf)
     if not (math.isfinite(lim) and omega_max > 0) or getattr(spec, "adaptive", False):
         return DRIFT_TOL
-    return DRIFT_TOL + min(1.0, h * omega_max / lim) ** getattr(spec, "ledger_order", min(spec.order, 2))
+    return DRIFT_TOL + LEDGER_CONSTANT * min(1.0, h * omega_max / lim) ** getattr(spec, "ledger_order", 2)
 
 
 class RunawayGuard:
@@ -60,7 +64,7 @@ class RunawayGuard:
         """Why the ledger does not balance (module docstring), or None.
 
         With ``step`` (the cumulative step count), an imbalance must persist over
-        ``PERSIST_CHECKS`` consecutive checks or ``RUNAWAY_LAG_STEPS`` steps: in the first steps of a drive the
+        ``PERSIST_CHECKS`` consecutive checks spanning ``RUNAWAY_LAG_STEPS`` steps: in the first steps of a drive the
         budget is tiny and the work quadrature's relative error is O(1) (a drive that starts like
         t², sampled by a few steps), which a runaway outgrows and a resolved run does not."""
         r = self.imbalance(energy, work, dissipated)
@@ -71,7 +75,7 @@ class RunawayGuard:
             if self.over_since is None:
                 self.over_since, self.over_checks = step, 0
             self.over_checks += 1
-            if step - self.over_since < RUNAWAY_LAG_STEPS and self.over_checks < PERSIST_CHECKS:
+            if step - self.over_since < RUNAWAY_LAG_STEPS or self.over_checks < PERSIST_CHECKS:
                 return None
         terms = "" if work == 0 and dissipated == 0 else f", work in {work:.4g}, dissipated {dissipated:.4g}"
         return (f"energy not conserved: E = {energy:.4g} from E0 = {self.e0:.4g}{terms} (nondimensional), an "
