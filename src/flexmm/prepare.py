@@ -39,8 +39,8 @@ def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
     problem = build_problem(plan.scene, built=plan.built_for(plan.scene))
     if check_steps is not None and plan.scene.solver.accuracy is not None and plan.scene.solver.dt_s is None \
             and problem.omega_max > 0:
-        h = acc.CAP * max(s.stability_limit for s in acc.candidates(problem)) / problem.omega_max \
-            if acc.candidates(problem) else problem.dt
+        specs = acc.candidates(problem)
+        h = acc.CAP * max(s.stability_limit for s in specs) / problem.omega_max if specs else problem.dt
         check_steps(problem.duration / h, h * problem.system.scales.time_s, problem.system.n_sites)
     if plan.scene.solver.accuracy is not None:
         problem = _accuracy(plan, problem)
