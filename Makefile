@@ -5,7 +5,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed-stamp
-PYTEST_ARGS ?=
+# two workers on two cores: the suite is CPU-bound (numba compiles, integrations), one process per core
+PYTEST_ARGS ?= -n auto --dist worksteal
 
 # `make reproduce`: every scene in configs/ and every sweep in sweeps/ as a file target, so
 # `make -j2 reproduce` runs two at a time and an interrupted `make` resumes where it stopped
