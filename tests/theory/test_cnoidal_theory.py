@@ -112,3 +112,23 @@ def test_driven_wave_family():
         assert np.mean(rt.hinge_stretch(PRESTRESSED, th)) == pytest.approx(w.mean_stretch, rel=1e-6)
     assert big.c < 0.93 * c_lin and 0.2 < big.wave.m < 0.4
     assert big.wave.crest > 3 * abs(big.wave.trough) and big.wave.harmonics(1)[0] > 0.03
+
+
+def test_wave_with_mean_recovers_the_force_driven_wave():
+    """Closed by the force-driven wave's own mean rotation, the free-mean family returns that wave;
+    closed by another mean it returns another wave of the same amplitude and frequency."""
+    from flexmm.theory.cnoidal import driven_wave, wave_with_mean
+    from flexmm.theory.rotating import RotatingChainND
+
+    p = RotatingChainND.from_si(0.016, 0.15, 71690, 1326.98, 7.038e-4, 4.52e-3, 8.7814e-8, n_v=1)
+    omega = 2 * math.pi * 10 * math.sqrt(4.52e-3 / 71690)
+    forced = driven_wave(p, omega, 0.03)
+    mean, h1 = forced.wave.harmonics(1)[:2]
+    free = wave_with_mean(p, omega, 0.03, mean)
+    assert free.c == pytest.approx(forced.c, rel=1e-7)
+    assert free.mean_stretch == pytest.approx(forced.mean_stretch, rel=1e-5, abs=1e-12)
+    assert free.wave.crest == pytest.approx(forced.wave.crest, rel=1e-7)
+    other = wave_with_mean(p, omega, 0.03, mean + 0.003)
+    m2, a2 = other.wave.harmonics(1)[:2]
+    assert a2 == pytest.approx(0.03, rel=1e-8) and m2 == pytest.approx(mean + 0.003, abs=1e-9)
+    assert abs(other.c / forced.c - 1) > 1e-3

@@ -260,3 +260,41 @@ def driven_wave(p, omega: float, amplitude: float, steps: int = 40) -> DrivenWav
 
     best = optimize.brentq(gap, lo, crest, xtol=1e-12)
     return _wave_at(p, omega, best, g0)
+
+
+def wave_with_mean(p, omega: float, amplitude: float, mean: float, steps: int = 60) -> DrivenWave:
+    """The steady wave at omega with fundamental |H1| = `amplitude` and mean rotation `mean`.
+
+    The family of periodic travelling waves at a given frequency has two parameters: the amplitude
+    and the constant of the integrated longitudinal equation (the mean hinge force). A force drive
+    fixes that constant (wave_coefficients); behind a displacement drive it is set by the mean-flow
+    transient at the wave's front, which the steady theory does not determine, so here the measured
+    mean rotation closes the family instead. Continued from the linear wave (amplitude and mean
+    scaled together over `steps` steps, secant predictor); mean_stretch is returned in the force
+    convention of wave_coefficients. ValueError when the continuation fails.
+    """
+    from scipy import optimize
+
+    def solve(x0, amp, avg):
+        def residual(x):
+            c, gbar, crest = x
+            try:
+                w = cnoidal_through(wave_coefficients(p, c, gbar), crest)
+            except ValueError:
+                return [1.0, 1.0, 1.0]
+            m0, h1 = w.harmonics(1)[:2]
+            return [w.wavelength * omega / (2 * math.pi * c) - 1, h1 / amp - 1, (m0 - avg) / amp]
+
+        x, _, ok, msg = optimize.fsolve(residual, x0, full_output=True, xtol=1e-12)
+        if ok != 1 or max(abs(r) for r in residual(x)) > 1e-9:
+            raise ValueError(f"no periodic wave of amplitude {amp} and mean {avg} at omega = {omega}: {msg}")
+        return np.asarray(x)
+
+    s_grid = np.linspace(0.05, 1.0, steps)
+    hist = [solve(np.array([linear_speed(p, omega), 0.0, s_grid[0] * amplitude]), s_grid[0] * amplitude,
+                  s_grid[0] * mean)]
+    for s in s_grid[1:]:
+        guess = hist[-1] if len(hist) < 2 else 2 * hist[-1] - hist[-2]
+        hist.append(solve(guess, s * amplitude, s * mean))
+    c, gbar, crest = hist[-1]
+    return DrivenWave(float(c), float(gbar), cnoidal_through(wave_coefficients(p, c, gbar), crest))
