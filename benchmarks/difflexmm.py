@@ -92,7 +92,12 @@ def difflexmm_worker(src: str) -> None:
     from difflexmm.dynamics import setup_dynamic_solver
     from difflexmm.energy import build_strain_energy, ligament_energy
     from difflexmm.geometry import RotatedSquareGeometry
-    from difflexmm.utils import ControlParams, GeometricalParams, LigamentParams, MechanicalParams
+    from difflexmm.utils import (
+        ControlParams,
+        GeometricalParams,
+        LigamentParams,
+        MechanicalParams,
+    )
 
     geom = RotatedSquareGeometry(n1_cells=N_COLS // 2, n2_cells=N_ROWS // 2, spacing=SPACING, bond_length=LIGAMENT)
     centroids, node_vectors, connectivity, reference = geom.get_parametrization()
