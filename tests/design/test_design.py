@@ -126,10 +126,23 @@ def test_impact_mitigation_showcase(tmp_path):
     assert peaks[0] / peaks[1] > 1.5, peaks
 
 
+def _soliton_law_speed(k_theta: float, amplitude: float) -> float:
+    """The planar vector soliton's speed (docs/physics.md §1.3 with n_v = 2, s_v = 1, θ0 = 0), in c0:
+    c² = Q/(1 + Q), Q = 8 K_θ A²/(1 − cos A)² + 1."""
+    q = 8.0 * k_theta * amplitude**2 / (1.0 - np.cos(amplitude)) ** 2 + 1.0
+    return float(np.sqrt(q / (1.0 + q)))
+
+
 @pytest.mark.slow
 def test_sheet_focusing_showcase(tmp_path):
-    """designs/sheet_focusing.yaml: the row-graded sheet delivers at least 1.3 times the mean kinetic
-    energy of the uniform sheet to the target patch (measured on the written best scene)."""
+    """designs/sheet_focusing.yaml, measured on the written best scene against the uniform sheet of
+    the same mean stiffness (the start). Design requirements: the patch receives at least 1.5 times
+    the uniform sheet's kinetic energy, AND holds at least 1.5 times its uniform share of the energy
+    of its band of columns (3/8 of it in a quarter of the rows instead of 1/4) — a lens that
+    concentrates the pulse, not only one that transmits more. The uniform sheet's pulse is the
+    planar vector soliton: a steady amplitude (spread < 15 %) within 15 % of the launched 0.3 rad and
+    a speed within 8 % of the planar law (which runs 3–6 % fast against the full sheet,
+    docs/physics.md §1.2)."""
     res = CliRunner().invoke(app, ["design", str(DESIGNS / "sheet_focusing.yaml"), "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
     from flexmm.assemble import build_problem
@@ -137,16 +150,40 @@ def test_sheet_focusing_showcase(tmp_path):
     from flexmm.design.gradient import trajectory_of
 
     spec = yaml.safe_load((DESIGNS / "sheet_focusing.yaml").read_text())
-    sites = spec["objective"][0]["region"]["sites"]
-    energies = []
-    for path in (DESIGNS / "sheet_focus_scene.yaml", tmp_path / "best_scene.yaml"):
+    best = yaml.safe_load((tmp_path / "best_scene.yaml").read_text())
+    written = [v["value"] for v in best["lattice"]["variation"] if v["target"] == "k_rot_n_m_per_rad"]
+    base = yaml.safe_load((DESIGNS / "sheet_focus_scene.yaml").read_text())
+    n_rows, n_cols = base["lattice"]["n_rows"], base["lattice"]["n_cols"]
+    assert len(written) == n_rows * n_cols  # one value per unit
+    assert np.mean(written) == pytest.approx(base["lattice"]["k_rot_n_m_per_rad"], rel=1e-6)  # equal mean
+    assert np.ptp(written) > 0.5 * base["lattice"]["k_rot_n_m_per_rad"]  # a real 2D field
+    c0, c1, r0, r1 = spec["objective"][0]["region"]["box"]
+    patch = [r * n_cols + c for r in range(r0, r1 + 1) for c in range(c0, c1 + 1)]
+    band = [r * n_cols + c for r in range(n_rows) for c in range(c0, c1 + 1)]
+    out = {}
+    for label, path in (("uniform", DESIGNS / "sheet_focus_scene.yaml"), ("best", tmp_path / "best_scene.yaml")):
         problem = build_problem(load_scene(path))
         s = problem.system
-        dofs = [s.dof(f.name, i) for f in s.fields for i in sites]
-        traj, raw = trajectory_of(problem, obs=dofs)
+        n = s.n_sites
+        traj, raw = trajectory_of(problem, obs=np.arange(s.ndof), stride=4)
         rec, _ = traj.run(raw)
-        energies.append(np.mean(0.5 * (rec.v**2 * s.mass[dofs]).sum(axis=1)) * s.scales.energy)
-    assert energies[1] / energies[0] > 1.3, energies
+        ke = 0.5 * rec.v[:, : 3 * n] ** 2 * s.mass[: 3 * n]
+        per_unit = ke.reshape(-1, 3, n).sum(axis=1).mean(axis=0)
+        out[label] = (per_unit[patch].sum(), per_unit[patch].sum() / per_unit[band].sum())
+        if label == "uniform":
+            theta = np.abs(rec.q[:, 2 * n : 3 * n]).reshape(-1, n_rows, n_cols).mean(axis=1)
+            crest, amp = theta.argmax(axis=1), theta.max(axis=1)
+            on = (crest >= 10) & (crest <= 32)
+            speed = np.polyfit(traj.times[on], crest[on], 1)[0]  # columns per time unit = c0 (θ0 = 0)
+            a = amp[on].mean()
+            k_theta = base["lattice"]["k_rot_n_m_per_rad"] / (s.scales.force * s.scales.length_m)
+            assert a == pytest.approx(0.3, rel=0.15) and np.ptp(amp[on]) < 0.15 * a  # steady
+            assert speed == pytest.approx(_soliton_law_speed(k_theta, a), rel=0.08)
+    energy_factor = out["best"][0] / out["uniform"][0]
+    share_factor = out["best"][1] / out["uniform"][1]
+    assert out["uniform"][1] == pytest.approx(0.25, rel=0.02)  # a planar pulse: a quarter of the rows
+    assert energy_factor >= 1.5, out
+    assert share_factor >= 1.5, out
 
 
 def test_spline_profile_stays_within_its_values_and_follows_rows():

@@ -199,4 +199,5 @@ def _mean_energy_map(dp, x: np.ndarray) -> np.ndarray:
 def _fmt(dp, term, rec, raw) -> str:
     from flexmm.design.objectives import UNITS
 
-    return f"{term.value(rec, raw, dp.objective.times)[0] * term.to_si:.4g} {UNITS[term.spec.kind]}"
+    unit = UNITS[term.spec.kind]
+    return f"{term.value(rec, raw, dp.objective.times)[0] * term.to_si:.4g}" + (f" {unit}" if unit != "1" else "")
