@@ -267,7 +267,7 @@ def test_energy_share_gradient_and_reused_jacobian(tmp_path):
 
 def test_mean_constraint_holds_the_field_mean(tmp_path):
     """A mean constraint is linear in the control values (the mean of the units' values), and every
-    design the optimiser (trust-constr) evaluates keeps it while it improves the objective."""
+    design the optimiser (SLSQP) evaluates keeps it while it improves the objective."""
     from flexmm.design.optimize import optimise
     from flexmm.design.variables import spline2d_values
 
