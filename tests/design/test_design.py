@@ -126,10 +126,23 @@ def test_impact_mitigation_showcase(tmp_path):
     assert peaks[0] / peaks[1] > 1.5, peaks
 
 
+def _soliton_law_speed(k_theta: float, amplitude: float) -> float:
+    """The planar vector soliton's speed (docs/physics.md §1.3 with n_v = 2, s_v = 1, θ0 = 0), in c0:
+    c² = Q/(1 + Q), Q = 8 K_θ A²/(1 − cos A)² + 1."""
+    q = 8.0 * k_theta * amplitude**2 / (1.0 - np.cos(amplitude)) ** 2 + 1.0
+    return float(np.sqrt(q / (1.0 + q)))
+
+
 @pytest.mark.slow
 def test_sheet_focusing_showcase(tmp_path):
-    """designs/sheet_focusing.yaml: the row-graded sheet delivers at least 1.3 times the mean kinetic
-    energy of the uniform sheet to the target patch (measured on the written best scene)."""
+    """designs/sheet_focusing.yaml, measured on the written best scene against the uniform sheet of
+    the same mean stiffness (the start). Design requirements: the patch receives at least 1.5 times
+    the uniform sheet's kinetic energy, AND holds at least 1.5 times its uniform share of the energy
+    of its band of columns (3/8 of it in a quarter of the rows instead of 1/4) — a lens that
+    concentrates the pulse, not only one that transmits more. The uniform sheet's pulse is the
+    planar vector soliton: a steady amplitude (spread < 15 %) within 15 % of the launched 0.3 rad and
+    a speed within 8 % of the planar law (which runs 3–6 % fast against the full sheet,
+    docs/physics.md §1.2)."""
     res = CliRunner().invoke(app, ["design", str(DESIGNS / "sheet_focusing.yaml"), "--out", str(tmp_path)])
     assert res.exit_code == 0, res.output
     from flexmm.assemble import build_problem
@@ -137,16 +150,40 @@ def test_sheet_focusing_showcase(tmp_path):
     from flexmm.design.gradient import trajectory_of
 
     spec = yaml.safe_load((DESIGNS / "sheet_focusing.yaml").read_text())
-    sites = spec["objective"][0]["region"]["sites"]
-    energies = []
-    for path in (DESIGNS / "sheet_focus_scene.yaml", tmp_path / "best_scene.yaml"):
+    best = yaml.safe_load((tmp_path / "best_scene.yaml").read_text())
+    written = [v["value"] for v in best["lattice"]["variation"] if v["target"] == "k_rot_n_m_per_rad"]
+    base = yaml.safe_load((DESIGNS / "sheet_focus_scene.yaml").read_text())
+    n_rows, n_cols = base["lattice"]["n_rows"], base["lattice"]["n_cols"]
+    assert len(written) == n_rows * n_cols  # one value per unit
+    assert np.mean(written) == pytest.approx(base["lattice"]["k_rot_n_m_per_rad"], rel=1e-6)  # equal mean
+    assert np.ptp(written) > 0.5 * base["lattice"]["k_rot_n_m_per_rad"]  # a real 2D field
+    c0, c1, r0, r1 = spec["objective"][0]["region"]["box"]
+    patch = [r * n_cols + c for r in range(r0, r1 + 1) for c in range(c0, c1 + 1)]
+    band = [r * n_cols + c for r in range(n_rows) for c in range(c0, c1 + 1)]
+    out = {}
+    for label, path in (("uniform", DESIGNS / "sheet_focus_scene.yaml"), ("best", tmp_path / "best_scene.yaml")):
         problem = build_problem(load_scene(path))
         s = problem.system
-        dofs = [s.dof(f.name, i) for f in s.fields for i in sites]
-        traj, raw = trajectory_of(problem, obs=dofs)
+        n = s.n_sites
+        traj, raw = trajectory_of(problem, obs=np.arange(s.ndof), stride=4)
         rec, _ = traj.run(raw)
-        energies.append(np.mean(0.5 * (rec.v**2 * s.mass[dofs]).sum(axis=1)) * s.scales.energy)
-    assert energies[1] / energies[0] > 1.3, energies
+        ke = 0.5 * rec.v[:, : 3 * n] ** 2 * s.mass[: 3 * n]
+        per_unit = ke.reshape(-1, 3, n).sum(axis=1).mean(axis=0)
+        out[label] = (per_unit[patch].sum(), per_unit[patch].sum() / per_unit[band].sum())
+        if label == "uniform":
+            theta = np.abs(rec.q[:, 2 * n : 3 * n]).reshape(-1, n_rows, n_cols).mean(axis=1)
+            crest, amp = theta.argmax(axis=1), theta.max(axis=1)
+            on = (crest >= 10) & (crest <= 32)
+            speed = np.polyfit(traj.times[on], crest[on], 1)[0]  # columns per time unit = c0 (θ0 = 0)
+            a = amp[on].mean()
+            k_theta = base["lattice"]["k_rot_n_m_per_rad"] / (s.scales.force * s.scales.length_m)
+            assert a == pytest.approx(0.3, rel=0.15) and np.ptp(amp[on]) < 0.15 * a  # steady
+            assert speed == pytest.approx(_soliton_law_speed(k_theta, a), rel=0.08)
+    energy_factor = out["best"][0] / out["uniform"][0]
+    share_factor = out["best"][1] / out["uniform"][1]
+    assert out["uniform"][1] == pytest.approx(0.25, rel=0.02)  # a planar pulse: a quarter of the rows
+    assert energy_factor >= 1.5, out
+    assert share_factor >= 1.5, out
 
 
 def test_spline_profile_stays_within_its_values_and_follows_rows():
@@ -162,3 +199,96 @@ def test_spline_profile_stays_within_its_values_and_follows_rows():
     sheet = {"n_rows": 2, "n_cols": 3}
     assert profile_lines(sheet, "y") == [[0, 1, 2], [3, 4, 5]]
     assert profile_lines(sheet, "x") == [[0, 3], [1, 4], [2, 5]]
+
+
+SHEET = {"name": "small_sheet", "lattice": {
+    "kind": "rotating_squares_sheet", "n_rows": 6, "n_cols": 10, "a_m": 0.01, "k_long_n_per_m": 1.0e4,
+    "k_shear_n_per_m": 1.0e4, "k_rot_n_m_per_rad": 0.002, "areal_density_kg_m2": 20.0, "left": "driven",
+    "bottom": "periodic", "top": "periodic"},
+    "excitation": {"kind": "boundary_displacement", "end": "left", "shape": "half_sine", "amplitude_m": 0.004,
+                   "duration_s": 0.0032},
+    "imperfection": {"kind": "random_rotation", "std_rad": 0.01, "seed": 1},
+    "solver": {"duration_s": 0.003}}
+FIELD = {"name": "k_rot", "target": "k_rot_n_m_per_rad", "profile": "spline2d", "knots": 3, "knots_y": 2,
+         "initial": [0.002, 0.0015, 0.0025, 0.003, 0.002, 0.001], "bounds": [0.0005, 0.008]}
+SHARE = [{"kind": "energy", "goal": "maximize", "region": {"box": [6, 7, 2, 3]}},
+         {"kind": "energy_share", "goal": "maximize", "region": {"box": [6, 7, 2, 3]},
+          "reference": {"box": [6, 7, 0, 5]}}]
+
+
+def _sheet_spec(tmp_path: Path, **changes) -> Path:
+    spec = {"name": "small_focus", "scene": copy.deepcopy(SHEET), "variables": [FIELD], "objective": SHARE,
+            "optimizer": {"max_iterations": 2, "sample_every": 2}}
+    spec.update(changes)
+    path = tmp_path / "focus.yaml"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+def test_spline2d_field_is_a_tensor_product_within_its_values_and_sets_each_hinge():
+    """The 2D field: separable control values give the product of the 1D splines, it stays within
+    its values, and every hinge takes the value of the later of its two units."""
+    from flexmm.design.variables import Design, Variable, spline2d_values, spline_values
+    from flexmm.models.hinge import H_KT
+    from flexmm.models.rotating_sheet import hinge_pairs
+
+    cx, cy = np.array([1.0, 2.0, 1.5, 3.0]), np.array([0.5, 2.0, 1.0])
+    f = spline2d_values(np.outer(cy, cx).ravel(), 4, 3, 7, 11)
+    np.testing.assert_allclose(f, np.outer(spline_values(cy, 7), spline_values(cx, 11)), rtol=1e-13)
+    c = np.random.default_rng(1).uniform(1.0, 4.0, 12)
+    g = spline2d_values(c, 4, 3, 7, 11)
+    assert c.min() - 1e-12 <= g.min() and g.max() <= c.max() + 1e-12
+    var = Variable(**FIELD)
+    design = Design(SHEET, [var])
+    system = design.build(design.x0)[0]
+    field = spline2d_values(design.x0, 3, 2, 6, 10).ravel()
+    a, b, _ = hinge_pairs(6, 10, False, True)
+    kt = system.args[3][:, H_KT] * system.scales.force * system.scales.length_m  # k_θ in N m/rad
+    np.testing.assert_allclose(kt, field[np.maximum(a, b)], rtol=1e-12)
+    assert len(design.scene_data(design.x0)["lattice"]["variation"]) == 60  # one defect per unit
+
+
+def test_energy_share_gradient_and_reused_jacobian(tmp_path):
+    """energy + energy_share of a box against its band, w.r.t. a 2D stiffness field: adjoint vs central
+    differences; at a second design the Jacobian of the first is reused (the map is affine) and
+    gives the gradient a fresh Jacobian gives."""
+    dp = load_design(_sheet_spec(tmp_path))
+    g, fd, err = check_gradient(dp)
+    assert np.all(err < 1e-6), (g, fd, err)
+    builds = dp.design.jacobian_builds
+    x1 = dp.design.x0 * np.linspace(0.7, 1.4, dp.design.x0.size)
+    _, g1, _ = dp.evaluate(x1)
+    assert dp.design.jacobian_builds == builds  # reused
+    fresh = load_design(_sheet_spec(tmp_path))
+    raw = fresh.design.raw(x1)
+    _, graw, _ = fresh.traj.gradient(raw, fresh.objective)
+    np.testing.assert_allclose(g1, fresh.design.chain(x1, graw), rtol=1e-7, atol=1e-9 * np.abs(g1).max())
+
+
+def test_mean_constraint_holds_the_field_mean(tmp_path):
+    """A mean constraint is linear in the control values (the mean of the units' values), and every
+    design the optimiser (SLSQP) evaluates keeps it while it improves the objective."""
+    from flexmm.design.optimize import optimise
+    from flexmm.design.variables import spline2d_values
+
+    spec = _sheet_spec(tmp_path, constraints=[{"kind": "mean", "variable": "k_rot"}],
+                       optimizer={"max_iterations": 5, "sample_every": 2})
+    dp = load_design(spec)
+    w = dp.mean_weights("k_rot")
+    x = np.random.default_rng(2).uniform(0.001, 0.004, 6)
+    assert w @ x == pytest.approx(spline2d_values(x, 3, 2, 6, 10).mean(), rel=1e-12)
+    res = optimise(dp)
+    start = spline2d_values(dp.design.x0, 3, 2, 6, 10).mean()
+    for x in res.history.x:
+        assert spline2d_values(x, 3, 2, 6, 10).mean() == pytest.approx(start, rel=1e-6)
+    assert min(res.history.objective) < res.history.objective[0]
+
+
+def test_share_and_field_spec_errors(tmp_path):
+    bad = [dict(SHARE[1], reference=None)]
+    with pytest.raises(ConfigError, match="energy_share needs a reference"):
+        load_design(_sheet_spec(tmp_path, objective=bad))
+    with pytest.raises(ConfigError, match="spline2d needs knots_y"):
+        load_design(_sheet_spec(tmp_path, variables=[dict(FIELD, knots_y=None)]))
+    with pytest.raises(ConfigError, match="exactly one of sites, end or box"):
+        load_design(_sheet_spec(tmp_path, objective=[dict(SHARE[0], region={"box": [1, 2, 0, 0], "end": "left"})]))

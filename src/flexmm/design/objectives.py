@@ -8,7 +8,10 @@ Each term measures one thing in a region (a list of sites, or an end of the latt
   smoothed as the p-norm (mean_k |F_k|^p)^{1/p} (``sharpness`` p; ∞ would be the true peak);
 - ``energy``: the kinetic energy of the region (all its DOFs), averaged over the run;
 - ``peak_energy``: its p-norm peak over time;
-- ``arrival_time``: the kinetic-energy-weighted mean time Σ t E_R(t) / Σ E_R(t) in the region.
+- ``arrival_time``: the kinetic-energy-weighted mean time Σ t E_R(t) / Σ E_R(t) in the region;
+- ``energy_share``: the region's mean kinetic energy over that of a ``reference`` region (e.g. a
+  target patch against the whole band of columns it sits in: raising it concentrates the energy
+  that passes there instead of only transmitting more of it).
 
 A weighted sum of terms is minimised; a term with ``goal: maximize`` enters with a minus sign,
 and each term is divided by its value at the start so weights compare like with like. Values
@@ -28,31 +31,42 @@ from flexmm.design.gradient import Raw, Records
 
 
 class Region(Strict):
-    """Sites of the lattice: listed, or an end's units."""
+    """Sites of the lattice: listed, an end's units, or a box of a grid's columns and rows."""
 
     sites: list[int] | None = Field(None, min_length=1)
     end: Literal["left", "right", "bottom", "top"] | None = None
+    box: tuple[int, int, int, int] | None = Field(
+        None, description="[first column, last column, first row, last row] (inclusive; a chain has row 0)")
 
     @model_validator(mode="after")
     def _one(self):
-        if (self.sites is None) == (self.end is None):
-            raise ValueError("give exactly one of sites or end")
+        if sum(x is not None for x in (self.sites, self.end, self.box)) != 1:
+            raise ValueError("give exactly one of sites, end or box")
+        if self.box is not None and not (0 <= self.box[0] <= self.box[1] and 0 <= self.box[2] <= self.box[3]):
+            raise ValueError(f"box {list(self.box)}: need 0 <= first <= last for the columns and the rows")
         return self
 
 
 class Term(Strict):
     """One objective term (see the module docstring)."""
 
-    kind: Literal["peak_force", "energy", "peak_energy", "arrival_time"]
+    kind: Literal["peak_force", "energy", "peak_energy", "arrival_time", "energy_share"]
     region: Region
+    reference: Region | None = Field(None, description="energy_share: the region whose energy is the denominator")
     field: str | None = Field(None, description="peak_force: the field whose forces are summed "
                                                  "(default the longitudinal one)")
     goal: Literal["minimize", "maximize"] = "minimize"
     weight: Positive = 1.0
     sharpness: float = Field(8.0, ge=2.0, le=64.0, description="p of the p-norm peak")
 
+    @model_validator(mode="after")
+    def _reference(self):
+        if (self.kind == "energy_share") != (self.reference is not None):
+            raise ValueError("kind energy_share needs a reference region (and only energy_share takes one)")
+        return self
 
-UNITS = {"peak_force": "N", "energy": "J", "peak_energy": "J", "arrival_time": "s"}
+
+UNITS = {"peak_force": "N", "energy": "J", "peak_energy": "J", "arrival_time": "s", "energy_share": "1"}
 
 
 @dataclass
@@ -64,13 +78,16 @@ class BoundTerm:
     dofs: np.ndarray  # their DOF indices
     to_si: float
     norm: float = 1.0
+    ref_cols: np.ndarray | None = None  # energy_share: the reference region's record columns
+    ref_dofs: np.ndarray | None = None
 
     @property
     def sign(self) -> float:
         return -1.0 if self.spec.goal == "maximize" else 1.0
 
     def value(self, rec: Records, raw: Raw, times: np.ndarray) -> tuple:
-        """(value in model units, dJ/dq, dJ/dv, dJ/df on the record columns, dJ/dminv (ndof,))."""
+        """(value in model units, dJ/dq, dJ/dv, dJ/df on the term's record columns — all of them for
+        energy_share —, dJ/dminv (ndof,))."""
         kind, p = self.spec.kind, self.spec.sharpness
         nk = rec.q.shape[0]
         dq = np.zeros((nk, self.cols.size))
@@ -82,10 +99,9 @@ class BoundTerm:
             val, dF = _pnorm(F, p)
             df[:] = dF[:, None]
             return val, dq, dv, df, dminv
-        minv = raw.minv[self.dofs]
-        mass = np.where(minv > 0, 1.0 / np.where(minv > 0, minv, 1.0), 0.0)  # held DOFs carry no KE here
-        v = rec.v[:, self.cols]
-        E = 0.5 * (v * v * mass).sum(axis=1)
+        if kind == "energy_share":
+            return self._share(rec, raw)
+        mass, v, E = kinetic(rec, raw, self.cols, self.dofs)
         if kind == "energy":
             val, dE = E.mean(), np.full(nk, 1.0 / nk)
         elif kind == "peak_energy":
@@ -95,9 +111,41 @@ class BoundTerm:
             val = float((times * E).sum() / total)
             dE = (times - val) / total
         dv[:] = dE[:, None] * mass * v
-        dmass = 0.5 * (dE[:, None] * v * v).sum(axis=0)
-        dminv[self.dofs] = np.where(minv > 0, -dmass * mass * mass, 0.0)  # m = 1/m⁻¹
+        dminv[self.dofs] = _dminv(dE, mass, v)
         return val, dq, dv, df, dminv
+
+    def _share(self, rec: Records, raw: Raw) -> tuple:
+        """Ē_R / Ē_ref over the columns of both regions (a DOF in both counts in both)."""
+        nk, width = rec.q.shape
+        zeros = np.zeros((nk, width))
+        dv = np.zeros((nk, width))
+        dminv = np.zeros(raw.minv.size)
+        m_r, v_r, E_r = kinetic(rec, raw, self.cols, self.dofs)
+        m_f, v_f, E_f = kinetic(rec, raw, self.ref_cols, self.ref_dofs)
+        top, bottom = E_r.mean(), E_f.mean()
+        if bottom == 0.0:
+            return 0.0, zeros, dv, zeros, dminv
+        val = top / bottom
+        d_top, d_bottom = np.full(nk, 1.0 / (nk * bottom)), np.full(nk, -val / (nk * bottom))
+        np.add.at(dv, (slice(None), self.cols), d_top[:, None] * m_r * v_r)
+        np.add.at(dv, (slice(None), self.ref_cols), d_bottom[:, None] * m_f * v_f)
+        np.add.at(dminv, self.dofs, _dminv(d_top, m_r, v_r))
+        np.add.at(dminv, self.ref_dofs, _dminv(d_bottom, m_f, v_f))
+        return float(val), zeros, dv, zeros.copy(), dminv
+
+
+def kinetic(rec: Records, raw: Raw, cols: np.ndarray, dofs: np.ndarray) -> tuple:
+    """(masses, velocities, kinetic energy over time) of some record columns; held DOFs carry no KE here."""
+    minv = raw.minv[dofs]
+    mass = np.where(minv > 0, 1.0 / np.where(minv > 0, minv, 1.0), 0.0)
+    v = rec.v[:, cols]
+    return mass, v, 0.5 * (v * v * mass).sum(axis=1)
+
+
+def _dminv(dE: np.ndarray, mass: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """d(Σ_k dE_k E_k)/d m⁻¹ per DOF, m = 1/m⁻¹ (zero on held DOFs)."""
+    dmass = 0.5 * (dE[:, None] * v * v).sum(axis=0)
+    return np.where(mass > 0, -dmass * mass * mass, 0.0)
 
 
 def _pnorm(x: np.ndarray, p: float) -> tuple[float, np.ndarray]:
@@ -120,16 +168,8 @@ def bind_terms(terms: list[Term], system) -> tuple[list[BoundTerm], np.ndarray]:
     sc = system.scales
     bound, dofs_all = [], []
     for t in terms:
-        if t.region.end is not None:
-            if t.region.end not in system.ends:
-                raise FlexmmError(f"objective region end {t.region.end!r}: this lattice's ends are "
-                                  f"{', '.join(system.ends)}")
-            sites = list(system.ends[t.region.end])
-        else:
-            sites = t.region.sites
-            bad = [s for s in sites if not 0 <= s < system.n_sites]
-            if bad:
-                raise FlexmmError(f"objective region sites {bad} outside 0..{system.n_sites - 1}")
+        sites = _sites(t.region, system)
+        ref = None
         if t.kind == "peak_force":
             field = t.field or system.longitudinal_field
             if field not in [f.name for f in system.fields]:
@@ -138,12 +178,38 @@ def bind_terms(terms: list[Term], system) -> tuple[list[BoundTerm], np.ndarray]:
             to_si = sc.generalised_force(system.fields[system.field_index(field)].kind)
         else:
             dofs = [system.dof(f.name, s) for f in system.fields for s in sites]
-            to_si = sc.time_s if t.kind == "arrival_time" else sc.energy
-        bound.append((t, np.asarray(dofs, np.int64), to_si))
+            to_si = {"arrival_time": sc.time_s, "energy_share": 1.0}.get(t.kind, sc.energy)
+            if t.reference is not None:
+                ref = np.asarray([system.dof(f.name, s) for f in system.fields for s in _sites(t.reference, system)],
+                                 np.int64)
+                dofs_all += ref.tolist()
+        bound.append((t, np.asarray(dofs, np.int64), to_si, ref))
         dofs_all += dofs
     obs = np.unique(np.asarray(dofs_all, np.int64))
-    out = [BoundTerm(t, np.searchsorted(obs, d), d, to_si) for t, d, to_si in bound]
+    out = [BoundTerm(t, np.searchsorted(obs, d), d, to_si, ref_cols=None if r is None else np.searchsorted(obs, r),
+                     ref_dofs=r) for t, d, to_si, r in bound]
     return out, obs
+
+
+def _sites(region: Region, system) -> list[int]:
+    from flexmm.errors import FlexmmError
+
+    if region.end is not None:
+        if region.end not in system.ends:
+            raise FlexmmError(f"objective region end {region.end!r}: this lattice's ends are {', '.join(system.ends)}")
+        return list(system.ends[region.end])
+    if region.box is not None:
+        c0, c1, r0, r1 = region.box
+        col, row = system.site_grid()
+        sites = np.flatnonzero((col >= c0) & (col <= c1) & (row >= r0) & (row <= r1)).tolist()
+        if not sites:
+            raise FlexmmError(f"objective region box {list(region.box)} holds no site (columns 0..{col.max()}, "
+                              f"rows 0..{row.max()})")
+        return sites
+    bad = [s for s in region.sites if not 0 <= s < system.n_sites]
+    if bad:
+        raise FlexmmError(f"objective region sites {bad} outside 0..{system.n_sites - 1}")
+    return list(region.sites)
 
 
 class Objective:
@@ -171,8 +237,9 @@ class Objective:
             self.last.append(val * t.to_si)
             c = t.sign * t.spec.weight / t.norm
             total += c * val
-            dq[:, t.cols] += c * tq
-            dv[:, t.cols] += c * tv
-            df[:, t.cols] += c * tf
+            cols = slice(None) if t.spec.kind == "energy_share" else t.cols  # a share spans both regions
+            dq[:, cols] += c * tq
+            dv[:, cols] += c * tv
+            df[:, cols] += c * tf
             explicit.minv += c * tm
         return total, dq, dv, df, explicit

@@ -2,11 +2,14 @@
 
 The spec holds a scene (file or inline), the design variables (``variables.Variable`` with
 bounds), the objective (``objectives.Term`` list, a weighted sum) and optional constraints
-(``total_mass``: the lattice's total mass equal to, or at most/least, its start value or a given
-one). Every evaluation is one velocity-Verlet run with checkpoints plus one adjoint sweep
+(``total_mass``: the lattice's total mass; ``mean``: the mean over the units of the values a
+variable writes — e.g. a stiffness field held at its start's mean, so the design is compared with
+the uniform lattice at equal mean stiffness — each equal to, or at most/least, its start value or
+a given one). Every evaluation is one velocity-Verlet run with checkpoints plus one adjoint sweep
 (``gradient.Trajectory.gradient``), chained through the variables' map to the raw arrays. The
-optimiser is scipy's L-BFGS-B (bounds only) or trust-constr (with constraints), on variables
-scaled by their start values. Each evaluation is appended to a history (an xarray dataset,
+optimiser is scipy's L-BFGS-B (bounds only), SLSQP (with only linear, ``mean``, constraints: every
+iterate keeps them) or trust-constr (with a total-mass constraint), on variables scaled by their
+start values. Each evaluation is appended to a history (an xarray dataset,
 ``history.nc``, rewritten atomically); ``resume`` restarts from the best design in it.
 """
 
@@ -18,22 +21,36 @@ from pathlib import Path
 from typing import Callable, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from flexmm.assemble import build_problem
 from flexmm.config.base import Positive, Strict
 from flexmm.design.gradient import Trajectory, check_differentiable
 from flexmm.design.objectives import Objective, Term, bind_terms
 from flexmm.design.spec import load_spec, scene_data_of
-from flexmm.design.variables import Design, Variable, finite_difference, worst_relative_error
+from flexmm.design.variables import (
+    Design,
+    Variable,
+    element_values,
+    finite_difference,
+    worst_relative_error,
+)
 
 
 class Constraint(Strict):
-    """The total mass of the lattice's units (kg): ``relation`` to ``value`` (default its start value)."""
+    """The total mass of the lattice's units (kg), or the mean over the units of a ``variable``'s
+    values (its SI unit): ``relation`` to ``value`` (default its start value)."""
 
-    kind: Literal["total_mass"]
+    kind: Literal["total_mass", "mean"]
     relation: Literal["equal", "at_most", "at_least"] = "equal"
     value: Positive | None = None
+    variable: str | None = Field(None, description="mean: the name of the variable")
+
+    @model_validator(mode="after")
+    def _variable(self):
+        if (self.kind == "mean") != (self.variable is not None):
+            raise ValueError("kind mean needs variable (the name of a design variable), and only mean takes one")
+        return self
 
 
 class OptimizerOptions(Strict):
@@ -114,13 +131,18 @@ class DesignProblem:
         rec, _ = self.traj.run(self.design.raw(self.design.x0))
         self.objective.normalise(rec, self.design.raw(self.design.x0))
         self.term_names = [f"{t.kind}[{k}]" for k, t in enumerate(spec.objective)]
-        self.mass0 = self.total_mass(self.design.x0)
+        names = [v.name for v in spec.variables]
+        for c in spec.constraints:
+            if c.kind == "mean" and c.variable not in names:
+                from flexmm.errors import FlexmmError
+
+                raise FlexmmError(f"constraint mean: no variable {c.variable!r} (the variables are {', '.join(names)})")
 
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray, list[float]]:
         """(objective, gradient w.r.t. x, terms in SI) by one run and one adjoint sweep."""
         raw = self.design.raw(x)
         value, graw, _ = self.traj.gradient(raw, self.objective)
-        return value, self.design.chain(x, graw), list(self.objective.last)
+        return value, self.design.chain(x, graw, raw), list(self.objective.last)
 
     def value(self, x: np.ndarray) -> float:
         return self.traj.value(self.design.raw(x), self.objective)
@@ -137,6 +159,24 @@ class DesignProblem:
     def mass_gradient(self, x: np.ndarray) -> np.ndarray:
         return np.array([finite_difference(self.total_mass, x, k, rel_steps=(1e-4, 1e-5, 1e-6)) for k in range(x.size)])
 
+    def mean_weights(self, name: str) -> np.ndarray:
+        """w with mean = w · x: the mean over the units of the values the variable writes (linear in them)."""
+        des = self.design
+        k = [v.name for v in des.variables].index(name)
+        var = des.variables[k]
+        start = int(np.sum(des.sizes[:k]))
+        w = np.zeros(des.x0.size)
+        for j in range(var.size):
+            unit = np.eye(var.size)[j]
+            w[start + j] = unit[0] if var.path is not None else element_values(des.base["lattice"], var, unit).mean()
+        return w
+
+    def constraint_value(self, c: Constraint, x: np.ndarray) -> float:
+        return self.total_mass(x) if c.kind == "total_mass" else float(self.mean_weights(c.variable) @ x)
+
+    def constraint_target(self, c: Constraint) -> float:
+        return c.value if c.value is not None else self.constraint_value(c, self.design.x0)
+
 
 @dataclass
 class DesignResult:
@@ -149,7 +189,7 @@ class DesignResult:
 def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callable | None = None,
              save: Callable[[History], None] | None = None) -> DesignResult:
     """Minimise the objective from the start values (or the best design of ``history``)."""
-    from scipy.optimize import Bounds, NonlinearConstraint, minimize
+    from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, minimize
 
     des = dp.design
     hist = history or History(des.labels, dp.term_names)
@@ -176,12 +216,23 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
     bounds = Bounds(lo / scale, hi / scale)
     cons = []
     for c in dp.spec.constraints:
-        target = c.value if c.value is not None else dp.mass0
+        target = dp.constraint_target(c)
         lb, ub = {"equal": (target, target), "at_most": (-np.inf, target), "at_least": (target, np.inf)}[c.relation]
-        cons.append(NonlinearConstraint(lambda z: dp.total_mass(z * scale) / target, lb / target, ub / target,
-                                        jac=lambda z: (dp.mass_gradient(z * scale) * scale / target)[None, :]))
+        if c.kind == "mean":  # linear in the variables
+            cons.append(LinearConstraint((dp.mean_weights(c.variable) * scale / target)[None, :], lb / target, ub / target))
+            continue
+        cons.append(NonlinearConstraint(lambda z, target=target: dp.total_mass(z * scale) / target, lb / target,
+                                        ub / target, jac=lambda z, target=target: (dp.mass_gradient(z * scale) * scale
+                                                                                   / target)[None, :]))
     z0 = x_start / scale
-    if cons:
+    if cons and all(c.kind == "mean" for c in dp.spec.constraints):
+        # linear constraints only: SLSQP keeps every iterate on them (to rounding)
+        slsqp = [{"type": "eq" if lc.lb[0] == lc.ub[0] else "ineq",
+                  "fun": (lambda z, lc=lc: lc.A @ z - lc.lb) if lc.lb[0] > -np.inf else (lambda z, lc=lc: lc.ub - lc.A @ z),
+                  "jac": (lambda z, lc=lc: lc.A) if lc.lb[0] > -np.inf else (lambda z, lc=lc: -lc.A)} for lc in cons]
+        res = minimize(fg, z0, jac=True, method="SLSQP", bounds=bounds, constraints=slsqp,
+                       options={"maxiter": opts.max_iterations, "ftol": opts.tolerance})
+    elif cons:
         res = minimize(lambda z: fg(z)[0], z0, jac=lambda z: fg(z)[1], method="trust-constr", bounds=bounds,
                        constraints=cons, options={"maxiter": opts.max_iterations, "gtol": opts.tolerance,
                                                   "xtol": opts.tolerance, "initial_tr_radius": 0.1})
@@ -195,8 +246,8 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
 
 def _feasible(dp: DesignProblem, x: np.ndarray, rtol: float = 1e-4) -> bool:
     for c in dp.spec.constraints:
-        target = c.value if c.value is not None else dp.mass0
-        m = dp.total_mass(x)
+        target = dp.constraint_target(c)
+        m = dp.constraint_value(c, x)
         if (c.relation == "equal" and abs(m - target) > rtol * target) or \
            (c.relation == "at_most" and m > target * (1 + rtol)) or \
            (c.relation == "at_least" and m < target * (1 - rtol)):

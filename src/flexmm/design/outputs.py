@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from flexmm.design.objectives import kinetic
+from flexmm.design.variables import element_values
 from flexmm.io.atomic import write_text_atomic
 from flexmm.io.cf import write_netcdf
 from flexmm.io.provenance import provenance_attrs
@@ -80,68 +82,122 @@ def fit_figure(ds, path: Path) -> Path:
 
 
 def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Path:
-    """Before/after: the design profile of each per-element variable and each objective term's
-    observable over time (force on the region, or its kinetic energy), start vs best."""
+    """Before/after: the design profile of each per-element variable (a 2D field: start and best
+    maps), each objective term's observable over time (force on the region, or its kinetic
+    energy; a share: the region's and the reference's), start vs best, and on a sheet with an
+    energy objective the time-mean kinetic energy of every unit, start and best, regions outlined."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     profiles = [v for v in dp.design.variables if v.target is not None]
-    n_rows = len(profiles) + len(dp.objective.terms)
-    fig, axes = plt.subplots(n_rows, 1, figsize=(7, 2.2 * n_rows + 0.4), squeeze=False)
-    row = 0
+    energy_terms = [t for t in dp.objective.terms if t.spec.kind != "peak_force"]
+    sheet_map = bool(energy_terms) and dp.problem.system.site_grid()[1].max() > 0
+    n_rows = len(profiles) + len(dp.objective.terms) + int(sheet_map)
+    fig = plt.figure(figsize=(9, 2.5 * n_rows + 0.4))
+    grid = fig.add_gridspec(n_rows, 2)
+    r = 0
+    lattice = dp.design.base["lattice"]
     for var in profiles:
-        ax = axes[row, 0]
-        for x, style, label in ((x_start, "--", "start"), (x_best, "-", "best")):
-            values = element_profile(dp, x, var)
-            ax.plot(np.arange(values.size), values, style, marker=".", label=label)
-        ax.set_xlabel({"x": "unit (column)", "y": "row"}[var.axis])
-        ax.set_ylabel(var.target)
-        ax.legend(fontsize=7)
-        row += 1
+        if var.profile == "spline2d":
+            fields = [element_values(lattice, var, dp.design.split(x)[dp.design.variables.index(var)])
+                      for x in (x_start, x_best)]
+            lo, hi = min(f.min() for f in fields), max(f.max() for f in fields)
+            for k, (f, label) in enumerate(zip(fields, ("start", "best"))):
+                ax = fig.add_subplot(grid[r, k])
+                im = ax.imshow(f, origin="lower", aspect="auto", vmin=lo, vmax=hi, cmap="viridis")
+                ax.set_title(f"{var.target} ({label}; mean {f.mean():.4g})", fontsize=9)
+                ax.set_xlabel("column")
+                ax.set_ylabel("row")
+                _outline(ax, dp)
+            fig.colorbar(im, ax=ax)
+        else:
+            ax = fig.add_subplot(grid[r, :])
+            for x, style, label in ((x_start, "--", "start"), (x_best, "-", "best")):
+                values = element_values(lattice, var, dp.design.split(x)[dp.design.variables.index(var)])
+                ax.plot(np.arange(values.size), values, style, marker=".", label=label)
+            ax.set_xlabel({"x": "unit (column)", "y": "row"}[var.axis])
+            ax.set_ylabel(var.target)
+            ax.legend(fontsize=7)
+        r += 1
     sc = dp.problem.system.scales
     t = dp.traj.times * sc.time_s * 1e3
     recs = {"start": dp.records(x_start), "best": dp.records(x_best)}
     raws = {"start": dp.design.raw(x_start), "best": dp.design.raw(x_best)}
     for term in dp.objective.terms:
-        ax = axes[row, 0]
+        ax = fig.add_subplot(grid[r, :])
         for label, style in (("start", "--"), ("best", "-")):
             rec, raw = recs[label], raws[label]
             if term.spec.kind == "peak_force":
-                y = rec.f[:, term.cols].sum(axis=1) * term.to_si
+                ax.plot(t, rec.f[:, term.cols].sum(axis=1) * term.to_si, style, lw=1, label=label)
                 ax.set_ylabel("force on region (N)")
-            else:
-                minv = raw.minv[term.dofs]
-                mass = np.where(minv > 0, 1.0 / np.where(minv > 0, minv, 1.0), 0.0)
-                y = 0.5 * (rec.v[:, term.cols] ** 2 * mass).sum(axis=1) * sc.energy
-                ax.set_ylabel("kinetic energy\nof region (J)")
-            ax.plot(t, y, style, lw=1, label=label)
-        ax.set_title(f"{term.spec.kind} (p = {term.spec.sharpness:g} norm over time): start {_fmt(dp, term, recs['start'], raws['start'])}, "
-                     f"best {_fmt(dp, term, recs['best'], raws['best'])}", fontsize=9)
+                continue
+            ax.plot(t, kinetic(rec, raw, term.cols, term.dofs)[2] * sc.energy, style, lw=1, color="tab:blue",
+                    label=f"region, {label}")
+            if term.ref_cols is not None:
+                ax.plot(t, kinetic(rec, raw, term.ref_cols, term.ref_dofs)[2] * sc.energy, style, lw=1,
+                        color="tab:gray", label=f"reference, {label}")
+            ax.set_ylabel("kinetic energy (J)")
+        v0, v1 = (term.value(recs[k], raws[k], dp.objective.times)[0] for k in ("start", "best"))
+        how = f" (p = {term.spec.sharpness:g} norm over time)" if term.spec.kind.startswith("peak") else ""
+        ax.set_title(f"{term.spec.kind}{how}: start {_fmt(dp, term, recs['start'], raws['start'])}, "
+                     f"best {_fmt(dp, term, recs['best'], raws['best'])} (x{v1 / v0 if v0 else np.nan:.3g})", fontsize=9)
         ax.set_xlabel("time (ms)")
         ax.legend(fontsize=7)
-        row += 1
+        r += 1
+    if sheet_map:
+        maps = [_mean_energy_map(dp, x) * sc.energy for x in (x_start, x_best)]
+        top = max(m.max() for m in maps)
+        for k, (m, label) in enumerate(zip(maps, ("start", "best"))):
+            ax = fig.add_subplot(grid[r, k])
+            im = ax.imshow(m, origin="lower", aspect="auto", vmin=0.0, vmax=top, cmap="magma")
+            ax.set_title(f"time-mean kinetic energy per unit ({label})", fontsize=9)
+            ax.set_xlabel("column")
+            ax.set_ylabel("row")
+            _outline(ax, dp)
+        fig.colorbar(im, ax=ax, label="J")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
 
 
+def _outline(ax, dp) -> None:
+    """Outline the objective's regions (and references) on a sheet map."""
+    from matplotlib.patches import Rectangle
+
+    col, row = dp.problem.system.site_grid()
+    for term in dp.objective.terms:
+        for dofs, color in ((term.dofs, "white"), (term.ref_dofs, "0.6")):
+            if dofs is None:
+                continue
+            sites = np.unique(np.asarray(dofs) % dp.problem.system.n_sites)
+            c, rr = col[sites], row[sites]
+            ax.add_patch(Rectangle((c.min() - 0.5, rr.min() - 0.5), c.max() - c.min() + 1, rr.max() - rr.min() + 1,
+                                   fill=False, ec=color, lw=1))
+
+
+def _mean_energy_map(dp, x: np.ndarray) -> np.ndarray:
+    """(rows, cols) time-mean kinetic energy of every unit over the design's run (model units)."""
+    from flexmm.design.gradient import Trajectory
+
+    s = dp.problem.system
+    tr = dp.traj
+    full = Trajectory(tr.args, tr.terms, tr.h, tr.nsteps, tr.stride, np.arange(s.ndof), tr.t0)
+    raw = dp.design.raw(x)
+    rec, _ = full.run(raw, segment=tr.nsteps + 1)
+    mass = np.where(raw.minv > 0, 1.0 / np.where(raw.minv > 0, raw.minv, 1.0), 0.0)
+    e = 0.5 * (rec.v**2 * mass).mean(axis=0)
+    per_site = e[: len(s.fields) * s.n_sites].reshape(len(s.fields), s.n_sites).sum(axis=0)
+    col, row = s.site_grid()
+    out = np.zeros((row.max() + 1, col.max() + 1))
+    np.add.at(out, (row, col), per_site)
+    return out
+
+
 def _fmt(dp, term, rec, raw) -> str:
     from flexmm.design.objectives import UNITS
 
-    return f"{term.value(rec, raw, dp.objective.times)[0] * term.to_si:.4g} {UNITS[term.spec.kind]}"
-
-
-def element_profile(dp, x: np.ndarray, var) -> np.ndarray:
-    """Per-unit values of a per-element variable in the design ``x`` (SI)."""
-    from flexmm.design.variables import spline_values
-
-    from flexmm.design.variables import profile_lines
-
-    vals = dp.design.split(x)[dp.design.variables.index(var)]
-    n = len(profile_lines(dp.design.base["lattice"], var.axis))
-    if var.profile == "spline":
-        return spline_values(vals, n)
-    return np.linspace(vals[0], vals[-1], n)
+    unit = UNITS[term.spec.kind]
+    return f"{term.value(rec, raw, dp.objective.times)[0] * term.to_si:.4g}" + (f" {unit}" if unit != "1" else "")

@@ -11,7 +11,19 @@ list (``k_rot_n_m_per_rad``, ``mass_kg``, ``bond.k1_n_per_m``, ...) with a ``pro
   (a hinge target: the hinges touching each unit, so a hinge between two units takes the value
   written last). It is linear in
   the values and stays between the smallest and largest of them, so the bounds hold at every
-  unit (an interpolating spline can overshoot, e.g. to a negative mass).
+  unit (an interpolating spline can overshoot, e.g. to a negative mass);
+- ``spline2d`` (``knots`` × ``knots_y`` values, row-major: the ``knots`` values along x of the
+  first row of control points, then the next): a sheet's 2D field, the tensor product of the
+  clamped B-splines over its columns and its rows, one defect per unit in increasing site order
+  (a hinge target: every hinge takes the value of the later of its two units — the right one of
+  a horizontal hinge, the upper one of a vertical hinge, the top-row one of a periodic wrap).
+
+The map from the values to the raw arrays is found by central differences of the scene builder.
+When it is affine (a stiffness target: the tables hold the value over fixed scales), the
+Jacobian found at one design predicts the raw arrays built at the next exactly; ``Design``
+checks that prediction against the build each evaluation makes anyway and then reuses the
+Jacobian (a per-unit 2D field of a sheet launched with an exact soliton costs tens of builds of
+0.1–0.3 s otherwise), recomputing it whenever the prediction fails.
 
 Variables are appended to the scene's own variations, so the lattice's scales stay those of
 its base parameters and every design is a runnable scene (``Design.scene_data``). The map from
@@ -46,8 +58,9 @@ class Variable(Strict):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     path: str | None = Field(None, description="dotted scene path of a scalar (e.g. damping.viscous.damping_ratio)")
     target: str | None = Field(None, description="per-element lattice variation target (e.g. k_rot_n_m_per_rad)")
-    profile: Literal["uniform", "linear", "spline"] = "uniform"
-    knots: int = Field(4, ge=2, le=200, description="spline knots (profile: spline)")
+    profile: Literal["uniform", "linear", "spline", "spline2d"] = "uniform"
+    knots: int = Field(4, ge=2, le=200, description="spline knots (profile: spline; spline2d: along x)")
+    knots_y: int | None = Field(None, ge=2, le=200, description="spline2d: knots along y (the rows)")
     axis: Literal["x", "y"] = Field("x", description="profiles run along the columns (x) or the rows (y) of a sheet")
     initial: Finite | list[Finite] = Field(description="start value (a list: one per value of the profile)")
     bounds: tuple[Finite, Finite] | None = Field(None, description="[low, high] for every value")
@@ -60,6 +73,10 @@ class Variable(Strict):
             raise ValueError(f"profile {self.profile!r} needs a target (a path is a single scalar)")
         if self.path is not None and self.axis != "x":
             raise ValueError("axis applies to a target's profile, not to a path")
+        if (self.profile == "spline2d") != (self.knots_y is not None):
+            raise ValueError("profile spline2d needs knots_y (and knots_y only applies to spline2d)")
+        if self.profile == "spline2d" and self.axis != "x":
+            raise ValueError("a spline2d field spans both axes: leave axis unset")
         if isinstance(self.initial, list) and len(self.initial) not in (1, self.size):
             raise ValueError(f"initial has {len(self.initial)} values; profile {self.profile} takes {self.size}")
         if self.bounds is not None and not self.bounds[0] < self.bounds[1]:
@@ -68,6 +85,8 @@ class Variable(Strict):
 
     @property
     def size(self) -> int:
+        if self.profile == "spline2d":
+            return self.knots * self.knots_y
         return {"uniform": 1, "linear": 2, "spline": self.knots}[self.profile]
 
     def start(self) -> np.ndarray:
@@ -96,6 +115,30 @@ def spline_values(coefficients: np.ndarray, n: int) -> np.ndarray:
     inner = np.linspace(0.0, n - 1.0, c.size - k + 1)
     t = np.concatenate([np.full(k, 0.0), inner, np.full(k, n - 1.0)])
     return BSpline(t, c, k)(np.arange(n, dtype=float))
+
+
+def spline_basis(knots: int, n: int) -> np.ndarray:
+    """(n, knots): column k is the clamped B-spline of ``spline_values`` with control point k set to 1."""
+    return np.stack([spline_values(np.eye(knots)[k], n) for k in range(knots)], axis=1)
+
+
+def spline2d_values(coefficients: np.ndarray, knots: int, knots_y: int, n_rows: int, n_cols: int) -> np.ndarray:
+    """(n_rows, n_cols) field of the tensor-product clamped B-spline with (knots_y, knots) control values."""
+    c = np.asarray(coefficients, float).reshape(knots_y, knots)
+    return spline_basis(knots_y, n_rows) @ c @ spline_basis(knots, n_cols).T
+
+
+def element_values(lattice: dict, var: Variable, vals: np.ndarray) -> np.ndarray:
+    """The per-unit values a target variable writes (a sheet's spline2d: (rows, cols); otherwise
+    one per column or row of ``profile_lines``)."""
+    if var.profile == "spline2d":
+        if "n_cols" not in lattice:
+            raise GradientError(f"variable {var.name!r}: profile spline2d needs a sheet (a lattice with rows)")
+        return spline2d_values(vals, var.knots, var.knots_y, int(lattice["n_rows"]), int(lattice["n_cols"]))
+    n = len(profile_lines(lattice, var.axis))
+    if var.profile == "spline":
+        return spline_values(vals, n)
+    return np.linspace(vals[0], vals[-1], n)
 
 
 def profile_lines(lattice: dict, axis: str) -> list[list[int]]:
@@ -127,6 +170,8 @@ class Design:
         self.bounds = (np.asarray(lo, float), np.asarray(hi, float))
         self.scales = None
         self.scales = self.build(self.x0)[0].scales
+        self._affine: tuple | None = None  # (x, raw(x), Jacobian) when the map looked affine
+        self.jacobian_builds = 0
 
     def split(self, x: np.ndarray) -> list[np.ndarray]:
         return np.split(np.asarray(x, float), np.cumsum(self.sizes)[:-1]) if self.variables else []
@@ -145,6 +190,10 @@ class Design:
                 if var.axis == "y":
                     ramp["axis"] = "y"
                 variations.append(ramp)
+            elif var.profile == "spline2d":
+                field = element_values(lat, var, vals).ravel()  # site = row · n_cols + col
+                variations += [{"kind": "defects", "target": var.target, "sites": [site], "value": float(v)}
+                               for site, v in enumerate(field)]
             else:
                 lines = profile_lines(lat, var.axis)
                 values = spline_values(vals, len(lines))
@@ -171,10 +220,37 @@ class Design:
         system, terms, damp = self.build(x)
         return raw_of(system, terms, damp)
 
-    def jacobian(self, x: np.ndarray) -> list[Raw]:
-        """d raw / d x_k for every value k, by central differences of the builder."""
-        out = []
+    def jacobian(self, x: np.ndarray, raw: Raw | None = None) -> list[Raw]:
+        """d raw / d x_k for every value k, by central differences of the builder; given the raw
+        arrays built at ``x``, the Jacobian of an earlier design is reused if it predicts them."""
         x = np.asarray(x, float)
+        if raw is not None and self._affine is not None and self._predicts(x, raw):
+            return self._affine[2]
+        out = self._differences(x)
+        if raw is not None:
+            self._affine = (x.copy(), raw, out)
+        return out
+
+    def _predicts(self, x: np.ndarray, raw: Raw) -> bool:
+        """raw(x) = raw(x_ref) + J (x − x_ref) to rounding (relative 1e-9 of each array's size)?"""
+        x_ref, raw_ref, jac = self._affine
+        pred = raw_ref
+        for k, d in enumerate(jac):
+            if x[k] != x_ref[k]:
+                pred = pred.axpy(x[k] - x_ref[k], d)
+        for name, a in raw.items():
+            b = getattr(pred, name)
+            if a.shape != b.shape or not np.array_equal(np.isfinite(a), np.isfinite(b)):
+                return False
+            fin = np.isfinite(a)
+            scale = max(float(np.abs(a[fin]).max(initial=0.0)), 1e-300)
+            if np.abs(a[fin] - b[fin]).max(initial=0.0) > 1e-9 * scale:
+                return False
+        return True
+
+    def _differences(self, x: np.ndarray) -> list[Raw]:
+        out = []
+        self.jacobian_builds += 2 * x.size
         for k in range(x.size):
             step = BUILD_STEP * max(abs(x[k]), 1e-300) if x[k] != 0 else BUILD_STEP
             xp, xm = x.copy(), x.copy()
@@ -184,9 +260,9 @@ class Design:
             out.append(rp.slope(rm, 2.0 * step))
         return out
 
-    def chain(self, x: np.ndarray, graw: Raw) -> np.ndarray:
-        """dJ/dx from dJ/draw."""
-        return np.array([graw.dot(d) for d in self.jacobian(x)])
+    def chain(self, x: np.ndarray, graw: Raw, raw: Raw | None = None) -> np.ndarray:
+        """dJ/dx from dJ/draw (``raw``: the arrays built at x, to reuse an affine map's Jacobian)."""
+        return np.array([graw.dot(d) for d in self.jacobian(x, raw)])
 
 
 def finite_difference(f, x: np.ndarray, k: int, rel_steps=(1e-3, 1e-4, 1e-5, 1e-6, 1e-7)) -> float:
