@@ -17,7 +17,7 @@ def design(
                                         "central differences at the start point and stop; the last line is the "
                                         "worst relative error (exit 1 above 1e-6)."),
 ) -> None:
-    """Optimise a scene's design variables for an objective of its run (L-BFGS-B / trust-constr).
+    """Optimise a scene's design variables for an objective of its run (L-BFGS-B, SLSQP or trust-constr).
 
     Writes DIR/history.nc after every evaluation (variables, objective, terms, gradient norm),
     then DIR/best_scene.yaml (runnable) and DIR/before_after.png.
