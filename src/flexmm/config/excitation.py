@@ -182,6 +182,30 @@ class BoundaryDisplacement(EndDrive):
         return 0.0 if self.amplitude_m is None else math.pi * abs(self.amplitude_m) / self.duration_s
 
 
+class BoundaryForce(EndDrive):
+    """A force pulse F_0(t) on the end units, or a moment pulse on their staggered rotation θ.
+
+    Unlike a prescribed displacement it holds no DOF, so it also drives an end that a
+    predeformation has displaced (a loaded end keeps its load; the pulse adds to it).
+    """
+
+    kind: Literal["boundary_force"]
+    shape: Literal["half_sine", "smooth_step", "gaussian"] = "half_sine"
+    amplitude_n: Finite | None = Field(None, description="peak force, positive into the lattice (N)")
+    amplitude_n_m: Finite | None = Field(
+        None, description="instead: peak moment on the staggered rotation θ of the driven units (N m, "
+        "positive increases θ); u, v stay free"
+    )
+    duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")
+
+    @model_validator(mode="after")
+    def _one_amplitude(self):
+        exactly_one(self, "amplitude_n", "amplitude_n_m", ("force", "moment"))
+        if self.angle_deg and self.amplitude_n_m is not None:
+            raise ValueError("angle_deg tilts a force drive; a moment has no direction")
+        return self
+
+
 class Soliton(Excitation):
     """Start from the exact continuum vector soliton (docs/physics.md §1.3) at a given site."""
 
@@ -311,6 +335,7 @@ EXCITATIONS: dict[str, ExcitationSpec] = _registry(
     ExcitationSpec(Impact, "flexmm.assemble:apply_impact", combinable=True),
     ExcitationSpec(Shaker, "flexmm.assemble:apply_shaker", combinable=True),
     ExcitationSpec(BoundaryDisplacement, "flexmm.assemble:apply_boundary_displacement", combinable=True),
+    ExcitationSpec(BoundaryForce, "flexmm.assemble:apply_boundary_force", combinable=True),
     ExcitationSpec(Soliton, "flexmm.assemble:apply_solitons"),
     ExcitationSpec(Solitons, "flexmm.assemble:apply_solitons"),
     ExcitationSpec(Kicks, "flexmm.assemble:apply_kicks", combinable=True),
