@@ -125,6 +125,15 @@ class EndDrive(Excitation):
         return _edge_issue(self.end)
 
 
+def _along_or_about(exc, along: str, about: str, names: tuple[str, str], tilt: str):
+    """Exactly one of an amplitude along the drive direction or about the rotation; a tilt
+    (``angle_deg``) only for the former."""
+    exactly_one(exc, along, about, names)
+    if exc.angle_deg and getattr(exc, about) is not None:
+        raise ValueError(f"angle_deg tilts {tilt} has no direction")
+    return exc
+
+
 class Shaker(EndDrive):
     """Harmonic boundary drive at 10 Hz–10 kHz, with a smooth ramp-up (and ramp-down)."""
 
@@ -172,10 +181,8 @@ class BoundaryDisplacement(EndDrive):
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        exactly_one(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"))
-        if self.angle_deg and self.amplitude_rad is not None:
-            raise ValueError("angle_deg tilts a displacement drive; a prescribed rotation has no direction")
-        return self
+        return _along_or_about(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"),
+                               "a displacement drive; a prescribed rotation")
 
     def imposed_velocity_m_s(self) -> float:
         # a prescribed rotation (amplitude_rad): no imposed velocity scale
@@ -200,10 +207,7 @@ class BoundaryForce(EndDrive):
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        exactly_one(self, "amplitude_n", "amplitude_n_m", ("force", "moment"))
-        if self.angle_deg and self.amplitude_n_m is not None:
-            raise ValueError("angle_deg tilts a force drive; a moment has no direction")
-        return self
+        return _along_or_about(self, "amplitude_n", "amplitude_n_m", ("force", "moment"), "a force drive; a moment")
 
 
 class Soliton(Excitation):
