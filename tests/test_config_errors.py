@@ -88,7 +88,7 @@ CASES = {
     "theta0_out_of_range": (variant(("  a_m: 0.016\n", "  a_m: 0.016\n  theta0_rad: 1.0\n")), "theta0_rad:",
                             "lattice.theta0_rad", ["|θ0| < π/4", "1.0"]),
     "driven_end_without_excitation": (variant((IMPACT, "excitation:\n  kind: none\n")), "left: driven",
-                                      "lattice.left", ["'driven'", "no impact, shaker or boundary_displacement"]),
+                                      "lattice.left", ["'driven'", "no impact, shaker, boundary_displacement or boundary_force"]),
     "soliton_center_outside": (
         variant((IMPACT, "excitation:\n  kind: soliton\n  amplitude_rad: 0.3\n  center_site: 25\n"),
                 ("left: driven", "left: free")),

@@ -175,14 +175,28 @@ def apply_boundary_displacement(system: System, scene: Scene, exc, terms: dict) 
         amp = exc.amplitude_rad
     else:
         amp = direction * exc.amplitude_m / sc.length_m
-    dur = exc.duration_s / sc.time_s
-    shape = SHAPES[exc.shape]
+    _drive(system, exc, terms, dofs, MODE_DISPLACEMENT, SHAPES[exc.shape], _pulse_row(system, exc, amp))
+
+
+def _pulse_row(system: System, exc, amp: float) -> list[float]:
+    """The waveform row of a pulse of ``exc.shape`` and ``exc.duration_s`` (a gaussian's FWHM,
+    centred at twice it)."""
+    dur = exc.duration_s / system.scales.time_s
     if exc.shape == "gaussian":
-        sigma = dur / (2.0 * math.sqrt(2.0 * math.log(2.0)))
-        row = [amp, sigma, 2.0 * dur, 0.0]
+        return [amp, dur / (2.0 * math.sqrt(2.0 * math.log(2.0))), 2.0 * dur, 0.0]
+    return [amp, dur, 0.0, 0.0]
+
+
+def apply_boundary_force(system: System, scene: Scene, exc, terms: dict) -> None:
+    """An applied force (or moment) pulse on the end units; no DOF is held."""
+    sc = system.scales
+    if exc.amplitude_n_m is not None:  # a moment on the staggered rotation of the end units
+        dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_n_m"), exc.sites)
+        amp = exc.amplitude_n_m / sc.generalised_force("angle")
     else:
-        row = [amp, dur, 0.0, 0.0]
-    _drive(system, exc, terms, dofs, MODE_DISPLACEMENT, shape, row)
+        dofs = _end_dofs(system, exc.end, sites=exc.sites)
+        amp = INWARD[exc.end] * exc.amplitude_n / sc.force
+    _drive(system, exc, terms, dofs, MODE_FORCE, SHAPES[exc.shape], _pulse_row(system, exc, amp))
 
 
 def _drive(system: System, exc, terms: dict, dofs: list[int], mode: int, shape: int, row: list) -> None:

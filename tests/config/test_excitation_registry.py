@@ -14,12 +14,14 @@ from flexmm.config.excitation import EXCITATIONS, ExcitationConfig
 IMPACT = {"kind": "impact", "velocity_m_s": -2.0}
 SHAKER = {"kind": "shaker", "end": "right", "frequency_hz": 100.0, "amplitude_m": 1e-4}
 PULSE = {"kind": "boundary_displacement", "amplitude_m": -1e-4, "duration_s": 1e-3}
+FORCE_PULSE = {"kind": "boundary_force", "end": "right", "amplitude_n": -2.0, "duration_s": 1e-3}
 
 #: kind -> (example, wave sources, imposed velocity (m/s), planar for a row-periodic sheet)
 EXAMPLES = {
     "impact": (IMPACT, ["left"], 2.0, True),
     "shaker": (SHAKER, ["right"], 2 * math.pi * 100.0 * 1e-4, True),
     "boundary_displacement": (PULSE, ["left"], math.pi * 1e-4 / 1e-3, True),
+    "boundary_force": (FORCE_PULSE, ["right"], 0.0, True),  # a force imposes no velocity
     "soliton": ({"kind": "soliton", "amplitude_rad": 0.3, "center_site": 7}, [7], 0.0, True),
     "solitons": ({"kind": "solitons", "pulses": [{"amplitude_rad": 0.3, "center_site": 7},
                                                  {"amplitude_rad": -0.3, "center_site": 30, "direction": -1}]},
@@ -65,7 +67,7 @@ def test_end_hooks_follow_the_end_and_sites() -> None:
 
 def test_combined_accepts_only_combinable_kinds() -> None:
     allowed = {k for k, spec in EXCITATIONS.items() if spec.combinable}
-    assert allowed == {"impact", "shaker", "boundary_displacement", "kicks"}
+    assert allowed == {"impact", "shaker", "boundary_displacement", "boundary_force", "kicks"}
     with pytest.raises(ValueError):
         _exc({"kind": "combined", "parts": [IMPACT, EXAMPLES["soliton"][0]]})
 
@@ -78,7 +80,7 @@ def _scene(excitation: dict, **lattice) -> dict:
 
 def test_a_driven_end_needs_an_end_excitation_on_it() -> None:
     scene_from_dict(_scene({"kind": "combined", "parts": [IMPACT, SHAKER]}, right="driven"))
-    with pytest.raises(ConfigError, match="no impact, shaker or boundary_displacement acts on the right"):
+    with pytest.raises(ConfigError, match="no impact, shaker, boundary_displacement or boundary_force acts on the right"):
         scene_from_dict(_scene(IMPACT, right="driven"))
     with pytest.raises(ConfigError, match="outside 0..39"):
         scene_from_dict(_scene(EXAMPLES["solitons"][0] | {"pulses": [{"amplitude_rad": 0.1, "center_site": 40}]}))

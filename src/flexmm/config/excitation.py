@@ -125,6 +125,15 @@ class EndDrive(Excitation):
         return _edge_issue(self.end)
 
 
+def _along_or_about(exc, along: str, about: str, names: tuple[str, str], tilt: str):
+    """Exactly one of an amplitude along the drive direction or about the rotation; a tilt
+    (``angle_deg``) only for the former."""
+    exactly_one(exc, along, about, names)
+    if exc.angle_deg and getattr(exc, about) is not None:
+        raise ValueError(f"angle_deg tilts {tilt} has no direction")
+    return exc
+
+
 class Shaker(EndDrive):
     """Harmonic boundary drive at 10 Hz–10 kHz, with a smooth ramp-up (and ramp-down)."""
 
@@ -172,14 +181,33 @@ class BoundaryDisplacement(EndDrive):
 
     @model_validator(mode="after")
     def _one_amplitude(self):
-        exactly_one(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"))
-        if self.angle_deg and self.amplitude_rad is not None:
-            raise ValueError("angle_deg tilts a displacement drive; a prescribed rotation has no direction")
-        return self
+        return _along_or_about(self, "amplitude_m", "amplitude_rad", ("displacement", "rotation"),
+                               "a displacement drive; a prescribed rotation")
 
     def imposed_velocity_m_s(self) -> float:
         # a prescribed rotation (amplitude_rad): no imposed velocity scale
         return 0.0 if self.amplitude_m is None else math.pi * abs(self.amplitude_m) / self.duration_s
+
+
+class BoundaryForce(EndDrive):
+    """A force pulse F_0(t) on the end units, or a moment pulse on their staggered rotation θ.
+
+    Unlike a prescribed displacement it holds no DOF, so it also drives an end that a
+    predeformation has displaced (a loaded end keeps its load; the pulse adds to it).
+    """
+
+    kind: Literal["boundary_force"]
+    shape: Literal["half_sine", "smooth_step", "gaussian"] = "half_sine"
+    amplitude_n: Finite | None = Field(None, description="peak force, positive into the lattice (N)")
+    amplitude_n_m: Finite | None = Field(
+        None, description="instead: peak moment on the staggered rotation θ of the driven units (N m, "
+        "positive increases θ); u, v stay free"
+    )
+    duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")
+
+    @model_validator(mode="after")
+    def _one_amplitude(self):
+        return _along_or_about(self, "amplitude_n", "amplitude_n_m", ("force", "moment"), "a force drive; a moment")
 
 
 class Soliton(Excitation):
@@ -311,6 +339,7 @@ EXCITATIONS: dict[str, ExcitationSpec] = _registry(
     ExcitationSpec(Impact, "flexmm.assemble:apply_impact", combinable=True),
     ExcitationSpec(Shaker, "flexmm.assemble:apply_shaker", combinable=True),
     ExcitationSpec(BoundaryDisplacement, "flexmm.assemble:apply_boundary_displacement", combinable=True),
+    ExcitationSpec(BoundaryForce, "flexmm.assemble:apply_boundary_force", combinable=True),
     ExcitationSpec(Soliton, "flexmm.assemble:apply_solitons"),
     ExcitationSpec(Solitons, "flexmm.assemble:apply_solitons"),
     ExcitationSpec(Kicks, "flexmm.assemble:apply_kicks", combinable=True),
