@@ -25,7 +25,7 @@ import numpy as np
 from flexmm._signals import signal_of
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
-from flexmm.integrators.parallel import advance_kernel, choose_threads
+from flexmm.integrators.parallel import advance_kernel, choose_threads, prepared
 from flexmm.integrators.runaway import DRIFT_TOL, RunawayGuard, drift_allowance
 from flexmm.models.kernels import model_energy
 
@@ -69,6 +69,9 @@ class Stepper:
         self.acc = spec.new_acc(system.ndof, rtol=rtol, atol=atol, max_step=max_step)
         self.ledger = Accumulators(self.acc)
         self.kernel, self.threads = advance_kernel(spec, system.args, system.inv_mass, damp, terms, threads)
+        self._prepared = prepared(self.kernel)  # (prepare, advance taking the tables) of a fused kernel
+        self._tables: tuple | None = None
+        self._tables_of: tuple = ()
         self.q = np.array(system.q0 if q0 is None else q0, float)
         self.v = np.array(system.v0 if v0 is None else v0, float)
         self.f = np.zeros_like(self.q)
@@ -88,18 +91,30 @@ class Stepper:
         """Compile (or load from numba's cache) the advance kernel on copies; returns seconds."""
         if not self._warm:
             t0 = time.perf_counter()
-            self.kernel(self.args, self.q.copy(), self.v.copy(), self.f.copy(), self.system.inv_mass,
-                          self.damp, self.terms, self.t, self.h, 1, self.acc.copy())
+            self._call(self.q.copy(), self.v.copy(), self.f.copy(), 1, self.acc.copy())
             self.compile_s = time.perf_counter() - t0
             self._warm = True
         return self.compile_s
+
+    def _call(self, q, v, f, nsteps: int, acc) -> float:
+        """The kernel on (q, v, f, acc) from self.t; a fused kernel's tables (``parallel.prepared``:
+        they depend on the parameters, masses, damping and h only) are built on the first call
+        and again only when h or one of those arrays is replaced."""
+        call = (self.args, q, v, f, self.system.inv_mass, self.damp, self.terms, self.t, self.h, nsteps, acc)
+        if self._prepared is None:
+            return self.kernel(*call)
+        key = (self.h, self.args, self.system.inv_mass, self.damp)
+        if (self._tables is None or key[0] != self._tables_of[0]
+                or any(a is not b for a, b in zip(key[1:], self._tables_of[1:]))):
+            self._tables = self._prepared[0](self.args, self.system.inv_mass, self.damp, self.h)
+            self._tables_of = key
+        return self._prepared[1](self._tables, *call)
 
     def advance(self, nsteps: int) -> None:
         """Advance ``nsteps`` steps of size h (adaptive: to t + nsteps·h) in place."""
         self.warm_up()
         w0, c0 = time.perf_counter(), time.process_time()
-        self.t = self.kernel(self.args, self.q, self.v, self.f, self.system.inv_mass, self.damp,
-                               self.terms, self.t, self.h, int(nsteps), self.acc)
+        self.t = self._call(self.q, self.v, self.f, int(nsteps), self.acc)
         self.wall_s += time.perf_counter() - w0
         self.cpu_s += time.process_time() - c0
 
