@@ -35,7 +35,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before numba loads its Op
 import numba
 import numpy as np
 
-from flexmm.integrators.verlet import sheet_fusable, sheet_verlet_advance
+from flexmm.integrators.verlet import (sheet_fusable, sheet_prepare, sheet_verlet_advance,
+                                      sheet_verlet_advance_prepared)
 from flexmm.integrators.verlet_chain import (chain_verlet_advance, chain_verlet_advance_parallel,
                                              chain_verlet_advance_parallel_prepared, chain_verlet_advance_prepared,
                                              fusable, prepare)
@@ -53,6 +54,7 @@ FUSED: dict[tuple[str, type], tuple[Callable, Callable | None, Callable]] = {
 PREPARED: dict[Callable, tuple[Callable, Callable]] = {
     chain_verlet_advance: (prepare, chain_verlet_advance_prepared),
     chain_verlet_advance_parallel: (prepare, chain_verlet_advance_parallel_prepared),
+    sheet_verlet_advance: (sheet_prepare, sheet_verlet_advance_prepared),
 }
 PARALLEL_MIN_SITES = 100_000
 #: a CPU busier than this over the sampling window (other processes) is not counted as free
