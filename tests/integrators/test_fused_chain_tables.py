@@ -47,13 +47,13 @@ def test_stepper_keeps_its_tables_and_rebuilds_them_when_h_changes() -> None:
     spec = INTEGRATORS["velocity_verlet"]
     st = Stepper(spec, s, problem.terms, problem.damp, 0.1, threads=1, check_energy=False)
     st.advance(5)
-    tables = st._tables
+    tables = st.kernel.tables
     assert tables is not None
     st.advance(5)
-    assert st._tables is tables  # kept
+    assert st.kernel.tables is tables  # kept
     st.h = 0.05
     st.advance(6)
-    assert st._tables is not tables  # h changed: rebuilt
+    assert st.kernel.tables is not tables  # h changed: rebuilt
     q, v, f, acc = s.q0.copy(), s.v0.copy(), np.zeros(s.ndof), spec.new_acc(s.ndof)
     apply_prescribed(q, v, 0.0, *problem.terms.drives)
     spec.init(s.args, q, v, 0.0, f, problem.terms)

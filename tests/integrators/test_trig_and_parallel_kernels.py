@@ -238,7 +238,7 @@ def test_adaptive_threads_gives_the_same_bits_and_follows_the_faster_count() -> 
     """The threaded fused advance runs on two threads or on the serial kernel, whichever was
     faster lately (on one when other processes hold the cores); either way the state is the
     serial kernel's, bit for bit, with or without prepared tables."""
-    from flexmm.integrators.parallel import AdaptiveThreads, prepared
+    from flexmm.integrators.parallel import AdaptiveThreads, keep_tables
 
     problem = chain_problem(3 * RANGE_MIN + 5, theta0_rad=0.1, n_lateral=1)
     s = problem.system
@@ -252,9 +252,9 @@ def test_adaptive_threads_gives_the_same_bits_and_follows_the_faster_count() -> 
     ref = _advance(chain_verlet_advance, problem, q0, v0, 7, calls=12)
     for a, b in zip(out, ref):
         np.testing.assert_array_equal(a, b)
-    prepare, with_tables = prepared(adaptive)
-    tables = prepare(s.args, s.inv_mass, problem.damp, 0.1)
-    out = _advance(lambda *call: with_tables(tables, *call), problem, q0, v0, 7, calls=12)
+    kept = keep_tables(adaptive)  # its tables built once, on the first call
+    out = _advance(kept, problem, q0, v0, 7, calls=12)
+    assert kept.tables is not None and kept.counts is adaptive.counts
     for a, b in zip(out, ref):
         np.testing.assert_array_equal(a, b)
     assert adaptive.counts[1] >= 1 and adaptive.counts[2] >= 1  # both were tried

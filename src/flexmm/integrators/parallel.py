@@ -261,18 +261,44 @@ class AdaptiveThreads:
         return getattr(self.kernel, name)
 
 
-def prepared(kernel: Callable) -> tuple[Callable, Callable] | None:
-    """(prepare, advance taking the prepared tables first) of an advance whose tables a
-    ``Stepper`` may keep from call to call (``PREPARED``, or ``AdaptiveThreads`` over such
-    kernels), else None."""
+class KeptTables:
+    """An advance (same signature) whose fused kernel's tables (``PREPARED``: they depend on the
+    parameters, masses, damping and h only) are built on the first call and again only when h
+    or one of those arrays is replaced (arrays changed in place are not seen: build a new
+    stepper). ``tables`` the current ones; other attributes (``__name__``, numba's ``stats``,
+    ``AdaptiveThreads.counts``) are those of the kernel that runs, but the name, the fused
+    kernel's."""
+
+    def __init__(self, prepare: Callable, advance: Callable, target, name: str):
+        self._prepare, self._advance, self.target = prepare, advance, target
+        self.__name__ = name
+        self.tables: tuple | None = None
+        self._of: tuple = ()
+
+    def __call__(self, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+        if (self.tables is None or h != self._of[0]
+                or any(a is not b for a, b in zip((args, minv, damp), self._of[1:]))):
+            self.tables = self._prepare(args, minv, damp, h)
+            self._of = (h, args, minv, damp)
+        return self._advance(self.tables, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+
+    def __getattr__(self, name):
+        return getattr(self.target, name)
+
+
+def keep_tables(kernel: Callable) -> Callable:
+    """``kernel`` as a ``KeptTables`` where it is a fused advance with prepared tables
+    (``PREPARED``, or ``AdaptiveThreads`` over two such kernels), else ``kernel`` itself."""
     if isinstance(kernel, AdaptiveThreads):
         if kernel.serial in PREPARED and kernel.kernel in PREPARED:
-            return PREPARED[kernel.serial][0], lambda tables, *call: kernel(*call, tables=tables)
-        return None
+            return KeptTables(PREPARED[kernel.serial][0], lambda tables, *call: kernel(*call, tables=tables), kernel,
+                              kernel.__name__)
+        return kernel
     try:
-        return PREPARED.get(kernel)
+        entry = PREPARED.get(kernel)
     except TypeError:  # not hashable
-        return None
+        return kernel
+    return kernel if entry is None else KeptTables(entry[0], entry[1], entry[1], kernel.__name__)
 
 
 def advance_kernel(spec, args, minv: np.ndarray, damp: np.ndarray, terms, threads: int) -> tuple[Callable, int]:

@@ -25,7 +25,7 @@ import numpy as np
 from flexmm._signals import signal_of
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
-from flexmm.integrators.parallel import advance_kernel, choose_threads, prepared
+from flexmm.integrators.parallel import advance_kernel, choose_threads, keep_tables
 from flexmm.integrators.runaway import DRIFT_TOL, RunawayGuard, drift_allowance
 from flexmm.models.kernels import model_energy
 
@@ -68,10 +68,8 @@ class Stepper:
         self.adaptive = spec.adaptive and rtol is not None
         self.acc = spec.new_acc(system.ndof, rtol=rtol, atol=atol, max_step=max_step)
         self.ledger = Accumulators(self.acc)
-        self.kernel, self.threads = advance_kernel(spec, system.args, system.inv_mass, damp, terms, threads)
-        self._prepared = prepared(self.kernel)  # (prepare, advance taking the tables) of a fused kernel
-        self._tables: tuple | None = None
-        self._tables_of: tuple = ()
+        kernel, self.threads = advance_kernel(spec, system.args, system.inv_mass, damp, terms, threads)
+        self.kernel = keep_tables(kernel)  # a fused kernel's tables are built once, not per call
         self.q = np.array(system.q0 if q0 is None else q0, float)
         self.v = np.array(system.v0 if v0 is None else v0, float)
         self.f = np.zeros_like(self.q)
@@ -97,18 +95,8 @@ class Stepper:
         return self.compile_s
 
     def _call(self, q, v, f, nsteps: int, acc) -> float:
-        """The kernel on (q, v, f, acc) from self.t; a fused kernel's tables (``parallel.prepared``:
-        they depend on the parameters, masses, damping and h only) are built on the first call
-        and again only when h or one of those arrays is replaced."""
-        call = (self.args, q, v, f, self.system.inv_mass, self.damp, self.terms, self.t, self.h, nsteps, acc)
-        if self._prepared is None:
-            return self.kernel(*call)
-        key = (self.h, self.args, self.system.inv_mass, self.damp)
-        if (self._tables is None or key[0] != self._tables_of[0]
-                or any(a is not b for a, b in zip(key[1:], self._tables_of[1:]))):
-            self._tables = self._prepared[0](self.args, self.system.inv_mass, self.damp, self.h)
-            self._tables_of = key
-        return self._prepared[1](self._tables, *call)
+        return self.kernel(self.args, q, v, f, self.system.inv_mass, self.damp, self.terms, self.t, self.h, nsteps,
+                           acc)
 
     def advance(self, nsteps: int) -> None:
         """Advance ``nsteps`` steps of size h (adaptive: to t + nsteps·h) in place."""
