@@ -50,7 +50,7 @@ FUSED: dict[tuple[str, type], tuple[Callable, Callable | None, Callable]] = {
     ("velocity_verlet", SheetArgs): (sheet_verlet_advance, None, sheet_fusable),
 }
 #: fused advance -> (its tables of (args, minv, damp, h), the same advance taking them first):
-#: a ``Stepper`` builds the tables once, not on every call (``prepared``)
+#: a ``Stepper`` builds the tables once, not on every call (``keep_tables``)
 PREPARED: dict[Callable, tuple[Callable, Callable]] = {
     chain_verlet_advance: (prepare, chain_verlet_advance_prepared),
     chain_verlet_advance_parallel: (prepare, chain_verlet_advance_parallel_prepared),
