@@ -125,9 +125,10 @@ class BusyMeter:
     """CPUs that other processes kept busy, measured between calls without sleeping: over a
     window of at least ``WINDOW_S``, all the CPUs' busy time (/proc/stat) less this process's
     own CPU time, over the wall time. ``sample()`` returns the latest window's figure (None
-    until a window has passed or where /proc/stat cannot be read)."""
+    until a window has passed or where /proc/stat cannot be read). /proc/stat counts in ticks
+    (10 ms at 100 Hz), so a window of 0.2 s reads to about ±0.1 CPU."""
 
-    WINDOW_S = 0.05
+    WINDOW_S = 0.2
 
     def __init__(self):
         self.hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
@@ -185,7 +186,7 @@ class AdaptiveThreads:
     MIN_TIMED_STEPS = 8
     WINDOW = 5
     EXPLORE = 8
-    BUSY_MARGIN = 0.25
+    BUSY_MARGIN = 0.3
     QUIET_CHECKS = 4
 
     def __init__(self, serial: Callable, kernel: Callable, threads: int):
