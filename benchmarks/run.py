@@ -406,13 +406,15 @@ def _busy_loop() -> subprocess.Popen:
 
 def contention(sizes=(100_000, 1_000_000), repeats: int = 15) -> list[dict]:
     """One thread against two on the fused chain kernel, without and beside a busy loop (another
-    process holding a core): advances of the two steppers alternate (ABBA), ``repeats`` each.
+    process holding a core): advances of the steppers alternate in a cycle, ``repeats`` each.
     Prints each stepper's best and median rate (wall and per CPU-second), the ratio of the
     medians, and the paired ratios (two-thread / one-thread advance of the same pair) as
     median [quartiles] (min-max), so "never slower" can be judged against the spread (and a
     sign test: how likely that many lost pairs are if neither stepper is slower); the
     two-thread stepper's calls by thread count in that phase (``AdaptiveThreads``), and what
-    ``parallel.choose_threads`` picks. Note the machine's own load: other processes compete too."""
+    ``parallel.choose_threads`` picks. A second one-thread stepper runs in the same rotation as
+    a control: its paired ratio to the first is the noise floor of the comparison. Note the
+    machine's own load: other processes compete too."""
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.parallel import choose_threads
     from flexmm.integrators.stepper import Stepper
@@ -422,6 +424,7 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 15) -> list[dict]:
     for n in sizes:
         system, terms, damp = _chain(n)
         steppers = {th: Stepper(spec, system, terms, damp, 0.1, threads=th, check_energy=False) for th in (1, 2)}
+        steppers[0] = Stepper(spec, system, terms, damp, 0.1, threads=1, check_energy=False)  # the control
         for st in steppers.values():
             st.warm_up()
         steps = max(20, int(3e7 / n))
@@ -431,10 +434,10 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 15) -> list[dict]:
                 time.sleep(0.5)
                 auto = choose_threads(n)
                 before = dict(getattr(steppers[2].kernel, "counts", {}))
-                rates = {1: [], 2: []}
-                cpu_rates = {1: [], 2: []}
+                rates = {1: [], 2: [], 0: []}
+                cpu_rates = {1: [], 2: [], 0: []}
                 for rep in range(repeats):
-                    for th in ((1, 2) if rep % 2 == 0 else (2, 1)):  # ABBA: neither always goes first
+                    for th in (1, 2, 0):  # a plain cycle: none runs twice in a row (its state still in cache)
                         st = steppers[th]
                         w0, c0 = st.wall_s, st.cpu_s
                         st.advance(steps)
@@ -445,6 +448,9 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 15) -> list[dict]:
                 if busy is not None:
                     busy.kill()
                     busy.wait()
+            control = np.array(rates.pop(0)) / np.array(rates[1])
+            cpu_rates.pop(0)
+            c1, c2, c3 = (float(x) for x in np.percentile(control, [25, 50, 75]))
             med = {th: float(np.median(r)) for th, r in rates.items()}
             paired = np.array(rates[2]) / np.array(rates[1])
             q1, q2, q3 = (float(x) for x in np.percentile(paired, [25, 50, 75]))
@@ -460,13 +466,15 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 15) -> list[dict]:
                    **{f"threads{th}_per_cpu_s_best": max(r) for th, r in cpu_rates.items()},
                    "median_ratio": med[2] / med[1], "paired_ratio_median": q2, "paired_ratio_quartiles": (q1, q3),
                    "paired_ratio_range": (float(paired.min()), float(paired.max())), "pairs_lost": slower,
-                   "sign_test_p": p_slower, "verdict": verdict,
+                   "sign_test_p": p_slower, "verdict": verdict, "control_paired_ratio_median": c2,
+                   "control_paired_ratio_quartiles": (c1, c3),
                    "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
             print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'no busy loop      '}: one thread "
                   f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median ({max(cpu_rates[1]):.1f} per CPU-s); two-thread "
                   f"stepper {max(rates[2]):6.1f} best, {med[2]:6.1f} median ({max(cpu_rates[2]):.1f} per CPU-s); ratio of "
                   f"medians {med[2] / med[1]:.2f}x, paired {q2:.2f}x [{q1:.2f}, {q3:.2f}] ({paired.min():.2f}-"
-                  f"{paired.max():.2f}), {repeats} pairs: {verdict}; its calls by threads {counts}; choose_threads -> "
+                  f"{paired.max():.2f}), {repeats} pairs: {verdict}; control (another one-thread stepper) {c2:.2f}x [{c1:.2f}, "
+                  f"{c3:.2f}]; its calls by threads {counts}; choose_threads -> "
                   f"{auto} ({load})")
             out.append(row)
         del system, steppers

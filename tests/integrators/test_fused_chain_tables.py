@@ -12,7 +12,11 @@ from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.common import apply_prescribed
 from flexmm.integrators.stepper import Stepper
 from flexmm.integrators.verlet import verlet_advance
-from flexmm.integrators.verlet_chain import RANGE_MIN, chain_verlet_advance_prepared, prepare
+from flexmm.integrators.verlet_chain import (
+    RANGE_MIN,
+    chain_verlet_advance_prepared,
+    prepare,
+)
 from flexmm.models.hinge import BLOCK, S_KG, S_KR, S_THETA0
 
 
