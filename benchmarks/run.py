@@ -106,8 +106,8 @@ def throughput(sizes=(1_000, 100_000, 1_000_000, 10_000_000), threads=(1, 2), re
                graded_sizes=(100_000, 1_000_000, 10_000_000)) -> list[dict]:
     """Unit-steps per second of velocity Verlet on the LEGO chain (compile excluded); uniform
     chains for ``sizes``, graded ones (``_grade``) for ``graded_sizes``. Each call advances
-    max(20, 3e7/N) steps, so the per-call preparation of the fused kernel (``roofline`` prints
-    it) is included."""
+    max(20, 3e7/N) steps; the fused kernel's tables are prepared once per stepper, in its
+    warm-up (``roofline`` prints their cost)."""
     import numba
 
     from flexmm.integrators import INTEGRATORS
@@ -221,32 +221,32 @@ SHEET_FLOPS = 128
 
 
 def _sheet_bytes(system) -> float:
-    """Bytes per unit-step the fused sheet kernel (``verlet.sheet_verlet_advance``) moves when
-    nothing stays in cache from one step to the next, counted from its sweep: q and v read and
-    written 96, F and cos/sin written (and read for ownership) 80, θ0 8; the two hinges' shear
-    signs 16 when all hinges share their other parameters (``uniform_hinges``), else their
-    table rows 112; the kicks 24 unless each field's masses are equal."""
+    """Bytes per unit-step the fused sheet kernel (``verlet.sheet_verlet_advance_prepared``) moves
+    when nothing stays in cache from one step to the next, counted from its sweep: q and v read
+    and written 96, F written (and read for ownership) 48, θ0 8 (cos/sin live in a window of a
+    block and a row: none); the two hinges' shear signs 2 (int8) when all hinges share their
+    other parameters (``uniform_hinges``), else their table rows 112; the kicks 24 unless each
+    field's masses are equal."""
     from flexmm.models.sheet_kernels import uniform_hinges
 
     uni = uniform_hinges(system.args.hinge_prm)
     n = system.n_sites
     kicks = system.inv_mass.reshape(3, n)
     same = all(np.all(row == row[0]) for row in kicks)
-    return 96.0 + 80.0 + 8.0 + (16.0 if uni[0] == uni[0] else 112.0) + (0.0 if same else 24.0)
+    return 96.0 + 48.0 + 8.0 + (2.0 if uni[0] == uni[0] else 112.0) + (0.0 if same else 24.0)
 
 
 def _chain_bytes(system, damp, h: float = 0.1) -> float:
     """Bytes per unit-step of one sweep of the fused chain kernel: q and v read and written (64),
-    plus 8 for each parameter or kick column it streams where that column varies (the per-call
-    tables of ``verlet_chain._prepare``; a uniform chain streams none). The memory roof is
-    taken against these bytes, what a kernel sweeping the chain once per step moves; blocked in
-    time (``verlet_chain.TIME_BLOCK`` steps per sweep), the kernel moves them once per time
-    block (``roofline`` prints both)."""
-    from flexmm.integrators.verlet_chain import BLOCK, _is_damped, _prepare
+    plus 8 for each parameter or kick column it streams where that column varies (the tables of
+    ``verlet_chain.prepare``; a uniform chain streams none). The memory roof is taken against
+    these bytes, what a kernel sweeping the chain once per step moves; blocked in time
+    (``verlet_chain.TIME_BLOCK`` steps per sweep), the kernel moves them once per time block
+    (``roofline`` prints both)."""
+    from flexmm.integrators.verlet_chain import BLOCK, prepare
 
     n = system.n_sites
-    tables = _prepare(system.args, system.inv_mass, damp, h, _is_damped(system.inv_mass, damp))
-    flag = tables[3]
+    flag = prepare(system.args, system.inv_mass, damp, h)[3]
     sizes = np.minimum(BLOCK, n - BLOCK * np.arange(flag.shape[0]))
     return 64.0 + 8.0 * float((flag.sum(axis=1) * sizes).sum()) / n
 
@@ -259,15 +259,15 @@ def _time_block(steps: int) -> int:
 
 
 def _prepare_s(system, damp, repeats: int = 5) -> float:
-    """Seconds per call of the fused kernel's per-call preparation (``verlet_chain._prepare``)."""
-    from flexmm.integrators.verlet_chain import _is_damped, _prepare
+    """Seconds of the fused chain kernel's table preparation (``verlet_chain.prepare``): paid once
+    per ``Stepper`` (and again only if h or the arrays change), not per call."""
+    from flexmm.integrators.verlet_chain import prepare
 
-    damped = _is_damped(system.inv_mass, damp)
-    _prepare(system.args, system.inv_mass, damp, 0.1, damped)
+    prepare(system.args, system.inv_mass, damp, 0.1)
     walls = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        _prepare(system.args, system.inv_mass, damp, 0.1, damped)
+        prepare(system.args, system.inv_mass, damp, 0.1)
         walls.append(time.perf_counter() - t0)
     return min(walls)
 
@@ -334,29 +334,44 @@ def sheet_throughput(sizes=SHEET_SIZES, repeats: int = 7) -> list[dict]:
 def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=SHEET_SIZES,
              repeats: int = 5) -> list[dict]:
     """Bytes and flops per unit-step, achieved GB/s and GFLOP/s, against the triad bandwidth of
-    a working set of the same size (one thread): the memory roof is that bandwidth over the
-    bytes per unit-step. Chains (uniform; graded: k_r varies, so its column is streamed; all
-    graded: nine columns streamed, ``_grade_all``) with the fused Verlet kernel, and the sheet
-    stepper. The fused kernel's per-call preparation is
-    printed in steps of the same chain (it is included in the rates: max(20, 3e7/N) steps per call)."""
+    a working set of the same size (one thread). Two roofs for the chain:
+
+    - the sweep roof (the one the issue's targets are against): triad bandwidth over the bytes a
+      kernel sweeping the chain once per step moves (``_chain_bytes``);
+    - the time-blocked roof: over the bytes the fused kernel actually moves, once per
+      ``TIME_BLOCK`` steps (about TIME_BLOCK times higher: the kernel is then bound by its
+      arithmetic and the L2 cache, not by memory).
+
+    Chains (uniform; graded: k_r varies, so its column is streamed; all graded: nine columns
+    streamed, ``_grade_all``) with the fused Verlet kernel, and the sheet stepper. The fused
+    kernels' table preparation is paid once per stepper (in its warm-up, not in the rates); it
+    is printed in steps of the same chain."""
     from flexmm.integrators import INTEGRATORS
 
     spec = INTEGRATORS["velocity_verlet"]
     out = []
 
-    def report(what, n, rate, rate_med, rate_cpu, nbytes, flops, extra=""):
+    def report(what, n, rate, rate_med, rate_cpu, nbytes, flops, extra="", blocked_bytes=None):
         bw, bw_med, bw_cpu = _triad_gbs(nbytes * n)
         roof, roof_cpu = bw * 1e9 / nbytes / 1e6, bw_cpu * 1e9 / nbytes / 1e6
         row = {"what": what, "n_units": n, "M_unit_steps_per_s": rate, "M_unit_steps_per_s_median": rate_med,
                "M_unit_steps_per_cpu_s": rate_cpu, "bytes_per_unit_step": nbytes, "flops_per_unit_step": flops,
                "triad_GB_s": bw, "triad_GB_s_median": bw_med, "triad_GB_per_cpu_s": bw_cpu,
                "memory_roof_M_per_s": roof, "fraction_of_roof": rate / roof,
+               "fraction_of_roof_median": rate_med / roof,
                "fraction_of_roof_per_cpu_s": rate_cpu / roof_cpu, "load": os.getloadavg()}
+        if blocked_bytes is not None:
+            row.update(time_blocked_bytes_per_unit_step=blocked_bytes,
+                       time_blocked_roof_M_per_s=bw * 1e9 / blocked_bytes / 1e6,
+                       fraction_of_time_blocked_roof=rate * blocked_bytes / (bw * 1e3))
+            extra = (f"; time-blocked traffic {blocked_bytes:.1f} B per unit-step -> roof "
+                     f"{row['time_blocked_roof_M_per_s']:,.0f} M/s: {100 * row['fraction_of_time_blocked_roof']:.1f} %"
+                     + extra)
         print(f"{what:18s} N = {n:>10,d}: {rate:6.1f} M/s (median {rate_med:6.1f}); {nbytes:5.0f} B, {flops} flop per "
               f"unit-step -> {rate * nbytes / 1e3:5.1f} GB/s, {rate * flops / 1e3:5.1f} GFLOP/s; triad {bw:5.1f} GB/s "
-              f"(median {bw_med:.1f}) -> roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it; per CPU-second "
-              f"{rate_cpu:6.1f} M/s against a triad of {bw_cpu:5.1f} GB/s: {100 * rate_cpu / roof_cpu:4.0f} % of that "
-              f"roof{extra} ({_load()})")
+              f"(median {bw_med:.1f}) -> sweep roof {roof:6.0f} M/s: {100 * rate / roof:4.0f} % of it (median "
+              f"{100 * rate_med / roof:.0f} %); per CPU-second {rate_cpu:6.1f} M/s against a triad of {bw_cpu:5.1f} "
+              f"GB/s: {100 * rate_cpu / roof_cpu:4.0f} % of that roof{extra} ({_load()})")
         out.append(row)
 
     for n in sizes:
@@ -371,10 +386,11 @@ def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=
             rate = row["M_unit_steps_per_s"]
             prep = _prepare_s(system, damp)
             step_s = row["wall_min_s"] / steps
+            nbytes = _chain_bytes(system, damp)
             report(f"chain {chain}", n, rate, rate * row["wall_min_s"] / row["wall_median_s"],
-                   row["M_unit_steps_per_cpu_s"], _chain_bytes(system, damp), CHAIN_FLOPS,
-                   f"; time-blocked traffic {_chain_bytes(system, damp) / _time_block(steps):.1f} B per unit-step; "
-                   f"preparation per call {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps")
+                   row["M_unit_steps_per_cpu_s"], nbytes, CHAIN_FLOPS,
+                   f"; table preparation once per stepper {1e3 * prep:.2f} ms = {prep / step_s:.2f} steps",
+                   blocked_bytes=nbytes / _time_block(steps))
             del system
     for r, c in sheet_sizes:
         row = _sheet_rate(r, c, repeats)
@@ -388,10 +404,17 @@ def _busy_loop() -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-c", "while True: pass"])
 
 
-def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
-    """One thread against two on the fused chain kernel, without and beside a busy
-    loop (another process holding a core): advances of the two steppers alternate, minimum and
-    median of ``repeats`` each. Also what ``parallel.choose_threads`` picks in each case."""
+def contention(sizes=(100_000, 1_000_000), repeats: int = 15) -> list[dict]:
+    """One thread against two on the fused chain kernel, without and beside a busy loop (another
+    process holding a core): advances of the steppers alternate in a cycle, ``repeats`` each.
+    Prints each stepper's best and median rate (wall and per CPU-second), the ratio of the
+    medians, and the paired ratios (two-thread / one-thread advance of the same pair) as
+    median [quartiles] (min-max), so "never slower" can be judged against the spread (and a
+    sign test: how likely that many lost pairs are if neither stepper is slower); the
+    two-thread stepper's calls by thread count in that phase (``AdaptiveThreads``), and what
+    ``parallel.choose_threads`` picks. A second one-thread stepper runs in the same rotation as
+    a control: its paired ratio to the first is the noise floor of the comparison. Note the
+    machine's own load: other processes compete too."""
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.parallel import choose_threads
     from flexmm.integrators.stepper import Stepper
@@ -401,6 +424,7 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
     for n in sizes:
         system, terms, damp = _chain(n)
         steppers = {th: Stepper(spec, system, terms, damp, 0.1, threads=th, check_energy=False) for th in (1, 2)}
+        steppers[0] = Stepper(spec, system, terms, damp, 0.1, threads=1, check_energy=False)  # the control
         for st in steppers.values():
             st.warm_up()
         steps = max(20, int(3e7 / n))
@@ -409,28 +433,49 @@ def contention(sizes=(100_000, 1_000_000), repeats: int = 11) -> list[dict]:
             try:
                 time.sleep(0.5)
                 auto = choose_threads(n)
-                rates = {1: [], 2: []}
+                before = dict(getattr(steppers[2].kernel, "counts", {}))
+                rates = {1: [], 2: [], 0: []}
+                cpu_rates = {1: [], 2: [], 0: []}
                 for rep in range(repeats):
-                    for th in ((1, 2) if rep % 2 == 0 else (2, 1)):  # ABBA: neither always goes first
+                    for th in (1, 2, 0):  # a plain cycle: none runs twice in a row (its state still in cache)
                         st = steppers[th]
-                        w0 = st.wall_s
+                        w0, c0 = st.wall_s, st.cpu_s
                         st.advance(steps)
                         rates[th].append(n * steps / (st.wall_s - w0) / 1e6)
+                        cpu_rates[th].append(n * steps / max(st.cpu_s - c0, 1e-9) / 1e6)
                 load = _load()
             finally:
                 if busy is not None:
                     busy.kill()
                     busy.wait()
+            control = np.array(rates.pop(0)) / np.array(rates[1])
+            cpu_rates.pop(0)
+            c1, c2, c3 = (float(x) for x in np.percentile(control, [25, 50, 75]))
             med = {th: float(np.median(r)) for th, r in rates.items()}
-            counts = dict(getattr(steppers[2].kernel, "counts", {}))  # calls by thread count (AdaptiveThreads)
+            paired = np.array(rates[2]) / np.array(rates[1])
+            q1, q2, q3 = (float(x) for x in np.percentile(paired, [25, 50, 75]))
+            after = dict(getattr(steppers[2].kernel, "counts", {}))
+            counts = {k: after.get(k, 0) - before.get(k, 0) for k in after}
+            slower = int((paired < 1.0).sum())  # sign test: pairs where two threads lost, if equally likely
+            p_slower = sum(math.comb(repeats, k) for k in range(slower, repeats + 1)) / 2.0**repeats
+            verdict = ("not slower" if q2 >= 1.0 else f"slower (sign test p = {p_slower:.3f})" if p_slower < 0.05
+                       else f"not slower beyond the noise (sign test p = {p_slower:.2f})")
             row = {"n_units": n, "competing_process": loaded, "auto_threads": auto, "calls_by_threads": counts,
                    **{f"threads{th}_best": max(r) for th, r in rates.items()},
                    **{f"threads{th}_median": m for th, m in med.items()},
-                   "median_ratio": med[2] / med[1], "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
+                   **{f"threads{th}_per_cpu_s_best": max(r) for th, r in cpu_rates.items()},
+                   "median_ratio": med[2] / med[1], "paired_ratio_median": q2, "paired_ratio_quartiles": (q1, q3),
+                   "paired_ratio_range": (float(paired.min()), float(paired.max())), "pairs_lost": slower,
+                   "sign_test_p": p_slower, "verdict": verdict, "control_paired_ratio_median": c2,
+                   "control_paired_ratio_quartiles": (c1, c3),
+                   "load": os.getloadavg(), "kernel2": steppers[2].kernel.__name__}
             print(f"N = {n:>9,d} {'beside a busy loop' if loaded else 'no busy loop      '}: one thread "
-                  f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median; two threads {max(rates[2]):6.1f} best, "
-                  f"{med[2]:6.1f} median: {med[2] / med[1]:.2f}x; two-thread stepper's calls by threads so far {counts}; "
-                  f"choose_threads -> {auto} ({load})")
+                  f"{max(rates[1]):6.1f} M/s best, {med[1]:6.1f} median ({max(cpu_rates[1]):.1f} per CPU-s); two-thread "
+                  f"stepper {max(rates[2]):6.1f} best, {med[2]:6.1f} median ({max(cpu_rates[2]):.1f} per CPU-s); ratio of "
+                  f"medians {med[2] / med[1]:.2f}x, paired {q2:.2f}x [{q1:.2f}, {q3:.2f}] ({paired.min():.2f}-"
+                  f"{paired.max():.2f}), {repeats} pairs: {verdict}; control (another one-thread stepper) {c2:.2f}x [{c1:.2f}, "
+                  f"{c3:.2f}]; its calls by threads {counts}; choose_threads -> "
+                  f"{auto} ({load})")
             out.append(row)
         del system, steppers
     out.append(_kinetic_contention())

@@ -113,3 +113,28 @@ def test_fused_sheet_kernel_is_picked_only_where_it_applies() -> None:
     assert pick(dashpot)[0] is spec.advance
     assert advance_kernel(INTEGRATORS["pefrl"], dashpot.system.args, dashpot.system.inv_mass, dashpot.damp,
                           dashpot.terms, 1)[0] is INTEGRATORS["pefrl"].advance
+
+
+@pytest.mark.parametrize("graded", [False, True])
+def test_stepper_keeps_the_sheet_tables_and_matches_unfused(graded) -> None:
+    """A Stepper builds the fused sheet kernel's tables once (``sheet_prepare``) and keeps them
+    over calls; the trajectory is still ``verlet_advance``'s, bit for bit."""
+    from flexmm.integrators.stepper import Stepper
+
+    problem = sheet_problem(2 * GRID_BLOCK // 40 + 3, 40, excitation=SHAKER)
+    s = problem.system
+    if graded:
+        s.args.hinge_prm[:, H_KL] *= np.linspace(0.8, 1.2, s.args.hinge_prm.shape[0])
+    rng = np.random.default_rng(4)
+    q0, v0 = 0.02 * rng.standard_normal(s.ndof), 0.02 * rng.standard_normal(s.ndof)
+    s.q0[:], s.v0[:] = q0, v0
+    st = Stepper(INTEGRATORS["velocity_verlet"], s, problem.terms, problem.damp, 0.05, threads=1, check_energy=False)
+    assert st.kernel.__name__ == "sheet_verlet_advance"
+    st.advance(10)
+    tables = st.kernel.tables
+    for _ in range(2):
+        st.advance(10)
+    assert st.kernel.tables is tables
+    ref = _advance(verlet_advance, problem, q0, v0, 10, calls=3)
+    for a, b in zip((st.q, st.v, st.f), ref[:3]):
+        np.testing.assert_array_equal(a, b)

@@ -223,24 +223,38 @@ def test_kernels_pick_the_fused_verlet_only_where_it_applies() -> None:
     assert not fusable(sheet, s.q0, s.inv_mass, undamped.damp, undamped.terms)
 
 
-def test_adaptive_threads_gives_the_same_bits_and_follows_the_faster_count(monkeypatch) -> None:
+class _Meter:
+    """A ``parallel.BusyMeter`` that reports ``busy`` CPUs held by others, a new window per call."""
+
+    def __init__(self, busy: float):
+        self.busy, self.windows = busy, 0
+
+    def sample(self) -> float:
+        self.windows += 1
+        return self.busy
+
+
+def test_adaptive_threads_gives_the_same_bits_and_follows_the_faster_count() -> None:
     """The threaded fused advance runs on two threads or on the serial kernel, whichever was
     faster lately (on one when other processes hold the cores); either way the state is the
-    serial kernel's, bit for bit."""
-    from flexmm.integrators import parallel
-    from flexmm.integrators.parallel import AdaptiveThreads
-
-    monkeypatch.setattr(parallel, "others_running", lambda: 0)  # an idle machine
+    serial kernel's, bit for bit, with or without prepared tables."""
+    from flexmm.integrators.parallel import AdaptiveThreads, keep_tables
 
     problem = chain_problem(3 * RANGE_MIN + 5, theta0_rad=0.1, n_lateral=1)
     s = problem.system
     rng = np.random.default_rng(8)
     q0, v0 = 0.05 * rng.standard_normal(s.ndof), 0.05 * rng.standard_normal(s.ndof)
     adaptive = AdaptiveThreads(chain_verlet_advance, chain_verlet_advance_parallel, 2)
+    adaptive.meter = _Meter(0.0)  # an idle machine
     adaptive.MIN_TIMED_S = 0.0  # time every call
     adaptive.MIN_TIMED_STEPS = 1
     out = _advance(adaptive, problem, q0, v0, 7, calls=12)
     ref = _advance(chain_verlet_advance, problem, q0, v0, 7, calls=12)
+    for a, b in zip(out, ref):
+        np.testing.assert_array_equal(a, b)
+    kept = keep_tables(adaptive)  # its tables built once, on the first call
+    out = _advance(kept, problem, q0, v0, 7, calls=12)
+    assert kept.tables is not None and kept.counts is adaptive.counts
     for a, b in zip(out, ref):
         np.testing.assert_array_equal(a, b)
     assert adaptive.counts[1] >= 1 and adaptive.counts[2] >= 1  # both were tried
@@ -252,11 +266,39 @@ def test_adaptive_threads_gives_the_same_bits_and_follows_the_faster_count(monke
         picks.append(adaptive.choice())
         adaptive._timed += 1
     assert picks.count(2) == 14 and picks.count(1) == 2
-    monkeypatch.setattr(parallel, "others_running", lambda: 1)  # another process holds a core
-    adaptive.cpus = 2
+    adaptive.cpus, adaptive._timed = 2, 0
+    adaptive.meter.busy = 1.0  # another process holds a core: one thread from the next call on
     assert adaptive.choice() == 1
-    monkeypatch.undo()
-    assert parallel.others_running() >= 0
+    adaptive.meter.busy = 0.0  # free again: two threads only after QUIET_CHECKS quiet windows
+    picks = [adaptive.choice() for _ in range(AdaptiveThreads.QUIET_CHECKS)]
+    assert picks == [1] * (AdaptiveThreads.QUIET_CHECKS - 1) + [2]
+    adaptive.meter.busy = 0.6  # busy again, even partly: down at once
+    assert adaptive.choice() == 1
+
+
+def test_busy_meter_sees_a_busy_loop() -> None:
+    """``BusyMeter`` counts another process's busy loop (about one CPU), not this process's
+    own work, in windows taken between calls."""
+    import subprocess
+    import sys
+    import time
+
+    from flexmm.integrators.parallel import BusyMeter
+
+    meter = BusyMeter()
+    if meter.sample() is None and meter._start is None:
+        pytest.skip("no /proc/stat")
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.3)
+        meter.sample()
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < 0.3:  # this process busy too: not counted
+            pass
+        assert meter.sample() > 0.5
+    finally:
+        busy.kill()
+        busy.wait()
 
 
 def test_thread_choice_counts_free_cpus(monkeypatch) -> None:

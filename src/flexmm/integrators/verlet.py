@@ -358,52 +358,86 @@ def _field_kicks(kick, n, damped):
 
 
 @jit
-def _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, uni, xsig):
+def _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, uni, xsig, base):
     """``grid_x`` with the shared parameters (``uni``, if not nan) or the columns."""
     if xsig.shape[0] > 0:
-        return grid_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, uni, xsig)
-    return grid_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry)
+        return grid_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, uni, xsig, base)
+    return grid_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, lo, hi, carry, None, None, base)
 
 
 @jit
-def _sheet_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig):
+def _sheet_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig, base):
     """``grid_y`` with the shared parameters (``uni``, if not nan) or the columns."""
     if ysig.shape[0] > 0:
-        grid_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig)
+        grid_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig, base)
     else:
-        grid_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w)
+        grid_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, None, None, base)
 
 
 @jit
-def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """``verlet_advance`` for ``sheet_kernels.sheet_force`` (same arguments and results), fused.
+def _small_signs(x):
+    """x as int8 (exact: the signs are ±1, and 0 for a row's dummy hinge), and whether it is exact."""
+    out = np.empty(x.shape[0], np.int8)
+    ok = True
+    for k in range(x.shape[0]):
+        out[k] = np.int8(x[k]) if -128.0 <= x[k] <= 127.0 else 0
+        ok &= out[k] == x[k]
+    return out, ok
 
-    Each step is one sweep over blocks of sites: the angles and the horizontal hinges
-    (``grid_x``) run a row ahead of the block's vertical hinges (``grid_y``); then the block's
-    sites have all their forces and are kicked and drifted at once, while in cache. So the state
-    streams through memory once per step (force + Verlet: about four times), and the layout is
-    checked once per call, not per step. Bit-identical to ``verlet_advance`` but for the
-    dissipation sum (summed by blocks). Only where ``sheet_fusable`` holds (the caller checks).
-    """
+
+@jit
+def _sheet_prepare(args, minv, damp, h):
+    """The tables of ``sheet_verlet_advance_prepared``: (grid layout (nc, y0, y1), per-DOF factors
+    (kick, pre, post, c; ``_factors``), damped, the shared hinge parameters (``uniform_hinges``,
+    nan if not shared), the horizontal hinges' parameters site-indexed (empty when shared), the
+    shear signs of the horizontal and vertical hinges as int8 (±1 exactly: 2 bytes a site
+    streamed instead of 16; empty when not shared), each field's kick if equal (``_field_kicks``))."""
+    hprm, theta0 = args[3], args[4]
+    n = theta0.shape[0]
+    nc, _, y0, y1 = grid_layout(args[0], args[1], args[2], n)
+    kick, pre, post, cd, damped = _factors(minv, damp, h)
+    uni = uniform_hinges(hprm)
+    xprm = grid_x_params(hprm, n, nc)
+    xsig, okx = _small_signs(xprm[H_SIGN::7])
+    ysig, oky = _small_signs(hprm[y0:y1, H_SIGN])
+    if uni[0] == uni[0] and okx and oky:
+        xprm = np.empty(0)
+    else:
+        uni = (np.nan, np.nan, np.nan, np.nan, np.nan, np.nan)
+        xsig, ysig = xsig[:0], ysig[:0]
+    return (nc, y0, y1), (kick, pre, post, cd), damped, uni, xprm, xsig, ysig, _field_kicks(kick, n, damped)
+
+
+def sheet_prepare(args, minv: np.ndarray, damp: np.ndarray, h: float) -> tuple:
+    """The tables of the fused sheet Verlet for these parameters, masses, damping and step: what
+    ``sheet_verlet_advance_prepared`` takes, built once per stepper."""
+    return _sheet_prepare(args, minv, damp, h)
+
+
+@jit
+def _slide(cw, sw, base, lo, hi):
+    """Keep sites lo..hi−1 of the windows (site i at i − base) at their start; returns the new base."""
+    for k in range(hi - lo):
+        cw[k] = cw[lo - base + k]
+        sw[k] = sw[lo - base + k]
+    return lo
+
+
+@jit
+def sheet_verlet_advance_prepared(tables, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``sheet_verlet_advance`` with its tables given (``sheet_prepare`` of the same args, minv, damp
+    and h), so a stepper that calls it often pays their preparation once."""
     if nsteps <= 0:
         return t
     drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    ha, hb, hax, hprm, theta0, cs, sn = args[:7]
+    hprm, theta0 = args[3], args[4]
     n = theta0.shape[0]
-    nc, _, y0, y1 = grid_layout(ha, hb, hax, n)
-    kick, pre, post, cd, damped = _factors(minv, damp, h)
+    (nc, y0, y1), (kick, pre, post, cd), damped, uni, xprm, xsig, ysig, fkick = tables
     w, pf = grid_scratch(n)
     nb = pf.shape[0] // 7
     ny = y1 - y0
-    uni = uniform_hinges(hprm)  # once per call: shared parameters, or every column streamed
-    if uni[0] == uni[0]:
-        xprm = np.empty(0)
-        xsig = grid_x_params(hprm, n, nc)[H_SIGN::7].copy()
-        ysig = hprm[y0:y1, H_SIGN].copy()
-    else:
-        xprm = grid_x_params(hprm, n, nc)
-        xsig = ysig = np.empty(0)
-    fkick = _field_kicks(kick, n, damped)
+    nw = min(n, nb + nc + 1)  # cos/sin of the sites in flight: a window, not an (N,) array
+    cw, sw = np.empty(nw), np.empty(nw)
     g = np.zeros(drv_dof.shape[0])  # applied forces at t
     rate = np.zeros(drv_dof.shape[0])
     _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
@@ -418,25 +452,29 @@ def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         for d in range(drv_dof.shape[0]):  # the imposed rates at t, for the prescribed work below
             rate[d] = v[drv_dof[d]]
         # one sweep: angles and horizontal hinges run ahead (to a row past the vertical block),
-        # then the block's vertical hinges, then its sites (all forces in) are kicked and drifted
+        # then the block's vertical hinges, then its sites (all forces in) are kicked and drifted;
+        # cos/sin live in a window (cw, sw: site i at i − base) that slides along
         carry = (0.0, 0.0, 0.0, 0.0)
         xs = 0  # horizontal hinges done on sites < xs, angles on sites ≤ xs
-        sheet_angles(q, theta0, cs, sn, 0, 1)
+        base = 0
+        sheet_angles(q, theta0, cw, sw, 0, 1, base)
         diss = 0.0
         done = 0
         for s0 in range(0, ny, nb):
             m = min(nb, ny - s0)
             x1 = min(n, s0 + m + nc)
-            sheet_angles(q, theta0, cs, sn, xs + 1, min(n, x1 + 1))
-            carry = _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, xs, x1, carry, uni, xsig)
+            base = _slide(cw, sw, base, s0, xs + 1)
+            sheet_angles(q, theta0, cw, sw, xs + 1, min(n, x1 + 1), base)
+            carry = _sheet_x(q, cw, sw, hprm, f, n, nc, w, pf, xprm, xs, x1, carry, uni, xsig, base)
             xs = x1
-            _sheet_y(q, cs, sn, hprm, f, n, nc, y0, s0, m, w, uni, ysig)
+            _sheet_y(q, cw, sw, hprm, f, n, nc, y0, s0, m, w, uni, ysig, base)
             diss += _sheet_sites_step(q, v, f, kick, pre, post, cd, h, n, s0, s0 + m, last, damped, drv_dof,
                                       drv_mode, g, fkick)
             done = s0 + m
         if xs < n:
-            sheet_angles(q, theta0, cs, sn, xs + 1, n)
-            _sheet_x(q, cs, sn, hprm, f, n, nc, w, pf, xprm, xs, n, carry, uni, xsig)
+            base = _slide(cw, sw, base, xs, min(n, xs + 1))
+            sheet_angles(q, theta0, cw, sw, xs + 1, n, base)
+            _sheet_x(q, cw, sw, hprm, f, n, nc, w, pf, xprm, xs, n, carry, uni, xsig, base)
         diss += _sheet_sites_step(q, v, f, kick, pre, post, cd, h, n, done, n, last, damped, drv_dof, drv_mode, g,
                                   fkick)
         for d in range(drv_dof.shape[0]):  # prescribed displacements work against f at t
@@ -447,3 +485,22 @@ def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
         acc[ACC_WORK] += 0.5 * h * (power0 + power)
     _count(acc, nsteps)
     return t
+
+
+@jit
+def sheet_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``verlet_advance`` for ``sheet_kernels.sheet_force`` (same arguments and results), fused.
+
+    Each step is one sweep over blocks of sites: the angles and the horizontal hinges
+    (``grid_x``) run a row ahead of the block's vertical hinges (``grid_y``); then the block's
+    sites have all their forces and are kicked and drifted at once, while in cache. So the state
+    streams through memory once per step (force + Verlet: about four times), cos/sin stay in a
+    window of about a block and a row of sites, the shear signs of shared hinges are read as
+    int8, and the layout and tables are checked once per call (``sheet_prepare``; a ``Stepper``
+    keeps them: ``sheet_verlet_advance_prepared``). Bit-identical to ``verlet_advance`` but for
+    the dissipation sum (summed by blocks). Only where ``sheet_fusable`` holds (the caller checks).
+    """
+    if nsteps <= 0:
+        return t
+    return sheet_verlet_advance_prepared(_sheet_prepare(args, minv, damp, h), args, q, v, f, minv, damp, terms, t,
+                                         h, nsteps, acc)

@@ -16,12 +16,15 @@ The arithmetic is that of ``verlet_advance`` with ``hinge.chain_force`` (same op
 same order), so trajectories are bit-identical to the unfused stepper; only the energy ledger's
 dissipation sum runs in another order (rounding, tests/integrators/test_trig_and_parallel_kernels.py).
 
-Parameters are read column-wise, and only where they vary: ``_prepare`` (once per call, one
-read of the tables) finds each column's period-2 pattern (the shear sign alternates) and the
-blocks that differ from it. A block where every column is uniform gets its parameters as
-scalars (one compiled variant of the loops, ``hinge.param``); any other block reads columns:
-block-sized copies of the pattern for the uniform ones, full columns for those that vary
-there (so a graded chain streams only the columns that vary, and only where they do).
+Parameters are read column-wise, and only where they vary: ``_prepare`` (one read of the
+tables; ``prepare``, kept by the ``Stepper`` until h or the arrays change, so a run pays it
+once) finds each column's period-2 pattern (the shear sign alternates) and the blocks that
+differ from it. A block where every column is uniform gets its parameters as scalars (one
+compiled variant of the loops, ``hinge.param``); one where only the site columns (θ0, k_g,
+k_r) vary gets the hinge and per-DOF ones as scalars and the site ones as columns (another);
+any other block reads columns (a third): block-sized copies of the pattern for the uniform
+ones, full columns for those that vary there (so a graded chain streams only the columns that
+vary, and only where they do).
 
 Time blocking (both kernels): the chain is cut into fixed ranges of about ``RANGE_SITES``
 sites (by N, whole blocks), and each range advances ``TIME_BLOCK`` steps at a time while its
@@ -170,12 +173,14 @@ def _copy_columns(tab, full, row, c0, cols, m):
 
 @jit
 def _prepare(args, minv, damp, h, damped):
-    """Column tables of one call: (rep, full, row, flag, any_kg, uniform).
+    """Column tables of (parameters, masses, damping, h): (rep, full, row, flag, any_kg, uniform,
+    hinges_uniform).
 
     ``rep`` (N_COLS, min(BLOCK, n) + 2): each column's period-2 pattern (taken mid-chain), repeated;
     ``flag[g, c]``: block g (sites g·BLOCK...) differs from it, so reads ``full[row[c]]`` (n,);
     ``any_kg[g]``: block g has lateral stretch (else the cheaper θ force law, as ``chain_force``);
-    ``uniform[g]``: every column used is constant on block g (but the alternating shear sign).
+    ``uniform[g]``: every column used is constant on block g (but the alternating shear sign);
+    ``hinges_uniform[g]``: so are the hinge and per-DOF columns (the site columns may vary).
     Cost: one vectorised read of the tables, masses and damping, plus a copy of each column
     that varies (benchmarks/run.py prints it in steps).
     """
@@ -226,6 +231,7 @@ def _prepare(args, minv, damp, h, damped):
     sflag = np.zeros((nblocks, ns), np.uint8)
     any_kg = np.zeros(nblocks, np.uint8)
     uniform = np.zeros(nblocks, np.uint8)
+    hinges_uniform = np.zeros(nblocks, np.uint8)
     for g in range(nblocks):
         a = g * BLOCK
         b = min(a + BLOCK, n)
@@ -248,7 +254,11 @@ def _prepare(args, minv, damp, h, damped):
         any_kg[g] = kg_nz
         uni = True
         for c in range(ncols):
-            uni &= flag[g, c] == 0 and (c == C_SIG or rep[c, 0] == rep[c, 1])
+            if c < C_TH0 or c >= C_KICK_U:
+                uni &= flag[g, c] == 0 and (c == C_SIG or rep[c, 0] == rep[c, 1])
+        hinges_uniform[g] = uni
+        for c in range(C_TH0, C_KICK_U):
+            uni &= flag[g, c] == 0 and rep[c, 0] == rep[c, 1]
         uniform[g] = uni
     # full columns where needed
     row = np.full(N_COLS, -1, np.int64)
@@ -275,7 +285,7 @@ def _prepare(args, minv, damp, h, damped):
                 col = full[row[c]]
                 for i in range(n):
                     col[i] = _kick_factors(minv, damp, h, fld * n + i)[which]
-    return (rep, full, row, flag, any_kg, uniform)
+    return (rep, full, row, flag, any_kg, uniform, hinges_uniform)
 
 
 @jit
@@ -405,34 +415,44 @@ def _block_body(qu, qt, vu, vt, fou, fot, prm, fac, w, a, m, right, ub, tb, th0_
 
 
 @jit
-def _block(qu, qt, vu, vt, fou, fot, tables, w, g, a, m, right, ub, tb, fl_left, gb_left, h, last, damped,
-           drives, gvals):
+def _block(qu, qt, vu, vt, fou, fot, tables, w, g, a, m, right, ub, tb, fl_left, gb_left, h, last, damped, drives,
+           gvals):
     """One step on the m sites a..a+m−1 of block g (state views from site a).
 
     ``right``: the hinge a+m−1 ↔ a+m exists, site a+m has (u, θ) = (ub, tb) at the old state;
     (fl_left, gb_left): the hinge a−1 ↔ a at the old state. Returns that right hinge's
-    (fl, gb) and the block's damping power (v½, before the kicks). A uniform block reads its
-    parameters as scalars (one compiled variant), any other as columns (another).
+    (fl, gb) and the block's damping power (v½, before the kicks). Three compiled variants of
+    the loops, by what the block's parameters are: all uniform (scalars), the hinges' and the
+    per-DOF factors uniform (scalars) but the site columns (θ0, k_g, k_r) not (columns: a chain
+    graded in its lateral hinges streams one or two columns, its hinge loop stays as cheap as a
+    uniform one's), or any (columns).
     """
     th0_next = _at(tables, C_TH0, a + m) if right else 0.0
     with_kg = tables[4][g] != 0
-    if tables[5][g] != 0:
-        r = tables[0]
-        p = a & 1
-        prm = (r[C_REST, 0], r[C_HA, 0], r[C_HB, 0], (r[C_SIG, p], r[C_SIG, p + 1]), r[C_KL, 0], r[C_KS, 0],
-               r[C_KT, 0], r[C_TH0, 0], r[C_KG, 0], r[C_KR, 0], r[C_C0, 0])
+    r = tables[0]
+    p = a & 1
+    sig = (r[C_SIG, p], r[C_SIG, p + 1])
+    if tables[6][g] != 0:
         fac = (r[C_KICK_U, 0], r[C_KICK_T, 0], r[C_PRE_U, 0], r[C_PRE_T, 0], r[C_POST_U, 0], r[C_POST_T, 0],
                r[C_CD_U, 0], r[C_CD_T, 0])
-        return _block_body(qu, qt, vu, vt, fou, fot, prm, fac, w, a, m, right, ub, tb, th0_next, fl_left, gb_left,
+        if tables[5][g] != 0:
+            prm = (r[C_REST, 0], r[C_HA, 0], r[C_HB, 0], sig, r[C_KL, 0], r[C_KS, 0], r[C_KT, 0], r[C_TH0, 0],
+                   r[C_KG, 0], r[C_KR, 0], r[C_C0, 0])
+            return _block_body(qu, qt, vu, vt, fou, fot, prm, fac, w, a, m, right, ub, tb, th0_next, fl_left,
+                               gb_left, with_kg, h, last, damped, drives, gvals)
+        sites = (r[C_REST, 0], r[C_HA, 0], r[C_HB, 0], sig, r[C_KL, 0], r[C_KS, 0], r[C_KT, 0],
+                 _view(tables, C_TH0, g, a), _view(tables, C_KG, g, a), _view(tables, C_KR, g, a),
+                 _view(tables, C_C0, g, a))
+        return _block_body(qu, qt, vu, vt, fou, fot, sites, fac, w, a, m, right, ub, tb, th0_next, fl_left, gb_left,
                            with_kg, h, last, damped, drives, gvals)
-    prm = (_view(tables, C_REST, g, a), _view(tables, C_HA, g, a), _view(tables, C_HB, g, a),
-           _view(tables, C_SIG, g, a), _view(tables, C_KL, g, a), _view(tables, C_KS, g, a),
-           _view(tables, C_KT, g, a), _view(tables, C_TH0, g, a), _view(tables, C_KG, g, a),
-           _view(tables, C_KR, g, a), _view(tables, C_C0, g, a))
-    fac = (_view(tables, C_KICK_U, g, a), _view(tables, C_KICK_T, g, a), _view(tables, C_PRE_U, g, a),
-           _view(tables, C_PRE_T, g, a), _view(tables, C_POST_U, g, a), _view(tables, C_POST_T, g, a),
-           _view(tables, C_CD_U, g, a), _view(tables, C_CD_T, g, a))
-    return _block_body(qu, qt, vu, vt, fou, fot, prm, fac, w, a, m, right, ub, tb, th0_next, fl_left, gb_left,
+    cols = (_view(tables, C_REST, g, a), _view(tables, C_HA, g, a), _view(tables, C_HB, g, a),
+            _view(tables, C_SIG, g, a), _view(tables, C_KL, g, a), _view(tables, C_KS, g, a),
+            _view(tables, C_KT, g, a), _view(tables, C_TH0, g, a), _view(tables, C_KG, g, a),
+            _view(tables, C_KR, g, a), _view(tables, C_C0, g, a))
+    facs = (_view(tables, C_KICK_U, g, a), _view(tables, C_KICK_T, g, a), _view(tables, C_PRE_U, g, a),
+            _view(tables, C_PRE_T, g, a), _view(tables, C_POST_U, g, a), _view(tables, C_POST_T, g, a),
+            _view(tables, C_CD_U, g, a), _view(tables, C_CD_T, g, a))
+    return _block_body(qu, qt, vu, vt, fou, fot, cols, facs, w, a, m, right, ub, tb, th0_next, fl_left, gb_left,
                        with_kg, h, last, damped, drives, gvals)
 
 
@@ -691,18 +711,20 @@ def _time_block_end(acc, h, damped, k, t, work):
 # ------------------------------------------------------------------ the kernels
 
 
+def prepare(args, minv: np.ndarray, damp: np.ndarray, h: float) -> tuple:
+    """The column tables of the fused kernels for these parameters, masses, damping and step
+    (``_prepare``): what ``chain_verlet_advance_prepared`` takes, built once per stepper."""
+    return _prepare(args, minv, damp, h, _is_damped(minv, damp))
+
+
 @jit
-def chain_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """``verlet_advance`` for ``hinge.chain_force`` (same arguments and results), fused, and
-    blocked in time: each range of ``RANGE_SITES`` sites takes ``TIME_BLOCK`` steps while it is
-    in cache (halos: module docstring), so a long chain streams through memory once per
-    ``TIME_BLOCK`` steps. Only where ``fusable`` holds (the caller checks).
-    """
+def chain_verlet_advance_prepared(tables, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``chain_verlet_advance`` with its tables given (``prepare`` of the same args, minv, damp
+    and h), so a stepper that calls it often pays their preparation once."""
     if nsteps <= 0:
         return t
     n = args[3].shape[0]
     damped = _is_damped(minv, damp)
-    tables = _prepare(args, minv, damp, h, damped)
     _open(q, v, f, minv, damp, h, damped)
     drives = _drives_of(terms, n)
     work = _work(n, drives[0].shape[0], 1)
@@ -718,15 +740,12 @@ def chain_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
 
 
 @jit(parallel=True)
-def chain_verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-    """``chain_verlet_advance`` with the chain's ranges shared out among numba's threads (in
-    ``_n_chunks`` fixed chunks), which meet once per ``TIME_BLOCK`` steps. Bit-identical to it:
-    the ranges, not the chunks, fix the arithmetic."""
+def chain_verlet_advance_parallel_prepared(tables, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``chain_verlet_advance_parallel`` with its tables given (``prepare``)."""
     if nsteps <= 0:
         return t
     n = args[3].shape[0]
     damped = _is_damped(minv, damp)
-    tables = _prepare(args, minv, damp, h, damped)
     nd2 = q.shape[0]
     nb = max(1, min(nd2 // DOF_BLOCK, 16))
     for c in prange(nb):
@@ -745,3 +764,28 @@ def chain_verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps
         s0 += k
     _count(acc, nsteps)
     return t
+
+
+@jit
+def chain_verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``verlet_advance`` for ``hinge.chain_force`` (same arguments and results), fused, and
+    blocked in time: each range of ``RANGE_SITES`` sites takes ``TIME_BLOCK`` steps while it is
+    in cache (halos: module docstring), so a long chain streams through memory once per
+    ``TIME_BLOCK`` steps. Only where ``fusable`` holds (the caller checks). Prepares its tables
+    on every call (``Stepper`` keeps them: ``chain_verlet_advance_prepared``).
+    """
+    if nsteps <= 0:
+        return t
+    tables = _prepare(args, minv, damp, h, _is_damped(minv, damp))
+    return chain_verlet_advance_prepared(tables, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
+
+
+@jit
+def chain_verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """``chain_verlet_advance`` with the chain's ranges shared out among numba's threads (in
+    ``_n_chunks`` fixed chunks), which meet once per ``TIME_BLOCK`` steps. Bit-identical to it:
+    the ranges, not the chunks, fix the arithmetic."""
+    if nsteps <= 0:
+        return t
+    tables = _prepare(args, minv, damp, h, _is_damped(minv, damp))
+    return chain_verlet_advance_parallel_prepared(tables, args, q, v, f, minv, damp, terms, t, h, nsteps, acc)

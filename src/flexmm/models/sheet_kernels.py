@@ -26,8 +26,9 @@ from flexmm.models.magnets import dipole_reference, dipole_terms
 
 
 @jit
-def sheet_angles(q, theta0, cs, sn, lo=0, hi=-1):
-    """cos/sin of θ0 + θ of sites lo..hi−1 (all by default) into the scratch ``cs``, ``sn`` (N,).
+def sheet_angles(q, theta0, cs, sn, lo=0, hi=-1, base=0):
+    """cos/sin of θ0 + θ of sites lo..hi−1 (all by default) into the scratch ``cs``, ``sn`` (N,;
+    or a window that holds site i at index i − ``base``).
 
     One simple loop over views from lo, so it vectorises (``_trig.sincos``); with libm's scalar
     sin/cos this pass cost as much as the hinge loop (benchmarks/).
@@ -35,7 +36,7 @@ def sheet_angles(q, theta0, cs, sn, lo=0, hi=-1):
     n = theta0.shape[0]
     if hi < 0:
         hi = n
-    th, t0, c, s_ = q[2 * n + lo : 3 * n], theta0[lo:], cs[lo:], sn[lo:]
+    th, t0, c, s_ = q[2 * n + lo : 3 * n], theta0[lo:], cs[lo - base :], sn[lo - base :]
     for i in range(hi - lo):
         s, co = sincos(t0[i] + th[i])
         c[i] = co
@@ -247,7 +248,8 @@ def grid_scratch(n):
 
 
 @jit
-def grid_x(q, cs, sn, hprm, out, n, nc, w, pf, xprm, lo=0, hi=-1, carry=(0.0, 0.0, 0.0, 0.0), uni=None, xsig=None):
+def grid_x(q, cs, sn, hprm, out, n, nc, w, pf, xprm, lo=0, hi=-1, carry=(0.0, 0.0, 0.0, 0.0), uni=None, xsig=None,
+           base=0):
     """Forces of the horizontal hinges on sites lo..hi−1 (all by default) into out[:3n],
     overwriting it there (the first terms of those sites' sums): one run over the sites (hinge
     to s + 1) with a dummy hinge at each row's end (parameters 0, its forces set to 0), so the
@@ -255,7 +257,8 @@ def grid_x(q, cs, sn, hprm, out, n, nc, w, pf, xprm, lo=0, hi=-1, carry=(0.0, 0.
     returns the one into site hi. cos/sin must be current up to site hi (included). The
     parameters, site-indexed, come from ``xprm`` (7n, ``grid_x_params``) if it is not empty,
     else block by block from the table into ``pf``; with ``uni`` (``uniform_hinges``) the shared
-    parameters and the signs ``xsig`` (n, site-indexed) instead."""
+    parameters and the signs ``xsig`` (n, site-indexed; any numeric type that holds them
+    exactly) instead. ``cs``, ``sn`` may be a window holding site i at index i − ``base``."""
     if hi < 0:
         hi = n
     nb = w.shape[1] - 1
@@ -266,17 +269,18 @@ def grid_x(q, cs, sn, hprm, out, n, nc, w, pf, xprm, lo=0, hi=-1, carry=(0.0, 0.
     for s0 in range(lo, hi, nb):
         m = min(nb, hi - s0)
         mh = min(m, n - 1 - s0)  # hinges from the block's sites (the last site has none)
+        c = s0 - base
         if uni is not None and xsig is not None:
-            _grid_hinges_uniform(u[s0:], u[s0 + 1 :], v[s0:], v[s0 + 1 :], th[s0:], th[s0 + 1 :], cs[s0:], sn[s0:],
-                                 cs[s0 + 1 :], sn[s0 + 1 :], uni, xsig[s0:], w[0, 1:], w[1, 1:], w[2, 1:], w[3, 1:], mh)
+            _grid_hinges_uniform(u[s0:], u[s0 + 1 :], v[s0:], v[s0 + 1 :], th[s0:], th[s0 + 1 :], cs[c:], sn[c:],
+                                 cs[c + 1 :], sn[c + 1 :], uni, xsig[s0:], w[0, 1:], w[1, 1:], w[2, 1:], w[3, 1:], mh)
         else:
             if xprm.shape[0] > 0:
                 prm = xprm[N_HINGE_PARAMS * s0 :]
             else:
                 _row_params(hf, pf, s0, mh, nc)
                 prm = pf[0:]
-            _grid_hinges(u[s0:], u[s0 + 1 :], v[s0:], v[s0 + 1 :], th[s0:], th[s0 + 1 :], cs[s0:], sn[s0:],
-                         cs[s0 + 1 :], sn[s0 + 1 :], prm, w[0, 1:], w[1, 1:], w[2, 1:], w[3, 1:], mh)
+            _grid_hinges(u[s0:], u[s0 + 1 :], v[s0:], v[s0 + 1 :], th[s0:], th[s0 + 1 :], cs[c:], sn[c:],
+                         cs[c + 1 :], sn[c + 1 :], prm, w[0, 1:], w[1, 1:], w[2, 1:], w[3, 1:], mh)
         for k in range(nc - 1 - s0 % nc, m, nc):  # the dummies (and the last site's)
             w[0, k + 1] = w[1, k + 1] = w[2, k + 1] = w[3, k + 1] = 0.0
         w[0, 0], w[1, 0], w[2, 0], w[3, 0] = c0, c1, c2, c3
@@ -297,18 +301,20 @@ def grid_x_params(hprm, n, nc):
 
 
 @jit
-def grid_y(q, cs, sn, hprm, out, n, nc, y0, s0, m, w, uni=None, ysig=None):
+def grid_y(q, cs, sn, hprm, out, n, nc, y0, s0, m, w, uni=None, ysig=None, base=0):
     """Forces of the vertical hinges y0 + s0 .. y0 + s0 + m − 1 (from sites s0.. to s0 + nc..)
     added to out: hinges, then their B sites, then their A sites (a site-centred pass like the
-    horizontal one measured slower here). Sites below s0 + m then have all their hinge forces."""
+    horizontal one measured slower here). Sites below s0 + m then have all their hinge forces.
+    ``cs``, ``sn`` may be a window holding site i at index i − ``base`` (``grid_x``)."""
     u, v, th = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
     ou, ov, ot = out[:n], out[n : 2 * n], out[2 * n : 3 * n]
     b = s0 + nc
+    ca, cb = s0 - base, b - base
     if uni is not None and ysig is not None:  # shared parameters, signs ysig (vertical hinges in order)
-        _grid_hinges_uniform(v[s0:], v[b:], u[s0:], u[b:], th[s0:], th[b:], cs[s0:], sn[s0:], cs[b:], sn[b:], uni,
+        _grid_hinges_uniform(v[s0:], v[b:], u[s0:], u[b:], th[s0:], th[b:], cs[ca:], sn[ca:], cs[cb:], sn[cb:], uni,
                              ysig[s0:], w[0], w[1], w[2], w[3], m)
     else:
-        _grid_hinges(v[s0:], v[b:], u[s0:], u[b:], th[s0:], th[b:], cs[s0:], sn[s0:], cs[b:], sn[b:],
+        _grid_hinges(v[s0:], v[b:], u[s0:], u[b:], th[s0:], th[b:], cs[ca:], sn[ca:], cs[cb:], sn[cb:],
                      hprm.ravel()[N_HINGE_PARAMS * (y0 + s0) :], w[0], w[1], w[2], w[3], m)
     _to_b(ov[b:], ou[b:], ot[b:], w, m)
     _to_a(ov[s0:], ou[s0:], ot[s0:], w, m)
