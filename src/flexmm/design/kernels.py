@@ -199,6 +199,186 @@ def chain_tangent(q, args, dq, d1, d2, out):
                       d2[a, S_THETA0], d2[b, S_THETA0], out)
 
 
+# ---------------------------------------------------------------- chain-ordered chains, column form
+#
+# The sweeps of a chain whose hinge h joins units h and h + 1 (``chain_ordered``) run on
+# contiguous parameter columns (``chain_columns``) with short loops over sites and hinges that
+# vectorise (``_trig.sincos``; per-hinge results go to padded rows, entry h + 1 for hinge h, so
+# each site gathers its two hinges without scattered writes; a loop touching many arrays does
+# not vectorise, hence several passes). The force has the arithmetic of ``hinge.chain_force``
+# (the same bits). The reverse step at a state takes the force there again, then the
+# Hessian-vector product and the parameter products, and accumulates parameter adjoints per
+# element in columns (``CA_*``), added to the tables once per gradient.
+
+#: rows of ``chain_columns``: hinge h (joins h, h + 1) at entry h, sites at entry i
+(CC_REST, CC_HA, CC_HB, CC_SIG, CC_KL, CC_KS, CC_KT, CC_TH0, CC_KG, CC_KR, CC_C0, CC_S0) = range(12)
+N_CC = 12
+#: rows of the parameter-adjoint accumulator of the column sweeps (hinge columns, then site columns)
+(CA_REST, CA_HA, CA_HB, CA_KL, CA_KS, CA_KT, CA_TH0, CA_KG, CA_KR) = range(9)
+N_CA = 9
+#: rows of the reverse step's scratch (padded rows: entry h + 1 for hinge h, 0 and n zero)
+(R_COS, R_SIN, R_FT, R_FL, R_GA, R_GB, R_EL, R_ES, R_XU, R_TA, R_TB, R_KD, R_DL, R_DS, R_DP) = range(15)
+N_R = 15
+
+
+def chain_ordered(args, ndof: int) -> bool:
+    """Whether a model's args are a chain with hinge h joining units h, h + 1 and 2N DOFs."""
+    if not isinstance(args, ChainArgs):
+        return False
+    n = args.site_prm.shape[0]
+    idx = np.arange(n - 1)
+    return (n >= 2 and ndof == 2 * n and np.array_equal(args.hinge_a, idx)
+            and np.array_equal(args.hinge_b, idx + 1))
+
+
+@jit
+def chain_columns(hprm, sprm):
+    """The (N_CC, n) parameter columns of a chain-ordered chain (hinge columns: last entry 0)."""
+    n = sprm.shape[0]
+    cols = np.zeros((N_CC, n))
+    hcols = (H_REST, H_HALF_A, H_HALF_B, H_SIGN, H_KL, H_KS, H_KT)
+    for h in range(n - 1):
+        for c in range(7):
+            cols[c, h] = hprm[h, hcols[c]]
+    for i in range(n):
+        cols[CC_TH0, i] = sprm[i, S_THETA0]
+        cols[CC_KG, i] = sprm[i, S_KG]
+        cols[CC_KR, i] = sprm[i, S_KR]
+        s0, c0 = sincos(sprm[i, S_THETA0])  # as hinge.chain_force
+        cols[CC_C0, i] = c0
+        cols[CC_S0, i] = s0
+    return cols
+
+
+@jit
+def chain_add_columns(acc, g1, g2):
+    """Add the column accumulator ``acc`` (N_CA, n) to the table gradients g1 (H, 7), g2 (n, 3)."""
+    hcols = (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT)
+    for h in range(g1.shape[0]):
+        for c in range(6):
+            g1[h, hcols[c]] += acc[c, h]
+    for i in range(g2.shape[0]):
+        g2[i, S_THETA0] += acc[CA_TH0, i]
+        g2[i, S_KG] += acc[CA_KG, i]
+        g2[i, S_KR] += acc[CA_KR, i]
+
+
+@jit
+def chain_force_columns(q, cols, with_kg, r, f):
+    """The model force F(q) of a chain-ordered chain from its columns into f (2n): the
+    operations of ``hinge.chain_force`` (``chain_sites``, ``chain_hinge``), so the same bits.
+    Leaves in the scratch r (N_R, n + 1) cos/sin of θ0+θ (rows R_COS, R_SIN), the hinges' forces
+    (R_FL, R_GA, R_GB) and their stretch and shear (R_EL, R_ES) for ``chain_reverse_hessian``."""
+    n = cols.shape[1]
+    qu, qt = q[:n], q[n:]
+    th0, kg, kr, c0 = cols[CC_TH0], cols[CC_KG], cols[CC_KR], cols[CC_C0]
+    cs, sn, ft = r[R_COS], r[R_SIN], r[R_FT]
+    if with_kg:
+        for i in range(n):
+            s, c = sincos(th0[i] + qt[i])
+            cs[i] = c
+            sn[i] = s
+            ft[i] = -(kg[i] * (c0[i] - c) * s + kr[i] * qt[i])
+    else:
+        for i in range(n):
+            s, c = sincos(th0[i] + qt[i])
+            cs[i] = c
+            sn[i] = s
+            ft[i] = -kr[i] * qt[i]
+    rest, ha, hb, sig = cols[CC_REST], cols[CC_HA], cols[CC_HB], cols[CC_SIG]
+    kl, ks, kt = cols[CC_KL], cols[CC_KS], cols[CC_KT]
+    fl, ga, gb, el_, es_ = r[R_FL, 1:], r[R_GA, 1:], r[R_GB, 1:], r[R_EL, 1:], r[R_ES, 1:]
+    for h in range(n - 1):
+        hA, hB, sg = ha[h], hb[h], sig[h]
+        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
+        el = qu[h + 1] - qu[h] + rest[h] - (hA * ca + hB * cb)
+        x = hB * sb - hA * sa
+        es = sg * x
+        f_l = kl[h] * el
+        f_s = ks[h] * sg * x  # written as hinge.chain_hinge (rounding)
+        f_p = kt[h] * (qt[h] + qt[h + 1])
+        fl[h] = f_l
+        ga[h] = f_l * hA * sa - f_s * sg * hA * ca + f_p
+        gb[h] = f_l * hB * sb + f_s * sg * hB * cb + f_p
+        el_[h] = el
+        es_[h] = es
+    for row in (R_FL, R_GA, R_GB):
+        r[row, 0] = 0.0
+        r[row, n] = 0.0
+    fl, ga, gb = r[R_FL], r[R_GA], r[R_GB]
+    for i in range(n):
+        f[i] = fl[i + 1] - fl[i]
+        f[n + i] = ft[i] - (gb[i] + ga[i + 1])
+
+
+@jit
+def chain_reverse_hessian(q, cols, lam, r, acc):
+    """Hinge part of (∂F/∂q)ᵀλ and (∂F/∂p)ᵀλ at the state of ``chain_reverse_force`` (its rows
+    in r): per hinge into the padded rows R_XU, R_TA, R_TB, R_KD (gathered by
+    ``chain_reverse_gather``), hinge-parameter adjoints into acc (``hinge_adjoint``'s algebra).
+    Three short loops (the variations of the strains along λ; the products; the parameter
+    adjoints): a loop touching many arrays does not vectorise."""
+    n = cols.shape[1]
+    qt = q[n:]
+    lu, lt = lam[:n], lam[n:]
+    cs, sn, el_, es_ = r[R_COS], r[R_SIN], r[R_EL, 1:], r[R_ES, 1:]
+    ha, hb, sig, kl, ks, kt = cols[CC_HA], cols[CC_HB], cols[CC_SIG], cols[CC_KL], cols[CC_KS], cols[CC_KT]
+    dl_, ds_, dp_ = r[R_DL], r[R_DS], r[R_DP]
+    for h in range(n - 1):
+        hA, hB, lta, ltb = ha[h], hb[h], lt[h], lt[h + 1]
+        dl_[h] = lu[h + 1] - lu[h] + hA * sn[h] * lta + hB * sn[h + 1] * ltb
+        ds_[h] = sig[h] * (hB * cs[h + 1] * ltb - hA * cs[h] * lta)
+        dp_[h] = lta + ltb
+    xu, ta_, tb_, kd = r[R_XU, 1:], r[R_TA, 1:], r[R_TB, 1:], r[R_KD, 1:]
+    for h in range(n - 1):
+        hA, hB, sg, k_l, k_s = ha[h], hb[h], sig[h], kl[h], ks[h]
+        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
+        el, es, dl, ds = el_[h], es_[h], dl_[h], ds_[h]
+        lta, ltb = lt[h], lt[h + 1]
+        xu[h] = k_l * dl
+        ta_[h] = k_l * (hA * sa * dl + el * hA * ca * lta) + k_s * (-sg * hA * ca * ds + es * sg * hA * sa * lta)
+        tb_[h] = k_l * (hB * sb * dl + el * hB * cb * ltb) + k_s * (sg * hB * cb * ds - es * sg * hB * sb * ltb)
+        kd[h] = kt[h] * dp_[h]
+    a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[CA_REST], acc[CA_HA], acc[CA_HB], acc[CA_KL], acc[CA_KS], acc[CA_KT]
+    for h in range(n - 1):
+        sg, k_l, k_s = sig[h], kl[h], ks[h]
+        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
+        el, es, dl, ds = el_[h], es_[h], dl_[h], ds_[h]
+        lta, ltb = lt[h], lt[h + 1]
+        a_rest[h] -= k_l * dl
+        a_ha[h] -= k_l * (-ca * dl + el * sa * lta) + k_s * (-sg * sa * ds - es * sg * ca * lta)
+        a_hb[h] -= k_l * (-cb * dl + el * sb * ltb) + k_s * (sg * sb * ds + es * sg * cb * ltb)
+        a_kl[h] -= el * dl
+        a_ks[h] -= es * ds
+        a_kt[h] -= (qt[h] + qt[h + 1]) * dp_[h]
+    for row in (R_XU, R_TA, R_TB, R_KD):
+        r[row, 0] = 0.0
+        r[row, n] = 0.0
+
+
+@jit
+def chain_reverse_gather(q, cols, lam, r, acc, out):
+    """Add each site's two hinges' and its on-site term's share of (∂F/∂q)ᵀλ to ``out`` and the
+    site-parameter adjoints (θ0, k_g, k_r) to acc (two loops, so that both vectorise)."""
+    n = cols.shape[1]
+    qt = q[n:]
+    lt = lam[n:]
+    kg, kr, c0, s0 = cols[CC_KG], cols[CC_KR], cols[CC_C0], cols[CC_S0]
+    cs, sn, xu, ta_, tb_, kd = r[R_COS], r[R_SIN], r[R_XU], r[R_TA], r[R_TB], r[R_KD]
+    ou, ot = out[:n], out[n:]
+    for i in range(n):
+        c, s = cs[i], sn[i]
+        ou[i] += xu[i + 1] - xu[i]
+        ot[i] -= (tb_[i] + ta_[i + 1]) + (kd[i] + kd[i + 1]) + (kg[i] * (s * s + (c0[i] - c) * c) + kr[i]) * lt[i]
+    a_th0, a_kg, a_kr = acc[CA_TH0], acc[CA_KG], acc[CA_KR]
+    for i in range(n):
+        c, s, lti = cs[i], sn[i], lt[i]
+        g = c0[i] - c
+        a_th0[i] -= (tb_[i] + ta_[i + 1]) + kg[i] * ((s - s0[i]) * s + g * c) * lti
+        a_kg[i] -= g * s * lti
+        a_kr[i] -= qt[i] * lti
+
+
 # ---------------------------------------------------------------- 2D sheet
 
 

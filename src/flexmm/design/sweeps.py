@@ -25,7 +25,14 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.design.kernels import model_adjoint, model_tangent
+from flexmm.design.kernels import (
+    N_R,
+    chain_force_columns,
+    chain_reverse_gather,
+    chain_reverse_hessian,
+    model_adjoint,
+    model_tangent,
+)
 from flexmm.design.terms import (
     contact_adjoint,
     contact_tangent,
@@ -33,8 +40,9 @@ from flexmm.design.terms import (
     drive_force_tangent,
     prescribed_adjoint,
     prescribed_tangent,
+    waveform_dprm,
 )
-from flexmm.integrators.common import apply_prescribed, total_force, waveform
+from flexmm.integrators.common import apply_prescribed, position_forces, total_force, waveform
 
 
 @jit
@@ -240,3 +248,127 @@ def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
 def apply_prescribed_only(terms, q, v, t):
     """``common.apply_prescribed`` with the terms' drive tables (the start of a run)."""
     apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+
+
+# ---------------------------------------------------------------- chain-ordered chains
+#
+# The same scheme on a chain-ordered rotating-squares chain (``kernels.chain_ordered``, no
+# contacts) from parameter columns: the forward run and the replay step with the column force
+# (bit-identical to ``verlet_step``); the replay keeps (q, v) only, and the reverse step takes
+# the force at each state again with its Hessian-vector product (cos/sin once per site). The
+# integrator-factor adjoints are folded: with z = λw(step j) + S λv(into j), the products at
+# state j are ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (v_j = S (w + K f_j)), so two
+# per-DOF accumulators GK, GV (``gradient.Trajectory.gradient`` turns them into m⁻¹, c).
+
+
+@jit
+def chain_step(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, w):
+    """``verlet_step`` with the column force (same arithmetic); returns t + h."""
+    n = q.shape[0]
+    for k in range(n):
+        v[k] = pre[k] * v[k] + kick[k] * f[k]
+        q[k] += h * v[k]
+    t1 = t + h
+    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    chain_force_columns(q, cols, with_kg, w, f)
+    position_forces(q, t1, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                    terms.drv_prm)
+    for k in range(n):
+        v[k] = (v[k] + kick[k] * f[k]) * post[k]
+    return t1
+
+
+@jit
+def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs,
+                  CQ, CV, CF, CT, Rq, Rv, Rf):
+    """``forward`` with ``chain_step``."""
+    w = np.empty((N_R, cols.shape[1] + 1))
+    for k in range(nsteps + 1):
+        if k % seg == 0:
+            c = k // seg
+            CQ[c, :] = q
+            CV[c, :] = v
+            CF[c, :] = f
+            CT[c] = t
+        if k % stride == 0:
+            _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            t = chain_step(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, w)
+    return t
+
+
+@jit
+def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, ST):
+    """States 0..nsteps of a segment from its checkpoint: (q, v, t) into rows of SQ, SV, ST."""
+    w = np.empty((N_R, cols.shape[1] + 1))
+    q = q0.copy()
+    v = v0.copy()
+    f = f0.copy()
+    t = t0
+    for s in range(nsteps + 1):
+        SQ[s, :] = q
+        SV[s, :] = v
+        ST[s] = t
+        if s < nsteps:
+            t = chain_step(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, w)
+
+
+@jit
+def chain_reverse(cols, with_kg, terms, kick, pre, post, SQ, SV, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+                  lq, lv, lf, lw, GK, GV, acc, gdrv):
+    """``reverse`` of a segment replayed by ``chain_replay`` (rows 0..nsteps of SQ, SV, ST).
+
+    ``lw`` enters as λw of the step out of state k0 + nsteps (zero at the end of the run) and
+    leaves as that of the step out of k0: its products with (f, v) at a state are taken with the
+    state's own (``GK``, ``GV``); the caller adds those of the initial state.
+    """
+    n2 = lq.shape[0]
+    n = n2 // 2
+    r = np.empty((N_R, n + 1))
+    f = np.empty(n2)
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    nd = dd.shape[0]
+    wsave = np.empty(nd)
+    for j in range(nsteps, 0, -1):
+        q = SQ[j]
+        vj = SV[j]
+        tj = ST[j]
+        chain_force_columns(q, cols, with_kg, r, f)
+        position_forces(q, tj, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+        for k in range(n2):  # the products at state j, then λw = S λv, λf += K S λv
+            sl = post[k] * lv[k]
+            z = lw[k] + sl
+            GK[k] += z * f[k]
+            GV[k] += z * vj[k]
+            lw[k] = sl
+            lf[k] += kick[k] * sl
+        for d in range(nd):  # applied forces: λf · ∂g/∂prm
+            if dm[d] == 1:
+                waveform_dprm(ds[d], dp[d], tj, dg, ddg)
+                for c in range(4):
+                    gdrv[d, c] += lf[dd[d]] * dg[c]
+        chain_reverse_hessian(q, cols, lf, r, acc)
+        for d in range(nd):
+            wsave[d] = lw[dd[d]]
+        chain_reverse_gather(q, cols, lf, r, acc, lq)
+        for k in range(n2):
+            x = lw[k] + h * lq[k]
+            lw[k] = x
+            lv[k] = pre[k] * x
+            lf[k] = kick[k] * x
+        for d in range(nd):  # prescribed DOFs: their q, w adjoints go to the drive, then zero
+            if dm[d] == 0:
+                k = dd[d]
+                waveform_dprm(ds[d], dp[d], tj, dg, ddg)
+                for c in range(4):
+                    gdrv[d, c] += lq[k] * dg[c] + wsave[d] * ddg[c]
+                for e in range(d + 1, nd):
+                    if dd[e] == k:
+                        wsave[e] = 0.0
+                lq[k] = 0.0
+                lw[k] = 0.0
+                lv[k] = 0.0
+                lf[k] = 0.0
+        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
