@@ -23,8 +23,8 @@ from typing import Callable
 import numpy as np
 
 from flexmm.design import sweeps
-from flexmm.design.kernels import (N_CA, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
-                                   param_tables, with_tables)
+from flexmm.design.kernels import (N_CA, N_F, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
+                                   param_tables, sheet_grid, sheet_grid_add, sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
 from flexmm.integrators.common import MODE_FRICTION, Terms
 from flexmm.models.hinge import S_KG
@@ -134,6 +134,19 @@ class Trajectory:
             raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
         ndof = 2 * self.args.site_prm.shape[0] if hasattr(self.args, "site_prm") else -1
         self._ordered = chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
+        nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
+        self._grid = sheet_grid(self.args, 3 * nsite)
+
+    def _grid_of(self, raw: Raw) -> tuple:
+        """The ``grid`` argument of the general sweeps: a grid sheet's hinges in column form
+        (``kernels.sheet_grid_adjoint``) when they apply, else the tuple that says not."""
+        e2 = np.zeros((0, 0))
+        if not (self.column_sweeps and self._grid and raw.q0.size == 3 * raw.t2.shape[0]):
+            return (0, np.zeros(0), e2, e2, e2, e2, np.zeros(0), e2)
+        nc, y0 = self._grid
+        n = raw.t2.shape[0]
+        xc, yc = sheet_grid_columns(raw.t1, n, nc, y0)
+        return (nc, raw.t2, xc, yc, np.zeros((6, n - 1)), np.zeros((6, n - nc)), np.zeros(n), np.empty((N_F + 2, n)))
 
     def columns(self, raw: Raw) -> bool:
         """Whether the run takes the column sweeps (``sweeps.chain_*``): a chain-ordered chain of
@@ -224,6 +237,7 @@ class Trajectory:
             lq[self.obs] += dq[j]
             lv[self.obs] += dv[j]
             lf[self.obs] += df[j]
+        grid = self._grid_of(raw)
         SQ, SV, SF, ST = stored or self._buffers(n, seg + 1)
         for c in range((N - 1) // seg if N else -1, -1, -1):
             k0 = c * seg
@@ -231,7 +245,7 @@ class Trajectory:
             if stored is None:
                 sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
             sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, self.stride, self.obs,
-                           dq, dv, df, lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv)
+                           dq, dv, df, lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv, grid)
         if N == 0:
             lq[self.obs] += dq[0]
             lv[self.obs] += dv[0]
@@ -239,7 +253,9 @@ class Trajectory:
         q0 = raw.q0.copy()
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv)
+        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, grid)
+        if grid[0] > 0:
+            sheet_grid_add(grid[4], grid[5], grid[6], g1, g2, grid[0], self._grid[1])
         # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹)
         hh = 0.5 * self.h
         s2 = post * post
@@ -290,7 +306,7 @@ class Trajectory:
         q0 = raw.q0.copy()
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv)
+        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, self._grid_of(raw))
         hh = 0.5 * self.h
         g_minv = hh * GK - hh * raw.damp * GV
         g_damp = -hh * raw.minv * GV

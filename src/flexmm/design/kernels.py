@@ -415,6 +415,148 @@ def sheet_adjoint(q, args, lam, out, g1, g2):
         g2[b] -= gb
 
 
+# The hinges of a rectangular grid (``sheet_kernels.grid_layout``: no wraps) in column form:
+# the x hinges as one family over sites s = 0..n−2 joining s, s + 1 (the n_cols − 1 … pairs that
+# cross a row end get zero parameters: exact zeros), the y hinges as one over s = 0..n−n_cols−1
+# joining s, s + n_cols. Each family runs the passes of the chain's (strains; their variations
+# along λ; products; parameter adjoints; adding to the two ends), contiguous, so they vectorise.
+
+#: rows of a family's scratch
+(F_EL, F_ES, F_DL, F_DS, F_DP, F_XL, F_XS, F_TA, F_TB, F_KD) = range(10)
+N_F = 10
+#: hinge-parameter columns of a family (table columns except the sign, which is discrete), in order
+FAMILY_COLS = (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT)
+
+
+def sheet_grid(args, ndof: int) -> tuple[int, int] | None:
+    """(n_cols, first y hinge) if the sheet's hinges are a grid without wraps and 3N DOFs, else None."""
+    from flexmm.models.sheet_kernels import grid_layout
+
+    if not isinstance(args, SheetArgs):
+        return None
+    n = args.theta0.shape[0]
+    nc, x1, y0, y1 = grid_layout(args.hinge_a, args.hinge_b, args.hinge_axis, n)
+    if nc == 0 or ndof != 3 * n or x1 != y0 or y1 != args.hinge_a.shape[0] or n // nc < 2:
+        return None
+    return int(nc), int(y0)
+
+
+@jit
+def sheet_grid_columns(hprm, n, nc, y0):
+    """Parameter columns (7, n − 1) of the x family and (7, n − nc) of the y family."""
+    xc = np.zeros((7, n - 1))
+    yc = np.zeros((7, n - nc))
+    for s in range(n - 1):
+        c = s % nc
+        if c < nc - 1:
+            h = (s // nc) * (nc - 1) + c
+            for k in range(7):
+                xc[k, s] = hprm[h, k]
+    for s in range(n - nc):
+        for k in range(7):
+            yc[k, s] = hprm[y0 + s, k]
+    return xc, yc
+
+
+@jit
+def sheet_grid_add(acc_x, acc_y, acc_t0, g1, g2, nc, y0):
+    """Add the family accumulators (6 rows, ``FAMILY_COLS``) and θ0's to the table gradients."""
+    n = g2.shape[0]
+    for s in range(n - 1):
+        c = s % nc
+        if c < nc - 1:
+            h = (s // nc) * (nc - 1) + c
+            for k in range(6):
+                g1[h, FAMILY_COLS[k]] += acc_x[k, s]
+    for s in range(n - nc):
+        for k in range(6):
+            g1[y0 + s, FAMILY_COLS[k]] += acc_y[k, s]
+    for i in range(n):
+        g2[i] += acc_t0[i]
+
+
+@jit
+def _family(q, lam, cs, sn, pc, off, la0, sa0, n, m, r, acc, out, acc_t0):
+    """One family of hinges k < m joining sites k and k + off: along-axis DOFs from la0, across
+    from sa0 (0 or n), rotations from 2n; (∂F/∂q)ᵀλ added to ``out``, parameter adjoints to
+    ``acc`` (6, m) and ``acc_t0`` (n). Many short loops: one that touches more arrays does not
+    vectorise (benchmarks/run.py gradient)."""
+    qla, qlb, qsa, qsb = q[la0:], q[la0 + off :], q[sa0:], q[sa0 + off :]
+    qta, qtb = q[2 * n :], q[2 * n + off :]
+    lla, llb, lsa, lsb = lam[la0:], lam[la0 + off :], lam[sa0:], lam[sa0 + off :]
+    lta, ltb = lam[2 * n :], lam[2 * n + off :]
+    ca, sa, cb, sb = cs, sn, cs[off:], sn[off:]
+    rest, ha, hb, sig, kl, ks, kt = pc[H_REST], pc[H_HALF_A], pc[H_HALF_B], pc[H_SIGN], pc[H_KL], pc[H_KS], pc[H_KT]
+    el_, es_, dl_, ds_, dp_ = r[F_EL], r[F_ES], r[F_DL], r[F_DS], r[F_DP]
+    for k in range(m):
+        el_[k] = qlb[k] - qla[k] + rest[k] - (ha[k] * ca[k] + hb[k] * cb[k])
+        es_[k] = sig[k] * (hb[k] * sb[k] - ha[k] * sa[k]) + qsb[k] - qsa[k]
+    for k in range(m):
+        dl_[k] = llb[k] - lla[k] + ha[k] * sa[k] * lta[k] + hb[k] * sb[k] * ltb[k]
+    for k in range(m):
+        ds_[k] = sig[k] * (hb[k] * cb[k] * ltb[k] - ha[k] * ca[k] * lta[k]) + lsb[k] - lsa[k]
+    for k in range(m):
+        dp_[k] = lta[k] + ltb[k]
+    xl, xs, ta_, tb_, kd = r[F_XL], r[F_XS], r[F_TA], r[F_TB], r[F_KD]
+    for k in range(m):
+        xl[k] = kl[k] * dl_[k]
+        xs[k] = ks[k] * ds_[k]
+        kd[k] = kt[k] * dp_[k]
+    for k in range(m):
+        hA, sg, k_l, k_s, c_a, s_a, l_a = ha[k], sig[k], kl[k], ks[k], ca[k], sa[k], lta[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        ta_[k] = k_l * (hA * s_a * dl + el * hA * c_a * l_a) + k_s * (-sg * hA * c_a * ds + es * sg * hA * s_a * l_a)
+    for k in range(m):
+        hB, sg, k_l, k_s, c_b, s_b, l_b = hb[k], sig[k], kl[k], ks[k], cb[k], sb[k], ltb[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        tb_[k] = k_l * (hB * s_b * dl + el * hB * c_b * l_b) + k_s * (sg * hB * c_b * ds - es * sg * hB * s_b * l_b)
+    a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
+    for k in range(m):
+        a_rest[k] -= kl[k] * dl_[k]
+        a_kl[k] -= el_[k] * dl_[k]
+        a_ks[k] -= es_[k] * ds_[k]
+    for k in range(m):
+        a_kt[k] -= (qta[k] + qtb[k]) * dp_[k]
+    for k in range(m):
+        sg, c_a, s_a, l_a = sig[k], ca[k], sa[k], lta[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        a_ha[k] -= kl[k] * (-c_a * dl + el * s_a * l_a) + ks[k] * (-sg * s_a * ds - es * sg * c_a * l_a)
+    for k in range(m):
+        sg, c_b, s_b, l_b = sig[k], cb[k], sb[k], ltb[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        a_hb[k] -= kl[k] * (-c_b * dl + el * s_b * l_b) + ks[k] * (sg * s_b * ds + es * sg * c_b * l_b)
+    ola, olb, osa, osb = out[la0:], out[la0 + off :], out[sa0:], out[sa0 + off :]
+    ota, otb = out[2 * n :], out[2 * n + off :]
+    t0a, t0b = acc_t0, acc_t0[off:]
+    for k in range(m):  # each end in its own loops (an end is another hinge's other end)
+        ola[k] += xl[k]
+        osa[k] += xs[k]
+    for k in range(m):
+        ota[k] -= ta_[k] + kd[k]
+        t0a[k] -= ta_[k]
+    for k in range(m):
+        olb[k] -= xl[k]
+        osb[k] -= xs[k]
+    for k in range(m):
+        otb[k] -= tb_[k] + kd[k]
+        t0b[k] -= tb_[k]
+
+
+@jit
+def sheet_grid_adjoint(q, theta0, nc, xc, yc, lam, out, acc_x, acc_y, acc_t0, r):
+    """``sheet_adjoint`` of a grid sheet in column form (``sheet_grid_columns``): (∂F/∂q)ᵀλ added
+    to ``out``, parameter adjoints to the family accumulators and θ0's; r (N_F + 2, n) scratch."""
+    n = theta0.shape[0]
+    cs, sn = r[N_F], r[N_F + 1]
+    th = q[2 * n :]
+    for i in range(n):
+        s, c = sincos(theta0[i] + th[i])
+        cs[i] = c
+        sn[i] = s
+    _family(q, lam, cs, sn, xc, 1, 0, n, n, n - 1, r, acc_x, out, acc_t0)
+    _family(q, lam, cs, sn, yc, nc, n, 0, n, n - nc, r, acc_y, out, acc_t0)
+
+
 @jit
 def sheet_tangent(q, args, dq, d1, d2, out):
     """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""

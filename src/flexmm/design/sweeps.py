@@ -32,6 +32,7 @@ from flexmm.design.kernels import (
     chain_reverse_hessian,
     model_adjoint,
     model_tangent,
+    sheet_grid_adjoint,
 )
 from flexmm.design.terms import (
     contact_adjoint,
@@ -110,9 +111,16 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
 
 
 @jit
-def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg):
-    """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces."""
-    model_adjoint(q, args, lf, lq, g1, g2)
+def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid):
+    """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces.
+
+    ``grid`` = (n_cols, θ0, x columns, y columns, their accumulators, θ0's, scratch): a grid
+    sheet's hinges in column form (``kernels.sheet_grid_adjoint``); n_cols = 0: ``model_adjoint``.
+    """
+    if grid[0] > 0:
+        sheet_grid_adjoint(q, grid[1], grid[0], grid[2], grid[3], lf, lq, grid[4], grid[5], grid[6], grid[7])
+    else:
+        model_adjoint(q, args, lf, lq, g1, g2)
     contact_adjoint(q, lf, lq, terms.con_ij, terms.con_prm, gcon)
     drive_force_adjoint(t, lf, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
@@ -129,7 +137,7 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
 
 @jit
 def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-            lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv):
+            lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv, grid):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
@@ -157,7 +165,7 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
                 k = dd[d]
                 _, rate = waveform(ds[d], dp[d], t1)
                 gS[k] += lv[k] * (rate - pre[k] * v0[k] - kick[k] * f0[k])
-        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg)
+        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
             lw[k] += h * lq[k]
@@ -169,11 +177,11 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
 
 
 @jit
-def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv):
+def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv, grid):
     """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
     dg = np.empty(4)
     ddg = np.empty(4)
-    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg)
+    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid)
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
