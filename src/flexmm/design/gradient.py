@@ -203,110 +203,72 @@ class Trajectory:
                  memory_mb: float = MEMORY_MB) -> tuple[float, Raw, Records]:
         """(J, dJ/draw, records) by one forward run and one reverse sweep.
 
-        If every state of the run fits in ``memory_mb`` (and no ``segment`` is asked for), the
-        forward run keeps them all and the reverse sweep reads them; otherwise the forward run
-        keeps checkpoints every ``segment`` steps (default ⌈√nsteps⌉) and the reverse sweep
-        replays one segment at a time (one more forward run in all, memory ~2√N states).
+        If every state of the run fits in ``memory_mb`` (the column sweeps: in ``CACHE_MB``, as
+        replaying from checkpoints costs less than streaming every state through memory), and no
+        ``segment`` is asked for, the forward run keeps them all and the reverse sweep reads
+        them; otherwise the forward run keeps checkpoints every ``segment`` steps (default
+        ⌈√nsteps⌉) and the reverse sweep replays one segment at a time (one more forward run in
+        all, memory ~2√N states).
         """
-        if self.columns(raw) and self.nsteps > 0:
-            return self._column_gradient(raw, objective, segment, memory_mb)
-        n = raw.q0.size
+        n, N = raw.q0.size, self.nsteps
         args, terms, kick, pre, post = self.bind(raw)
-        if segment is None and (self.nsteps + 1) * (3 * n + 1) * 8 <= memory_mb * 1e6:
-            SQ, SV, SF, ST = self._buffers(n, self.nsteps + 1)
+        columns = self.columns(raw) and N > 0
+        grid = self._grid_of(raw)
+        budget = min(memory_mb, CACHE_MB) if columns else memory_mb
+        keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= budget * 1e6
+        if keep_all and not columns:  # the replay from the start is the forward run
+            SQ, SV, SF, ST = self._buffers(n, N + 1)
             q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
             sweeps.initial_force(args, terms, q, v, f, self.t0)
-            sweeps.replay(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, SQ, SV, SF, ST)
-            rows = np.arange(0, self.nsteps + 1, self.stride)
+            sweeps.replay(args, terms, kick, pre, post, q, v, f, self.t0, self.h, N, SQ, SV, SF, ST)
+            rows = np.arange(0, N + 1, self.stride)
             rec = Records(SQ[rows][:, self.obs], SV[rows][:, self.obs], SF[rows][:, self.obs])
-            stored = (SQ, SV, SF, ST)
-            seg = self.nsteps
-            CQ = CV = CF = CT = None
+            CQ, CV, CF, CT, seg = SQ, SV, SF, ST, max(N, 1)
         else:
-            rec, (CQ, CV, CF, CT, seg) = self.run(raw, segment)
-            stored = None
+            rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
         value, dq, dv, df, explicit = objective(rec, raw)
         dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
-        lq, lv, lf = np.zeros(n), np.zeros(n), np.zeros(n)
+        lq, lv, lf, lw = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        GK, GV = np.zeros(n), np.zeros(n)
         g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
-        gK, gP, gS = np.zeros(n), np.zeros(n), np.zeros(n)
         gcon, gdrv = np.zeros_like(raw.con), np.zeros_like(raw.drv)
-        N = self.nsteps
-        if N % self.stride == 0:
-            j = N // self.stride
-            lq[self.obs] += dq[j]
-            lv[self.obs] += dv[j]
-            lf[self.obs] += df[j]
-        grid = self._grid_of(raw)
-        SQ, SV, SF, ST = stored or self._buffers(n, seg + 1)
-        for c in range((N - 1) // seg if N else -1, -1, -1):
-            k0 = c * seg
-            m = min(seg, N - k0)
-            if stored is None:
+        j = N // self.stride
+        lq[self.obs] += dq[j]
+        lv[self.obs] += dv[j]
+        lf[self.obs] += df[j]
+        tail = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw)
+        if columns:
+            cols, with_kg = self._columns(raw)
+            acc = np.zeros((N_CA, n // 2))
+            common = (cols, with_kg, terms, kick, pre, post)
+            if keep_all:  # every state was kept by the forward run
+                sweeps.chain_reverse(*common, CQ, CV, CT, self.h, 0, N, *tail, GK, GV, acc, gdrv)
+            else:
+                SQ, SV, ST = np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty(seg + 1)
+                for c in range((N - 1) // seg, -1, -1):
+                    k0, m = c * seg, min(seg, N - c * seg)
+                    sweeps.chain_replay(*common, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, ST)
+                    sweeps.chain_reverse(*common, SQ, SV, ST, self.h, k0, m, *tail, GK, GV, acc, gdrv)
+            chain_add_columns(acc, g1, g2)
+        elif keep_all:
+            sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *tail, g1, g2, GK, GV, gcon,
+                           gdrv, grid)
+        else:
+            SQ, SV, SF, ST = self._buffers(n, seg + 1)
+            for c in range((N - 1) // seg if N else -1, -1, -1):
+                k0, m = c * seg, min(seg, N - c * seg)
                 sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
-            sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, self.stride, self.obs,
-                           dq, dv, df, lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv, grid)
-        if N == 0:
-            lq[self.obs] += dq[0]
-            lv[self.obs] += dv[0]
-            lf[self.obs] += df[0]
+                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *tail, g1, g2, GK, GV,
+                               gcon, gdrv, grid)
+        GK += lw * CF[0]  # the products of the first step's λw with the initial state
+        GV += lw * CV[0]
         q0 = raw.q0.copy()
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
         sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, grid)
         if grid[0] > 0:
             sheet_grid_add(grid[4], grid[5], grid[6], g1, g2, grid[0], self._grid[1])
-        # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹)
-        hh = 0.5 * self.h
-        s2 = post * post
-        g_minv = hh * gK - hh * raw.damp * gP - s2 * hh * raw.damp * gS
-        g_damp = -hh * raw.minv * gP - s2 * hh * raw.minv * gS
-        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv)
-        if explicit is not None:
-            grad = grad.axpy(1.0, explicit)
-        return float(value), grad, rec
-
-    def _column_gradient(self, raw: Raw, objective: Objective, segment: int | None,
-                         memory_mb: float) -> tuple[float, Raw, Records]:
-        """``gradient`` of a chain-ordered chain by the column sweeps (``sweeps.chain_*``): the
-        replay keeps (q, v) per step, the reverse step takes the force again with its Hessian."""
-        n, N = raw.q0.size, self.nsteps
-        args, terms, kick, pre, post = self.bind(raw)
-        cols, with_kg = self._columns(raw)
-        # replaying from checkpoints costs less than streaming every state through memory unless
-        # they all fit in cache
-        keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= min(memory_mb, CACHE_MB) * 1e6
-        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
-        value, dq, dv, df, explicit = objective(rec, raw)
-        dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
-        lq, lv, lf, lw = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
-        GK, GV = np.zeros(n), np.zeros(n)
-        acc = np.zeros((N_CA, n // 2))
-        gcon, gdrv = np.zeros_like(raw.con), np.zeros_like(raw.drv)
-        j = N // self.stride
-        lq[self.obs] += dq[j]
-        lv[self.obs] += dv[j]
-        lf[self.obs] += df[j]
-        common = (cols, with_kg, terms, kick, pre, post)
-        if keep_all:  # every state was kept by the forward run
-            sweeps.chain_reverse(*common, CQ, CV, CT, self.h, 0, N, self.stride, self.obs, dq, dv, df,
-                                 lq, lv, lf, lw, GK, GV, acc, gdrv)
-        else:
-            SQ, SV, ST = np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty(seg + 1)
-            for c in range((N - 1) // seg, -1, -1):
-                k0 = c * seg
-                m = min(seg, N - k0)
-                sweeps.chain_replay(*common, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, ST)
-                sweeps.chain_reverse(*common, SQ, SV, ST, self.h, k0, m, self.stride, self.obs, dq, dv, df,
-                                     lq, lv, lf, lw, GK, GV, acc, gdrv)
-        GK += lw * CF[0]  # the products of the first step's λw with the initial state
-        GV += lw * CV[0]
-        g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
-        chain_add_columns(acc, g1, g2)
-        q0 = raw.q0.copy()
-        v0 = raw.v0.copy()
-        sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, self._grid_of(raw))
+        # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹); GV = ∂J/∂P + S² ∂J/∂S
         hh = 0.5 * self.h
         g_minv = hh * GK - hh * raw.damp * GV
         g_damp = -hh * raw.minv * GV

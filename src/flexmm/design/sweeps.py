@@ -13,6 +13,11 @@ The reverse of a step, given the adjoints (λq, λv, λf) of (q', v', f'):
     λq_D, λw_D → drive parameters, then zeroed,
     λw += h λq,  λv ← P λw,  λf ← K λw,              ∂J/∂P += λw ⊙ v, ∂J/∂K += λw ⊙ f.
 
+The products with the integrator factors are folded per state: with z = λw (of the step out
+of state j) + S λv (of v_j), ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (as
+v_j = S (w + K f_j), prescribed DOFs included), two per-DOF sums from which ∂J/∂m⁻¹ and ∂J/∂c
+follow (``gradient.Trajectory.gradient``).
+
 This is the exact transpose of the discrete step, so gradients agree with finite differences
 of the same discrete run to rounding. The objective enters through records of (q, v, f) at
 the observed DOFs every ``stride`` steps: their adjoints are added at those steps.
@@ -137,43 +142,39 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
 
 @jit
 def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-            lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv, grid):
+            lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, grid):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
-    and leave as those at step k0 (objective at k0 included); parameter adjoints accumulate.
+    and leave as those at step k0 (objective at k0 included); ``lw`` enters as λw of the step
+    out of state k0 + nsteps (zero at the end of the run) and leaves as that of the step out of
+    k0. Parameter adjoints accumulate; the integrator factors' in the folded form of the module
+    docstring (GK, GV; the caller adds the initial state's products).
     """
     n = lq.shape[0]
-    lw = np.empty(n)
     dg = np.empty(4)
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    for s in range(nsteps - 1, -1, -1):
-        q1 = SQ[s + 1]
-        v0 = SV[s]
-        f0 = SF[s]
-        f1 = SF[s + 1]
-        t1 = ST[s + 1]
-        for k in range(n):  # w = P v + K f (the half-kicked velocity) and v' = S (w + K f')
-            gS[k] += lv[k] * (pre[k] * v0[k] + kick[k] * f0[k] + kick[k] * f1[k])
+    for j in range(nsteps, 0, -1):
+        q1 = SQ[j]
+        v1 = SV[j]
+        f1 = SF[j]
+        t1 = ST[j]
+        for k in range(n):  # the products at state j, then λw = S λv, λf += K S λv
             sl = post[k] * lv[k]
-            gK[k] += sl * f1[k]
+            z = lw[k] + sl
+            GK[k] += z * f1[k]
+            GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        for d in range(dd.shape[0]):  # a prescribed DOF's w is the waveform's rate (and K = 0)
-            if dm[d] == 0:
-                k = dd[d]
-                _, rate = waveform(ds[d], dp[d], t1)
-                gS[k] += lv[k] * (rate - pre[k] * v0[k] - kick[k] * f0[k])
         _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
-            lw[k] += h * lq[k]
-            gP[k] += lw[k] * v0[k]
-            gK[k] += lw[k] * f0[k]
-            lv[k] = pre[k] * lw[k]
-            lf[k] = kick[k] * lw[k]
-        _inject(k0 + s, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+            x = lw[k] + h * lq[k]
+            lw[k] = x
+            lv[k] = pre[k] * x
+            lf[k] = kick[k] * x
+        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
 
 
 @jit
