@@ -271,28 +271,62 @@ def apply_prescribed_only(terms, q, v, t):
 
 
 @jit
-def chain_step(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, w):
-    """``verlet_step`` with the column force (same arithmetic); returns t + h."""
-    n = q.shape[0]
-    for k in range(n):
+def _chain_open(q, v, f, kick, pre, h):
+    """Opening half kick and drift (v becomes the half-kicked w)."""
+    for k in range(q.shape[0]):
         v[k] = pre[k] * v[k] + kick[k] * f[k]
         q[k] += h * v[k]
-    t1 = t + h
-    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
-    chain_force_columns(q, cols, with_kg, w, f)
-    position_forces(q, t1, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
-                    terms.drv_prm)
-    for k in range(n):
+
+
+@jit
+def _chain_close(v, f, kick, post):
+    for k in range(v.shape[0]):
         v[k] = (v[k] + kick[k] * f[k]) * post[k]
-    return t1
+
+
+@jit
+def _chain_close_open(q, v, f, kick, pre, post, h, sq, sv, store):
+    """Closing kick of a step (if ``store``, the new state's q, v copied to sq, sv) and the
+    opening kick and drift of the next in one pass: the operations of ``_chain_close`` then
+    ``_chain_open``."""
+    if store:
+        for k in range(q.shape[0]):
+            x = (v[k] + kick[k] * f[k]) * post[k]
+            sq[k] = q[k]
+            sv[k] = x
+            x = pre[k] * x + kick[k] * f[k]
+            v[k] = x
+            q[k] += h * x
+    else:
+        for k in range(q.shape[0]):
+            x = (v[k] + kick[k] * f[k]) * post[k]
+            x = pre[k] * x + kick[k] * f[k]
+            v[k] = x
+            q[k] += h * x
+
+
+@jit
+def _chain_force_at(cols, with_kg, terms, q, v, f, t, w):
+    """Prescribe the driven DOFs at t, then the total force (the column force, applied forces)."""
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    chain_force_columns(q, cols, with_kg, w, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                    terms.drv_prm)
 
 
 @jit
 def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs,
                   CQ, CV, CF, CT, Rq, Rv, Rf):
-    """``forward`` with ``chain_step``."""
+    """``forward`` with the column force (the same arithmetic: the same run). Between the states
+    it keeps, the closing kick of a step and the opening of the next take one pass."""
     w = np.empty((N_R, cols.shape[1] + 1))
     for k in range(nsteps + 1):
+        if k > 0:
+            t += h
+            _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
+        keep = k % seg == 0 or k % stride == 0 or k == nsteps
+        if k > 0 and keep:
+            _chain_close(v, f, kick, post)
         if k % seg == 0:
             c = k // seg
             CQ[c, :] = q
@@ -302,7 +336,10 @@ def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, 
         if k % stride == 0:
             _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            t = chain_step(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, w)
+            if keep:
+                _chain_open(q, v, f, kick, pre, h)
+            elif k > 0:
+                _chain_close_open(q, v, f, kick, pre, post, h, q, v, False)
     return t
 
 
@@ -314,12 +351,21 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
     v = v0.copy()
     f = f0.copy()
     t = t0
-    for s in range(nsteps + 1):
-        SQ[s, :] = q
-        SV[s, :] = v
+    SQ[0, :] = q
+    SV[0, :] = v
+    ST[0] = t
+    if nsteps > 0:
+        _chain_open(q, v, f, kick, pre, h)
+    for s in range(1, nsteps + 1):
+        t += h
+        _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
         ST[s] = t
         if s < nsteps:
-            t = chain_step(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, w)
+            _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], True)
+        else:
+            _chain_close(v, f, kick, post)
+            SQ[s, :] = q
+            SV[s, :] = v
 
 
 @jit
