@@ -772,7 +772,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     """
     import tracemalloc
 
-    from flexmm.design.gradient import MEMORY_MB, Trajectory, raw_of
+    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, raw_of
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
@@ -808,10 +808,11 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
         n = system.ndof
-        keep_all = (steps + 1) * (3 * n + 1) * 8 <= MEMORY_MB * 1e6  # what Trajectory.gradient does by default
-        seg = max(1, math.isqrt(steps))
         columns = traj.columns(raw)
-        per_state = (2 if columns else 3) * n * 8  # the column sweeps replay (q, v) only
+        budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
+        keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
+        seg = max(1, math.isqrt(steps))
+        per_state = 3 * n * 8
         if keep_all:
             stored = (steps + 1) * 3 * n * 8
         else:
@@ -822,7 +823,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
                "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd)),
                "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
                "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu)),
-               "sweeps": "column" if columns else "general",
+               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]],
                "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps",
                "stored_MB": stored / 1e6, "traced_peak_MB": peak / 1e6,
                "all_states_MB": (steps + 1) * 3 * n * 8 / 1e6}

@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 
 from flexmm.design import sweeps
-from flexmm.design.kernels import (N_CA, N_F, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
+from flexmm.design.kernels import (N_CA, N_F, N_R, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
                                    param_tables, sheet_grid, sheet_grid_add, sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
 from flexmm.integrators.common import MODE_FRICTION, Terms
@@ -114,9 +114,11 @@ class Trajectory:
     non-differentiable parts), the step ``h``, ``nsteps``, the recording ``stride`` and the
     observed DOFs ``obs``, and the start time ``t0``.
 
-    A chain-ordered rotating-squares chain without contacts runs the column sweeps
-    (``sweeps.chain_*``: the same trajectory bit for bit, the same gradient to rounding, about
-    half the cost); any other problem the general ones."""
+    The model part of the reverse step takes column form where it can (``form``): a
+    chain-ordered rotating-squares chain without contacts (whose forward run and replay then use
+    the column force, ``sweeps.chain_forward``/``chain_replay``: the same trajectory bit for
+    bit) and a grid sheet; the gradient is the same to rounding, at about half the cost.
+    ``column_sweeps=False`` runs the model's own adjoint kernel always."""
 
     args: tuple
     terms: Terms
@@ -137,16 +139,21 @@ class Trajectory:
         nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
         self._grid = sheet_grid(self.args, 3 * nsite)
 
-    def _grid_of(self, raw: Raw) -> tuple:
-        """The ``grid`` argument of the general sweeps: a grid sheet's hinges in column form
-        (``kernels.sheet_grid_adjoint``) when they apply, else the tuple that says not."""
-        e2 = np.zeros((0, 0))
-        if not (self.column_sweeps and self._grid and raw.q0.size == 3 * raw.t2.shape[0]):
-            return (0, np.zeros(0), e2, e2, e2, e2, np.zeros(0), e2)
-        nc, y0 = self._grid
-        n = raw.t2.shape[0]
-        xc, yc = sheet_grid_columns(raw.t1, n, nc, y0)
-        return (nc, raw.t2, xc, yc, np.zeros((6, n - 1)), np.zeros((6, n - nc)), np.zeros(n), np.empty((N_F + 2, n)))
+    def form(self, raw: Raw) -> tuple:
+        """The ``form`` argument of the reverse sweep (``sweeps._force_adjoint``): a chain-ordered
+        chain's columns, a grid sheet's hinge families, or the model's own adjoint kernel."""
+        e1, e2 = np.zeros(0), np.zeros((0, 0))
+        if self.columns(raw):
+            n = raw.t2.shape[0]
+            cols, _ = self._columns(raw)
+            return (sweeps.FORM_CHAIN, 0, e1, cols, e2, np.zeros((N_CA, n)), e2, e1, np.empty((N_R, n + 1)))
+        if self.column_sweeps and self._grid and raw.q0.size == 3 * raw.t2.shape[0]:
+            nc, y0 = self._grid
+            n = raw.t2.shape[0]
+            xc, yc = sheet_grid_columns(raw.t1, n, nc, y0)
+            return (sweeps.FORM_GRID, nc, raw.t2, xc, yc, np.zeros((6, n - 1)), np.zeros((6, n - nc)), np.zeros(n),
+                    np.empty((N_F + 2, n)))
+        return (sweeps.FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2)
 
     def columns(self, raw: Raw) -> bool:
         """Whether the run takes the column sweeps (``sweeps.chain_*``): a chain-ordered chain of
@@ -212,20 +219,11 @@ class Trajectory:
         """
         n, N = raw.q0.size, self.nsteps
         args, terms, kick, pre, post = self.bind(raw)
-        columns = self.columns(raw) and N > 0
-        grid = self._grid_of(raw)
-        budget = min(memory_mb, CACHE_MB) if columns else memory_mb
+        form = self.form(raw)
+        chain = form[0] == sweeps.FORM_CHAIN
+        budget = min(memory_mb, CACHE_MB) if chain else memory_mb
         keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= budget * 1e6
-        if keep_all and not columns:  # the replay from the start is the forward run
-            SQ, SV, SF, ST = self._buffers(n, N + 1)
-            q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
-            sweeps.initial_force(args, terms, q, v, f, self.t0)
-            sweeps.replay(args, terms, kick, pre, post, q, v, f, self.t0, self.h, N, SQ, SV, SF, ST)
-            rows = np.arange(0, N + 1, self.stride)
-            rec = Records(SQ[rows][:, self.obs], SV[rows][:, self.obs], SF[rows][:, self.obs])
-            CQ, CV, CF, CT, seg = SQ, SV, SF, ST, max(N, 1)
-        else:
-            rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
+        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
         value, dq, dv, df, explicit = objective(rec, raw)
         dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
         lq, lv, lf, lw = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
@@ -236,38 +234,29 @@ class Trajectory:
         lq[self.obs] += dq[j]
         lv[self.obs] += dv[j]
         lf[self.obs] += df[j]
-        tail = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw)
-        if columns:
-            cols, with_kg = self._columns(raw)
-            acc = np.zeros((N_CA, n // 2))
-            common = (cols, with_kg, terms, kick, pre, post)
-            if keep_all:  # every state was kept by the forward run
-                sweeps.chain_reverse(*common, CQ, CV, CT, self.h, 0, N, *tail, GK, GV, acc, gdrv)
-            else:
-                SQ, SV, ST = np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty(seg + 1)
-                for c in range((N - 1) // seg, -1, -1):
-                    k0, m = c * seg, min(seg, N - c * seg)
-                    sweeps.chain_replay(*common, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, ST)
-                    sweeps.chain_reverse(*common, SQ, SV, ST, self.h, k0, m, *tail, GK, GV, acc, gdrv)
-            chain_add_columns(acc, g1, g2)
-        elif keep_all:
-            sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *tail, g1, g2, GK, GV, gcon,
-                           gdrv, grid)
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form)
+        if keep_all:  # every state was kept by the forward run
+            sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1)
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
-                sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
-                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *tail, g1, g2, GK, GV,
-                               gcon, gdrv, grid)
+                if chain:
+                    sweeps.chain_replay(form[3], self._columns(raw)[1], terms, kick, pre, post, CQ[c], CV[c], CF[c],
+                                        CT[c], self.h, m, SQ, SV, SF, ST)
+                else:
+                    sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
+                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
         GK += lw * CF[0]  # the products of the first step's λw with the initial state
         GV += lw * CV[0]
         q0 = raw.q0.copy()
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, grid)
-        if grid[0] > 0:
-            sheet_grid_add(grid[4], grid[5], grid[6], g1, g2, grid[0], self._grid[1])
+        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, form)
+        if chain:
+            chain_add_columns(form[5], g1, g2)
+        elif form[0] == sweeps.FORM_GRID:
+            sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
         # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹); GV = ∂J/∂P + S² ∂J/∂S
         hh = 0.5 * self.h
         g_minv = hh * GK - hh * raw.damp * GV

@@ -312,9 +312,25 @@ def chain_force_columns(q, cols, with_kg, r, f):
 
 
 @jit
+def chain_strains(q, cols, r):
+    """cos/sin of θ0+θ (rows R_COS, R_SIN) and the hinges' stretch and shear (R_EL, R_ES) at q:
+    what ``chain_reverse_hessian`` reads, without the force (``chain_force_columns``)."""
+    n = cols.shape[1]
+    qu, qt = q[:n], q[n:]
+    th0, rest, ha, hb, sig = cols[CC_TH0], cols[CC_REST], cols[CC_HA], cols[CC_HB], cols[CC_SIG]
+    cs, sn, el_, es_ = r[R_COS], r[R_SIN], r[R_EL, 1:], r[R_ES, 1:]
+    for i in range(n):
+        s, c = sincos(th0[i] + qt[i])
+        cs[i] = c
+        sn[i] = s
+    for h in range(n - 1):
+        el_[h] = qu[h + 1] - qu[h] + rest[h] - (ha[h] * cs[h] + hb[h] * cs[h + 1])
+        es_[h] = sig[h] * (hb[h] * sn[h + 1] - ha[h] * sn[h])
+
+
+@jit
 def chain_reverse_hessian(q, cols, lam, r, acc):
-    """Hinge part of (∂F/∂q)ᵀλ and (∂F/∂p)ᵀλ at the state of ``chain_reverse_force`` (its rows
-    in r): per hinge into the padded rows R_XU, R_TA, R_TB, R_KD (gathered by
+    """Hinge part of (∂F/∂q)ᵀλ and (∂F/∂p)ᵀλ at the state of ``chain_strains`` (its rows in r): per hinge into the padded rows R_XU, R_TA, R_TB, R_KD (gathered by
     ``chain_reverse_gather``), hinge-parameter adjoints into acc (``hinge_adjoint``'s algebra).
     Three short loops (the variations of the strains along λ; the products; the parameter
     adjoints): a loop touching many arrays does not vectorise."""

@@ -35,6 +35,7 @@ from flexmm.design.kernels import (
     chain_force_columns,
     chain_reverse_gather,
     chain_reverse_hessian,
+    chain_strains,
     model_adjoint,
     model_tangent,
     sheet_grid_adjoint,
@@ -115,15 +116,27 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
             t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h)
 
 
+#: the model part of a reverse step (``_force_adjoint``'s ``form``): ``model_adjoint`` into the
+#: tables, a grid sheet's hinge families, a chain-ordered chain's columns
+FORM_TABLES, FORM_GRID, FORM_CHAIN = 0, 1, 2
+
+
 @jit
-def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid):
+def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form):
     """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces.
 
-    ``grid`` = (n_cols, θ0, x columns, y columns, their accumulators, θ0's, scratch): a grid
-    sheet's hinges in column form (``kernels.sheet_grid_adjoint``); n_cols = 0: ``model_adjoint``.
+    ``form`` = (kind, n_cols, θ0, columns, columns, accumulator, accumulator, accumulator,
+    scratch): FORM_GRID (·, n_cols, θ0, x and y columns, their accumulators, θ0's, scratch:
+    ``kernels.sheet_grid_adjoint``), FORM_CHAIN (·, ·, ·, ``kernels.chain_columns``, ·, their
+    accumulator, ·, ·, scratch), FORM_TABLES (``model_adjoint`` into g1, g2).
     """
-    if grid[0] > 0:
-        sheet_grid_adjoint(q, grid[1], grid[0], grid[2], grid[3], lf, lq, grid[4], grid[5], grid[6], grid[7])
+    kind = form[0]
+    if kind == FORM_CHAIN:
+        chain_strains(q, form[3], form[8])
+        chain_reverse_hessian(q, form[3], lf, form[8], form[5])
+        chain_reverse_gather(q, form[3], lf, form[8], form[5], lq)
+    elif kind == FORM_GRID:
+        sheet_grid_adjoint(q, form[2], form[1], form[3], form[4], lf, lq, form[5], form[6], form[7], form[8])
     else:
         model_adjoint(q, args, lf, lq, g1, g2)
     contact_adjoint(q, lf, lq, terms.con_ij, terms.con_prm, gcon)
@@ -142,7 +155,7 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
 
 @jit
 def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-            lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, grid):
+            lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
@@ -167,7 +180,7 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
             GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid)
+        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
             x = lw[k] + h * lq[k]
@@ -178,11 +191,11 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
 
 
 @jit
-def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv, grid):
+def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv, form):
     """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
     dg = np.empty(4)
     ddg = np.empty(4)
-    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, grid)
+    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form)
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
@@ -344,8 +357,8 @@ def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, 
 
 
 @jit
-def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, ST):
-    """States 0..nsteps of a segment from its checkpoint: (q, v, t) into rows of SQ, SV, ST."""
+def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST):
+    """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST."""
     w = np.empty((N_R, cols.shape[1] + 1))
     q = q0.copy()
     v = v0.copy()
@@ -353,12 +366,14 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
     t = t0
     SQ[0, :] = q
     SV[0, :] = v
+    SF[0, :] = f
     ST[0] = t
     if nsteps > 0:
         _chain_open(q, v, f, kick, pre, h)
     for s in range(1, nsteps + 1):
         t += h
         _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
+        SF[s, :] = f
         ST[s] = t
         if s < nsteps:
             _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], True)
@@ -366,64 +381,3 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
             _chain_close(v, f, kick, post)
             SQ[s, :] = q
             SV[s, :] = v
-
-
-@jit
-def chain_reverse(cols, with_kg, terms, kick, pre, post, SQ, SV, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-                  lq, lv, lf, lw, GK, GV, acc, gdrv):
-    """``reverse`` of a segment replayed by ``chain_replay`` (rows 0..nsteps of SQ, SV, ST).
-
-    ``lw`` enters as λw of the step out of state k0 + nsteps (zero at the end of the run) and
-    leaves as that of the step out of k0: its products with (f, v) at a state are taken with the
-    state's own (``GK``, ``GV``); the caller adds those of the initial state.
-    """
-    n2 = lq.shape[0]
-    n = n2 // 2
-    r = np.empty((N_R, n + 1))
-    f = np.empty(n2)
-    dg = np.empty(4)
-    ddg = np.empty(4)
-    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    nd = dd.shape[0]
-    wsave = np.empty(nd)
-    for j in range(nsteps, 0, -1):
-        q = SQ[j]
-        vj = SV[j]
-        tj = ST[j]
-        chain_force_columns(q, cols, with_kg, r, f)
-        position_forces(q, tj, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
-        for k in range(n2):  # the products at state j, then λw = S λv, λf += K S λv
-            sl = post[k] * lv[k]
-            z = lw[k] + sl
-            GK[k] += z * f[k]
-            GV[k] += z * vj[k]
-            lw[k] = sl
-            lf[k] += kick[k] * sl
-        for d in range(nd):  # applied forces: λf · ∂g/∂prm
-            if dm[d] == 1:
-                waveform_dprm(ds[d], dp[d], tj, dg, ddg)
-                for c in range(4):
-                    gdrv[d, c] += lf[dd[d]] * dg[c]
-        chain_reverse_hessian(q, cols, lf, r, acc)
-        for d in range(nd):
-            wsave[d] = lw[dd[d]]
-        chain_reverse_gather(q, cols, lf, r, acc, lq)
-        for k in range(n2):
-            x = lw[k] + h * lq[k]
-            lw[k] = x
-            lv[k] = pre[k] * x
-            lf[k] = kick[k] * x
-        for d in range(nd):  # prescribed DOFs: their q, w adjoints go to the drive, then zero
-            if dm[d] == 0:
-                k = dd[d]
-                waveform_dprm(ds[d], dp[d], tj, dg, ddg)
-                for c in range(4):
-                    gdrv[d, c] += lq[k] * dg[c] + wsave[d] * ddg[c]
-                for e in range(d + 1, nd):
-                    if dd[e] == k:
-                        wsave[e] = 0.0
-                lq[k] = 0.0
-                lw[k] = 0.0
-                lv[k] = 0.0
-                lf[k] = 0.0
-        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
