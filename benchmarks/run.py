@@ -812,7 +812,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
         keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
         seg = max(1, math.isqrt(steps))
-        per_state = 3 * n * 8
+        per_state = (2 if columns else 3) * n * 8  # the chain-column replay keeps (q, v) only
         if keep_all:
             stored = (steps + 1) * 3 * n * 8
         else:

@@ -145,15 +145,16 @@ class Trajectory:
         e1, e2 = np.zeros(0), np.zeros((0, 0))
         if self.columns(raw):
             n = raw.t2.shape[0]
-            cols, _ = self._columns(raw)
-            return (sweeps.FORM_CHAIN, 0, e1, cols, e2, np.zeros((N_CA, n)), e2, e1, np.empty((N_R, n + 1)))
+            cols, with_kg = self._columns(raw)
+            return (sweeps.FORM_CHAIN, int(with_kg), e1, cols, e2, np.zeros((N_CA, n)), e2, e1, np.empty((N_R, n + 1)),
+                    np.empty(2 * n))
         if self.column_sweeps and self._grid and raw.q0.size == 3 * raw.t2.shape[0]:
             nc, y0 = self._grid
             n = raw.t2.shape[0]
             xc, yc = sheet_grid_columns(raw.t1, n, nc, y0)
             return (sweeps.FORM_GRID, nc, raw.t2, xc, yc, np.zeros((6, n - 1)), np.zeros((6, n - nc)), np.zeros(n),
-                    np.empty((N_F + 2, n)))
-        return (sweeps.FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2)
+                    np.empty((N_F + 2, n)), e1)
+        return (sweeps.FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2, e1)
 
     def columns(self, raw: Raw) -> bool:
         """Whether the run takes the column sweeps (``sweeps.chain_*``): a chain-ordered chain of
@@ -238,12 +239,13 @@ class Trajectory:
         if keep_all:  # every state was kept by the forward run
             sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
         else:
-            SQ, SV, SF, ST = self._buffers(n, seg + 1)
+            SQ, SV, SF, ST = self._buffers(n, seg + 1) if not chain else (
+                np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0, n)), np.empty(seg + 1))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
                 if chain:
-                    sweeps.chain_replay(form[3], self._columns(raw)[1], terms, kick, pre, post, CQ[c], CV[c], CF[c],
-                                        CT[c], self.h, m, SQ, SV, SF, ST)
+                    sweeps.chain_replay(form[3], form[1] != 0, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c],
+                                        self.h, m, SQ, SV, ST)
                 else:
                     sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
                 sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)

@@ -122,17 +122,20 @@ FORM_TABLES, FORM_GRID, FORM_CHAIN = 0, 1, 2
 
 
 @jit
-def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form):
+def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, ready):
     """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces.
 
     ``form`` = (kind, n_cols, θ0, columns, columns, accumulator, accumulator, accumulator,
-    scratch): FORM_GRID (·, n_cols, θ0, x and y columns, their accumulators, θ0's, scratch:
-    ``kernels.sheet_grid_adjoint``), FORM_CHAIN (·, ·, ·, ``kernels.chain_columns``, ·, their
-    accumulator, ·, ·, scratch), FORM_TABLES (``model_adjoint`` into g1, g2).
+    scratch, force scratch): FORM_GRID (·, n_cols, θ0, x and y columns, their accumulators, θ0's,
+    scratch: ``kernels.sheet_grid_adjoint``), FORM_CHAIN (·, lateral stretch?, ·,
+    ``kernels.chain_columns``, ·, their accumulator, ·, ·, scratch, F at the state: the reverse
+    sweep takes the force again, ``ready``: the scratch already holds the state's strains),
+    FORM_TABLES (``model_adjoint`` into g1, g2).
     """
     kind = form[0]
     if kind == FORM_CHAIN:
-        chain_strains(q, form[3], form[8])
+        if not ready:
+            chain_strains(q, form[3], form[8])
         chain_reverse_hessian(q, form[3], lf, form[8], form[5])
         chain_reverse_gather(q, form[3], lf, form[8], form[5], lq)
     elif kind == FORM_GRID:
@@ -171,8 +174,13 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
     for j in range(nsteps, 0, -1):
         q1 = SQ[j]
         v1 = SV[j]
-        f1 = SF[j]
         t1 = ST[j]
+        if form[0] == FORM_CHAIN:  # the force again (cheaper than keeping it), strains with it
+            f1 = form[9]
+            chain_force_columns(q1, form[3], form[1] != 0, form[8], f1)
+            position_forces(q1, t1, f1, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+        else:
+            f1 = SF[j]
         for k in range(n):  # the products at state j, then λw = S λv, λf += K S λv
             sl = post[k] * lv[k]
             z = lw[k] + sl
@@ -180,7 +188,7 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
             GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form)
+        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, True)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
             x = lw[k] + h * lq[k]
@@ -195,7 +203,7 @@ def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv, form):
     """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
     dg = np.empty(4)
     ddg = np.empty(4)
-    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form)
+    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
@@ -357,8 +365,9 @@ def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, 
 
 
 @jit
-def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST):
-    """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST."""
+def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, ST):
+    """States 0..nsteps of a segment from its checkpoint: (q, v, t) into rows of SQ, SV, ST (the
+    reverse step takes the force again)."""
     w = np.empty((N_R, cols.shape[1] + 1))
     q = q0.copy()
     v = v0.copy()
@@ -366,14 +375,12 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
     t = t0
     SQ[0, :] = q
     SV[0, :] = v
-    SF[0, :] = f
     ST[0] = t
     if nsteps > 0:
         _chain_open(q, v, f, kick, pre, h)
     for s in range(1, nsteps + 1):
         t += h
         _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
-        SF[s, :] = f
         ST[s] = t
         if s < nsteps:
             _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], True)
