@@ -171,13 +171,15 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
     dg = np.empty(4)
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    for j in range(nsteps, 0, -1):
+    chain = form[0] == FORM_CHAIN
+    cols, with_kg, acc, r, fc = form[3], form[1] != 0, form[5], form[8], form[9]  # (passing the
+    for j in range(nsteps, 0, -1):  # whole tuple on each step costs a reference count per array)
         q1 = SQ[j]
         v1 = SV[j]
         t1 = ST[j]
-        if form[0] == FORM_CHAIN:  # the force again (cheaper than keeping it), strains with it
-            f1 = form[9]
-            chain_force_columns(q1, form[3], form[1] != 0, form[8], f1)
+        if chain:  # the force again (cheaper than keeping it), strains with it
+            f1 = fc
+            chain_force_columns(q1, cols, with_kg, r, f1)
             position_forces(q1, t1, f1, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
         else:
             f1 = SF[j]
@@ -188,7 +190,12 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
             GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, True)
+        if chain:  # ``_force_adjoint`` (no contacts here)
+            chain_reverse_hessian(q1, cols, lf, r, acc)
+            chain_reverse_gather(q1, cols, lf, r, acc, lq)
+            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
+        else:
+            _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, True)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
             x = lw[k] + h * lq[k]
