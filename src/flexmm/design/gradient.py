@@ -117,7 +117,8 @@ class Trajectory:
     The model part of the reverse step takes column form where it can (``form``): a
     chain-ordered rotating-squares chain without contacts (whose forward run and replay then use
     the column force, ``sweeps.chain_forward``/``chain_replay``: the same trajectory bit for
-    bit) and a grid sheet; the gradient is the same to rounding, at about half the cost.
+    bit) and a grid sheet; the gradient is the same to rounding, at a third to a half of the
+    cost (``python benchmarks/run.py gradient``).
     ``column_sweeps=False`` runs the model's own adjoint kernel always."""
 
     args: tuple
