@@ -805,61 +805,78 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
     return out
 
 
-def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), repeats: int = 5) -> list[dict]:
-    """Cost of an exact gradient (flexmm.design: checkpointed forward + reverse sweep) as a multiple
-    of one forward run of the engine (the Stepper's velocity Verlet, damped so both take the same
-    scheme), interleaved in the same loop; memory of the checkpoints and the peak traced by
-    tracemalloc during the gradient. DifFlexMM (JAX) is not run: JAX is not a flexmm dependency.
+def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
+             repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient (flexmm.design: forward run with checkpoints, replay and reverse
+    sweep) as a multiple of one forward run of the engine (the Stepper's velocity Verlet — the
+    fused chain or sheet kernel — damped so both take the same scheme), interleaved in the same
+    loop, by wall time and by process CPU time (the machine is shared); memory of the stored
+    states and the peak traced by tracemalloc during the gradient. Chains: the LEGO impact chain
+    (``cases``: units x steps); sheets: configs/sheet_pulse.yaml (``sheets``: rows x cols x
+    steps). DifFlexMM (JAX) is not run: JAX is not a flexmm dependency.
     """
     import tracemalloc
 
-    from flexmm.design.gradient import MEMORY_MB, Trajectory, raw_of
+    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, raw_of
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
+    def objective(rec, raw):  # ½ Σ θ(T)²
+        dq = np.zeros_like(rec.q)
+        dq[-1] = rec.q[-1]
+        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+    runs = [("chain", f"{n} units", _chain(n), steps) for n, steps in cases]
+    runs += [("sheet", f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
     rows = []
-    for n_units, steps in cases:
-        system, terms, damp = _chain(n_units)
+    for kind, label, (system, terms, damp), steps in runs:
         damp = damp + 0.01 * system.mass  # light damping: the engine's general Verlet kernel
         st = Stepper(INTEGRATORS["velocity_verlet"], system, terms, damp, 0.1, check_energy=False)
         st.warm_up()
-        obs = np.arange(system.n_sites, 2 * system.n_sites)  # every θ, at the last step only
+        n_sites = system.n_sites
+        obs = np.arange(system.ndof - n_sites, system.ndof)  # every θ, at the last step only
         traj = Trajectory(system.args, terms, 0.1, steps, steps, obs)
         raw = raw_of(system, terms, damp)
-
-        def objective(rec, raw):  # ½ Σ θ(T)²
-            dq = np.zeros_like(rec.q)
-            dq[-1] = rec.q[-1]
-            return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
-
         small = Trajectory(system.args, terms, 0.1, 4, 4, obs)
         small.gradient(raw, objective)  # compile
-        fwd, grad = [], []
+        small.gradient(raw, objective, segment=2)
+        fwd, grad, fwd_cpu, grad_cpu = [], [], [], []
         for _ in range(repeats):
-            t0 = time.perf_counter()
-            st.advance(steps)
-            fwd.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            traj.gradient(raw, objective)
-            grad.append(time.perf_counter() - t0)
+            for runner, wall, cpu in ((lambda: st.advance(steps), fwd, fwd_cpu),
+                                      (lambda: traj.gradient(raw, objective), grad, grad_cpu)):
+                t0, c0 = time.perf_counter(), time.process_time()
+                runner()
+                wall.append(time.perf_counter() - t0)
+                cpu.append(time.process_time() - c0)
         tracemalloc.start()
         traj.gradient(raw, objective)
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
-        seg = max(1, int(np.sqrt(steps)))
-        all_states = (steps + 1) * (3 * system.ndof + 1) * 8
-        keep_all = all_states <= MEMORY_MB * 1e6  # what Trajectory.gradient does by default
-        ckpt = all_states if keep_all else (steps // seg + 1 + seg + 1) * 3 * system.ndof * 8
-        row = {"n_units": n_units, "steps": steps, "forward_min_s": min(fwd), "forward_median_s": float(np.median(fwd)),
+        n = system.ndof
+        columns = traj.columns(raw)
+        budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
+        keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
+        seg = max(1, math.isqrt(steps))
+        per_state = (2 if columns else 3) * n * 8  # the chain-column replay keeps (q, v) only
+        if keep_all:
+            stored = (steps + 1) * 3 * n * 8
+        else:
+            stored = (steps // seg + 1) * 3 * n * 8 + (seg + 1) * per_state
+        row = {"model": kind, "size": label, "steps": steps, "load": os.getloadavg()[0],
+               "forward_min_s": min(fwd), "forward_median_s": float(np.median(fwd)),
                "gradient_min_s": min(grad), "gradient_median_s": float(np.median(grad)),
                "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd)),
+               "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
+               "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu)),
+               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]],
                "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps",
-               "stored_MB": ckpt / 1e6, "traced_peak_MB": peak / 1e6,
-               "all_states_MB": (steps + 1) * 3 * system.ndof * 8 / 1e6}
-        print(f"  gradient, {n_units} units x {steps} steps: forward {row['forward_min_s']:.3g} s, gradient "
-              f"{row['gradient_min_s']:.3g} s (x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
-              f"target <= 4); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak {row['traced_peak_MB']:.1f} MB "
-              f"(all states would be {row['all_states_MB']:.0f} MB)")
+               "stored_MB": stored / 1e6, "traced_peak_MB": peak / 1e6,
+               "all_states_MB": (steps + 1) * 3 * n * 8 / 1e6}
+        print(f"  gradient, {label} x {steps} steps ({row['sweeps']} sweeps): forward {row['forward_min_s']:.3g} s, "
+              f"gradient {row['gradient_min_s']:.3g} s (wall x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} "
+              f"median; CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; target <= 4; "
+              f"load {row['load']:.1f}); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak "
+              f"{row['traced_peak_MB']:.1f} MB (all states would be {row['all_states_MB']:.0f} MB)")
         rows.append(row)
     print("  DifFlexMM (JAX) comparison: not run (JAX is not a flexmm dependency)")
     return rows

@@ -11,6 +11,7 @@ contact, fixed ends and checkpointed reverse sweeps.
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -19,9 +20,11 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.design.gradient import GradientError, trajectory_of
+from flexmm.design.kernels import N_R, chain_columns, chain_force_columns
+from flexmm.design.sweeps import FORM_TABLES
 from flexmm.integrators.common import SHAPES
 from flexmm.integrators.stepper import make_stepper
-from flexmm.models.hinge import H_SIGN
+from flexmm.models.hinge import BLOCK, H_SIGN, S_KG, ChainArgs, chain_force
 
 CHAIN = dict(LEGO_CHAIN, n_units=6, theta0_rad=0.2)
 MASS = {"kind": "mass_chain", "n_units": 6, "spacing_m": 0.01, "mass_kg": 0.01,
@@ -166,6 +169,42 @@ def test_forward_sweep_is_the_engine_run(name):
     stepper.advance(120)
     np.testing.assert_allclose(rec.q[-1], stepper.q, rtol=0, atol=1e-12 * np.abs(stepper.q).max())
     np.testing.assert_allclose(rec.v[-1], stepper.v, rtol=0, atol=1e-12 * np.abs(stepper.v).max())
+
+
+def test_column_force_is_the_chain_force():
+    """The column sweeps' force is ``hinge.chain_force`` bit for bit (a graded chain longer than
+    one of its blocks, lateral stretch on part of it)."""
+    rng = np.random.default_rng(4)
+    n = BLOCK + 300
+    hprm = np.abs(rng.normal(1.0, 0.2, size=(n - 1, 7)))
+    hprm[:, H_SIGN] = np.where(np.arange(n - 1) % 2, -1.0, 1.0)
+    sprm = np.abs(rng.normal(0.3, 0.1, size=(n, 3)))
+    sprm[: n // 2, S_KG] = 0.0
+    idx = np.arange(n - 1)
+    args = ChainArgs(idx, idx + 1, hprm, sprm, np.empty(n), np.empty(n))
+    q = rng.normal(scale=0.05, size=2 * n)
+    expected = np.empty(2 * n)
+    chain_force(q, args, expected)
+    got = np.empty(2 * n)
+    chain_force_columns(q, chain_columns(hprm, sprm), True, np.empty((N_R, n + 1)), got)
+    np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "sheet-tilted-pulse-damped"])
+def test_column_sweeps_match_the_general_sweeps(name):
+    """Same records bit for bit, same gradient to rounding, checkpointed or not (chains: the
+    column sweeps; grid sheets: the general sweeps with the grid's hinges in column form)."""
+    traj, raw = trajectory_of(_problem(name), nsteps=120, stride=3)
+    assert traj.form(raw)[0] != FORM_TABLES
+    general = dataclasses.replace(traj, column_sweeps=False)
+    objective = _objective((traj.n_samples, traj.obs.size), seed=2)
+    _, ref, rec_ref = general.gradient(raw, objective)
+    for segment in (None, 11):
+        _, grad, rec = traj.gradient(raw, objective, segment=segment)
+        np.testing.assert_array_equal(rec.q, rec_ref.q)
+        np.testing.assert_array_equal(rec.f, rec_ref.f)
+        for (k, a), (_, b) in zip(grad.items(), ref.items()):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
 
 
 def test_checkpoint_segment_does_not_change_the_gradient():

@@ -23,13 +23,17 @@ from typing import Callable
 import numpy as np
 
 from flexmm.design import sweeps
-from flexmm.design.kernels import adjoint_kernels_of, param_tables, with_tables
+from flexmm.design.kernels import (N_CA, N_F, N_R, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
+                                   param_tables, sheet_grid, sheet_grid_add, sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
 from flexmm.integrators.common import MODE_FRICTION, Terms
+from flexmm.models.hinge import S_KG
 
 
 #: a run whose states fit in this many MB keeps them all (no replay); larger runs checkpoint
 MEMORY_MB = 256.0
+#: the column sweeps keep every state only if they fit in this many MB (a cache's size)
+CACHE_MB = 4.0
 
 
 class GradientError(FlexmmError):
@@ -108,7 +112,14 @@ Objective = Callable[[Records, Raw], tuple]
 class Trajectory:
     """What a differentiated run needs besides the raw arrays: the system's args and terms (their
     non-differentiable parts), the step ``h``, ``nsteps``, the recording ``stride`` and the
-    observed DOFs ``obs``, and the start time ``t0``."""
+    observed DOFs ``obs``, and the start time ``t0``.
+
+    The model part of the reverse step takes column form where it can (``form``): a
+    chain-ordered rotating-squares chain without contacts (whose forward run and replay then use
+    the column force, ``sweeps.chain_forward``/``chain_replay``: the same trajectory bit for
+    bit) and a grid sheet; the gradient is the same to rounding, at a third to a half of the
+    cost (``python benchmarks/run.py gradient``).
+    ``column_sweeps=False`` runs the model's own adjoint kernel always."""
 
     args: tuple
     terms: Terms
@@ -117,11 +128,42 @@ class Trajectory:
     stride: int
     obs: np.ndarray
     t0: float = 0.0
+    #: run the column sweeps where they apply (``columns``); False: the general sweeps always
+    column_sweeps: bool = True
 
     def __post_init__(self):
         self.obs = np.asarray(self.obs, np.int64)
         if self.nsteps % self.stride:
             raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
+        ndof = 2 * self.args.site_prm.shape[0] if hasattr(self.args, "site_prm") else -1
+        self._ordered = chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
+        nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
+        self._grid = sheet_grid(self.args, 3 * nsite)
+
+    def form(self, raw: Raw) -> tuple:
+        """The ``form`` argument of the reverse sweep (``sweeps._force_adjoint``): a chain-ordered
+        chain's columns, a grid sheet's hinge families, or the model's own adjoint kernel."""
+        e1, e2 = np.zeros(0), np.zeros((0, 0))
+        if self.columns(raw):
+            n = raw.t2.shape[0]
+            cols, with_kg = self._columns(raw)
+            return (sweeps.FORM_CHAIN, int(with_kg), e1, cols, e2, np.zeros((N_CA, n)), e2, e1, np.empty((N_R, n + 1)),
+                    np.empty(2 * n))
+        if self.column_sweeps and self._grid and raw.q0.size == 3 * raw.t2.shape[0]:
+            nc, y0 = self._grid
+            n = raw.t2.shape[0]
+            xc, yc = sheet_grid_columns(raw.t1, n, nc, y0)
+            return (sweeps.FORM_GRID, nc, raw.t2, xc, yc, np.zeros((6, n - 1)), np.zeros((6, n - nc)), np.zeros(n),
+                    np.empty((N_F + 2, n)), e1)
+        return (sweeps.FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2, e1)
+
+    def columns(self, raw: Raw) -> bool:
+        """Whether the run takes the column sweeps (``sweeps.chain_*``): a chain-ordered chain of
+        2N DOFs without contacts."""
+        return self.column_sweeps and self._ordered and raw.q0.size == 2 * self.args.site_prm.shape[0]
+
+    def _columns(self, raw: Raw) -> tuple:
+        return chain_columns(raw.t1, raw.t2), bool(np.any(raw.t2[:, S_KG] != 0.0))
 
     @property
     def n_samples(self) -> int:
@@ -158,67 +200,70 @@ class Trajectory:
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
         CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1)
         rec = self._records()
-        sweeps.forward(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, seg,
-                       self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
+        if self.columns(raw):
+            sweeps.chain_forward(*self._columns(raw), terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps,
+                                 seg, self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
+        else:
+            sweeps.forward(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, seg,
+                           self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
         return rec, (CQ, CV, CF, CT, seg)
 
     def gradient(self, raw: Raw, objective: Objective, segment: int | None = None,
                  memory_mb: float = MEMORY_MB) -> tuple[float, Raw, Records]:
         """(J, dJ/draw, records) by one forward run and one reverse sweep.
 
-        If every state of the run fits in ``memory_mb`` (and no ``segment`` is asked for), the
-        forward run keeps them all and the reverse sweep reads them; otherwise the forward run
-        keeps checkpoints every ``segment`` steps (default ⌈√nsteps⌉) and the reverse sweep
-        replays one segment at a time (one more forward run in all, memory ~2√N states).
+        If every state of the run fits in ``memory_mb`` (the column sweeps: in ``CACHE_MB``, as
+        replaying from checkpoints costs less than streaming every state through memory), and no
+        ``segment`` is asked for, the forward run keeps them all and the reverse sweep reads
+        them; otherwise the forward run keeps checkpoints every ``segment`` steps (default
+        ⌈√nsteps⌉) and the reverse sweep replays one segment at a time (one more forward run in
+        all, memory ~2√N states).
         """
-        n = raw.q0.size
+        n, N = raw.q0.size, self.nsteps
         args, terms, kick, pre, post = self.bind(raw)
-        if segment is None and (self.nsteps + 1) * (3 * n + 1) * 8 <= memory_mb * 1e6:
-            SQ, SV, SF, ST = self._buffers(n, self.nsteps + 1)
-            q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
-            sweeps.initial_force(args, terms, q, v, f, self.t0)
-            sweeps.replay(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, SQ, SV, SF, ST)
-            rows = np.arange(0, self.nsteps + 1, self.stride)
-            rec = Records(SQ[rows][:, self.obs], SV[rows][:, self.obs], SF[rows][:, self.obs])
-            stored = (SQ, SV, SF, ST)
-            seg = self.nsteps
-            CQ = CV = CF = CT = None
-        else:
-            rec, (CQ, CV, CF, CT, seg) = self.run(raw, segment)
-            stored = None
+        form = self.form(raw)
+        chain = form[0] == sweeps.FORM_CHAIN
+        budget = min(memory_mb, CACHE_MB) if chain else memory_mb
+        keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= budget * 1e6
+        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
         value, dq, dv, df, explicit = objective(rec, raw)
         dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
-        lq, lv, lf = np.zeros(n), np.zeros(n), np.zeros(n)
+        lq, lv, lf, lw = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        GK, GV = np.zeros(n), np.zeros(n)
         g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
-        gK, gP, gS = np.zeros(n), np.zeros(n), np.zeros(n)
         gcon, gdrv = np.zeros_like(raw.con), np.zeros_like(raw.drv)
-        N = self.nsteps
-        if N % self.stride == 0:
-            j = N // self.stride
-            lq[self.obs] += dq[j]
-            lv[self.obs] += dv[j]
-            lf[self.obs] += df[j]
-        SQ, SV, SF, ST = stored or self._buffers(n, seg + 1)
-        for c in range((N - 1) // seg if N else -1, -1, -1):
-            k0 = c * seg
-            m = min(seg, N - k0)
-            if stored is None:
-                sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
-            sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, self.stride, self.obs,
-                           dq, dv, df, lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv)
-        if N == 0:
-            lq[self.obs] += dq[0]
-            lv[self.obs] += dv[0]
-            lf[self.obs] += df[0]
+        j = N // self.stride
+        lq[self.obs] += dq[j]
+        lv[self.obs] += dv[j]
+        lf[self.obs] += df[j]
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form)
+        if keep_all:  # every state was kept by the forward run
+            sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
+        else:
+            SQ, SV, SF, ST = self._buffers(n, seg + 1) if not chain else (
+                np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0, n)), np.empty(seg + 1))
+            for c in range((N - 1) // seg if N else -1, -1, -1):
+                k0, m = c * seg, min(seg, N - c * seg)
+                if chain:
+                    sweeps.chain_replay(form[3], form[1] != 0, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c],
+                                        self.h, m, SQ, SV, ST)
+                else:
+                    sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
+                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
+        GK += lw * CF[0]  # the products of the first step's λw with the initial state
+        GV += lw * CV[0]
         q0 = raw.q0.copy()
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv)
-        # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹)
+        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, form)
+        if chain:
+            chain_add_columns(form[5], g1, g2)
+        elif form[0] == sweeps.FORM_GRID:
+            sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
+        # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹); GV = ∂J/∂P + S² ∂J/∂S
         hh = 0.5 * self.h
-        s2 = post * post
-        g_minv = hh * gK - hh * raw.damp * gP - s2 * hh * raw.damp * gS
-        g_damp = -hh * raw.minv * gP - s2 * hh * raw.minv * gS
+        g_minv = hh * GK - hh * raw.damp * GV
+        g_damp = -hh * raw.minv * GV
         grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv)
         if explicit is not None:
             grad = grad.axpy(1.0, explicit)

@@ -199,6 +199,202 @@ def chain_tangent(q, args, dq, d1, d2, out):
                       d2[a, S_THETA0], d2[b, S_THETA0], out)
 
 
+# ---------------------------------------------------------------- chain-ordered chains, column form
+#
+# The sweeps of a chain whose hinge h joins units h and h + 1 (``chain_ordered``) run on
+# contiguous parameter columns (``chain_columns``) with short loops over sites and hinges that
+# vectorise (``_trig.sincos``; per-hinge results go to padded rows, entry h + 1 for hinge h, so
+# each site gathers its two hinges without scattered writes; a loop touching many arrays does
+# not vectorise, hence several passes). The force has the arithmetic of ``hinge.chain_force``
+# (the same bits). The reverse step at a state takes the force there again, then the
+# Hessian-vector product and the parameter products, and accumulates parameter adjoints per
+# element in columns (``CA_*``), added to the tables once per gradient.
+
+#: rows of ``chain_columns``: hinge h (joins h, h + 1) at entry h, sites at entry i
+(CC_REST, CC_HA, CC_HB, CC_SIG, CC_KL, CC_KS, CC_KT, CC_TH0, CC_KG, CC_KR, CC_C0, CC_S0) = range(12)
+N_CC = 12
+#: rows of the parameter-adjoint accumulator of the column sweeps (hinge columns, then site columns)
+(CA_REST, CA_HA, CA_HB, CA_KL, CA_KS, CA_KT, CA_TH0, CA_KG, CA_KR) = range(9)
+N_CA = 9
+#: rows of the reverse step's scratch (padded rows: entry h + 1 for hinge h, 0 and n zero)
+(R_COS, R_SIN, R_FT, R_FL, R_GA, R_GB, R_EL, R_ES, R_XU, R_TA, R_TB, R_KD, R_DL, R_DS, R_DP) = range(15)
+N_R = 15
+
+
+def chain_ordered(args, ndof: int) -> bool:
+    """Whether a model's args are a chain with hinge h joining units h, h + 1 and 2N DOFs."""
+    if not isinstance(args, ChainArgs):
+        return False
+    n = args.site_prm.shape[0]
+    idx = np.arange(n - 1)
+    return (n >= 2 and ndof == 2 * n and np.array_equal(args.hinge_a, idx)
+            and np.array_equal(args.hinge_b, idx + 1))
+
+
+@jit
+def chain_columns(hprm, sprm):
+    """The (N_CC, n) parameter columns of a chain-ordered chain (hinge columns: last entry 0)."""
+    n = sprm.shape[0]
+    cols = np.zeros((N_CC, n))
+    hcols = (H_REST, H_HALF_A, H_HALF_B, H_SIGN, H_KL, H_KS, H_KT)
+    for h in range(n - 1):
+        for c in range(7):
+            cols[c, h] = hprm[h, hcols[c]]
+    for i in range(n):
+        cols[CC_TH0, i] = sprm[i, S_THETA0]
+        cols[CC_KG, i] = sprm[i, S_KG]
+        cols[CC_KR, i] = sprm[i, S_KR]
+        s0, c0 = sincos(sprm[i, S_THETA0])  # as hinge.chain_force
+        cols[CC_C0, i] = c0
+        cols[CC_S0, i] = s0
+    return cols
+
+
+@jit
+def chain_add_columns(acc, g1, g2):
+    """Add the column accumulator ``acc`` (N_CA, n) to the table gradients g1 (H, 7), g2 (n, 3)."""
+    hcols = (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT)
+    for h in range(g1.shape[0]):
+        for c in range(6):
+            g1[h, hcols[c]] += acc[c, h]
+    for i in range(g2.shape[0]):
+        g2[i, S_THETA0] += acc[CA_TH0, i]
+        g2[i, S_KG] += acc[CA_KG, i]
+        g2[i, S_KR] += acc[CA_KR, i]
+
+
+@jit
+def chain_force_columns(q, cols, with_kg, r, f):
+    """The model force F(q) of a chain-ordered chain from its columns into f (2n): the
+    operations of ``hinge.chain_force`` (``chain_sites``, ``chain_hinge``), so the same bits.
+    Leaves in the scratch r (N_R, n + 1) cos/sin of θ0+θ (rows R_COS, R_SIN), the hinges' forces
+    (R_FL, R_GA, R_GB) and their stretch and shear (R_EL, R_ES) for ``chain_reverse_hessian``."""
+    n = cols.shape[1]
+    qu, qt = q[:n], q[n:]
+    th0, kg, kr, c0 = cols[CC_TH0], cols[CC_KG], cols[CC_KR], cols[CC_C0]
+    cs, sn, ft = r[R_COS], r[R_SIN], r[R_FT]
+    if with_kg:
+        for i in range(n):
+            s, c = sincos(th0[i] + qt[i])
+            cs[i] = c
+            sn[i] = s
+            ft[i] = -(kg[i] * (c0[i] - c) * s + kr[i] * qt[i])
+    else:
+        for i in range(n):
+            s, c = sincos(th0[i] + qt[i])
+            cs[i] = c
+            sn[i] = s
+            ft[i] = -kr[i] * qt[i]
+    rest, ha, hb, sig = cols[CC_REST], cols[CC_HA], cols[CC_HB], cols[CC_SIG]
+    kl, ks, kt = cols[CC_KL], cols[CC_KS], cols[CC_KT]
+    fl, ga, gb, el_, es_ = r[R_FL, 1:], r[R_GA, 1:], r[R_GB, 1:], r[R_EL, 1:], r[R_ES, 1:]
+    for h in range(n - 1):
+        hA, hB, sg = ha[h], hb[h], sig[h]
+        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
+        el = qu[h + 1] - qu[h] + rest[h] - (hA * ca + hB * cb)
+        x = hB * sb - hA * sa
+        es = sg * x
+        f_l = kl[h] * el
+        f_s = ks[h] * sg * x  # written as hinge.chain_hinge (rounding)
+        f_p = kt[h] * (qt[h] + qt[h + 1])
+        fl[h] = f_l
+        ga[h] = f_l * hA * sa - f_s * sg * hA * ca + f_p
+        gb[h] = f_l * hB * sb + f_s * sg * hB * cb + f_p
+        el_[h] = el
+        es_[h] = es
+    for row in (R_FL, R_GA, R_GB):
+        r[row, 0] = 0.0
+        r[row, n] = 0.0
+    fl, ga, gb = r[R_FL], r[R_GA], r[R_GB]
+    for i in range(n):
+        f[i] = fl[i + 1] - fl[i]
+        f[n + i] = ft[i] - (gb[i] + ga[i + 1])
+
+
+@jit
+def chain_strains(q, cols, r):
+    """cos/sin of θ0+θ (rows R_COS, R_SIN) and the hinges' stretch and shear (R_EL, R_ES) at q:
+    what ``chain_reverse_hessian`` reads, without the force (``chain_force_columns``)."""
+    n = cols.shape[1]
+    qu, qt = q[:n], q[n:]
+    th0, rest, ha, hb, sig = cols[CC_TH0], cols[CC_REST], cols[CC_HA], cols[CC_HB], cols[CC_SIG]
+    cs, sn, el_, es_ = r[R_COS], r[R_SIN], r[R_EL, 1:], r[R_ES, 1:]
+    for i in range(n):
+        s, c = sincos(th0[i] + qt[i])
+        cs[i] = c
+        sn[i] = s
+    for h in range(n - 1):
+        el_[h] = qu[h + 1] - qu[h] + rest[h] - (ha[h] * cs[h] + hb[h] * cs[h + 1])
+        es_[h] = sig[h] * (hb[h] * sn[h + 1] - ha[h] * sn[h])
+
+
+@jit
+def chain_reverse_hessian(q, cols, lam, r, acc):
+    """Hinge part of (∂F/∂q)ᵀλ and (∂F/∂p)ᵀλ at the state of ``chain_strains`` (its rows in r): per hinge into the padded rows R_XU, R_TA, R_TB, R_KD (gathered by
+    ``chain_reverse_gather``), hinge-parameter adjoints into acc (``hinge_adjoint``'s algebra).
+    Three short loops (the variations of the strains along λ; the products; the parameter
+    adjoints): a loop touching many arrays does not vectorise."""
+    n = cols.shape[1]
+    qt = q[n:]
+    lu, lt = lam[:n], lam[n:]
+    cs, sn, el_, es_ = r[R_COS], r[R_SIN], r[R_EL, 1:], r[R_ES, 1:]
+    ha, hb, sig, kl, ks, kt = cols[CC_HA], cols[CC_HB], cols[CC_SIG], cols[CC_KL], cols[CC_KS], cols[CC_KT]
+    dl_, ds_, dp_ = r[R_DL], r[R_DS], r[R_DP]
+    for h in range(n - 1):
+        hA, hB, lta, ltb = ha[h], hb[h], lt[h], lt[h + 1]
+        dl_[h] = lu[h + 1] - lu[h] + hA * sn[h] * lta + hB * sn[h + 1] * ltb
+        ds_[h] = sig[h] * (hB * cs[h + 1] * ltb - hA * cs[h] * lta)
+        dp_[h] = lta + ltb
+    xu, ta_, tb_, kd = r[R_XU, 1:], r[R_TA, 1:], r[R_TB, 1:], r[R_KD, 1:]
+    for h in range(n - 1):
+        hA, hB, sg, k_l, k_s = ha[h], hb[h], sig[h], kl[h], ks[h]
+        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
+        el, es, dl, ds = el_[h], es_[h], dl_[h], ds_[h]
+        lta, ltb = lt[h], lt[h + 1]
+        xu[h] = k_l * dl
+        ta_[h] = k_l * (hA * sa * dl + el * hA * ca * lta) + k_s * (-sg * hA * ca * ds + es * sg * hA * sa * lta)
+        tb_[h] = k_l * (hB * sb * dl + el * hB * cb * ltb) + k_s * (sg * hB * cb * ds - es * sg * hB * sb * ltb)
+        kd[h] = kt[h] * dp_[h]
+    a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[CA_REST], acc[CA_HA], acc[CA_HB], acc[CA_KL], acc[CA_KS], acc[CA_KT]
+    for h in range(n - 1):
+        sg, k_l, k_s = sig[h], kl[h], ks[h]
+        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
+        el, es, dl, ds = el_[h], es_[h], dl_[h], ds_[h]
+        lta, ltb = lt[h], lt[h + 1]
+        a_rest[h] -= k_l * dl
+        a_ha[h] -= k_l * (-ca * dl + el * sa * lta) + k_s * (-sg * sa * ds - es * sg * ca * lta)
+        a_hb[h] -= k_l * (-cb * dl + el * sb * ltb) + k_s * (sg * sb * ds + es * sg * cb * ltb)
+        a_kl[h] -= el * dl
+        a_ks[h] -= es * ds
+        a_kt[h] -= (qt[h] + qt[h + 1]) * dp_[h]
+    for row in (R_XU, R_TA, R_TB, R_KD):
+        r[row, 0] = 0.0
+        r[row, n] = 0.0
+
+
+@jit
+def chain_reverse_gather(q, cols, lam, r, acc, out):
+    """Add each site's two hinges' and its on-site term's share of (∂F/∂q)ᵀλ to ``out`` and the
+    site-parameter adjoints (θ0, k_g, k_r) to acc (two loops, so that both vectorise)."""
+    n = cols.shape[1]
+    qt = q[n:]
+    lt = lam[n:]
+    kg, kr, c0, s0 = cols[CC_KG], cols[CC_KR], cols[CC_C0], cols[CC_S0]
+    cs, sn, xu, ta_, tb_, kd = r[R_COS], r[R_SIN], r[R_XU], r[R_TA], r[R_TB], r[R_KD]
+    ou, ot = out[:n], out[n:]
+    for i in range(n):
+        c, s = cs[i], sn[i]
+        ou[i] += xu[i + 1] - xu[i]
+        ot[i] -= (tb_[i] + ta_[i + 1]) + (kd[i] + kd[i + 1]) + (kg[i] * (s * s + (c0[i] - c) * c) + kr[i]) * lt[i]
+    a_th0, a_kg, a_kr = acc[CA_TH0], acc[CA_KG], acc[CA_KR]
+    for i in range(n):
+        c, s, lti = cs[i], sn[i], lt[i]
+        g = c0[i] - c
+        a_th0[i] -= (tb_[i] + ta_[i + 1]) + kg[i] * ((s - s0[i]) * s + g * c) * lti
+        a_kg[i] -= g * s * lti
+        a_kr[i] -= qt[i] * lti
+
+
 # ---------------------------------------------------------------- 2D sheet
 
 
@@ -233,6 +429,148 @@ def sheet_adjoint(q, args, lam, out, g1, g2):
                                cs[a], sn[a], cs[b], sn[b])
         g2[a] -= ga
         g2[b] -= gb
+
+
+# The hinges of a rectangular grid (``sheet_kernels.grid_layout``: no wraps) in column form:
+# the x hinges as one family over sites s = 0..n−2 joining s, s + 1 (the n_cols − 1 … pairs that
+# cross a row end get zero parameters: exact zeros), the y hinges as one over s = 0..n−n_cols−1
+# joining s, s + n_cols. Each family runs the passes of the chain's (strains; their variations
+# along λ; products; parameter adjoints; adding to the two ends), contiguous, so they vectorise.
+
+#: rows of a family's scratch
+(F_EL, F_ES, F_DL, F_DS, F_DP, F_XL, F_XS, F_TA, F_TB, F_KD) = range(10)
+N_F = 10
+#: hinge-parameter columns of a family (table columns except the sign, which is discrete), in order
+FAMILY_COLS = (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT)
+
+
+def sheet_grid(args, ndof: int) -> tuple[int, int] | None:
+    """(n_cols, first y hinge) if the sheet's hinges are a grid without wraps and 3N DOFs, else None."""
+    from flexmm.models.sheet_kernels import grid_layout
+
+    if not isinstance(args, SheetArgs):
+        return None
+    n = args.theta0.shape[0]
+    nc, x1, y0, y1 = grid_layout(args.hinge_a, args.hinge_b, args.hinge_axis, n)
+    if nc == 0 or ndof != 3 * n or x1 != y0 or y1 != args.hinge_a.shape[0] or n // nc < 2:
+        return None
+    return int(nc), int(y0)
+
+
+@jit
+def sheet_grid_columns(hprm, n, nc, y0):
+    """Parameter columns (7, n − 1) of the x family and (7, n − nc) of the y family."""
+    xc = np.zeros((7, n - 1))
+    yc = np.zeros((7, n - nc))
+    for s in range(n - 1):
+        c = s % nc
+        if c < nc - 1:
+            h = (s // nc) * (nc - 1) + c
+            for k in range(7):
+                xc[k, s] = hprm[h, k]
+    for s in range(n - nc):
+        for k in range(7):
+            yc[k, s] = hprm[y0 + s, k]
+    return xc, yc
+
+
+@jit
+def sheet_grid_add(acc_x, acc_y, acc_t0, g1, g2, nc, y0):
+    """Add the family accumulators (6 rows, ``FAMILY_COLS``) and θ0's to the table gradients."""
+    n = g2.shape[0]
+    for s in range(n - 1):
+        c = s % nc
+        if c < nc - 1:
+            h = (s // nc) * (nc - 1) + c
+            for k in range(6):
+                g1[h, FAMILY_COLS[k]] += acc_x[k, s]
+    for s in range(n - nc):
+        for k in range(6):
+            g1[y0 + s, FAMILY_COLS[k]] += acc_y[k, s]
+    for i in range(n):
+        g2[i] += acc_t0[i]
+
+
+@jit
+def _family(q, lam, cs, sn, pc, off, la0, sa0, n, m, r, acc, out, acc_t0):
+    """One family of hinges k < m joining sites k and k + off: along-axis DOFs from la0, across
+    from sa0 (0 or n), rotations from 2n; (∂F/∂q)ᵀλ added to ``out``, parameter adjoints to
+    ``acc`` (6, m) and ``acc_t0`` (n). Many short loops: one that touches more arrays does not
+    vectorise (benchmarks/run.py gradient)."""
+    qla, qlb, qsa, qsb = q[la0:], q[la0 + off :], q[sa0:], q[sa0 + off :]
+    qta, qtb = q[2 * n :], q[2 * n + off :]
+    lla, llb, lsa, lsb = lam[la0:], lam[la0 + off :], lam[sa0:], lam[sa0 + off :]
+    lta, ltb = lam[2 * n :], lam[2 * n + off :]
+    ca, sa, cb, sb = cs, sn, cs[off:], sn[off:]
+    rest, ha, hb, sig, kl, ks, kt = pc[H_REST], pc[H_HALF_A], pc[H_HALF_B], pc[H_SIGN], pc[H_KL], pc[H_KS], pc[H_KT]
+    el_, es_, dl_, ds_, dp_ = r[F_EL], r[F_ES], r[F_DL], r[F_DS], r[F_DP]
+    for k in range(m):
+        el_[k] = qlb[k] - qla[k] + rest[k] - (ha[k] * ca[k] + hb[k] * cb[k])
+        es_[k] = sig[k] * (hb[k] * sb[k] - ha[k] * sa[k]) + qsb[k] - qsa[k]
+    for k in range(m):
+        dl_[k] = llb[k] - lla[k] + ha[k] * sa[k] * lta[k] + hb[k] * sb[k] * ltb[k]
+    for k in range(m):
+        ds_[k] = sig[k] * (hb[k] * cb[k] * ltb[k] - ha[k] * ca[k] * lta[k]) + lsb[k] - lsa[k]
+    for k in range(m):
+        dp_[k] = lta[k] + ltb[k]
+    xl, xs, ta_, tb_, kd = r[F_XL], r[F_XS], r[F_TA], r[F_TB], r[F_KD]
+    for k in range(m):
+        xl[k] = kl[k] * dl_[k]
+        xs[k] = ks[k] * ds_[k]
+        kd[k] = kt[k] * dp_[k]
+    for k in range(m):
+        hA, sg, k_l, k_s, c_a, s_a, l_a = ha[k], sig[k], kl[k], ks[k], ca[k], sa[k], lta[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        ta_[k] = k_l * (hA * s_a * dl + el * hA * c_a * l_a) + k_s * (-sg * hA * c_a * ds + es * sg * hA * s_a * l_a)
+    for k in range(m):
+        hB, sg, k_l, k_s, c_b, s_b, l_b = hb[k], sig[k], kl[k], ks[k], cb[k], sb[k], ltb[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        tb_[k] = k_l * (hB * s_b * dl + el * hB * c_b * l_b) + k_s * (sg * hB * c_b * ds - es * sg * hB * s_b * l_b)
+    a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
+    for k in range(m):
+        a_rest[k] -= kl[k] * dl_[k]
+        a_kl[k] -= el_[k] * dl_[k]
+        a_ks[k] -= es_[k] * ds_[k]
+    for k in range(m):
+        a_kt[k] -= (qta[k] + qtb[k]) * dp_[k]
+    for k in range(m):
+        sg, c_a, s_a, l_a = sig[k], ca[k], sa[k], lta[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        a_ha[k] -= kl[k] * (-c_a * dl + el * s_a * l_a) + ks[k] * (-sg * s_a * ds - es * sg * c_a * l_a)
+    for k in range(m):
+        sg, c_b, s_b, l_b = sig[k], cb[k], sb[k], ltb[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        a_hb[k] -= kl[k] * (-c_b * dl + el * s_b * l_b) + ks[k] * (sg * s_b * ds + es * sg * c_b * l_b)
+    ola, olb, osa, osb = out[la0:], out[la0 + off :], out[sa0:], out[sa0 + off :]
+    ota, otb = out[2 * n :], out[2 * n + off :]
+    t0a, t0b = acc_t0, acc_t0[off:]
+    for k in range(m):  # each end in its own loops (an end is another hinge's other end)
+        ola[k] += xl[k]
+        osa[k] += xs[k]
+    for k in range(m):
+        ota[k] -= ta_[k] + kd[k]
+        t0a[k] -= ta_[k]
+    for k in range(m):
+        olb[k] -= xl[k]
+        osb[k] -= xs[k]
+    for k in range(m):
+        otb[k] -= tb_[k] + kd[k]
+        t0b[k] -= tb_[k]
+
+
+@jit
+def sheet_grid_adjoint(q, theta0, nc, xc, yc, lam, out, acc_x, acc_y, acc_t0, r):
+    """``sheet_adjoint`` of a grid sheet in column form (``sheet_grid_columns``): (∂F/∂q)ᵀλ added
+    to ``out``, parameter adjoints to the family accumulators and θ0's; r (N_F + 2, n) scratch."""
+    n = theta0.shape[0]
+    cs, sn = r[N_F], r[N_F + 1]
+    th = q[2 * n :]
+    for i in range(n):
+        s, c = sincos(theta0[i] + th[i])
+        cs[i] = c
+        sn[i] = s
+    _family(q, lam, cs, sn, xc, 1, 0, n, n, n - 1, r, acc_x, out, acc_t0)
+    _family(q, lam, cs, sn, yc, nc, n, 0, n, n - nc, r, acc_y, out, acc_t0)
 
 
 @jit

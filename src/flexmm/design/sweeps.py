@@ -13,6 +13,11 @@ The reverse of a step, given the adjoints (λq, λv, λf) of (q', v', f'):
     λq_D, λw_D → drive parameters, then zeroed,
     λw += h λq,  λv ← P λw,  λf ← K λw,              ∂J/∂P += λw ⊙ v, ∂J/∂K += λw ⊙ f.
 
+The products with the integrator factors are folded per state: with z = λw (of the step out
+of state j) + S λv (of v_j), ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (as
+v_j = S (w + K f_j), prescribed DOFs included), two per-DOF sums from which ∂J/∂m⁻¹ and ∂J/∂c
+follow (``gradient.Trajectory.gradient``).
+
 This is the exact transpose of the discrete step, so gradients agree with finite differences
 of the same discrete run to rounding. The objective enters through records of (q, v, f) at
 the observed DOFs every ``stride`` steps: their adjoints are added at those steps.
@@ -25,7 +30,16 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.design.kernels import model_adjoint, model_tangent
+from flexmm.design.kernels import (
+    N_R,
+    chain_force_columns,
+    chain_reverse_gather,
+    chain_reverse_hessian,
+    chain_strains,
+    model_adjoint,
+    model_tangent,
+    sheet_grid_adjoint,
+)
 from flexmm.design.terms import (
     contact_adjoint,
     contact_tangent,
@@ -33,8 +47,9 @@ from flexmm.design.terms import (
     drive_force_tangent,
     prescribed_adjoint,
     prescribed_tangent,
+    waveform_dprm,
 )
-from flexmm.integrators.common import apply_prescribed, total_force, waveform
+from flexmm.integrators.common import apply_prescribed, position_forces, total_force, waveform
 
 
 @jit
@@ -101,10 +116,32 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
             t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h)
 
 
+#: the model part of a reverse step (``_force_adjoint``'s ``form``): ``model_adjoint`` into the
+#: tables, a grid sheet's hinge families, a chain-ordered chain's columns
+FORM_TABLES, FORM_GRID, FORM_CHAIN = 0, 1, 2
+
+
 @jit
-def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg):
-    """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces."""
-    model_adjoint(q, args, lf, lq, g1, g2)
+def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, ready):
+    """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces.
+
+    ``form`` = (kind, n_cols, θ0, columns, columns, accumulator, accumulator, accumulator,
+    scratch, force scratch): FORM_GRID (·, n_cols, θ0, x and y columns, their accumulators, θ0's,
+    scratch: ``kernels.sheet_grid_adjoint``), FORM_CHAIN (·, lateral stretch?, ·,
+    ``kernels.chain_columns``, ·, their accumulator, ·, ·, scratch, F at the state: the reverse
+    sweep takes the force again, ``ready``: the scratch already holds the state's strains),
+    FORM_TABLES (``model_adjoint`` into g1, g2).
+    """
+    kind = form[0]
+    if kind == FORM_CHAIN:
+        if not ready:
+            chain_strains(q, form[3], form[8])
+        chain_reverse_hessian(q, form[3], lf, form[8], form[5])
+        chain_reverse_gather(q, form[3], lf, form[8], form[5], lq)
+    elif kind == FORM_GRID:
+        sheet_grid_adjoint(q, form[2], form[1], form[3], form[4], lf, lq, form[5], form[6], form[7], form[8])
+    else:
+        model_adjoint(q, args, lf, lq, g1, g2)
     contact_adjoint(q, lf, lq, terms.con_ij, terms.con_prm, gcon)
     drive_force_adjoint(t, lf, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
@@ -121,51 +158,59 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
 
 @jit
 def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-            lq, lv, lf, g1, g2, gK, gP, gS, gcon, gdrv):
+            lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
-    and leave as those at step k0 (objective at k0 included); parameter adjoints accumulate.
+    and leave as those at step k0 (objective at k0 included); ``lw`` enters as λw of the step
+    out of state k0 + nsteps (zero at the end of the run) and leaves as that of the step out of
+    k0. Parameter adjoints accumulate; the integrator factors' in the folded form of the module
+    docstring (GK, GV; the caller adds the initial state's products).
     """
     n = lq.shape[0]
-    lw = np.empty(n)
     dg = np.empty(4)
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    for s in range(nsteps - 1, -1, -1):
-        q1 = SQ[s + 1]
-        v0 = SV[s]
-        f0 = SF[s]
-        f1 = SF[s + 1]
-        t1 = ST[s + 1]
-        for k in range(n):  # w = P v + K f (the half-kicked velocity) and v' = S (w + K f')
-            gS[k] += lv[k] * (pre[k] * v0[k] + kick[k] * f0[k] + kick[k] * f1[k])
+    chain = form[0] == FORM_CHAIN
+    cols, with_kg, acc, r, fc = form[3], form[1] != 0, form[5], form[8], form[9]  # (passing the
+    for j in range(nsteps, 0, -1):  # whole tuple on each step costs a reference count per array)
+        q1 = SQ[j]
+        v1 = SV[j]
+        t1 = ST[j]
+        if chain:  # the force again (cheaper than keeping it), strains with it
+            f1 = fc
+            chain_force_columns(q1, cols, with_kg, r, f1)
+            position_forces(q1, t1, f1, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+        else:
+            f1 = SF[j]
+        for k in range(n):  # the products at state j, then λw = S λv, λf += K S λv
             sl = post[k] * lv[k]
-            gK[k] += sl * f1[k]
+            z = lw[k] + sl
+            GK[k] += z * f1[k]
+            GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        for d in range(dd.shape[0]):  # a prescribed DOF's w is the waveform's rate (and K = 0)
-            if dm[d] == 0:
-                k = dd[d]
-                _, rate = waveform(ds[d], dp[d], t1)
-                gS[k] += lv[k] * (rate - pre[k] * v0[k] - kick[k] * f0[k])
-        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg)
+        if chain:  # ``_force_adjoint`` (no contacts here)
+            chain_reverse_hessian(q1, cols, lf, r, acc)
+            chain_reverse_gather(q1, cols, lf, r, acc, lq)
+            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
+        else:
+            _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, True)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
-            lw[k] += h * lq[k]
-            gP[k] += lw[k] * v0[k]
-            gK[k] += lw[k] * f0[k]
-            lv[k] = pre[k] * lw[k]
-            lf[k] = kick[k] * lw[k]
-        _inject(k0 + s, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+            x = lw[k] + h * lq[k]
+            lw[k] = x
+            lv[k] = pre[k] * x
+            lf[k] = kick[k] * x
+        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
 
 
 @jit
-def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv):
+def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv, form):
     """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
     dg = np.empty(4)
     ddg = np.empty(4)
-    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg)
+    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
@@ -240,3 +285,113 @@ def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
 def apply_prescribed_only(terms, q, v, t):
     """``common.apply_prescribed`` with the terms' drive tables (the start of a run)."""
     apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+
+
+# ---------------------------------------------------------------- chain-ordered chains
+#
+# The same scheme on a chain-ordered rotating-squares chain (``kernels.chain_ordered``, no
+# contacts) from parameter columns: the forward run and the replay step with the column force
+# (bit-identical to ``verlet_step``); the replay keeps (q, v) only, and the reverse step takes
+# the force at each state again with its Hessian-vector product (cos/sin once per site). The
+# integrator-factor adjoints are folded: with z = λw(step j) + S λv(into j), the products at
+# state j are ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (v_j = S (w + K f_j)), so two
+# per-DOF accumulators GK, GV (``gradient.Trajectory.gradient`` turns them into m⁻¹, c).
+
+
+@jit
+def _chain_open(q, v, f, kick, pre, h):
+    """Opening half kick and drift (v becomes the half-kicked w)."""
+    for k in range(q.shape[0]):
+        v[k] = pre[k] * v[k] + kick[k] * f[k]
+        q[k] += h * v[k]
+
+
+@jit
+def _chain_close(v, f, kick, post):
+    for k in range(v.shape[0]):
+        v[k] = (v[k] + kick[k] * f[k]) * post[k]
+
+
+@jit
+def _chain_close_open(q, v, f, kick, pre, post, h, sq, sv, store):
+    """Closing kick of a step (if ``store``, the new state's q, v copied to sq, sv) and the
+    opening kick and drift of the next in one pass: the operations of ``_chain_close`` then
+    ``_chain_open``."""
+    if store:
+        for k in range(q.shape[0]):
+            x = (v[k] + kick[k] * f[k]) * post[k]
+            sq[k] = q[k]
+            sv[k] = x
+            x = pre[k] * x + kick[k] * f[k]
+            v[k] = x
+            q[k] += h * x
+    else:
+        for k in range(q.shape[0]):
+            x = (v[k] + kick[k] * f[k]) * post[k]
+            x = pre[k] * x + kick[k] * f[k]
+            v[k] = x
+            q[k] += h * x
+
+
+@jit
+def _chain_force_at(cols, with_kg, terms, q, v, f, t, w):
+    """Prescribe the driven DOFs at t, then the total force (the column force, applied forces)."""
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    chain_force_columns(q, cols, with_kg, w, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                    terms.drv_prm)
+
+
+@jit
+def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs,
+                  CQ, CV, CF, CT, Rq, Rv, Rf):
+    """``forward`` with the column force (the same arithmetic: the same run). Between the states
+    it keeps, the closing kick of a step and the opening of the next take one pass."""
+    w = np.empty((N_R, cols.shape[1] + 1))
+    for k in range(nsteps + 1):
+        if k > 0:
+            t += h
+            _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
+        keep = k % seg == 0 or k % stride == 0 or k == nsteps
+        if k > 0 and keep:
+            _chain_close(v, f, kick, post)
+        if k % seg == 0:
+            c = k // seg
+            CQ[c, :] = q
+            CV[c, :] = v
+            CF[c, :] = f
+            CT[c] = t
+        if k % stride == 0:
+            _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            if keep:
+                _chain_open(q, v, f, kick, pre, h)
+            elif k > 0:
+                _chain_close_open(q, v, f, kick, pre, post, h, q, v, False)
+    return t
+
+
+@jit
+def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, ST):
+    """States 0..nsteps of a segment from its checkpoint: (q, v, t) into rows of SQ, SV, ST (the
+    reverse step takes the force again)."""
+    w = np.empty((N_R, cols.shape[1] + 1))
+    q = q0.copy()
+    v = v0.copy()
+    f = f0.copy()
+    t = t0
+    SQ[0, :] = q
+    SV[0, :] = v
+    ST[0] = t
+    if nsteps > 0:
+        _chain_open(q, v, f, kick, pre, h)
+    for s in range(1, nsteps + 1):
+        t += h
+        _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
+        ST[s] = t
+        if s < nsteps:
+            _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], True)
+        else:
+            _chain_close(v, f, kick, post)
+            SQ[s, :] = q
+            SV[s, :] = v

@@ -45,13 +45,15 @@ def _ramp(prm, t):
 @jit
 def waveform_dprm(shape, prm, t, dg, ddg):
     """∂g/∂prm_c into ``dg`` and ∂ġ/∂prm_c into ``ddg`` (4 each) at time t."""
+    amp = prm[0]
+    for c in range(4):  # dg holds the unit-amplitude parameters for a moment (no allocation)
+        dg[c] = prm[c]
+    dg[0] = 1.0
+    g1, dg1 = waveform(shape, dg, t)
     for c in range(4):
         dg[c] = 0.0
         ddg[c] = 0.0
-    amp = prm[0]
-    unit = prm.copy()
-    unit[0] = 1.0
-    dg[0], ddg[0] = waveform(shape, unit, t)
+    dg[0], ddg[0] = g1, dg1
     if shape == 0:
         period = prm[1]
         if 0.0 < t < period:
