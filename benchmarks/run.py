@@ -813,7 +813,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     loop, by wall time and by process CPU time (the machine is shared); memory of the stored
     states and the peak traced by tracemalloc during the gradient. Chains: the LEGO impact chain
     (``cases``: units x steps); sheets: configs/sheet_pulse.yaml (``sheets``: rows x cols x
-    steps). DifFlexMM (JAX) is not run: JAX is not a flexmm dependency.
+    steps). DifFlexMM's jax.grad on the same-size sheet: ``benchmarks/difflexmm.py`` (a separate
+    JAX environment; JAX is not a flexmm dependency).
     """
     import tracemalloc
 
@@ -878,7 +879,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
               f"load {row['load']:.1f}); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak "
               f"{row['traced_peak_MB']:.1f} MB (all states would be {row['all_states_MB']:.0f} MB)")
         rows.append(row)
-    print("  DifFlexMM (JAX) comparison: not run (JAX is not a flexmm dependency)")
+    print("  DifFlexMM (JAX) comparison: benchmarks/difflexmm.py (needs a separate JAX environment)")
     return rows
 
 
