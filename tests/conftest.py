@@ -243,3 +243,12 @@ def pytest_generate_tests(metafunc):
         for name, example in examples.items():
             params.append(pytest.param((kind, example), id=f"{kind}-{name}"))
     metafunc.parametrize("example_lattice", params)
+
+
+def default_sigint() -> None:
+    """``preexec_fn`` of a test's child process that receives SIGINT: its disposition back to the
+    default, so Python turns SIGINT into KeyboardInterrupt even when the tests run with SIGINT
+    ignored (as a background job of a non-interactive shell, which its children inherit)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

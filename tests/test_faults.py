@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import default_sigint
 
 from flexmm.io.run_dataset import open_run
 
@@ -35,7 +36,8 @@ def flexmm(*args, **kw) -> subprocess.CompletedProcess:
 
 
 def start(*args) -> subprocess.Popen:
-    return subprocess.Popen([FLEXMM, *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen([FLEXMM, *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=default_sigint)
 
 
 def wait_until_stepping(out: Path, proc: subprocess.Popen, timeout: float = 60.0) -> None:

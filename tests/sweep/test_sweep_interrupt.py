@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import default_sigint
 
 from flexmm.sweep import load_sweep, run_sweep
 from flexmm.sweep.store import FINISHED, SweepStore, dataset_status
@@ -41,7 +42,8 @@ def start(spec_path: Path, sweep_dir: Path) -> subprocess.Popen:
     code = "from flexmm.cli import main; main()"
     cmd = [sys.executable, "-c", code, "sweep", str(spec_path), "--out", str(sweep_dir),
            "--workers", "1", "--batch-size", "1"]
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True,
+                            preexec_fn=default_sigint)
 
 
 def n_done(sweep_dir: Path) -> int:
