@@ -284,6 +284,22 @@ def test_mean_constraint_holds_the_field_mean(tmp_path):
     assert min(res.history.objective) < res.history.objective[0]
 
 
+def test_mean_constraint_spec_errors_name_the_constraint(tmp_path):
+    """A mean constraint whose target (here the start mean of a variable starting at 0) is not
+    positive, or that names no variable, is a config error naming the constraint, raised before any run."""
+    zero = [dict(VARIABLES[2], initial=0.0)]
+    path = _spec(tmp_path, ["peak_force"], variables=zero, constraints=[{"kind": "mean", "variable": "zeta"}])
+    with pytest.raises(ConfigError) as err:
+        load_design(path)
+    assert type(err.value) is ConfigError
+    assert str(err.value).startswith(f"{path}: constraints[0]: the start mean of variable 'zeta' is 0; "
+                                     "a mean constraint needs a positive target")
+    path = _spec(tmp_path, ["peak_force"], constraints=[{"kind": "mean", "variable": "stiffness"}])
+    with pytest.raises(ConfigError, match=r"constraints\[0\]\.variable: no variable 'stiffness' \(the variables "
+                                          r"are mass, k_rot, zeta, impact\)"):
+        load_design(path)
+
+
 def test_share_and_field_spec_errors(tmp_path):
     bad = [dict(SHARE[1], reference=None)]
     with pytest.raises(ConfigError, match="energy_share needs a reference"):
