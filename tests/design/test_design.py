@@ -300,6 +300,26 @@ def test_mean_constraint_spec_errors_name_the_constraint(tmp_path):
         load_design(path)
 
 
+LINKAGE = {"name": "small_linkage", "lattice": {
+    "kind": "bistable_linkage", "n_cols": 3, "bar_length_m": 0.01, "theta0_rad": 0.3, "theta_deployed_rad": 0.7,
+    "mass_kg": 1e-3, "k_pin_n_per_m": 1e4, "released_energy_j": 1e-4}, "solver": {"duration_s": 0.001}}
+
+
+@pytest.mark.parametrize("variable, needs", [
+    (dict(FIELD, target="mass_kg", initial=1e-3, bounds=None), "profile spline2d needs a sheet with n_rows"),
+    ({"name": "mass", "target": "mass_kg", "profile": "spline", "knots": 2, "initial": 1e-3},
+     "a profile along the columns or rows needs a sheet with n_rows")])
+def test_sheet_profiles_on_a_lattice_without_rows_are_user_errors(variable, needs):
+    """The bistable linkage has n_cols but no n_rows: a 2D field or a profile over its columns is a
+    user error naming the variable, not a KeyError."""
+    from flexmm.design.gradient import GradientError
+    from flexmm.design.variables import Design, Variable
+
+    with pytest.raises(GradientError) as err:
+        Design(LINKAGE, [Variable(**variable)])
+    assert str(err.value).startswith(f"variable {variable['name']!r}: {needs}")
+
+
 def test_share_and_field_spec_errors(tmp_path):
     bad = [dict(SHARE[1], reference=None)]
     with pytest.raises(ConfigError, match="energy_share needs a reference"):
