@@ -270,13 +270,27 @@ def test_mean_constraint_holds_the_field_mean(tmp_path):
     design the optimiser (SLSQP) evaluates keeps it while it improves the objective."""
     from flexmm.design.optimize import optimise
     from flexmm.design.variables import spline2d_values
+    from flexmm.models.hinge import H_KT
+    from flexmm.models.rotating_sheet import hinge_pairs
 
     spec = _sheet_spec(tmp_path, constraints=[{"kind": "mean", "variable": "k_rot"}],
                        optimizer={"max_iterations": 5, "sample_every": 2})
     dp = load_design(spec)
     w = dp.mean_weights("k_rot")
     x = np.random.default_rng(2).uniform(0.001, 0.004, 6)
-    assert w @ x == pytest.approx(spline2d_values(x, 3, 2, 6, 10).mean(), rel=1e-12)
+    # the units' values as the built sheet holds them: every hinge carries the value of the later of
+    # its two units, which recovers every unit but the first; the first, a corner, takes its control
+    # value (a clamped spline passes through its end control points)
+    system = dp.design.build(x)[0]
+    kt = system.args[3][:, H_KT] * system.scales.force * system.scales.length_m  # N m/rad
+    a, b, _ = hinge_pairs(6, 10, False, True)
+    later = np.maximum(a, b)
+    per_unit = np.full(60, np.nan)
+    per_unit[later] = kt
+    np.testing.assert_allclose(per_unit[later], kt, rtol=1e-12)  # hinges sharing a later unit agree
+    per_unit[0] = x[0]
+    assert np.isnan(per_unit).sum() == 0 and np.ptp(per_unit) > 0.1 * per_unit.mean()
+    assert w @ x == pytest.approx(per_unit.mean(), rel=1e-9)
     res = optimise(dp)
     start = spline2d_values(dp.design.x0, 3, 2, 6, 10).mean()
     for x in res.history.x:
