@@ -270,18 +270,68 @@ def test_mean_constraint_holds_the_field_mean(tmp_path):
     design the optimiser (SLSQP) evaluates keeps it while it improves the objective."""
     from flexmm.design.optimize import optimise
     from flexmm.design.variables import spline2d_values
+    from flexmm.models.hinge import H_KT
+    from flexmm.models.rotating_sheet import hinge_pairs
 
     spec = _sheet_spec(tmp_path, constraints=[{"kind": "mean", "variable": "k_rot"}],
                        optimizer={"max_iterations": 5, "sample_every": 2})
     dp = load_design(spec)
     w = dp.mean_weights("k_rot")
     x = np.random.default_rng(2).uniform(0.001, 0.004, 6)
-    assert w @ x == pytest.approx(spline2d_values(x, 3, 2, 6, 10).mean(), rel=1e-12)
+    # the units' values as the built sheet holds them: every hinge carries the value of the later of
+    # its two units, which recovers every unit but the first; the first, a corner, takes its control
+    # value (a clamped spline passes through its end control points)
+    system = dp.design.build(x)[0]
+    kt = system.args[3][:, H_KT] * system.scales.force * system.scales.length_m  # N m/rad
+    a, b, _ = hinge_pairs(6, 10, False, True)
+    later = np.maximum(a, b)
+    per_unit = np.full(60, np.nan)
+    per_unit[later] = kt
+    np.testing.assert_allclose(per_unit[later], kt, rtol=1e-12)  # hinges sharing a later unit agree
+    per_unit[0] = x[0]
+    assert np.isnan(per_unit).sum() == 0 and np.ptp(per_unit) > 0.1 * per_unit.mean()
+    assert w @ x == pytest.approx(per_unit.mean(), rel=1e-9)
     res = optimise(dp)
     start = spline2d_values(dp.design.x0, 3, 2, 6, 10).mean()
     for x in res.history.x:
         assert spline2d_values(x, 3, 2, 6, 10).mean() == pytest.approx(start, rel=1e-6)
     assert min(res.history.objective) < res.history.objective[0]
+
+
+def test_mean_constraint_spec_errors_name_the_constraint(tmp_path):
+    """A mean constraint whose target (here the start mean of a variable starting at 0) is not
+    positive, or that names no variable, is a config error naming the constraint, raised before any run."""
+    zero = [dict(VARIABLES[2], initial=0.0)]
+    path = _spec(tmp_path, ["peak_force"], variables=zero, constraints=[{"kind": "mean", "variable": "zeta"}])
+    with pytest.raises(ConfigError) as err:
+        load_design(path)
+    assert type(err.value) is ConfigError
+    assert str(err.value).startswith(f"{path}: constraints[0]: the start mean of variable 'zeta' is 0; "
+                                     "a mean constraint needs a positive target")
+    path = _spec(tmp_path, ["peak_force"], constraints=[{"kind": "mean", "variable": "stiffness"}])
+    with pytest.raises(ConfigError, match=r"constraints\[0\]\.variable: no variable 'stiffness' \(the variables "
+                                          r"are mass, k_rot, zeta, impact\)"):
+        load_design(path)
+
+
+LINKAGE = {"name": "small_linkage", "lattice": {
+    "kind": "bistable_linkage", "n_cols": 3, "bar_length_m": 0.01, "theta0_rad": 0.3, "theta_deployed_rad": 0.7,
+    "mass_kg": 1e-3, "k_pin_n_per_m": 1e4, "released_energy_j": 1e-4}, "solver": {"duration_s": 0.001}}
+
+
+@pytest.mark.parametrize("variable, needs", [
+    (dict(FIELD, target="mass_kg", initial=1e-3, bounds=None), "profile spline2d needs a sheet with n_rows"),
+    ({"name": "mass", "target": "mass_kg", "profile": "spline", "knots": 2, "initial": 1e-3},
+     "a profile along the columns or rows needs a sheet with n_rows")])
+def test_sheet_profiles_on_a_lattice_without_rows_are_user_errors(variable, needs):
+    """The bistable linkage has n_cols but no n_rows: a 2D field or a profile over its columns is a
+    user error naming the variable, not a KeyError."""
+    from flexmm.design.gradient import GradientError
+    from flexmm.design.variables import Design, Variable
+
+    with pytest.raises(GradientError) as err:
+        Design(LINKAGE, [Variable(**variable)])
+    assert str(err.value).startswith(f"variable {variable['name']!r}: {needs}")
 
 
 def test_share_and_field_spec_errors(tmp_path):

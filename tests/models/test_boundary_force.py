@@ -17,7 +17,7 @@ import xarray as xr
 
 from flexmm.api import run_scene
 from flexmm.assemble import SceneError, build_problem
-from flexmm.config import scene_from_dict
+from flexmm.config import ConfigError, scene_from_dict
 from flexmm.integrators.common import MODE_FORCE, SHAPES
 
 MASS, N = 0.01, 40
@@ -83,3 +83,19 @@ def test_moment_pulse_on_a_loaded_end_keeps_the_energy_ledger(tmp_path) -> None:
     work = ds["applied_work"].values
     assert work.max() > 0
     assert gained == pytest.approx(work, abs=1e-3 * work.max())
+
+
+@pytest.mark.parametrize("amplitudes, error, fragment", [
+    ({"amplitude_n": 0.5, "amplitude_n_m": 0.001}, ConfigError,
+     "excitation.amplitude_n: expected: give exactly one of amplitude_n (force) or amplitude_n_m (moment)"),
+    ({}, ConfigError, "excitation: expected: give exactly one of amplitude_n (force) or amplitude_n_m (moment)"),
+    ({"amplitude_n_m": 0.001}, SceneError, "amplitude_n_m needs a rotation field; model 'mass_chain' has none")])
+def test_amplitude_errors_name_the_field(amplitudes, error, fragment) -> None:
+    """Both a force and a moment, neither, or a moment on a model without rotations (a mass chain):
+    user errors (FlexmmError) that name the field."""
+    from flexmm.errors import FlexmmError
+
+    exc = {"kind": "boundary_force", "end": "left", "duration_s": 0.01, **amplitudes}
+    with pytest.raises(error) as err:
+        build_problem(scene_from_dict(_chain(exc)))
+    assert isinstance(err.value, FlexmmError) and fragment in str(err.value), str(err.value)

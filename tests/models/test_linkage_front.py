@@ -36,9 +36,9 @@ def test_linkage_front_steady_with_hinge_damping_only(tmp_path):
 
 
 def _speeds_and_dissipation(tmp_path, factor):
-    """Stretch speeds (columns/ms) over columns 10–70 and the fraction of the released energy
-    (3 joints × 1.5 J per column) dissipated while the front crosses columns 15–65, with the hinge
-    damping of ROTATION_ONLY scaled by ``factor``."""
+    """Stretch speeds (columns/ms) over columns 10–70, the fraction of the released energy
+    (3 joints × 1.5 J per column) dissipated while the front crosses columns 15–65, and the frames
+    that crossing spans, with the hinge damping of ROTATION_ONLY scaled by ``factor``."""
     coef = 1.8856e-5 * factor
     scene, ds, _ = run("k_linkage_transition_wave", tmp_path / f"x{factor:g}",
                        [f"damping.viscous={{coefficient_n_s_per_m: 0.0, rotational_coefficient_n_m_s: {coef}}}",
@@ -49,15 +49,16 @@ def _speeds_and_dissipation(tmp_path, factor):
     speeds = np.array([np.polyfit(arrival[a : a + 20], np.arange(a, a + 20), 1)[0] for a in (10, 30, 50)]) / 1e3
     d = ds["dissipated_energy"].values
     i0, i1 = np.searchsorted(t, [arrival[15], arrival[65]])
-    return speeds, (d[i1] - d[i0]) / (3 * lat.released_energy_j * 50)
+    return speeds, (d[i1] - d[i0]) / (3 * lat.released_energy_j * 50), i1 - i0
 
 
 def test_linkage_front_speed_is_not_set_by_hinge_dissipation(tmp_path):
     """docs/scenes.md: no damped-front (energy balance) law can give this front's speed: from no
     damping to 4× the hinge damping the speed changes by < 4 % while the dissipated share of the
     released energy goes from 0 to > 30 %."""
-    free, none = _speeds_and_dissipation(tmp_path, 0.0)
-    damped, share = _speeds_and_dissipation(tmp_path, 4.0)
-    assert none == 0.0 and share > 0.3
+    free, _, free_frames = _speeds_and_dissipation(tmp_path, 0.0)  # no damping: nothing dissipated
+    damped, share, damped_frames = _speeds_and_dissipation(tmp_path, 4.0)
+    assert min(free_frames, damped_frames) >= 100  # the front takes ms, not a frame or two, to cross 50 columns
+    assert share > 0.3
     assert np.ptp(free) < 0.03 * free.mean()  # steady without any damping
     assert abs(damped.mean() / free.mean() - 1) < 0.04

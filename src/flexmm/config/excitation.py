@@ -140,7 +140,7 @@ class Shaker(EndDrive):
     kind: Literal["shaker"]
     frequency_hz: float = Field(ge=10.0, le=10_000.0, description="drive frequency (Hz)")
     amplitude_m: Positive | None = Field(None, description="displacement amplitude (m)")
-    amplitude_n: Positive | None = Field(None, description="force amplitude (N)")
+    amplitude_n: Positive | None = Field(None, description="force amplitude on each driven unit (N)")
     amplitude_rad: Positive | None = Field(
         None, description="instead: amplitude of a prescribed staggered rotation θ of the driven units (rad); "
         "u, v stay free"
@@ -198,9 +198,10 @@ class BoundaryForce(EndDrive):
 
     kind: Literal["boundary_force"]
     shape: Literal["half_sine", "smooth_step", "gaussian"] = "half_sine"
-    amplitude_n: Finite | None = Field(None, description="peak force, positive into the lattice (N)")
+    amplitude_n: Finite | None = Field(None, description="peak force on each driven unit, positive into the "
+                                       "lattice (N)")
     amplitude_n_m: Finite | None = Field(
-        None, description="instead: peak moment on the staggered rotation θ of the driven units (N m, "
+        None, description="instead: peak moment on the staggered rotation θ of each driven unit (N m, "
         "positive increases θ); u, v stay free"
     )
     duration_s: Positive = Field(description="pulse length; FWHM for the gaussian; rise time for the step")

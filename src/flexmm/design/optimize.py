@@ -25,6 +25,7 @@ from pydantic import Field, model_validator
 
 from flexmm.assemble import build_problem
 from flexmm.config.base import Positive, Strict
+from flexmm.config.loader import ConfigError, ConfigIssue
 from flexmm.design.gradient import Trajectory, check_differentiable
 from flexmm.design.objectives import Objective, Term, bind_terms
 from flexmm.design.spec import load_spec, scene_data_of
@@ -119,7 +120,21 @@ class DesignProblem:
     def __init__(self, spec: DesignSpec, spec_path: str | Path, base_dir: Path):
         self.spec = spec
         data, source, where = scene_data_of(spec.scene, spec_path, base_dir)
+        names = [v.name for v in spec.variables]
+        for k, c in enumerate(spec.constraints):
+            if c.kind == "mean" and c.variable not in names:
+                raise ConfigError([ConfigIssue(str(spec_path), None, f"constraints[{k}].variable",
+                                               f"no variable {c.variable!r} (the variables are {', '.join(names)})")])
         self.design = Design(data, spec.variables, where, source)
+        #: each constraint's target (its value, or its start value), computed once
+        self.targets = [c.value if c.value is not None else self.constraint_value(c, self.design.x0)
+                        for c in spec.constraints]
+        for k, (c, target) in enumerate(zip(spec.constraints, self.targets)):
+            if not target > 0:  # the constraints are scaled by their targets
+                raise ConfigError([ConfigIssue(str(spec_path), None, f"constraints[{k}]", (
+                    f"the start mean of variable {c.variable!r} is {target:g}; a mean constraint needs a positive "
+                    "target (give a positive value, or start the variable at a positive mean)")
+                    if c.kind == "mean" else f"the start total mass is {target:g} kg; it must be positive")])
         self.problem = build_problem(self.design.scene(self.design.x0))
         s = self.problem.system
         check_differentiable(s, self.problem.terms)
@@ -131,12 +146,6 @@ class DesignProblem:
         rec, _ = self.traj.run(self.design.raw(self.design.x0))
         self.objective.normalise(rec, self.design.raw(self.design.x0))
         self.term_names = [f"{t.kind}[{k}]" for k, t in enumerate(spec.objective)]
-        names = [v.name for v in spec.variables]
-        for c in spec.constraints:
-            if c.kind == "mean" and c.variable not in names:
-                from flexmm.errors import FlexmmError
-
-                raise FlexmmError(f"constraint mean: no variable {c.variable!r} (the variables are {', '.join(names)})")
 
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray, list[float]]:
         """(objective, gradient w.r.t. x, terms in SI) by one run and one adjoint sweep."""
@@ -173,9 +182,6 @@ class DesignProblem:
 
     def constraint_value(self, c: Constraint, x: np.ndarray) -> float:
         return self.total_mass(x) if c.kind == "total_mass" else float(self.mean_weights(c.variable) @ x)
-
-    def constraint_target(self, c: Constraint) -> float:
-        return c.value if c.value is not None else self.constraint_value(c, self.design.x0)
 
 
 @dataclass
@@ -215,8 +221,7 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
     opts = dp.spec.optimizer
     bounds = Bounds(lo / scale, hi / scale)
     cons = []
-    for c in dp.spec.constraints:
-        target = dp.constraint_target(c)
+    for c, target in zip(dp.spec.constraints, dp.targets):
         lb, ub = {"equal": (target, target), "at_most": (-np.inf, target), "at_least": (target, np.inf)}[c.relation]
         if c.kind == "mean":  # linear in the variables
             cons.append(LinearConstraint((dp.mean_weights(c.variable) * scale / target)[None, :], lb / target, ub / target))
@@ -245,8 +250,7 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
 
 
 def _feasible(dp: DesignProblem, x: np.ndarray, rtol: float = 1e-4) -> bool:
-    for c in dp.spec.constraints:
-        target = dp.constraint_target(c)
+    for c, target in zip(dp.spec.constraints, dp.targets):
         m = dp.constraint_value(c, x)
         if (c.relation == "equal" and abs(m - target) > rtol * target) or \
            (c.relation == "at_most" and m > target * (1 + rtol)) or \

@@ -132,22 +132,29 @@ def element_values(lattice: dict, var: Variable, vals: np.ndarray) -> np.ndarray
     """The per-unit values a target variable writes (a sheet's spline2d: (rows, cols); otherwise
     one per column or row of ``profile_lines``)."""
     if var.profile == "spline2d":
-        if "n_cols" not in lattice:
-            raise GradientError(f"variable {var.name!r}: profile spline2d needs a sheet (a lattice with rows)")
-        return spline2d_values(vals, var.knots, var.knots_y, int(lattice["n_rows"]), int(lattice["n_cols"]))
-    n = len(profile_lines(lattice, var.axis))
+        rows, cols = lattice.get("n_rows"), lattice.get("n_cols")
+        if rows is None or cols is None:
+            raise GradientError(f"variable {var.name!r}: profile spline2d needs a sheet with n_rows and n_cols "
+                                f"(lattice kind {lattice.get('kind')!r} has no n_rows)")
+        return spline2d_values(vals, var.knots, var.knots_y, int(rows), int(cols))
+    n = len(profile_lines(lattice, var.axis, var.name))
     if var.profile == "spline":
         return spline_values(vals, n)
     return np.linspace(vals[0], vals[-1], n)
 
 
-def profile_lines(lattice: dict, axis: str) -> list[list[int]]:
-    """The units of each column (axis x) or row (axis y) of a lattice dict, in order (a chain: its units)."""
-    if "n_cols" not in lattice:
+def profile_lines(lattice: dict, axis: str, name: str = "") -> list[list[int]]:
+    """The units of each column (axis x) or row (axis y) of a lattice dict, in order (a chain: its units);
+    ``name``, the variable's, for the errors."""
+    rows, cols = lattice.get("n_rows"), lattice.get("n_cols")
+    if cols is None:
         if axis == "y":
-            raise GradientError("axis: y needs a sheet (a lattice with rows)")
+            raise GradientError(f"variable {name!r}: axis: y needs a sheet (a lattice with rows)")
         return [[i] for i in range(int(lattice.get("n_units", 0)))]
-    rows, cols = int(lattice["n_rows"]), int(lattice["n_cols"])
+    if rows is None:
+        raise GradientError(f"variable {name!r}: a profile along the columns or rows needs a sheet with n_rows "
+                            f"(lattice kind {lattice.get('kind')!r} has none)")
+    rows, cols = int(rows), int(cols)
     if axis == "x":
         return [[r * cols + c for r in range(rows)] for c in range(cols)]
     return [[r * cols + c for c in range(cols)] for r in range(rows)]
@@ -195,7 +202,7 @@ class Design:
                 variations += [{"kind": "defects", "target": var.target, "sites": [site], "value": float(v)}
                                for site, v in enumerate(field)]
             else:
-                lines = profile_lines(lat, var.axis)
+                lines = profile_lines(lat, var.axis, var.name)
                 values = spline_values(vals, len(lines))
                 variations += [{"kind": "defects", "target": var.target, "sites": sites, "value": float(v)}
                                for sites, v in zip(lines, values)]
