@@ -83,16 +83,21 @@ def _record(q, v, f, obs, Rq, Rv, Rf, j):
 
 
 @jit
+def _checkpoint(q, v, f, t, CQ, CV, CF, CT, c):
+    """Keep the state (q, v, f, t) as checkpoint row ``c``."""
+    CQ[c, :] = q
+    CV[c, :] = v
+    CF[c, :] = f
+    CT[c] = t
+
+
+@jit
 def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, Rq, Rv, Rf):
     """Run ``nsteps`` from (q, v, f, t) in place; checkpoint every ``seg`` steps (rows of CQ, CV,
     CF, CT), record (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
     for k in range(nsteps + 1):
         if k % seg == 0:
-            c = k // seg
-            CQ[c, :] = q
-            CV[c, :] = v
-            CF[c, :] = f
-            CT[c] = t
+            _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
         if k % stride == 0:
             _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
@@ -356,11 +361,7 @@ def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, 
         if k > 0 and keep:
             _chain_close(v, f, kick, post)
         if k % seg == 0:
-            c = k // seg
-            CQ[c, :] = q
-            CV[c, :] = v
-            CF[c, :] = f
-            CT[c] = t
+            _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
         if k % stride == 0:
             _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
