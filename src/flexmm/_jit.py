@@ -36,9 +36,18 @@ import time
 import warnings
 from pathlib import Path
 
+import llvmlite.binding
 import numba
 
 NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
+
+#: LLVM's loop vectoriser gives up on a loop whose arrays need more run-time overlap checks than
+#: this (numba cannot declare arrays non-aliasing); the default stops loops over ~10 arrays,
+#: such as a uniform chain's fused reverse passes (design/kernels.py), from vectorising.
+#: Process-wide, set before anything compiles; elementwise loops give the same bits either way.
+VECTORIZE_MEMORY_CHECKS = 256
+if not NO_JIT:
+    llvmlite.binding.set_option("flexmm", f"-vectorize-memory-check-threshold={VECTORIZE_MEMORY_CHECKS}")
 
 # NaN/inf semantics are kept so blow-ups are seen; see the module docstring for reassoc/contract.
 FASTMATH = frozenset({"nsz", "arcp", "afn"})

@@ -207,6 +207,31 @@ def test_column_sweeps_match_the_general_sweeps(name):
             np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
 
 
+@pytest.mark.parametrize("name,free", [("chain-force-shaker", True), ("chain-displacement-damped", False)])
+def test_uniform_sweeps_match_the_general_sweeps(name, free):
+    """A uniform chain's reverse sweep (scalar parameters; integrator factors scalar per field
+    when both ends are free, per-DOF columns with a fixed or driven end), damped and driven
+    (an applied force; a prescribed displacement), equals the general sweeps' and the column
+    sweeps' gradient to rounding, checkpointed or not, the objective entering every 3 steps."""
+    problem = _problem(name)
+    if free:
+        data = {"name": "grad"} | copy.deepcopy(SCENES[name])
+        data["lattice"]["right"] = "free"
+        problem = build_problem(scene_from_dict(data))
+    traj, raw = trajectory_of(problem, nsteps=120, stride=3)
+    args, terms, kick, pre, post = traj.bind(raw)
+    u, fac = traj._uniform(traj._columns(raw)[0], kick, pre, post)
+    assert all(isinstance(x, float) for x in fac) == free
+    objective = _objective((traj.n_samples, traj.obs.size), seed=4)
+    refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
+    for segment in (None, 11):
+        _, grad, _ = traj.gradient(raw, objective, segment=segment)
+        for other in refs:
+            _, ref, _ = other.gradient(raw, objective, segment=segment)
+            for (k, a), (_, b) in zip(grad.items(), ref.items()):
+                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
+
+
 def test_checkpoint_segment_does_not_change_the_gradient():
     traj, raw = trajectory_of(_problem("chain-force-shaker"), nsteps=240, stride=4)
     objective = _objective((traj.n_samples, traj.obs.size))

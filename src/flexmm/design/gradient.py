@@ -23,8 +23,9 @@ from typing import Callable
 import numpy as np
 
 from flexmm.design import sweeps
-from flexmm.design.kernels import (N_CA, N_F, N_R, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
-                                   param_tables, sheet_grid, sheet_grid_add, sheet_grid_columns, with_tables)
+from flexmm.design.kernels import (N_CA, N_F, N_R, N_V, adjoint_kernels_of, chain_add_columns, chain_columns,
+                                   chain_ordered, chain_uniform, param_tables, sheet_grid, sheet_grid_add,
+                                   sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
 from flexmm.integrators.common import MODE_FRICTION, Terms
 from flexmm.models.hinge import S_KG
@@ -130,6 +131,9 @@ class Trajectory:
     t0: float = 0.0
     #: run the column sweeps where they apply (``columns``); False: the general sweeps always
     column_sweeps: bool = True
+    #: a uniform chain's reverse sweep with scalar parameters (``sweeps.chain_uniform_reverse``)
+    #: where it applies; False: the column sweeps' (for comparisons)
+    uniform_sweeps: bool = True
 
     def __post_init__(self):
         self.obs = np.asarray(self.obs, np.int64)
@@ -164,6 +168,19 @@ class Trajectory:
 
     def _columns(self, raw: Raw) -> tuple:
         return chain_columns(raw.t1, raw.t2), bool(np.any(raw.t2[:, S_KG] != 0.0))
+
+    def _uniform(self, cols: np.ndarray, kick, pre, post) -> tuple | None:
+        """(parameters, integrator factors) of the uniform chain's reverse sweep, or None: the
+        factors (K_u, K_θ, S_u, S_θ, P_u, P_θ) as scalars if constant on each field, else as
+        per-field columns."""
+        u = chain_uniform(cols) if self.uniform_sweeps else None
+        if u is None:
+            return None
+        n = cols.shape[1]
+        fields = [a[sl] for a in (kick, post, pre) for sl in (slice(0, n), slice(n, None))]
+        if all(np.all(a == a[0]) for a in fields):
+            return u, tuple(float(a[0]) for a in fields)
+        return u, tuple(np.ascontiguousarray(a) for a in fields)
 
     @property
     def n_samples(self) -> int:
@@ -237,8 +254,19 @@ class Trajectory:
         lv[self.obs] += dv[j]
         lf[self.obs] += df[j]
         adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form)
+        uniform = self._uniform(form[3], kick, pre, post) if chain else None
+        if uniform is not None:
+            u, fac = uniform
+            ur = np.empty((N_V, n // 2 + 1))
+            urev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gdrv, form[5], ur)
+
+            def reverse(SQ, SV, SF, ST, k0, m):
+                sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, ST, self.h, k0, m, *urev)
+        else:
+            def reverse(SQ, SV, SF, ST, k0, m):
+                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
         if keep_all:  # every state was kept by the forward run
-            sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
+            reverse(CQ, CV, CF, CT, 0, N)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1) if not chain else (
                 np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0, n)), np.empty(seg + 1))
@@ -249,7 +277,7 @@ class Trajectory:
                                         self.h, m, SQ, SV, ST)
                 else:
                     sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
-                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
+                reverse(SQ, SV, SF, ST, k0, m)
         GK += lw * CF[0]  # the products of the first step's λw with the initial state
         GV += lw * CV[0]
         q0 = raw.q0.copy()

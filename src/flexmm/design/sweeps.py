@@ -32,10 +32,17 @@ import numpy as np
 from flexmm._jit import jit
 from flexmm.design.kernels import (
     N_R,
+    U_TH0,
+    V_ZT,
+    V_ZU,
     chain_force_columns,
     chain_reverse_gather,
     chain_reverse_hessian,
     chain_strains,
+    chain_uniform_gather,
+    chain_uniform_hinges,
+    chain_uniform_open,
+    chain_uniform_sites,
     model_adjoint,
     model_tangent,
     sheet_grid_adjoint,
@@ -50,6 +57,7 @@ from flexmm.design.terms import (
     waveform_dprm,
 )
 from flexmm.integrators.common import apply_prescribed, position_forces, total_force, waveform
+from flexmm.models.hinge import param
 
 
 @jit
@@ -396,3 +404,71 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
             _chain_close(v, f, kick, post)
             SQ[s, :] = q
             SV[s, :] = v
+
+
+# ---------------------------------------------------------------- uniform chains
+#
+# The reverse sweep of a uniform chain (``kernels.chain_uniform``): the steps of ``reverse``'s
+# FORM_CHAIN branch with the model part from scalar parameters in fused passes
+# (``kernels.chain_uniform_*``), and the integrator factors K, P, S as scalars per field, or
+# per-DOF columns where they vary (a fixed end), through ``param``. The same gradient to
+# rounding (tests/design/test_gradient.py), at about 0.6 of the column sweeps' reverse cost.
+
+
+@jit
+def _uniform_update(lq, lv, lf, lw, kick, pre, h):
+    """The close of a reverse step on one field: λw += h λq, λv = P λw, λf = K λw."""
+    for k in range(lq.shape[0]):
+        x = lw[k] + h * lq[k]
+        lw[k] = x
+        lv[k] = param(pre, k) * x
+        lf[k] = param(kick, k) * x
+
+
+@jit
+def _applied_products(t, z, GK, dd, dm, ds, dp):
+    """∂J/∂K += z g of the applied forces g(t) (force drives), which the state's force includes
+    (z: (2, n), the u and θ fields)."""
+    n = z.shape[1]
+    for d in range(dd.shape[0]):
+        if dm[d] == 1:
+            g, _ = waveform(ds[d], dp[d], t)
+            k = dd[d]
+            GK[k] += z[k // n, k % n] * g
+
+
+@jit
+def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+                          lq, lv, lf, lw, GK, GV, gdrv, acc, r):
+    """``reverse`` of a uniform chain (the same arguments where they exist; ``u``: its
+    parameters, ``fac`` = (K_u, K_θ, S_u, S_θ, P_u, P_θ) scalars or per-field columns, acc the
+    column accumulator (N_CA, n), r scratch (N_V, n + 1)). A step is four passes: cos/sin at
+    the sites; the integrator factors' products (with the close of the step before, unless
+    the objective enters between them); the hinges (force, Hessian and parameter products);
+    the sites (force, gathering, site parameters). Drives as ``reverse``."""
+    n = lq.shape[0] // 2
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    z = r[V_ZU : V_ZT + 1, :n]
+    pending = False
+    for j in range(nsteps, 0, -1):
+        q1 = SQ[j]
+        t1 = ST[j]
+        chain_uniform_sites(q1[n:], u[U_TH0], r)
+        chain_uniform_open(lq[:n], lv[:n], lf[:n], lw[:n], SV[j, :n], GV[:n], z[0], fac[0], fac[4], fac[2], h,
+                           pending)
+        chain_uniform_open(lq[n:], lv[n:], lf[n:], lw[n:], SV[j, n:], GV[n:], z[1], fac[1], fac[5], fac[3], h,
+                           pending)
+        chain_uniform_hinges(q1, lf, r, acc, u)
+        chain_uniform_gather(q1, lf, lq, GK, r, acc, u)
+        if dd.shape[0]:
+            _applied_products(t1, z, GK, dd, dm, ds, dp)
+            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
+            prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
+        k = k0 + j - 1
+        pending = j > 1 and k % stride != 0
+        if not pending:
+            _uniform_update(lq[:n], lv[:n], lf[:n], lw[:n], fac[0], fac[4], h)
+            _uniform_update(lq[n:], lv[n:], lf[n:], lw[n:], fac[1], fac[5], h)
+            _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
