@@ -19,7 +19,7 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
-from flexmm.design.gradient import GradientError, trajectory_of
+from flexmm.design.gradient import ENGINE_SITES, GradientError, trajectory_of
 from flexmm.design.kernels import N_R, chain_columns, chain_force_columns
 from flexmm.design.sweeps import FORM_TABLES
 from flexmm.integrators.common import SHAPES
@@ -230,6 +230,23 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
             _, ref, _ = other.gradient(raw, objective, segment=segment)
             for (k, a), (_, b) in zip(grad.items(), ref.items()):
                 np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
+
+
+def test_engine_forward_is_the_column_forward():
+    """A long damped chain under a prescribed displacement runs forward by the engine's fused
+    kernel (``Trajectory._engine_run``): the same checkpoints and records bit for bit as
+    ``sweeps.chain_forward``."""
+    data = {"name": "grad"} | copy.deepcopy(SCENES["chain-displacement-damped"])
+    data["lattice"]["n_units"] = ENGINE_SITES
+    traj, raw = trajectory_of(build_problem(scene_from_dict(data)), nsteps=96, stride=32)
+    args, terms = traj.bind(raw)[:2]
+    q = raw.q0.copy()
+    assert traj._engine_run(raw, args, terms, q, raw.v0.copy(), np.zeros_like(q), 48, *traj._buffers(q.size, 3),
+                            traj._records())
+    rec, checkpoints = traj.run(raw, segment=48)
+    rec_ref, ref = dataclasses.replace(traj, engine_forward=False).run(raw, segment=48)
+    for a, b in zip((rec.q, rec.v, rec.f) + checkpoints[:4], (rec_ref.q, rec_ref.v, rec_ref.f) + ref[:4]):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_checkpoint_segment_does_not_change_the_gradient():

@@ -27,7 +27,8 @@ from flexmm.design.kernels import (N_CA, N_F, N_R, N_V, adjoint_kernels_of, chai
                                    chain_ordered, chain_uniform, param_tables, sheet_grid, sheet_grid_add,
                                    sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
-from flexmm.integrators.common import MODE_FRICTION, Terms
+from flexmm.integrators import verlet_chain
+from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms
 from flexmm.models.hinge import S_KG
 
 
@@ -35,6 +36,9 @@ from flexmm.models.hinge import S_KG
 MEMORY_MB = 256.0
 #: the column sweeps keep every state only if they fit in this many MB (a cache's size)
 CACHE_MB = 4.0
+#: chains of this many sites or more run forward with the engine's time-blocked kernel when it
+#: gives the same bits (``Trajectory._engine_run``)
+ENGINE_SITES = 4096
 
 
 class GradientError(FlexmmError):
@@ -134,6 +138,9 @@ class Trajectory:
     #: a uniform chain's reverse sweep with scalar parameters (``sweeps.chain_uniform_reverse``)
     #: where it applies; False: the column sweeps' (for comparisons)
     uniform_sweeps: bool = True
+    #: the forward run by the engine's fused chain kernel where it gives the same bits and is
+    #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
+    engine_forward: bool = True
 
     def __post_init__(self):
         self.obs = np.asarray(self.obs, np.int64)
@@ -217,13 +224,43 @@ class Trajectory:
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
         CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1)
         rec = self._records()
-        if self.columns(raw):
+        if self._engine_run(raw, args, terms, q, v, f, seg, CQ, CV, CF, CT, rec):
+            pass
+        elif self.columns(raw):
             sweeps.chain_forward(*self._columns(raw), terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps,
                                  seg, self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
         else:
             sweeps.forward(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, seg,
                            self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
         return rec, (CQ, CV, CF, CT, seg)
+
+    def _engine_run(self, raw: Raw, args, terms, q, v, f, seg, CQ, CV, CF, CT, rec: Records) -> bool:
+        """The forward run by the engine's fused, time-blocked chain kernel
+        (``integrators.verlet_chain``), stopping at each checkpoint and record, where it gives
+        ``chain_forward``'s bits and is faster: a damped chain (undamped, the engine adds the two
+        half kicks between steps as one: a different rounding) of ``ENGINE_SITES`` sites or more
+        (shorter ones fit in cache, where ``chain_forward`` is as fast), stopping at most every
+        ``TIME_BLOCK`` steps. Returns whether it ran."""
+        n = raw.t2.shape[0]
+        if (not (self.engine_forward and self.columns(raw)) or n < ENGINE_SITES
+                or min(seg, self.stride) < verlet_chain.TIME_BLOCK or not np.any(raw.damp * raw.minv != 0.0)
+                or not verlet_chain.fusable(args, q, raw.minv, raw.damp, terms)):
+            return False
+        tables = verlet_chain.prepare(args, raw.minv, raw.damp, self.h)
+        ledger = np.zeros(ACC_HEADER)
+        t, k = self.t0, 0
+        while True:
+            if k % seg == 0:
+                CQ[k // seg], CV[k // seg], CF[k // seg], CT[k // seg] = q, v, f, t
+            if k % self.stride == 0:
+                j = k // self.stride
+                rec.q[j], rec.v[j], rec.f[j] = q[self.obs], v[self.obs], f[self.obs]
+            if k == self.nsteps:
+                return True
+            m = min(seg - k % seg, self.stride - k % self.stride, self.nsteps - k)
+            t = verlet_chain.chain_verlet_advance_prepared(tables, args, q, v, f, raw.minv, raw.damp, terms, t, self.h,
+                                                           m, ledger)
+            k += m
 
     def gradient(self, raw: Raw, objective: Objective, segment: int | None = None,
                  memory_mb: float = MEMORY_MB) -> tuple[float, Raw, Records]:
