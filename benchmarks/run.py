@@ -14,6 +14,7 @@ average; thread/process CPU time is printed next to wall time because the machin
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -806,7 +807,7 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
 
 
 def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
-             repeats: int = 5) -> list[dict]:
+             repeats: int = 5, compare_old: bool = True) -> list[dict]:
     """Cost of an exact gradient (flexmm.design: forward run with checkpoints, replay and reverse
     sweep) as a multiple of one forward run of the engine (the Stepper's velocity Verlet — the
     fused chain or sheet kernel — damped so both take the same scheme), interleaved in the same
@@ -814,7 +815,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     states and the peak traced by tracemalloc during the gradient. Chains: the LEGO impact chain
     (``cases``: units x steps); sheets: configs/sheet_pulse.yaml (``sheets``: rows x cols x
     steps). DifFlexMM's jax.grad on the same-size sheet: ``benchmarks/difflexmm.py`` (a separate
-    JAX environment; JAX is not a flexmm dependency).
+    JAX environment; JAX is not a flexmm dependency). ``compare_old``: also the previous path,
+    interleaved (a uniform chain's column sweeps and column forward run: ``Trajectory``'s
+    ``uniform_sweeps=False, engine_forward=False``), where the default path differs from it.
     """
     import tracemalloc
 
@@ -838,17 +841,21 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         obs = np.arange(system.ndof - n_sites, system.ndof)  # every θ, at the last step only
         traj = Trajectory(system.args, terms, 0.1, steps, steps, obs)
         raw = raw_of(system, terms, damp)
-        small = Trajectory(system.args, terms, 0.1, 4, 4, obs)
-        small.gradient(raw, objective)  # compile
-        small.gradient(raw, objective, segment=2)
-        fwd, grad, fwd_cpu, grad_cpu = [], [], [], []
+        old = dataclasses.replace(traj, uniform_sweeps=False, engine_forward=False)
+        contenders = [(lambda: st.advance(steps), [], []), (lambda: traj.gradient(raw, objective), [], [])]
+        if compare_old and kind == "chain":
+            contenders.append((lambda: old.gradient(raw, objective), [], []))
+        for t in (traj, old):
+            small = dataclasses.replace(t, nsteps=4, stride=4)
+            small.gradient(raw, objective)  # compile
+            small.gradient(raw, objective, segment=2)
         for _ in range(repeats):
-            for runner, wall, cpu in ((lambda: st.advance(steps), fwd, fwd_cpu),
-                                      (lambda: traj.gradient(raw, objective), grad, grad_cpu)):
+            for runner, wall, cpu in contenders:
                 t0, c0 = time.perf_counter(), time.process_time()
                 runner()
                 wall.append(time.perf_counter() - t0)
                 cpu.append(time.process_time() - c0)
+        (_, fwd, fwd_cpu), (_, grad, grad_cpu) = contenders[:2]
         tracemalloc.start()
         traj.gradient(raw, objective)
         _, peak = tracemalloc.get_traced_memory()
@@ -869,7 +876,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
                "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd)),
                "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
                "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu)),
-               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]],
+               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]]
+               + (" (uniform)" if columns and traj._uniform(traj._columns(raw)[0], *traj.bind(raw)[2:]) else ""),
                "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps",
                "stored_MB": stored / 1e6, "traced_peak_MB": peak / 1e6,
                "all_states_MB": (steps + 1) * 3 * n * 8 / 1e6}
@@ -878,6 +886,14 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
               f"median; CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; target <= 4; "
               f"load {row['load']:.1f}); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak "
               f"{row['traced_peak_MB']:.1f} MB (all states would be {row['all_states_MB']:.0f} MB)")
+        if len(contenders) > 2:
+            _, prev, prev_cpu = contenders[2]
+            row.update(previous_min_s=min(prev), previous_median_s=float(np.median(prev)),
+                       previous_ratio_min=min(prev) / min(fwd), previous_ratio_median=float(np.median(prev) / np.median(fwd)),
+                       previous_cpu_ratio_median=float(np.median(prev_cpu) / np.median(fwd_cpu)))
+            print(f"    previous path (column sweeps, column forward), interleaved: gradient {min(prev):.3g} s (wall "
+                  f"x{row['previous_ratio_min']:.2f} min, x{row['previous_ratio_median']:.2f} median; CPU "
+                  f"x{row['previous_cpu_ratio_median']:.2f} median)")
         rows.append(row)
     print("  DifFlexMM (JAX) comparison: benchmarks/difflexmm.py (needs a separate JAX environment)")
     return rows

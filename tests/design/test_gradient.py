@@ -20,7 +20,8 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.design.gradient import ENGINE_SITES, GradientError, trajectory_of
-from flexmm.design.kernels import N_R, chain_columns, chain_force_columns
+from flexmm.design import sweeps
+from flexmm.design.kernels import N_R, N_V, chain_columns, chain_force_columns
 from flexmm.design.sweeps import FORM_TABLES
 from flexmm.integrators.common import SHAPES
 from flexmm.integrators.stepper import make_stepper
@@ -222,6 +223,18 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
     args, terms, kick, pre, post = traj.bind(raw)
     u, fac = traj._uniform(traj._columns(raw)[0], kick, pre, post)
     assert all(isinstance(x, float) for x in fac) == free
+    states = []
+    for replay, extra in ((sweeps.chain_uniform_replay, (u, False, fac)), (sweeps.chain_replay, traj._columns(raw))):
+        _, (CQ, CV, CF, CT, _) = traj.run(raw, segment=50)
+        SQ, SV, ST = np.empty((51, raw.q0.size)), np.empty((51, raw.q0.size)), np.empty(51)
+        if replay is sweeps.chain_replay:
+            replay(*extra, terms, kick, pre, post, CQ[1], CV[1], CF[1], CT[1], traj.h, 50, SQ, SV, ST)
+        else:
+            replay(*extra, terms, CQ[1], CV[1], CF[1], CT[1], traj.h, 50, SQ, SV, ST, np.empty((N_V, raw.t2.shape[0] + 1)))
+        np.testing.assert_array_equal(SQ[-1], CQ[2])  # the replay ends on the next checkpoint
+        states.append((SQ, SV, ST))
+    for a, b in zip(*states):  # the uniform replay is the column replay, bit for bit
+        np.testing.assert_array_equal(a, b)
     objective = _objective((traj.n_samples, traj.obs.size), seed=4)
     refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
     for segment in (None, 11):

@@ -309,7 +309,10 @@ class Trajectory:
                 np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0, n)), np.empty(seg + 1))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
-                if chain:
+                if uniform is not None:
+                    sweeps.chain_uniform_replay(u, form[1] != 0, fac, terms, CQ[c], CV[c], CF[c], CT[c], self.h, m,
+                                                SQ, SV, ST, ur)
+                elif chain:
                     sweeps.chain_replay(form[3], form[1] != 0, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c],
                                         self.h, m, SQ, SV, ST)
                 else:

@@ -433,6 +433,46 @@ def chain_uniform(cols: np.ndarray) -> np.ndarray | None:
 
 
 @jit
+def _uniform_hinge_force(ua, ub, qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt):
+    """A uniform hinge's stretch el, unsigned shear x, k_l el, k_s x and its (f_l, g_A, g_B) as
+    ``chain_force_columns`` (the same bits: k_s σ x σ = k_s x exactly)."""
+    el = ub - ua + rest - (hA * ca + hB * cb)
+    x = hB * sb - hA * sa
+    e = kl * el
+    xs = ks * x
+    fp = kt * (qa + qb)
+    return el, x, e, xs, e * hA * sa - xs * hA * ca + fp, e * hB * sb + xs * hB * cb + fp
+
+
+@jit
+def chain_uniform_force(q, u, with_kg, r, f):
+    """``chain_force_columns`` of a uniform chain (``chain_uniform``'s parameters u): the same bits;
+    cos/sin of θ0+θ and the hinges' forces left in the scratch r (N_V, n + 1)."""
+    n = r.shape[1] - 1
+    rest, hA, hB, kl, ks, kt = u[U_REST], u[U_HA], u[U_HB], u[U_KL], u[U_KS], u[U_KT]
+    kg, kr, c0 = u[U_KG], u[U_KR], u[U_C0]
+    qu, qt = q[:n], q[n:]
+    chain_uniform_sites(qt, u[U_TH0], r)
+    cs, sn = r[V_COS], r[V_SIN]
+    fl, ga, gb = r[V_FL, 1:], r[V_GA, 1:], r[V_GB, 1:]
+    for h in range(n - 1):
+        _, _, fl[h], _, ga[h], gb[h] = _uniform_hinge_force(qu[h], qu[h + 1], qt[h], qt[h + 1], cs[h], sn[h],
+                                                            cs[h + 1], sn[h + 1], rest, hA, hB, kl, ks, kt)
+    for row in (V_FL, V_GA, V_GB):
+        r[row, 0] = 0.0
+        r[row, n] = 0.0
+    fl, ga, gb = r[V_FL], r[V_GA], r[V_GB]
+    if with_kg:
+        for i in range(n):
+            f[i] = fl[i + 1] - fl[i]
+            f[n + i] = -(kg * (c0 - cs[i]) * sn[i] + kr * qt[i]) - (gb[i] + ga[i + 1])
+    else:
+        for i in range(n):
+            f[i] = fl[i + 1] - fl[i]
+            f[n + i] = -kr * qt[i] - (gb[i] + ga[i + 1])
+
+
+@jit
 def chain_uniform_sites(qt, th0, r):
     """cos/sin of θ0 + θ at every site (rows V_COS, V_SIN)."""
     cs, sn = r[V_COS], r[V_SIN]
@@ -482,14 +522,9 @@ def chain_uniform_hinges(q, lf, r, acc, u):
     for h in range(n - 1):
         ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
         qa, qb, lta, ltb = qt[h], qt[h + 1], lt[h], lt[h + 1]
-        el = qu[h + 1] - qu[h] + rest - (hA * ca + hB * cb)
-        x = hB * sb - hA * sa
-        e = kl * el
-        xs = ks * x
-        fp = kt * (qa + qb)
+        el, x, e, xs, ga[h], gb[h] = _uniform_hinge_force(qu[h], qu[h + 1], qa, qb, ca, sa, cb, sb, rest, hA, hB,
+                                                          kl, ks, kt)
         fl[h] = e
-        ga[h] = e * hA * sa - xs * hA * ca + fp
-        gb[h] = e * hB * sb + xs * hB * cb + fp
         dl = lu[h + 1] - lu[h] + hA * sa * lta + hB * sb * ltb  # δ(stretch), δ(unsigned shear)
         d = hB * cb * ltb - hA * ca * lta
         p = kl * dl

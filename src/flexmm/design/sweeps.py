@@ -39,6 +39,7 @@ from flexmm.design.kernels import (
     chain_reverse_gather,
     chain_reverse_hessian,
     chain_strains,
+    chain_uniform_force,
     chain_uniform_gather,
     chain_uniform_hinges,
     chain_uniform_open,
@@ -313,16 +314,16 @@ def apply_prescribed_only(terms, q, v, t):
 
 @jit
 def _chain_open(q, v, f, kick, pre, h):
-    """Opening half kick and drift (v becomes the half-kicked w)."""
+    """Opening half kick and drift (v becomes the half-kicked w); factors: columns or scalars."""
     for k in range(q.shape[0]):
-        v[k] = pre[k] * v[k] + kick[k] * f[k]
+        v[k] = param(pre, k) * v[k] + param(kick, k) * f[k]
         q[k] += h * v[k]
 
 
 @jit
 def _chain_close(v, f, kick, post):
     for k in range(v.shape[0]):
-        v[k] = (v[k] + kick[k] * f[k]) * post[k]
+        v[k] = (v[k] + param(kick, k) * f[k]) * param(post, k)
 
 
 @jit
@@ -332,16 +333,16 @@ def _chain_close_open(q, v, f, kick, pre, post, h, sq, sv, store):
     ``_chain_open``."""
     if store:
         for k in range(q.shape[0]):
-            x = (v[k] + kick[k] * f[k]) * post[k]
+            x = (v[k] + param(kick, k) * f[k]) * param(post, k)
             sq[k] = q[k]
             sv[k] = x
-            x = pre[k] * x + kick[k] * f[k]
+            x = param(pre, k) * x + param(kick, k) * f[k]
             v[k] = x
             q[k] += h * x
     else:
         for k in range(q.shape[0]):
-            x = (v[k] + kick[k] * f[k]) * post[k]
-            x = pre[k] * x + kick[k] * f[k]
+            x = (v[k] + param(kick, k) * f[k]) * param(post, k)
+            x = param(pre, k) * x + param(kick, k) * f[k]
             v[k] = x
             q[k] += h * x
 
@@ -413,6 +414,39 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
 # (``kernels.chain_uniform_*``), and the integrator factors K, P, S as scalars per field, or
 # per-DOF columns where they vary (a fixed end), through ``param``. The same gradient to
 # rounding (tests/design/test_gradient.py), at about 0.6 of the column sweeps' reverse cost.
+
+
+@jit
+def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, ST, r):
+    """``chain_replay`` of a uniform chain (``chain_uniform_reverse``'s ``u``, ``fac``, scratch r):
+    the force from scalar parameters (``kernels.chain_uniform_force``) and the kicks with the
+    factors per field, the same operations, so the same states bit for bit."""
+    n = q0.shape[0] // 2
+    q = q0.copy()
+    v = v0.copy()
+    f = f0.copy()
+    t = t0
+    SQ[0, :] = q
+    SV[0, :] = v
+    ST[0] = t
+    if nsteps > 0:
+        _chain_open(q[:n], v[:n], f[:n], fac[0], fac[4], h)
+        _chain_open(q[n:], v[n:], f[n:], fac[1], fac[5], h)
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    for s in range(1, nsteps + 1):
+        t += h
+        apply_prescribed(q, v, t, dd, dm, ds, dp)
+        chain_uniform_force(q, u, with_kg, r, f)
+        position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+        ST[s] = t
+        if s < nsteps:
+            _chain_close_open(q[:n], v[:n], f[:n], fac[0], fac[4], fac[2], h, SQ[s, :n], SV[s, :n], True)
+            _chain_close_open(q[n:], v[n:], f[n:], fac[1], fac[5], fac[3], h, SQ[s, n:], SV[s, n:], True)
+        else:
+            _chain_close(v[:n], f[:n], fac[0], fac[2])
+            _chain_close(v[n:], f[n:], fac[1], fac[3])
+            SQ[s, :] = q
+            SV[s, :] = v
 
 
 @jit
