@@ -865,7 +865,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
         keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
         seg = max(1, math.isqrt(steps))
-        per_state = (2 if columns else 3) * n * 8  # the chain-column replay keeps (q, v) only
+        uniform = columns and traj._uniform(traj._columns(raw)[0], *traj.bind(raw)[2:]) is not None
+        # the chain-column replay keeps (q, v) only; a uniform chain's also cos/sin of θ0+θ
+        per_state = (3 if uniform or not columns else 2) * n * 8
         if keep_all:
             stored = (steps + 1) * 3 * n * 8
         else:
@@ -877,7 +879,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
                "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
                "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu)),
                "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]]
-               + (" (uniform)" if columns and traj._uniform(traj._columns(raw)[0], *traj.bind(raw)[2:]) else ""),
+               + (" (uniform)" if uniform else ""),
                "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps",
                "stored_MB": stored / 1e6, "traced_peak_MB": peak / 1e6,
                "all_states_MB": (steps + 1) * 3 * n * 8 / 1e6}

@@ -296,9 +296,10 @@ class Trajectory:
             u, fac = uniform
             ur = np.empty((N_V, n // 2 + 1))
             urev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gdrv, form[5], ur)
+            SC = np.empty((0 if keep_all else seg + 1, 2, n // 2))
 
             def reverse(SQ, SV, SF, ST, k0, m):
-                sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, ST, self.h, k0, m, *urev)
+                sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, self.h, k0, m, *urev)
         else:
             def reverse(SQ, SV, SF, ST, k0, m):
                 sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
@@ -311,7 +312,7 @@ class Trajectory:
                 k0, m = c * seg, min(seg, N - c * seg)
                 if uniform is not None:
                     sweeps.chain_uniform_replay(u, form[1] != 0, fac, terms, CQ[c], CV[c], CF[c], CT[c], self.h, m,
-                                                SQ, SV, ST, ur)
+                                                SQ, SV, ST, SC, ur)
                 elif chain:
                     sweeps.chain_replay(form[3], form[1] != 0, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c],
                                         self.h, m, SQ, SV, ST)

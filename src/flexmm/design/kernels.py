@@ -445,15 +445,15 @@ def _uniform_hinge_force(ua, ub, qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks, k
 
 
 @jit
-def chain_uniform_force(q, u, with_kg, r, f):
+def chain_uniform_force(q, u, with_kg, cs, sn, r, f):
     """``chain_force_columns`` of a uniform chain (``chain_uniform``'s parameters u): the same bits;
-    cos/sin of θ0+θ and the hinges' forces left in the scratch r (N_V, n + 1)."""
+    cos/sin of θ0+θ into cs, sn (kept by the replay for the reverse step), the hinges' forces
+    left in the scratch r (N_V, n + 1)."""
     n = r.shape[1] - 1
     rest, hA, hB, kl, ks, kt = u[U_REST], u[U_HA], u[U_HB], u[U_KL], u[U_KS], u[U_KT]
     kg, kr, c0 = u[U_KG], u[U_KR], u[U_C0]
     qu, qt = q[:n], q[n:]
-    chain_uniform_sites(qt, u[U_TH0], r)
-    cs, sn = r[V_COS], r[V_SIN]
+    chain_uniform_sites(qt, u[U_TH0], cs, sn)
     fl, ga, gb = r[V_FL, 1:], r[V_GA, 1:], r[V_GB, 1:]
     for h in range(n - 1):
         _, _, fl[h], _, ga[h], gb[h] = _uniform_hinge_force(qu[h], qu[h + 1], qt[h], qt[h + 1], cs[h], sn[h],
@@ -473,9 +473,8 @@ def chain_uniform_force(q, u, with_kg, r, f):
 
 
 @jit
-def chain_uniform_sites(qt, th0, r):
-    """cos/sin of θ0 + θ at every site (rows V_COS, V_SIN)."""
-    cs, sn = r[V_COS], r[V_SIN]
+def chain_uniform_sites(qt, th0, cs, sn):
+    """cos/sin of θ0 + θ at every site into cs, sn."""
     for i in range(qt.shape[0]):
         s, c = sincos(th0 + qt[i])
         cs[i] = c
@@ -507,7 +506,7 @@ def chain_uniform_open(lq, lv, lf, lw, v, GV, z, kick, pre, post, h, close):
 
 
 @jit
-def chain_uniform_hinges(q, lf, r, acc, u):
+def chain_uniform_hinges(q, lf, cs, sn, r, acc, u):
     """Every hinge of a uniform chain at the state q, in one pass: its force (as
     ``chain_force_columns``, the same bits), and along λf its share of −∇²E λ (rows V_PL: k_l δl,
     V_TA, V_TB: at its two rotations without k_θ, V_KD: k_θ δφ) and its parameters' adjoints into
@@ -515,7 +514,6 @@ def chain_uniform_hinges(q, lf, r, acc, u):
     n = r.shape[1] - 1
     rest, hA, hB, kl, ks, kt = u[U_REST], u[U_HA], u[U_HB], u[U_KL], u[U_KS], u[U_KT]
     qu, qt, lu, lt = q[:n], q[n:], lf[:n], lf[n:]
-    cs, sn = r[V_COS], r[V_SIN]
     fl, ga, gb, pl, ta, tb, kd = (r[V_FL, 1:], r[V_GA, 1:], r[V_GB, 1:], r[V_PL, 1:], r[V_TA, 1:], r[V_TB, 1:],
                                   r[V_KD, 1:])
     a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[CA_REST], acc[CA_HA], acc[CA_HB], acc[CA_KL], acc[CA_KS], acc[CA_KT]
@@ -549,14 +547,14 @@ def chain_uniform_hinges(q, lf, r, acc, u):
 
 
 @jit
-def chain_uniform_gather(q, lf, lq, GK, r, acc, u):
+def chain_uniform_gather(q, lf, lq, GK, cs, sn, r, acc, u):
     """Every site of a uniform chain, in one pass: its force from its hinges and on-site term
     (∂J/∂K += z f, z of ``chain_uniform_open``), its two hinges' and its on-site term's share
     of (∂F/∂q)ᵀλf added to λq, its parameters' adjoints (θ0, k_g, k_r) into acc."""
     n = r.shape[1] - 1
     kg, kr, c0, s0 = u[U_KG], u[U_KR], u[U_C0], u[U_S0]
     qt, lt = q[n:], lf[n:]
-    cs, sn, zu, zt = r[V_COS], r[V_SIN], r[V_ZU], r[V_ZT]
+    zu, zt = r[V_ZU], r[V_ZT]
     fl, ga, gb, pl, ta, tb, kd = r[V_FL], r[V_GA], r[V_GB], r[V_PL], r[V_TA], r[V_TB], r[V_KD]
     gku, gkt, ou, ot = GK[:n], GK[n:], lq[:n], lq[n:]
     a_th0, a_kg, a_kr = acc[CA_TH0], acc[CA_KG], acc[CA_KR]

@@ -38,6 +38,8 @@ from flexmm._jit import jit
 from flexmm.design.kernels import (
     N_R,
     U_TH0,
+    V_COS,
+    V_SIN,
     V_ZT,
     V_ZU,
     chain_force_columns,
@@ -426,10 +428,11 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
 
 
 @jit
-def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, ST, r):
+def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, ST, SC, r):
     """``chain_replay`` of a uniform chain (``chain_uniform_reverse``'s ``u``, ``fac``, scratch r):
     the force from scalar parameters (``kernels.chain_uniform_force``) and the kicks with the
-    factors per field, the same operations, so the same states bit for bit."""
+    factors per field, the same operations, so the same states bit for bit. Keeps each state's
+    cos/sin of θ0+θ too (SC[s] = (cos, sin), rows 1..nsteps), which the reverse step reads."""
     n = q0.shape[0] // 2
     q, v, f = _segment_start(q0, v0, f0, t0, SQ, SV, ST)
     t = t0
@@ -440,7 +443,7 @@ def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, 
     for s in range(1, nsteps + 1):
         t += h
         apply_prescribed(q, v, t, dd, dm, ds, dp)
-        chain_uniform_force(q, u, with_kg, r, f)
+        chain_uniform_force(q, u, with_kg, SC[s, 0], SC[s, 1], r, f)
         position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
         ST[s] = t
         if s < nsteps:
@@ -502,12 +505,12 @@ def _applied_products(t, z, GK, dd, dm, ds, dp):
 
 
 @jit
-def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
                           lq, lv, lf, lw, GK, GV, gdrv, acc, r):
     """``reverse`` of a uniform chain (the same arguments where they exist; ``u``: its
     parameters, ``fac`` = (K_u, K_θ, S_u, S_θ, P_u, P_θ) scalars or per-field columns, acc the
-    column accumulator (N_CA, n), r scratch (N_V, n + 1)). A step is four passes: cos/sin at
-    the sites; the integrator factors' products (with the close of the step before, unless
+    column accumulator (N_CA, n), r scratch (N_V, n + 1), SC the replay's cos/sin of θ0+θ or
+    empty: then taken here). A step is four passes: cos/sin at the sites (unless kept); the integrator factors' products (with the close of the step before, unless
     the objective enters between them); the hinges (force, Hessian and parameter products);
     the sites (force, gathering, site parameters). Drives as ``reverse``.
 
@@ -527,13 +530,17 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, h, k0, nsteps, stride, obs,
     for j in range(nsteps, 0, -1):
         q1 = SQ[j]
         t1 = ST[j]
-        chain_uniform_sites(q1[n:], u[U_TH0], r)
+        if SC.shape[0]:
+            cs, sn = SC[j, 0], SC[j, 1]
+        else:
+            cs, sn = r[V_COS, :n], r[V_SIN, :n]
+            chain_uniform_sites(q1[n:], u[U_TH0], cs, sn)
         chain_uniform_open(lq[:n], lv[:n], lf[:n], lw[:n], SV[j, :n], GV[:n], z[0], fac[0], fac[4], fac[2], h,
                            pending)
         chain_uniform_open(lq[n:], lv[n:], lf[n:], lw[n:], SV[j, n:], GV[n:], z[1], fac[1], fac[5], fac[3], h,
                            pending)
-        chain_uniform_hinges(q1, lf, r, acc, u)
-        chain_uniform_gather(q1, lf, lq, GK, r, acc, u)
+        chain_uniform_hinges(q1, lf, cs, sn, r, acc, u)
+        chain_uniform_gather(q1, lf, lq, GK, cs, sn, r, acc, u)
         if dd.shape[0]:
             _applied_products(t1, z, GK, dd, dm, ds, dp)
             drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
