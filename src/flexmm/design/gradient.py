@@ -123,7 +123,10 @@ class Trajectory:
     chain-ordered rotating-squares chain without contacts (whose forward run and replay then use
     the column force, ``sweeps.chain_forward``/``chain_replay``: the same trajectory bit for
     bit) and a grid sheet; the gradient is the same to rounding, at a third to a half of the
-    cost (``python benchmarks/run.py gradient``).
+    cost (``python benchmarks/run.py gradient``). A uniform chain (``kernels.chain_uniform``)
+    replays and reverses with scalar parameters (``sweeps.chain_uniform_*``: ~0.7 of the column
+    sweeps' cost), and a long damped one runs forward with the engine's fused kernel
+    (``_engine_run``); ``uniform_sweeps=False``, ``engine_forward=False`` keep the column path.
     ``column_sweeps=False`` runs the model's own adjoint kernel always."""
 
     args: tuple
