@@ -17,7 +17,7 @@ replays one segment at a time, so a run of N steps keeps about 2√N states, plu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Callable
 
 import numpy as np
@@ -26,7 +26,7 @@ from flexmm.design import sweeps
 from flexmm.design.kernels import (N_CA, N_F, N_R, adjoint_kernels_of, chain_add_columns, chain_columns, chain_ordered,
                                    param_tables, sheet_grid, sheet_grid_add, sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
-from flexmm.integrators.common import MODE_FRICTION, Terms
+from flexmm.integrators.common import MODE_FRICTION, Terms, has_velocity_terms
 from flexmm.models.hinge import S_KG
 
 
@@ -43,8 +43,11 @@ class GradientError(FlexmmError):
 @dataclass
 class Raw:
     """The differentiable arrays of a problem (nondimensional): model tables ``t1``, ``t2``,
-    ``minv`` and ``damp`` (ndof,), contact rows ``con`` (C, 3), drive rows ``drv`` (D, 4), the
-    initial state ``q0``, ``v0``. A gradient has the same structure."""
+    ``minv`` and ``damp`` (ndof,), contact rows ``con`` (C, 3), drive rows ``drv`` (D, 4; ground
+    friction's rows (F₊, v_ε, F₋, 0) among them), the initial state ``q0``, ``v0``, and the
+    dashpot coefficients ``dash`` (P,; last, and empty by default, so arrays built without it
+    still construct: ``Trajectory.bind`` checks its size against the dashpots). A gradient has
+    the same structure."""
 
     t1: np.ndarray
     t2: np.ndarray
@@ -54,6 +57,7 @@ class Raw:
     drv: np.ndarray
     q0: np.ndarray
     v0: np.ndarray
+    dash: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def zeros(self) -> Raw:
         return Raw(*(np.zeros_like(getattr(self, f.name)) for f in fields(self)))
@@ -77,11 +81,21 @@ def raw_of(system, terms: Terms, damp: np.ndarray) -> Raw:
     """The raw arrays of a built system (copies)."""
     t1, t2 = param_tables(system.args)
     return Raw(t1.copy(), t2.copy(), system.inv_mass.copy(), np.asarray(damp, float).copy(),
-               terms.con_prm.copy(), terms.drv_prm.copy(), system.q0.copy(), system.v0.copy())
+               terms.con_prm.copy(), terms.drv_prm.copy(), system.q0.copy(), system.v0.copy(),
+               np.asarray(terms.dash_c, float).copy())
 
 
 def check_differentiable(system, terms: Terms) -> None:
-    """Refuse models without gradient kernels and velocity-dependent external terms."""
+    """Refuse models without gradient kernels, magnets or joints of the sheet, and a run that
+    is not differentiable because of anisotropic ground friction.
+
+    Dashpots and ground friction are differentiated (``sweeps.step_forces``). The friction law
+    −F tanh(v/v_ε) is smooth, except that with F₊ ≠ F₋ its slope jumps at v = 0: a DOF at rest
+    (v = 0 exactly, as every site of a run that starts at rest is until the wave reaches it)
+    then moves either way under a perturbation, with different slopes, and the run has no
+    derivative. So anisotropic friction is differentiated only if each of its DOFs is free and
+    starts moving (v0 ≠ 0); velocities then cross zero at isolated instants, between steps.
+    """
     try:
         adjoint_kernels_of(type(system.args))
     except TypeError as err:
@@ -90,9 +104,14 @@ def check_differentiable(system, terms: Terms) -> None:
     if hasattr(args, "dipoles") and (args.dipoles[0].shape[0] or args.joints[0].shape[0]):
         raise GradientError(f"model {system.model!r}: gradients through magnets or bistable joints are not "
                             "implemented (hinges only)")
-    if terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION):
-        raise GradientError("gradients through dashpots or ground friction are not implemented "
-                            "(velocity-dependent external forces); use on-site viscous damping")
+    rows = (terms.drv_mode == MODE_FRICTION) & (terms.drv_prm[:, 0] != terms.drv_prm[:, 2])
+    dofs = terms.drv_dof[rows]
+    still = dofs[(system.v0[dofs] == 0.0) | (system.inv_mass[dofs] == 0.0)]
+    if still.size:
+        raise GradientError(
+            f"anisotropic ground friction (backward force ≠ forward force) on {still.size} DOF(s) that start at "
+            f"rest or are held (first: DOF {int(still[0])}): its slope jumps at v = 0, so the run has no gradient "
+            "there; use isotropic friction (no backward_force_n) or start every friction site moving")
 
 
 @dataclass
@@ -136,7 +155,9 @@ class Trajectory:
         if self.nsteps % self.stride:
             raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
         ndof = 2 * self.args.site_prm.shape[0] if hasattr(self.args, "site_prm") else -1
-        self._ordered = chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
+        # the column sweeps take no contacts and no velocity terms (dashpots, friction)
+        self._ordered = (chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
+                         and not has_velocity_terms(self.terms))
         nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
         self._grid = sheet_grid(self.args, 3 * nsite)
 
@@ -176,7 +197,9 @@ class Trajectory:
     # -- the arrays a sweep takes -----------------------------------------------------------
     def bind(self, raw: Raw) -> tuple:
         args = with_tables(self.args, raw.t1, raw.t2)
-        terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
+        if raw.dash.shape != self.terms.dash_c.shape:
+            raise ValueError(f"raw.dash has shape {raw.dash.shape}; the problem has {self.terms.dash_c.size} dashpots")
+        terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv, dash_c=raw.dash)
         h = self.h
         g = raw.damp * raw.minv
         kick = 0.5 * h * raw.minv
@@ -231,12 +254,12 @@ class Trajectory:
         lq, lv, lf, lw = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
         GK, GV = np.zeros(n), np.zeros(n)
         g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
-        gcon, gdrv = np.zeros_like(raw.con), np.zeros_like(raw.drv)
+        gcon, gdrv, gdash = np.zeros_like(raw.con), np.zeros_like(raw.drv), np.zeros_like(raw.dash)
         j = N // self.stride
         lq[self.obs] += dq[j]
         lv[self.obs] += dv[j]
         lf[self.obs] += df[j]
-        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form)
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form)
         if keep_all:  # every state was kept by the forward run
             sweeps.reverse(args, terms, kick, pre, post, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
         else:
@@ -255,7 +278,7 @@ class Trajectory:
         q0 = raw.q0.copy()
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, form)
+        sweeps.reverse_initial(args, terms, q0, v0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         if chain:
             chain_add_columns(form[5], g1, g2)
         elif form[0] == sweeps.FORM_GRID:
@@ -264,7 +287,7 @@ class Trajectory:
         hh = 0.5 * self.h
         g_minv = hh * GK - hh * raw.damp * GV
         g_damp = -hh * raw.minv * GV
-        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv)
+        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)
         if explicit is not None:
             grad = grad.axpy(1.0, explicit)
         return float(value), grad, rec
@@ -293,7 +316,8 @@ class Trajectory:
         TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
         sweeps.tangent(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, self.stride, self.obs,
-                       stack("t1"), stack("t2"), DK, DP, DS, stack("con"), stack("drv"), stack("q0"), stack("v0"),
+                       stack("t1"), stack("t2"), DK, DP, DS, stack("con"), stack("drv"), stack("dash"), stack("q0"),
+                       stack("v0"),
                        rec.q, rec.v, rec.f, TQ, TV, TF)
         return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
 
