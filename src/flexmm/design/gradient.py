@@ -2,8 +2,10 @@
 
 The differentiable inputs of a built problem are its *raw* arrays (``Raw``): the model's two
 parameter tables (``kernels.param_tables``), the inverse masses and on-site damping per DOF,
-the contact and drive parameter rows and the initial state. ``Trajectory`` runs a problem with
-velocity Verlet and records (q, v, f) at the observed DOFs every ``stride`` steps;
+the contact and drive parameter rows (ground friction's among them), the initial state and the
+dashpot coefficients. ``Trajectory`` runs a problem with velocity Verlet (velocity-dependent
+forces at the engine's predicted velocity) and records (q, v, f) at the observed DOFs every
+``stride`` steps;
 ``gradient`` returns an objective and its gradient with respect to every raw array by one
 forward run with checkpoints and one reverse sweep; ``sensitivities`` returns the records'
 derivatives along a few raw directions (forward mode, for least-squares Jacobians).
