@@ -40,6 +40,13 @@ SCENES = {
         "damping": {"viscous": {"damping_ratio": 0.05}},
         "imperfection": {"kind": "random_rotation", "std_rad": 0.01, "seed": 2},
         "solver": {"duration_s": 3e-3}},
+    "sheet-dashpots": {
+        "lattice": dict(SHEET, left="driven"),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "angle_deg": 20.0,
+                       "duration_s": 1e-3, "shape": "half_sine"},
+        "damping": {"viscous": {"damping_ratio": 0.02}, "dashpot_n_s_per_m": 0.5},
+        "imperfection": {"kind": "random_rotation", "std_rad": 0.01, "seed": 2},
+        "solver": {"duration_s": 3e-3}},
     "chain-displacement-damped": {
         "lattice": dict(CHAIN, left="driven", right="fixed"),
         "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3,
@@ -178,7 +185,7 @@ def test_adjoint_matches_central_differences(name):
 
 
 @pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker", "chain-dashpots-damped",
-                                  "mass-friction-dashpots"])
+                                  "mass-friction-dashpots", "sheet-dashpots"])
 def test_forward_sweep_is_the_engine_run(name):
     """The differentiated run is the Stepper's velocity-Verlet run (to rounding: the engine fuses
     the two half kicks of an undamped run into one)."""
