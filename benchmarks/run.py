@@ -883,6 +883,56 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     return rows
 
 
+def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient through dashpots (velocity forces at the predicted velocity) on
+    the LEGO impact chain with a dashpot between each pair of neighbours, lightly damped: against
+    the engine's forward run of the same problem (its general Verlet kernel) and against the
+    gradient of the same chain without dashpots through the same general sweeps (what the
+    velocity terms add), interleaved, process CPU time (min and median of ``repeats``)."""
+    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.stepper import Stepper
+
+    def objective(rec, raw):  # ½ Σ θ(T)²
+        dq = np.zeros_like(rec.q)
+        dq[-1] = rec.q[-1]
+        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+    system, terms, damp = _chain(n)
+    damp = damp + 0.01 * system.mass
+    idx = np.arange(n - 1, dtype=np.int64)
+    cases = {"without dashpots": terms,
+             "dashpots": terms._replace(dash_ij=np.stack([idx, idx + 1], axis=1), dash_c=np.full(n - 1, 0.02))}
+    obs = np.arange(system.ndof - n, system.ndof)
+    runs = {}
+    for tag, tm in cases.items():
+        st = Stepper(INTEGRATORS["velocity_verlet"], system, tm, damp, 0.1, check_energy=False)
+        st.warm_up()
+        raw = raw_of(system, tm, damp)
+        for seg in (None, 2):  # compile both reverse paths
+            Trajectory(system.args, tm, 0.1, 4, 4, obs, column_sweeps=False).gradient(raw, objective, segment=seg)
+        runs[tag] = (st, Trajectory(system.args, tm, 0.1, steps, steps, obs, column_sweeps=False), raw, [], [])
+    for _ in range(repeats):
+        for st, traj, raw, fwd, grad in runs.values():
+            for runner, cpu in ((lambda: st.advance(steps), fwd), (lambda: traj.gradient(raw, objective), grad)):
+                c0 = time.process_time()
+                runner()
+                cpu.append(time.process_time() - c0)
+    rows = []
+    for tag, (_, _, _, fwd, grad) in runs.items():
+        row = {"case": tag, "n_units": n, "steps": steps, "load": os.getloadavg()[0],
+               "forward_cpu_min_s": min(fwd), "forward_cpu_median_s": float(np.median(fwd)),
+               "gradient_cpu_min_s": min(grad), "gradient_cpu_median_s": float(np.median(grad)),
+               "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd))}
+        print(f"  gradient, {n} units x {steps} steps, {tag} (general sweeps): forward {min(fwd):.3g} s, gradient "
+              f"{min(grad):.3g} s CPU (x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
+              f"load {row['load']:.1f})")
+        rows.append(row)
+    extra = rows[1]["gradient_cpu_min_s"] / rows[0]["gradient_cpu_min_s"]
+    print(f"  the velocity terms make the gradient x{extra:.2f} (min CPU) of the same chain's without them")
+    return rows
+
+
 def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor: int = 16) -> list[dict]:
     """Issue 14: the default (solver.accuracy) against the old default, over the shipped scenes.
 
@@ -965,7 +1015,7 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
-            "gradient": gradient, "accuracy": accuracy}
+            "gradient": gradient, "gradient_dashpots": gradient_dashpots, "accuracy": accuracy}
 
 
 def main(argv: list[str]) -> None:
