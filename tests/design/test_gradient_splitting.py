@@ -27,8 +27,8 @@ from flexmm.integrators.common import total_force
 from flexmm.integrators.stepper import make_stepper
 
 from . import test_fit
-from .test_design import TERMS, VARIABLES
 from .test_design import SCENE as DESIGN_SCENE
+from .test_design import TERMS, VARIABLES
 from .test_gradient import SCENES, _central, _directions, _objective, _problem
 
 SPLITTINGS = ("pefrl", "blanes_moan6")

@@ -35,7 +35,13 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.design.sweeps import _checkpoint, _force_adjoint, _force_tangent, _inject, _record
+from flexmm.design.sweeps import (
+    _checkpoint,
+    _force_adjoint,
+    _force_tangent,
+    _inject,
+    _record,
+)
 from flexmm.design.terms import prescribed_adjoint, prescribed_tangent
 from flexmm.integrators import composition
 from flexmm.integrators import splitting as engine
