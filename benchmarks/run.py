@@ -3,7 +3,7 @@
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
                                               #              | roofline | sheet_throughput | contention | sheet | workprecision
-                                              #              | render | gradient | accuracy
+                                              #              | render | gradient | gradient_dashpots | gradient_splitting | accuracy
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -805,6 +805,19 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
     return out
 
 
+def _interleaved(first, second, repeats: int) -> tuple[list, list, list, list]:
+    """Wall and CPU seconds of two runners called alternately: (wall₁, wall₂, cpu₁, cpu₂)."""
+    wall: tuple[list, list] = ([], [])
+    cpu: tuple[list, list] = ([], [])
+    for _ in range(repeats):
+        for k, runner in enumerate((first, second)):
+            t0, c0 = time.perf_counter(), time.process_time()
+            runner()
+            wall[k].append(time.perf_counter() - t0)
+            cpu[k].append(time.process_time() - c0)
+    return wall[0], wall[1], cpu[0], cpu[1]
+
+
 def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
              repeats: int = 5) -> list[dict]:
     """Cost of an exact gradient (flexmm.design: forward run with checkpoints, replay and reverse
@@ -841,14 +854,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         small = Trajectory(system.args, terms, 0.1, 4, 4, obs)
         small.gradient(raw, objective)  # compile
         small.gradient(raw, objective, segment=2)
-        fwd, grad, fwd_cpu, grad_cpu = [], [], [], []
-        for _ in range(repeats):
-            for runner, wall, cpu in ((lambda: st.advance(steps), fwd, fwd_cpu),
-                                      (lambda: traj.gradient(raw, objective), grad, grad_cpu)):
-                t0, c0 = time.perf_counter(), time.process_time()
-                runner()
-                wall.append(time.perf_counter() - t0)
-                cpu.append(time.process_time() - c0)
+        fwd, grad, fwd_cpu, grad_cpu = _interleaved(lambda: st.advance(steps), lambda: traj.gradient(raw, objective),
+                                                    repeats)
         tracemalloc.start()
         traj.gradient(raw, objective)
         _, peak = tracemalloc.get_traced_memory()
@@ -930,6 +937,48 @@ def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> l
         rows.append(row)
     extra = rows[1]["gradient_cpu_min_s"] / rows[0]["gradient_cpu_min_s"]
     print(f"  the velocity terms make the gradient x{extra:.2f} (min CPU) of the same chain's without them")
+    return rows
+
+
+def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integrators=("pefrl", "blanes_moan6"),
+                       repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient through a splitting (``design.splitting``: forward run with its
+    states, reverse sweep recomputing each step's stages) as a multiple of one forward run of the
+    engine's Stepper with the same integrator, interleaved, wall and CPU time. The LEGO impact
+    chain (``cases``: units x steps) and the sheet of configs/sheet_pulse.yaml (rows x cols x
+    steps), lightly damped (both take the exact damped kicks); h = 0.1."""
+    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.stepper import Stepper
+
+    def objective(rec, raw):  # ½ Σ θ(T)²
+        dq = np.zeros_like(rec.q)
+        dq[-1] = rec.q[-1]
+        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
+    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    rows = []
+    for label, (system, terms, damp), steps in runs:
+        damp = damp + 0.01 * system.mass
+        obs = np.arange(system.ndof - system.n_sites, system.ndof)
+        raw = raw_of(system, terms, damp)
+        for name in integrators:
+            st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
+            st.warm_up()
+            traj = Trajectory(system.args, terms, 0.1, steps, steps, obs, integrator=name)
+            Trajectory(system.args, terms, 0.1, 4, 4, obs, integrator=name).gradient(raw, objective)  # compile
+            fwd, grad, fwd_cpu, grad_cpu = _interleaved(lambda: st.advance(steps),
+                                                        lambda: traj.gradient(raw, objective), repeats)
+            row = {"integrator": name, "size": label, "steps": steps, "load": os.getloadavg()[0],
+                   "forward_min_s": min(fwd), "gradient_min_s": min(grad), "ratio_min": min(grad) / min(fwd),
+                   "ratio_median": float(np.median(grad) / np.median(fwd)),
+                   "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
+                   "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu))}
+            print(f"  gradient, {name}, {label} x {steps} steps: forward {row['forward_min_s']:.3g} s, gradient "
+                  f"{row['gradient_min_s']:.3g} s (wall x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
+                  f"CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; {_load()})", flush=True)
+            rows.append(row)
     return rows
 
 
@@ -1015,7 +1064,8 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
-            "gradient": gradient, "gradient_dashpots": gradient_dashpots, "accuracy": accuracy}
+            "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
+            "accuracy": accuracy}
 
 
 def main(argv: list[str]) -> None:

@@ -5,7 +5,8 @@ bounds), the objective (``objectives.Term`` list, a weighted sum) and optional c
 (``total_mass``: the lattice's total mass; ``mean``: the mean over the units of the values a
 variable writes — e.g. a stiffness field held at its start's mean, so the design is compared with
 the uniform lattice at equal mean stiffness — each equal to, or at most/least, its start value or
-a given one). Every evaluation is one velocity-Verlet run with checkpoints plus one adjoint sweep
+a given one). Every evaluation is one run with the scene's integrator (velocity Verlet, PEFRL or
+BM6: ``gradient.DIFFERENTIABLE``) with checkpoints plus one adjoint sweep
 (``gradient.Trajectory.gradient``), chained through the variables' map to the raw arrays. The
 optimiser is scipy's L-BFGS-B (bounds only), SLSQP (with only linear, ``mean``, constraints: every
 iterate keeps them) or trust-constr (with a total-mass constraint), on variables scaled by their
@@ -141,7 +142,8 @@ class DesignProblem:
         bound, obs = bind_terms(spec.objective, s)
         stride = spec.optimizer.sample_every
         nsteps = stride * max(1, math.ceil(self.problem.duration / self.problem.dt / stride - 1e-9))
-        self.traj = Trajectory(s.args, self.problem.terms, self.problem.dt, nsteps, stride, obs)
+        self.traj = Trajectory(s.args, self.problem.terms, self.problem.dt, nsteps, stride, obs,
+                               integrator=self.problem.scene.solver.integrator)
         self.objective = Objective(bound, self.traj.times * s.scales.time_s)
         rec, _ = self.traj.run(self.design.raw(self.design.x0))
         self.objective.normalise(rec, self.design.raw(self.design.x0))

@@ -184,7 +184,8 @@ def _mean_energy_map(dp, x: np.ndarray) -> np.ndarray:
 
     s = dp.problem.system
     tr = dp.traj
-    full = Trajectory(tr.args, tr.terms, tr.h, tr.nsteps, tr.stride, np.arange(s.ndof), tr.t0)
+    full = Trajectory(tr.args, tr.terms, tr.h, tr.nsteps, tr.stride, np.arange(s.ndof), tr.t0,
+                      integrator=tr.integrator)
     raw = dp.design.raw(x)
     rec, _ = full.run(raw, segment=tr.nsteps + 1)
     mass = np.where(raw.minv > 0, 1.0 / np.where(raw.minv > 0, raw.minv, 1.0), 0.0)
