@@ -1,39 +1,44 @@
 """Gradients through runs of the models of ``design.kernels_extra``: each part of their tables.
 
 ``test_gradient.py`` checks every raw block of these scenes along one random direction; a
-block that packs several tables (the sheet's t2: θ0, magnet moments, core, offsets, joints,
-loads; the loaded chain's: sites, loads) is checked here part by part, so that a small part
+block that packs several tables (the sheet's t2: θ0, magnet moments, core, offsets, magnet
+positions, joints, loads; the loaded chain's: sites, loads) is checked here part by part, so that a small part
 cannot hide behind a large one. Also: magnets held closed in their cores (the core's
-parameters), harmonic oscillators (no scene), forward tangents of each new model kind.
+parameters), harmonic oscillators (no scene), forward tangents of each new model kind, and
+``flexmm design --check-gradient`` on the small specs of ``tests/design/specs``.
 """
 
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from design.test_gradient import SCENES, _central, _directions, _objective, _problem
 from flexmm.assemble import build_problem
+from flexmm.cli import app
 from flexmm.config import scene_from_dict
 from flexmm.design.gradient import Raw, Trajectory, trajectory_of
 from flexmm.design.kernels import sheet_grid
-from flexmm.design.kernels_extra import sheet_layout
+from flexmm.design.kernels_extra import sheet_offsets
 from flexmm.integrators.common import empty_terms
 from flexmm.models.harmonic import HarmonicArgs
 from flexmm.models.predeform import fire_relax
+
+SPECS = Path(__file__).resolve().parent / "specs"
 
 
 def _sections(args, t2_size: int) -> dict[str, slice]:
     """The named parts of a packed t2 vector."""
     if hasattr(args, "dipoles"):
-        n = args.theta0.shape[0]
-        o_s, o_core, o_off, o_j, o_l, size = sheet_layout(n, args.dipoles[0].shape[0], args.joints[0].shape[0],
-                                                          args.loads[0].shape[0])
+        n, o_s, o_core, o_off, o_pos, o_j, o_l, size = sheet_offsets(args)
         assert size == t2_size
         parts = {"theta0": slice(0, n), "moments": slice(o_s, o_core), "core": slice(o_core, o_off),
-                 "offsets": slice(o_off, o_j), "joints": slice(o_j, o_l), "loads": slice(o_l, size)}
+                 "offsets": slice(o_off, o_pos), "positions": slice(o_pos, o_j), "joints": slice(o_j, o_l),
+                 "loads": slice(o_l, size)}
     else:  # loaded chain
         m = args.chain.site_prm.size
         parts = {"sites": slice(0, m), "loads": slice(m, t2_size)}
@@ -132,3 +137,13 @@ def test_tangent_matches_adjoint(name):
     _, dq, dv, df, _ = objective(rec, raw)
     projected = np.sum(dq * tan.q) + np.sum(dv * tan.v) + np.sum(df * tan.f)
     assert projected == pytest.approx(grad.dot(direction), rel=1e-10)
+
+
+@pytest.mark.parametrize("spec", ["magnet_strip", "linkage_deploy", "loaded_chain_pull", "triangle_strip"])
+def test_check_gradient_cli_on_each_model(spec):
+    """Scene variables (magnet moment and recess, joint law, masses, stiffness ramps, damping, drive)
+    through the builder and the run: the worst relative error, printed last, below 1e-6."""
+    res = CliRunner().invoke(app, ["design", str(SPECS / f"{spec}.yaml"), "--check-gradient"])
+    assert res.exit_code == 0, res.output
+    last = res.output.strip().splitlines()[-1]
+    assert last.startswith("worst relative error:") and float(last.split(":")[1]) < 1e-6

@@ -22,7 +22,7 @@ from flexmm.design.kernels import (
     param_tables,
     with_tables,
 )
-from flexmm.design.kernels_extra import sheet_layout
+from flexmm.design.kernels_extra import sheet_offsets
 from flexmm.models.harmonic import HarmonicArgs
 from flexmm.models.hinge import H_SIGN
 from flexmm.models.kernels import kernels_of, model_force
@@ -162,10 +162,10 @@ def test_closed_magnets_are_in_their_cores():
     """The closed state of ``sheet-magnets-closed`` exercises the dipoles' core: its r_c and k_c
     get nonzero parameter products (zero while no magnet pair is inside r_c)."""
     system = _system("sheet-magnets-closed")
-    args, n = system.args, system.n_sites
+    args = system.args
     rng = np.random.default_rng(1)
     t1, t2 = param_tables(args)
-    _, o_core, *_ = sheet_layout(n, args.dipoles[0].shape[0], 0, 0)
+    o_core = sheet_offsets(args)[2]
     for q, active in ((np.zeros(system.ndof), False), (_closed(system, "sheet-magnets-closed"), True)):
         g2 = np.zeros_like(t2)
         model_adjoint(q, args, rng.normal(size=q.size), np.zeros(q.size), np.zeros_like(t1), g2)

@@ -753,10 +753,10 @@ def mass_tangent(q, args, dq, d1, d2, out):
 @jit
 def sheet_full_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (the t2 vector)."""
-    n, o_s, o_core, o_off, o_j, o_l, _ = sheet_offsets(args)
+    n, o_s, o_core, o_off, o_pos, o_j, o_l, _ = sheet_offsets(args)
     sheet_adjoint(q, args, lam, out, g1, g2)  # hinges; θ0 at g2[:n]
     if args.dipoles[0].shape[0] > 0:
-        dipoles_second(q, args.dipoles, n, lam, g2, o_s, o_core, o_off, False, out, g2)
+        dipoles_second(q, args.dipoles, n, lam, g2, o_s, o_core, o_off, o_pos, False, out, g2)
     joints_adjoint(q, n, args.joints, lam, out, g2, o_j)
     loads_adjoint(args.loads, lam, g2, o_l)
 
@@ -764,10 +764,10 @@ def sheet_full_adjoint(q, args, lam, out, g1, g2):
 @jit
 def sheet_full_tangent(q, args, dq, d1, d2, out):
     """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: the t2 vector)."""
-    n, o_s, o_core, o_off, o_j, o_l, _ = sheet_offsets(args)
+    n, o_s, o_core, o_off, o_pos, o_j, o_l, _ = sheet_offsets(args)
     sheet_tangent(q, args, dq, d1, d2, out)  # zeroes out; θ0 directions at d2[:n]
     if args.dipoles[0].shape[0] > 0:
-        dipoles_second(q, args.dipoles, n, dq, d2, o_s, o_core, o_off, True, out, d2)
+        dipoles_second(q, args.dipoles, n, dq, d2, o_s, o_core, o_off, o_pos, True, out, d2)
     joints_tangent(q, n, args.joints, dq, d2, o_j, out)
     loads_tangent(args.loads, d2, o_l, out)
 

@@ -21,10 +21,11 @@ derivatives the adjoint products along λ are the same with δq = λ, δp = 0: (
 Parameter tables (``gradient.Raw.t1``, ``t2``; the ``*_pack``/``*_unpack`` functions below):
 
 - sheet: t1 the hinge table (H, 7); t2 one vector: θ0 (N), then, when present, the dipoles'
-  signed moments s (N), their core (r_c, k_c) and the pairs' rest offsets (P × 2, row-major),
-  the joints' (k, β, ψ*) (J × 3), the loads' values (L) (``sheet_layout``). Without dipoles,
-  joints or loads t2 is θ0, as for the hinge-only sheet. Not differentiated: the magnets'
-  body-frame positions and directions (their recess) and the checkerboard signs.
+  signed moments s (N), their core (r_c, k_c), the pairs' rest offsets (P × 2, row-major) and
+  the magnets' body-frame positions (M × 2, shared by the units: the recess), the joints'
+  (k, β, ψ*) (J × 3), the loads' values (L) (``sheet_layout``). Without dipoles, joints or loads
+  t2 is θ0, as for the hinge-only sheet. Not differentiated: the magnets' directions (the faces'
+  normals) and the checkerboard signs.
 - loaded chain: t1 the hinge table; t2 the site table (N × 3, row-major) then the loads' values.
 - triangles: t1 the hinge table, t2 θ0 (the hinge axes are the lattice's geometry: fixed).
 - harmonic: t1 the stiffnesses, t2 empty.
@@ -162,10 +163,11 @@ def _pair_second(rx, ry, drx, dry, m1x, m1y, dm1x, dm1y, m2x, m2y, dm2x, dm2y, r
 
 
 @jit
-def dipoles_second(q, dip, n, dq, d, o_s, o_core, o_off, tangent, out, g):
+def dipoles_second(q, dip, n, dq, d, o_s, o_core, o_off, o_pos, tangent, out, g):
     """The dipole pairs' second derivatives along δq = ``dq`` and (tangent only) the parameter
     direction ``d`` (the sheet's t2 vector): −δG_q added to ``out``; unless ``tangent``, −δG_p
-    added to ``g`` (θ0 at 0, moments at o_s, core at o_core, offsets at o_off)."""
+    added to ``g`` (θ0 at 0, moments at o_s, core at o_core, offsets at o_off, the magnets'
+    body-frame positions at o_pos)."""
     pab, off, pos, dirs, theta0, sig, s, core = dip
     rc, kc = core[0], core[1]
     drc = d[o_core] if tangent else 0.0
@@ -202,7 +204,11 @@ def dipoles_second(q, dip, n, dq, d, o_s, o_core, o_off, tangent, out, g):
             uky = sa * dirs[k, 0] + ca * dirs[k, 1]
             m1x, m1y = s_a * ukx, s_a * uky
             # δ(R_a p_k) = J R_a p_k δφa; δm1 = δs_a R_a d_k + J m1 δφa
-            dpkx, dpky = -pky * dpa, pkx * dpa
+            epkx = epky = 0.0  # R_a δp_k
+            if tangent:
+                epkx = ca * d[o_pos + 2 * k] - sa * d[o_pos + 2 * k + 1]
+                epky = sa * d[o_pos + 2 * k] + ca * d[o_pos + 2 * k + 1]
+            dpkx, dpky = -pky * dpa + epkx, pkx * dpa + epky
             dm1x = dsa * ukx - m1y * dpa
             dm1y = dsa * uky + m1x * dpa
             for l in range(pos.shape[0]):
@@ -211,7 +217,11 @@ def dipoles_second(q, dip, n, dq, d, o_s, o_core, o_off, tangent, out, g):
                 ulx = cb * dirs[l, 0] - sb * dirs[l, 1]
                 uly = sb * dirs[l, 0] + cb * dirs[l, 1]
                 m2x, m2y = s_b * ulx, s_b * uly
-                dplx, dply = -ply * dpb, plx * dpb
+                eplx = eply = 0.0
+                if tangent:
+                    eplx = cb * d[o_pos + 2 * l] - sb * d[o_pos + 2 * l + 1]
+                    eply = sb * d[o_pos + 2 * l] + cb * d[o_pos + 2 * l + 1]
+                dplx, dply = -ply * dpb + eplx, plx * dpb + eply
                 dm2x = dsb * ulx - m2y * dpb
                 dm2y = dsb * uly + m2x * dpb
                 _pair_second(dx + plx - pkx, dy + ply - pky, ddx + dplx - dpkx, ddy + dply - dpky,
@@ -221,14 +231,21 @@ def dipoles_second(q, dip, n, dq, d, o_s, o_core, o_off, tangent, out, g):
                 gdx += hrx
                 gdy += hry
                 # ∂E/∂φa = g_r·(−J P_k) + g_1·(J m1); J v = (−v_y, v_x)
-                gfa += (hrx * pky - hry * pkx + grx * pkx * dpa + gry * pky * dpa
+                gfa += (hrx * pky - hry * pkx + grx * pkx * dpa + gry * pky * dpa + grx * epky - gry * epkx
                         - h1x * m1y + h1y * m1x + (-g1x * uky + g1y * ukx) * dsa - (g1x * m1x + g1y * m1y) * dpa)
-                gfb += (-hrx * ply + hry * plx - grx * plx * dpb - gry * ply * dpb
+                gfb += (-hrx * ply + hry * plx - grx * plx * dpb - gry * ply * dpb - grx * eply + gry * eplx
                         - h2x * m2y + h2y * m2x + (-g2x * uly + g2y * ulx) * dsb - (g2x * m2x + g2y * m2y) * dpb)
                 gsa += h1x * ukx + h1y * uky + (-g1x * uky + g1y * ukx) * dpa
                 gsb += h2x * ulx + h2y * uly + (-g2x * uly + g2y * ulx) * dpb
                 grc += res[14]
                 gkc += res[15]
+                if not tangent:  # ∂E/∂p_k = −R_aᵀ g_r, ∂E/∂p_l = R_bᵀ g_r (δR = J R δφ)
+                    wx, wy = -gry * dpa - hrx, grx * dpa - hry
+                    g[o_pos + 2 * k] -= ca * wx + sa * wy
+                    g[o_pos + 2 * k + 1] -= -sa * wx + ca * wy
+                    wx, wy = hrx + gry * dpb, hry - grx * dpb
+                    g[o_pos + 2 * l] -= cb * wx + sb * wy
+                    g[o_pos + 2 * l + 1] -= -sb * wx + cb * wy
         out[a] += gdx
         out[b] -= gdx
         out[n + a] += gdy
@@ -250,33 +267,35 @@ def dipoles_second(q, dip, n, dq, d, o_s, o_core, o_off, tangent, out, g):
 
 
 @jit
-def sheet_layout(n, npairs, njoints, nloads):
-    """Offsets in the sheet's t2 vector: (moments, core, offsets, joints, loads, length)."""
+def sheet_layout(n, npairs, nmagnets, njoints, nloads):
+    """Offsets in the sheet's t2 vector: (moments, core, offsets, positions, joints, loads, length)."""
     o = n
-    o_s = o_core = o_off = o
+    o_s = o_core = o_off = o_pos = o
     if npairs > 0:
         o_s = o
         o_core = o + n
         o_off = o + n + 2
-        o = o_off + 2 * npairs
+        o_pos = o_off + 2 * npairs
+        o = o_pos + 2 * nmagnets
     o_j = o
     o_l = o_j + 3 * njoints
-    return o_s, o_core, o_off, o_j, o_l, o_l + nloads
+    return o_s, o_core, o_off, o_pos, o_j, o_l, o_l + nloads
 
 
 @jit
 def sheet_offsets(args):
     """(N, offsets of ``sheet_layout``) of a sheet's args."""
     n = args.theta0.shape[0]
-    return (n,) + sheet_layout(n, args.dipoles[0].shape[0], args.joints[0].shape[0], args.loads[0].shape[0])
+    return (n,) + sheet_layout(n, args.dipoles[0].shape[0], args.dipoles[2].shape[0], args.joints[0].shape[0],
+                               args.loads[0].shape[0])
 
 
 def sheet_pack(args: SheetArgs) -> tuple[np.ndarray, np.ndarray]:
     """(hinge table, t2 vector) of a sheet (``sheet_layout``)."""
-    pab, off, _, _, _, _, s, core = args.dipoles
+    pab, off, pos, _, _, _, s, core = args.dipoles
     parts = [args.theta0]
     if pab.shape[0]:
-        parts += [s, core, off.ravel()]
+        parts += [s, core, off.ravel(), pos.ravel()]
     parts += [args.joints[2].ravel(), args.loads[1]]
     return args.hinge_prm, np.concatenate(parts).astype(float)
 
@@ -287,14 +306,15 @@ def sheet_unpack(args: SheetArgs, t1: np.ndarray, t2: np.ndarray) -> SheetArgs:
     pab, off, pos, dirs, _, sig, s, core = args.dipoles
     ja, jb, jp = args.joints
     dof = args.loads[0]
-    o_s, o_core, o_off, o_j, o_l, size = sheet_layout(n, pab.shape[0], ja.shape[0], dof.shape[0])
+    o_s, o_core, o_off, o_pos, o_j, o_l, size = sheet_layout(n, pab.shape[0], pos.shape[0], ja.shape[0], dof.shape[0])
     if t2.shape != (size,):
         raise ValueError(f"sheet parameter vector of shape {t2.shape}, expected ({size},)")
     theta0 = np.ascontiguousarray(t2[:n])
     if pab.shape[0]:
         s = t2[o_s:o_core].copy()
         core = t2[o_core:o_off].copy()
-        off = t2[o_off:o_j].reshape(off.shape).copy()
+        off = t2[o_off:o_pos].reshape(off.shape).copy()
+        pos = t2[o_pos:o_j].reshape(pos.shape).copy()
     dip = (pab, off, pos, dirs, theta0, sig, s, core)
     joints = (ja, jb, t2[o_j:o_l].reshape(jp.shape).copy())
     return args._replace(hinge_prm=t1, theta0=theta0, dipoles=dip, joints=joints, loads=(dof, t2[o_l:].copy()))
