@@ -74,6 +74,13 @@ LATTICES |= {
                         "variation": [{"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 0.4,
                                        "end": 0.8}]},
     "harmonic": None,  # no scene: ``HarmonicArgs`` directly
+    # configs/g_magnetic_bistable_unidirectional.yaml's laws (a chain of masses: dipole bonds to
+    # first and second neighbours, an asymmetric double well on site)
+    "mass-dipole-bistable": {"kind": "mass_chain", "n_units": 7, "spacing_m": 0.02, "mass_kg": 0.005,
+                             "bond": {"law": "dipole", "distance_m": 0.02, "moment_a_m2": 0.5},
+                             "bond2": {"law": "dipole", "distance_m": 0.04, "moment_a_m2": 0.5},
+                             "onsite": [{"law": "bistable_cubic", "alpha_n_per_m3": 1e7, "beta": 0.3,
+                                         "jump_m": 0.004}]},
 }
 #: (rotation, contraction) of a state near which a lattice is checked (default: small random
 #: displacements about rest): the units rotated and their centres drawn together
