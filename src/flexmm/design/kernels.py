@@ -48,6 +48,7 @@ from flexmm.design.kernels_extra import (
     sheet_pack,
     sheet_unpack,
     to_hinge_frame,
+    unit_angles,
 )
 from flexmm.models import laws as lw
 from flexmm.models.harmonic import HarmonicArgs
@@ -796,10 +797,12 @@ def loaded_chain_tangent(q, args, dq, d1, d2, out):
 def triangle_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0)."""
     n = args.theta0.shape[0]
+    cs, sn = np.empty(n), np.empty(n)
+    unit_angles(q, args.theta0, cs, sn)
     ql, ll, ol = np.empty(6), np.empty(6), np.empty(6)
     for h in range(args.hinge_a.shape[0]):
-        a, b, c, s, ca, sa, cb, sb = to_hinge_frame(q, lam, args, h, ql, ll, ol)
-        ga, gb = hinge_adjoint(ql, ll, ol, g1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, ca, sa, cb, sb)
+        a, b, c, s = to_hinge_frame(q, lam, args, h, ql, ll, ol)
+        ga, gb = hinge_adjoint(ql, ll, ol, g1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, cs[a], sn[a], cs[b], sn[b])
         from_hinge_frame(ol, n, a, b, c, s, out)
         g2[a] -= ga
         g2[b] -= gb
@@ -811,10 +814,12 @@ def triangle_tangent(q, args, dq, d1, d2, out):
     n = args.theta0.shape[0]
     for k in range(out.shape[0]):
         out[k] = 0.0
+    cs, sn = np.empty(n), np.empty(n)
+    unit_angles(q, args.theta0, cs, sn)
     ql, dl, ol = np.empty(6), np.empty(6), np.empty(6)
     for h in range(args.hinge_a.shape[0]):
-        a, b, c, s, ca, sa, cb, sb = to_hinge_frame(q, dq, args, h, ql, dl, ol)
-        hinge_tangent(ql, dl, d1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, ca, sa, cb, sb, d2[a], d2[b], ol)
+        a, b, c, s = to_hinge_frame(q, dq, args, h, ql, dl, ol)
+        hinge_tangent(ql, dl, d1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, cs[a], sn[a], cs[b], sn[b], d2[a], d2[b], ol)
         from_hinge_frame(ol, n, a, b, c, s, out)
 
 

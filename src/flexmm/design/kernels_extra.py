@@ -357,20 +357,27 @@ def _to_frame(x, n, a, b, c, s, loc):
 
 
 @jit
+def unit_angles(q, theta0, cs, sn):
+    """cos/sin of θ0 + θ of every unit into cs, sn (one loop: vectorised ``_trig.sincos``)."""
+    n = theta0.shape[0]
+    for i in range(n):
+        s, c = sincos(theta0[i] + q[2 * n + i])
+        cs[i] = c
+        sn[i] = s
+
+
+@jit
 def to_hinge_frame(q, x, args, h, ql, xl, ol):
     """Triangle hinge h in its frame: ql = L q, xl = L x (x: λ or δq), ol zeroed; returns its
-    triangles a, b, axis (c, s) and cos/sin of θ0 + θ of a and b."""
+    triangles a, b and axis (c, s)."""
     a = args.hinge_a[h]
     b = args.hinge_b[h]
     c, s = args.axis_cos[h], args.axis_sin[h]
-    theta0 = args.theta0
-    n = theta0.shape[0]
+    n = args.theta0.shape[0]
     _to_frame(q, n, a, b, c, s, ql)
     _to_frame(x, n, a, b, c, s, xl)
     ol[:] = 0.0
-    sa, ca = sincos(theta0[a] + q[2 * n + a])
-    sb, cb = sincos(theta0[b] + q[2 * n + b])
-    return a, b, c, s, ca, sa, cb, sb
+    return a, b, c, s
 
 
 @jit
