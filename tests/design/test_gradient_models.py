@@ -21,7 +21,13 @@ from design.test_gradient import SCENES, _central, _directions, _objective, _pro
 from flexmm.assemble import build_problem
 from flexmm.cli import app
 from flexmm.config import scene_from_dict
-from flexmm.design.gradient import Raw, Trajectory, trajectory_of
+from flexmm.design.gradient import (
+    GradientError,
+    Raw,
+    Trajectory,
+    check_differentiable,
+    trajectory_of,
+)
 from flexmm.design.kernels import sheet_grid
 from flexmm.design.kernels_extra import sheet_offsets
 from flexmm.integrators.common import empty_terms
@@ -147,3 +153,13 @@ def test_check_gradient_cli_on_each_model(spec):
     assert res.exit_code == 0, res.output
     last = res.output.strip().splitlines()[-1]
     assert last.startswith("worst relative error:") and float(last.split(":")[1]) < 1e-6
+
+
+def test_magnets_with_their_own_rest_angles_are_refused():
+    """Gradients take θ0 as one parameter per unit (the sheet's and its magnets'): a system whose
+    magnets hold other rest angles is refused with a message, not differentiated wrongly."""
+    problem = _problem("sheet-magnets-rotation-damped")
+    dip = problem.system.args.dipoles
+    problem.system.args = problem.system.args._replace(dipoles=dip[:4] + (dip[4] + 0.01,) + dip[5:])
+    with pytest.raises(GradientError, match="magnets' rest angles differ"):
+        check_differentiable(problem.system, problem.terms)
