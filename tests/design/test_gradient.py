@@ -2,10 +2,11 @@
 
 Every scene is small (a few units, 200 steps) so finite differences over random directions in
 each block of raw arrays are cheap; the adjoint must match them to 1e-6 relative (central
-differences themselves are good to ~1e-9 here). Scenes cover the three model kinds with gradient
-kernels (rotating-squares chain and sheet, chains of masses), on-site damping, dashpots between
-units, ground friction, prescribed displacements and applied forces (half-sine, Gaussian, smooth
-step, harmonic), a striker contact, fixed ends and checkpointed reverse sweeps.
+differences themselves are good to ~1e-9 here). Scenes cover every model kind with gradient
+kernels (rotating-squares chain, loaded chain and sheet, the sheet with magnets, the bistable
+linkage, rotating triangles, chains of masses), on-site damping, dashpots between units, ground
+friction, prescribed displacements and applied forces (half-sine, Gaussian, smooth step,
+harmonic), a striker contact, fixed ends and checkpointed reverse sweeps.
 """
 
 from __future__ import annotations
@@ -31,6 +32,16 @@ MASS = {"kind": "mass_chain", "n_units": 6, "spacing_m": 0.01, "mass_kg": 0.01,
         "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
 
 SHEET = dict(LEGO_SHEET, n_rows=3, n_cols=4, theta0_rad=0.15)
+#: configs/j_magnets_transition_wave.yaml's units (a 2 × 3 strip)
+MAGNETS = {"kind": "rotating_squares_sheet", "n_rows": 2, "n_cols": 3, "a_m": 0.02, "k_long_n_per_m": 5e4,
+           "k_shear_n_per_m": 5e4, "k_rot_n_m_per_rad": 0.01, "mass_kg": 0.005,
+           "magnets": {"moment_a_m2": 0.253, "recess_m": 0.003, "polarity": "attract"}}
+#: configs/k_linkage_transition_wave.yaml's bars and joints (3 columns)
+LINKAGE = {"kind": "bistable_linkage", "n_cols": 3, "bar_length_m": 0.02, "theta0_rad": 1.0472,
+           "theta_deployed_rad": 0.4363, "mass_kg": 0.002, "k_pin_n_per_m": 1e5, "released_energy_j": 1.5,
+           "barrier_fraction": 0.3}
+TRIANGLES = {"a_m": 0.02, "theta0_rad": 0.1, "k_long_n_per_m": 71690, "k_shear_n_per_m": 7169,
+             "k_rot_n_m_per_rad": 0.5735, "mass_kg": 4.52e-3}
 
 SCENES = {
     "sheet-tilted-pulse-damped": {
@@ -85,6 +96,37 @@ SCENES = {
                        "duration_s": 0.047, "shape": "smooth_step"},  # ends between steps (C³ there)
         "damping": {"viscous": {"damping_ratio": 0.05}, "dashpot_n_s_per_m": 0.05},
         "solver": {"duration_s": 0.3}},
+    "sheet-magnets-rotation-damped": {
+        "lattice": dict(MAGNETS, left="driven", theta0_rad=0.05),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_rad": 0.3,
+                       "duration_s": 2e-3, "shape": "smooth_step"},
+        "damping": {"viscous": {"damping_ratio": 0.02}},
+        "solver": {"duration_s": 3e-3}},
+    "linkage-deploy-damped": {  # the first joint switches
+        "lattice": dict(LINKAGE, left="driven"),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_rad": -0.6,
+                       "duration_s": 6e-4, "shape": "smooth_step"},
+        "damping": {"viscous": {"damping_ratio": 0.02}},
+        "solver": {"duration_s": 1.2e-3}},
+    "chain-loaded-pull": {  # predeformed by constant end loads
+        "lattice": dict(CHAIN, theta0_rad=0.05, predeform={
+            "loads": [{"end": "left", "force_n": 0.2}, {"end": "right", "force_n": 0.2}], "theta_guess_rad": 0.1}),
+        "excitation": {"kind": "boundary_force", "end": "left", "amplitude_n": -1.0, "duration_s": 2e-3,
+                       "shape": "half_sine"},
+        "solver": {"duration_s": 5e-3}},
+    "triangles-chain-push": {
+        "lattice": {"kind": "rotating_triangles_chain", "n_units": 6, **TRIANGLES, "left": "driven"},
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "duration_s": 2e-3,
+                       "shape": "gaussian"},
+        "solver": {"duration_s": 6e-3}},
+    "triangles-sheet-damped": {
+        "lattice": {"kind": "rotating_triangles_sheet", "n_rows": 2, "n_cols": 4, **TRIANGLES, "left": "driven",
+                    "bottom": "periodic", "top": "periodic",
+                    "variation": [{"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 0.4, "end": 0.8}]},
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "duration_s": 2e-3,
+                       "shape": "half_sine"},
+        "damping": {"viscous": {"damping_ratio": 0.03}},
+        "solver": {"duration_s": 6e-3}},
     "mass-striker": {
         "lattice": dict(MASS, left="free", right="fixed"),
         "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 0.5,
@@ -126,7 +168,7 @@ def _directions(raw, rng, raw_shapes, modes=None):
         finite = np.isfinite(arr)
         scale = max(np.abs(arr[finite]).max(initial=0.0), 1e-2)
         d = rng.normal(size=arr.shape) * np.maximum(np.abs(np.where(finite, arr, 0.0)), 1e-2 * scale)
-        if name == "t1" and arr.shape[1] == 7:
+        if name == "t1" and arr.ndim == 2 and arr.shape[1] == 7:
             d[:, H_SIGN] = 0.0  # the checkerboard sign is discrete
         if name == "minv":
             d[arr == 0.0] = 0.0

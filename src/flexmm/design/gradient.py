@@ -104,9 +104,9 @@ def check_differentiable(system, terms: Terms) -> None:
     except TypeError as err:
         raise GradientError(f"model {system.model!r}: {err}") from None
     args = system.args
-    if hasattr(args, "dipoles") and (args.dipoles[0].shape[0] or args.joints[0].shape[0]):
-        raise GradientError(f"model {system.model!r}: gradients through magnets or bistable joints are not "
-                            "implemented (hinges only)")
+    if hasattr(args, "dipoles") and args.dipoles[0].shape[0] and not np.array_equal(args.dipoles[4], args.theta0):
+        raise GradientError(f"model {system.model!r}: the magnets' rest angles differ from the units' θ0 "
+                            "(gradients take θ0 as one parameter per unit)")
     rows = (terms.drv_mode == MODE_FRICTION) & (terms.drv_prm[:, 0] != terms.drv_prm[:, 2])
     dofs = terms.drv_dof[rows]
     still = dofs[(system.v0[dofs] == 0.0) | (system.inv_mass[dofs] == 0.0)]
