@@ -507,3 +507,31 @@ def test_per_hinge_design_holds_the_mean_and_writes_a_runnable_scene(tmp_path, m
     assert objective.min() < objective[0]
     run = CliRunner().invoke(app, ["run", str(out / "best_scene.yaml"), "--out", str(tmp_path / "run")])
     assert run.exit_code == 0, run.output
+
+
+def test_coded_differences_recover_a_sparse_map_and_refuse_a_dense_one():
+    """On a linear map whose entries have one or two owners (anywhere in the index, not only
+    neighbours) the code recovers the matrix exactly from O(log n) moved sets; a dense map (every
+    entry owned by every value) cannot be decoded and returns None (Design then takes one build
+    pair per value)."""
+    from flexmm.design.variables import coded_differences
+
+    rng = np.random.default_rng(7)
+    n, m = 300, 700
+    A = np.zeros((m, n))
+    A[np.arange(m), rng.integers(0, n, m)] = rng.uniform(0.5, 2.0, m)
+    pairs = rng.choice(m, 150, replace=False)
+    A[pairs, rng.integers(0, n, 150)] += rng.uniform(0.5, 2.0, 150)  # a second owner
+    steps = rng.uniform(1e-3, 2e-3, n)
+    calls = []
+
+    def change(moved):
+        calls.append(1)
+        return A @ np.where(moved, 2.0 * steps, 0.0)
+
+    J = coded_differences(change, n, steps)
+    assert J is not None
+    np.testing.assert_allclose(J.toarray(), A, rtol=1e-12, atol=1e-15)
+    assert len(calls) < n / 2
+    dense = rng.uniform(0.5, 2.0, (5, n))
+    assert coded_differences(lambda moved: dense @ np.where(moved, 2.0 * steps, 0.0), n, steps) is None
