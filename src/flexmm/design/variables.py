@@ -268,7 +268,10 @@ class Design:
         for var, idx in zip(self.variables, np.split(np.arange(self.x0.size), np.cumsum(self.sizes)[:-1])):
             self.each[idx] = var.profile == "each"
         self.scales = None
-        self.scales = self.build(self.x0)[0].scales
+        built = self.build(self.x0)
+        self.scales = built[0].scales
+        #: the raw arrays at the start (their shapes, to unflatten Jacobian columns)
+        self.template = raw_of(*built)
         self._affine: tuple | None = None  # (x, flat raw(x), Jacobian) when the map looked affine
         self.jacobian_builds = 0
         #: how the last Jacobian of the each-values was found: "coded" or "differences" (fallback)
@@ -355,7 +358,7 @@ class Design:
 
     def jacobian(self, x: np.ndarray, raw: Raw | None = None) -> list[Raw]:
         """d raw / d x_k for every value k (``jacobian_matrix``'s columns as raw arrays)."""
-        like = raw if raw is not None else self.raw(x)
+        like = self.template
         J = self.jacobian_matrix(x, raw).tocsc()
         J.sum_duplicates()
         out = []
@@ -400,7 +403,7 @@ class Design:
             d[idx] = rng.uniform(0.5, 1.0, idx.size) * rng.choice([-1.0, 1.0], idx.size) * steps
             self.jacobian_builds += 2
             fd = _change(_flat(self.raw(x + d)), _flat(self.raw(x - d))) / 2.0
-            like = self.raw(x)
+            like = self.template
             if _close(_unflat(fd, like), _unflat(J @ d[idx], like), 1e-6):
                 self.each_method = "coded"
                 return _embed(J, idx, x.size)
