@@ -144,7 +144,7 @@ def _patch_energy_and_share(path: Path, spec: dict) -> tuple:
     problem = build_problem(load_scene(path))
     s = problem.system
     n = s.n_sites
-    n_rows, n_cols = s.grid_shape
+    n_cols = s.grid_shape[1]
     c0, c1, r0, r1 = spec["objective"][0]["region"]["box"]
     b0, b1, q0, q1 = spec["objective"][1]["reference"]["box"]
     patch = [r * n_cols + c for r in range(r0, r1 + 1) for c in range(c0, c1 + 1)]

@@ -10,8 +10,9 @@ a given one). Every evaluation is one velocity-Verlet run with checkpoints plus 
 optimiser is scipy's L-BFGS-B (bounds only), SLSQP (with only linear, ``mean``, constraints: every
 iterate keeps them), L-BFGS-B on values projected onto equal-mean constraints and the bounds
 (``MeanProjection``; the default above 100 values, e.g. one per hinge, where SLSQP's dense steps
-get slow) or trust-constr (with a total-mass constraint), on variables scaled by their start values. Each evaluation is appended to a history (an xarray dataset,
-``history.nc``, rewritten atomically); ``resume`` restarts from the best design in it.
+get slow) or trust-constr (with a total-mass constraint), on variables scaled by their start
+values. Each evaluation is appended to a history (an xarray dataset, ``history.nc``, rewritten
+atomically); ``resume`` restarts from the best design in it.
 """
 
 from __future__ import annotations
@@ -228,7 +229,7 @@ class MeanProjection:
         for idx, w, m in self.rows:
             zi, lo, hi = z[idx], self.lo[idx], self.hi[idx]
 
-            def excess(t):
+            def excess(t, w=w, zi=zi, lo=lo, hi=hi, m=m):
                 return float(w @ np.clip(zi + t * w, lo, hi)) - m
 
             with np.errstate(invalid="ignore", divide="ignore"):

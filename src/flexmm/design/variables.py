@@ -49,8 +49,9 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import Field, PrivateAttr, model_validator
@@ -175,7 +176,7 @@ def element_values(lattice: dict, var: Variable, vals: np.ndarray) -> np.ndarray
     return np.linspace(vals[0], vals[-1], n)
 
 
-def unit_field(design: "Design", var: Variable, vals: np.ndarray) -> np.ndarray | None:
+def unit_field(design: Design, var: Variable, vals: np.ndarray) -> np.ndarray | None:
     """A sheet's (rows, cols) map of what a variable writes, for figures: spline2d its field,
     profile each its per-unit values or, for a hinge target, the mean of the hinges touching each
     unit; None for other profiles and lattices."""
@@ -237,7 +238,7 @@ def _flat(raw: Raw) -> np.ndarray:
 
 def _unflat(vec: np.ndarray, like: Raw) -> Raw:
     parts, k = [], 0
-    for _, a in like.items():
+    for a in [a for _, a in like.items()]:
         parts.append(np.asarray(vec[k : k + a.size], float).reshape(a.shape))
         k += a.size
     return Raw(*parts)
