@@ -149,7 +149,7 @@ def test_design_differentiates_the_scenes_integrator(tmp_path):
     path.write_text(yaml.safe_dump(spec, sort_keys=False))
     design = load_design(path)
     assert design.traj.integrator == "pefrl"
-    _, _, err = check_gradient(design)
+    _, _, _, err = check_gradient(design)
     assert np.all(err < 1e-6), err
     spec["scene"]["solver"]["integrator"] = "rk4"
     path.write_text(yaml.safe_dump(spec, sort_keys=False))

@@ -63,7 +63,7 @@ def test_design_gradient_with_friction(tmp_path):
          "bounds": [0.0, 1.0]},
         {"name": "v_eps", "path": "lattice.friction.regularisation_m_s", "initial": 0.05, "bounds": [0.01, 1.0]}],
         [{"kind": "energy", "region": {"sites": [5, 6, 7]}, "goal": "maximize"}]))
-    g, fd, err = check_gradient(dp)
+    _, g, fd, err = check_gradient(dp)
     assert np.all(g != 0.0) and np.all(err < 1e-6), (g, fd, err)
 
 
