@@ -3,7 +3,7 @@
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
                                               #              | roofline | sheet_throughput | contention | sheet | workprecision
-                                              #              | render | gradient | accuracy
+                                              #              | render | gradient | gradient_dashpots | gradient_splitting | accuracy
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -806,6 +806,26 @@ def compare(cases=COMPARE_CASES, rounds: int = 3, repeats: int = 3) -> list[dict
     return out
 
 
+def _interleaved_all(runners, repeats: int) -> tuple[list, list]:
+    """Wall and CPU seconds of runners called in turn, ``repeats`` rounds: (walls, cpus), a list
+    per runner each."""
+    wall: list[list] = [[] for _ in runners]
+    cpu: list[list] = [[] for _ in runners]
+    for _ in range(repeats):
+        for k, runner in enumerate(runners):
+            t0, c0 = time.perf_counter(), time.process_time()
+            runner()
+            wall[k].append(time.perf_counter() - t0)
+            cpu[k].append(time.process_time() - c0)
+    return wall, cpu
+
+
+def _interleaved(first, second, repeats: int) -> tuple[list, list, list, list]:
+    """Wall and CPU seconds of two runners called alternately: (wall₁, wall₂, cpu₁, cpu₂)."""
+    wall, cpu = _interleaved_all((first, second), repeats)
+    return wall[0], wall[1], cpu[0], cpu[1]
+
+
 def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
              repeats: int = 5, compare_old: bool = True) -> list[dict]:
     """Cost of an exact gradient (flexmm.design: forward run with checkpoints, replay and reverse
@@ -842,20 +862,15 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         traj = Trajectory(system.args, terms, 0.1, steps, steps, obs)
         raw = raw_of(system, terms, damp)
         old = dataclasses.replace(traj, uniform_sweeps=False, engine_forward=False)
-        contenders = [(lambda: st.advance(steps), [], []), (lambda: traj.gradient(raw, objective), [], [])]
+        runners = [lambda: st.advance(steps), lambda: traj.gradient(raw, objective)]
         if compare_old and kind == "chain":
-            contenders.append((lambda: old.gradient(raw, objective), [], []))
+            runners.append(lambda: old.gradient(raw, objective))
         for t in (traj, old):
             small = dataclasses.replace(t, nsteps=4, stride=4)
             small.gradient(raw, objective)  # compile
             small.gradient(raw, objective, segment=2)
-        for _ in range(repeats):
-            for runner, wall, cpu in contenders:
-                t0, c0 = time.perf_counter(), time.process_time()
-                runner()
-                wall.append(time.perf_counter() - t0)
-                cpu.append(time.process_time() - c0)
-        (_, fwd, fwd_cpu), (_, grad, grad_cpu) = contenders[:2]
+        walls, cpus = _interleaved_all(runners, repeats)
+        fwd, grad, fwd_cpu, grad_cpu = walls[0], walls[1], cpus[0], cpus[1]
         tracemalloc.start()
         traj.gradient(raw, objective)
         _, peak = tracemalloc.get_traced_memory()
@@ -888,8 +903,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
               f"median; CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; target <= 4; "
               f"load {row['load']:.1f}); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak "
               f"{row['traced_peak_MB']:.1f} MB (all states would be {row['all_states_MB']:.0f} MB)")
-        if len(contenders) > 2:
-            _, prev, prev_cpu = contenders[2]
+        if len(runners) > 2:
+            prev, prev_cpu = walls[2], cpus[2]
             row.update(previous_min_s=min(prev), previous_median_s=float(np.median(prev)),
                        previous_ratio_min=min(prev) / min(fwd), previous_ratio_median=float(np.median(prev) / np.median(fwd)),
                        previous_cpu_ratio_median=float(np.median(prev_cpu) / np.median(fwd_cpu)))
@@ -898,6 +913,98 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
                   f"x{row['previous_cpu_ratio_median']:.2f} median)")
         rows.append(row)
     print("  DifFlexMM (JAX) comparison: benchmarks/difflexmm.py (needs a separate JAX environment)")
+    return rows
+
+
+def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient through dashpots (velocity forces at the predicted velocity) on
+    the LEGO impact chain with a dashpot between each pair of neighbours, lightly damped: against
+    the engine's forward run of the same problem (its general Verlet kernel) and against the
+    gradient of the same chain without dashpots through the same general sweeps (what the
+    velocity terms add), interleaved, process CPU time (min and median of ``repeats``)."""
+    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.stepper import Stepper
+
+    def objective(rec, raw):  # ½ Σ θ(T)²
+        dq = np.zeros_like(rec.q)
+        dq[-1] = rec.q[-1]
+        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+    system, terms, damp = _chain(n)
+    damp = damp + 0.01 * system.mass
+    idx = np.arange(n - 1, dtype=np.int64)
+    cases = {"without dashpots": terms,
+             "dashpots": terms._replace(dash_ij=np.stack([idx, idx + 1], axis=1), dash_c=np.full(n - 1, 0.02))}
+    obs = np.arange(system.ndof - n, system.ndof)
+    runs = {}
+    for tag, tm in cases.items():
+        st = Stepper(INTEGRATORS["velocity_verlet"], system, tm, damp, 0.1, check_energy=False)
+        st.warm_up()
+        raw = raw_of(system, tm, damp)
+        for seg in (None, 2):  # compile both reverse paths
+            Trajectory(system.args, tm, 0.1, 4, 4, obs, column_sweeps=False).gradient(raw, objective, segment=seg)
+        runs[tag] = (st, Trajectory(system.args, tm, 0.1, steps, steps, obs, column_sweeps=False), raw, [], [])
+    for _ in range(repeats):
+        for st, traj, raw, fwd, grad in runs.values():
+            for runner, cpu in ((lambda: st.advance(steps), fwd), (lambda: traj.gradient(raw, objective), grad)):
+                c0 = time.process_time()
+                runner()
+                cpu.append(time.process_time() - c0)
+    rows = []
+    for tag, (_, _, _, fwd, grad) in runs.items():
+        row = {"case": tag, "n_units": n, "steps": steps, "load": os.getloadavg()[0],
+               "forward_cpu_min_s": min(fwd), "forward_cpu_median_s": float(np.median(fwd)),
+               "gradient_cpu_min_s": min(grad), "gradient_cpu_median_s": float(np.median(grad)),
+               "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd))}
+        print(f"  gradient, {n} units x {steps} steps, {tag} (general sweeps): forward {min(fwd):.3g} s, gradient "
+              f"{min(grad):.3g} s CPU (x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
+              f"load {row['load']:.1f})")
+        rows.append(row)
+    extra = rows[1]["gradient_cpu_min_s"] / rows[0]["gradient_cpu_min_s"]
+    print(f"  the velocity terms make the gradient x{extra:.2f} (min CPU) of the same chain's without them")
+    return rows
+
+
+def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integrators=("pefrl", "blanes_moan6"),
+                       repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient through a splitting (``design.splitting``: forward run with its
+    states, reverse sweep recomputing each step's stages) as a multiple of one forward run of the
+    engine's Stepper with the same integrator, interleaved, wall and CPU time. The LEGO impact
+    chain (``cases``: units x steps) and the sheet of configs/sheet_pulse.yaml (rows x cols x
+    steps), lightly damped (both take the exact damped kicks); h = 0.1."""
+    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.stepper import Stepper
+
+    def objective(rec, raw):  # ½ Σ θ(T)²
+        dq = np.zeros_like(rec.q)
+        dq[-1] = rec.q[-1]
+        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
+    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    rows = []
+    for label, (system, terms, damp), steps in runs:
+        damp = damp + 0.01 * system.mass
+        obs = np.arange(system.ndof - system.n_sites, system.ndof)
+        raw = raw_of(system, terms, damp)
+        for name in integrators:
+            st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
+            st.warm_up()
+            traj = Trajectory(system.args, terms, 0.1, steps, steps, obs, integrator=name)
+            Trajectory(system.args, terms, 0.1, 4, 4, obs, integrator=name).gradient(raw, objective)  # compile
+            fwd, grad, fwd_cpu, grad_cpu = _interleaved(lambda: st.advance(steps),
+                                                        lambda: traj.gradient(raw, objective), repeats)
+            row = {"integrator": name, "size": label, "steps": steps, "load": os.getloadavg()[0],
+                   "forward_min_s": min(fwd), "gradient_min_s": min(grad), "ratio_min": min(grad) / min(fwd),
+                   "ratio_median": float(np.median(grad) / np.median(fwd)),
+                   "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
+                   "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu))}
+            print(f"  gradient, {name}, {label} x {steps} steps: forward {row['forward_min_s']:.3g} s, gradient "
+                  f"{row['gradient_min_s']:.3g} s (wall x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
+                  f"CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; {_load()})", flush=True)
+            rows.append(row)
     return rows
 
 
@@ -983,7 +1090,8 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
 SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
-            "gradient": gradient, "accuracy": accuracy}
+            "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
+            "accuracy": accuracy}
 
 
 def main(argv: list[str]) -> None:

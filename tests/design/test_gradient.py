@@ -2,10 +2,11 @@
 
 Every scene is small (a few units, 200 steps) so finite differences over random directions in
 each block of raw arrays are cheap; the adjoint must match them to 1e-6 relative (central
-differences themselves are good to ~1e-9 here). Scenes cover the three model kinds with gradient
-kernels (rotating-squares chain and sheet, chains of masses), on-site damping, prescribed
-displacements and applied forces (half-sine, Gaussian, smooth step, harmonic), a striker
-contact, fixed ends and checkpointed reverse sweeps.
+differences themselves are good to ~1e-9 here). Scenes cover every model kind with gradient
+kernels (rotating-squares chain, loaded chain and sheet, the sheet with magnets, the bistable
+linkage, rotating triangles, chains of masses), on-site damping, dashpots between units, ground
+friction, prescribed displacements and applied forces (half-sine, Gaussian, smooth step,
+harmonic), a striker contact, fixed ends and checkpointed reverse sweeps.
 """
 
 from __future__ import annotations
@@ -19,11 +20,11 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
-from flexmm.design.gradient import ENGINE_SITES, GradientError, trajectory_of
 from flexmm.design import sweeps
+from flexmm.design.gradient import ENGINE_SITES, GradientError, Trajectory, raw_of, trajectory_of
 from flexmm.design.kernels import N_R, N_V, chain_columns, chain_force_columns
 from flexmm.design.sweeps import FORM_TABLES
-from flexmm.integrators.common import SHAPES
+from flexmm.integrators.common import MODE_FRICTION, SHAPES
 from flexmm.integrators.stepper import make_stepper
 from flexmm.models.hinge import BLOCK, H_SIGN, S_KG, ChainArgs, chain_force
 
@@ -32,6 +33,16 @@ MASS = {"kind": "mass_chain", "n_units": 6, "spacing_m": 0.01, "mass_kg": 0.01,
         "bond": {"law": "polynomial", "k1_n_per_m": 100.0, "k2_n_per_m2": 2e3, "k3_n_per_m3": 1e5}}
 
 SHEET = dict(LEGO_SHEET, n_rows=3, n_cols=4, theta0_rad=0.15)
+#: configs/j_magnets_transition_wave.yaml's units (a 2 × 3 strip)
+MAGNETS = {"kind": "rotating_squares_sheet", "n_rows": 2, "n_cols": 3, "a_m": 0.02, "k_long_n_per_m": 5e4,
+           "k_shear_n_per_m": 5e4, "k_rot_n_m_per_rad": 0.01, "mass_kg": 0.005,
+           "magnets": {"moment_a_m2": 0.253, "recess_m": 0.003, "polarity": "attract"}}
+#: configs/k_linkage_transition_wave.yaml's bars and joints (3 columns)
+LINKAGE = {"kind": "bistable_linkage", "n_cols": 3, "bar_length_m": 0.02, "theta0_rad": 1.0472,
+           "theta_deployed_rad": 0.4363, "mass_kg": 0.002, "k_pin_n_per_m": 1e5, "released_energy_j": 1.5,
+           "barrier_fraction": 0.3}
+TRIANGLES = {"a_m": 0.02, "theta0_rad": 0.1, "k_long_n_per_m": 71690, "k_shear_n_per_m": 7169,
+             "k_rot_n_m_per_rad": 0.5735, "mass_kg": 4.52e-3}
 
 SCENES = {
     "sheet-tilted-pulse-damped": {
@@ -39,6 +50,13 @@ SCENES = {
         "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "angle_deg": 20.0,
                        "duration_s": 1e-3, "shape": "half_sine"},
         "damping": {"viscous": {"damping_ratio": 0.05}},
+        "imperfection": {"kind": "random_rotation", "std_rad": 0.01, "seed": 2},
+        "solver": {"duration_s": 3e-3}},
+    "sheet-dashpots": {
+        "lattice": dict(SHEET, left="driven"),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "angle_deg": 20.0,
+                       "duration_s": 1e-3, "shape": "half_sine"},
+        "damping": {"viscous": {"damping_ratio": 0.02}, "dashpot_n_s_per_m": 0.5},
         "imperfection": {"kind": "random_rotation", "std_rad": 0.01, "seed": 2},
         "solver": {"duration_s": 3e-3}},
     "chain-displacement-damped": {
@@ -65,6 +83,51 @@ SCENES = {
                        "duration_s": 0.05, "shape": "smooth_step"},
         "damping": {"viscous": {"damping_ratio": 0.02}},
         "solver": {"duration_s": 0.3}},
+    "chain-dashpots-damped": {
+        "lattice": dict(CHAIN, left="driven", right="fixed"),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3,
+                       "duration_s": 1e-3, "shape": "half_sine"},
+        "damping": {"viscous": {"damping_ratio": 0.02}, "dashpot_n_s_per_m": 0.5},
+        "imperfection": {"kind": "rotation_seed", "theta_rad": 0.01, "sites": [2]},
+        "solver": {"duration_s": 3e-3}},
+    "mass-friction-dashpots": {
+        "lattice": dict(MASS, left="driven", right="free",
+                        friction={"force_n": 0.05, "regularisation_m_s": 0.05}),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 2e-3,
+                       "duration_s": 0.047, "shape": "smooth_step"},  # ends between steps (C³ there)
+        "damping": {"viscous": {"damping_ratio": 0.05}, "dashpot_n_s_per_m": 0.05},
+        "solver": {"duration_s": 0.3}},
+    "sheet-magnets-rotation-damped": {
+        "lattice": dict(MAGNETS, left="driven", theta0_rad=0.05),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_rad": 0.3,
+                       "duration_s": 2e-3, "shape": "smooth_step"},
+        "damping": {"viscous": {"damping_ratio": 0.02}},
+        "solver": {"duration_s": 3e-3}},
+    "linkage-deploy-damped": {  # the first joint switches
+        "lattice": dict(LINKAGE, left="driven"),
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_rad": -0.6,
+                       "duration_s": 6e-4, "shape": "smooth_step"},
+        "damping": {"viscous": {"damping_ratio": 0.02}},
+        "solver": {"duration_s": 1.2e-3}},
+    "chain-loaded-pull": {  # predeformed by constant end loads
+        "lattice": dict(CHAIN, theta0_rad=0.05, predeform={
+            "loads": [{"end": "left", "force_n": 0.2}, {"end": "right", "force_n": 0.2}], "theta_guess_rad": 0.1}),
+        "excitation": {"kind": "boundary_force", "end": "left", "amplitude_n": -1.0, "duration_s": 2e-3,
+                       "shape": "half_sine"},
+        "solver": {"duration_s": 5e-3}},
+    "triangles-chain-push": {
+        "lattice": {"kind": "rotating_triangles_chain", "n_units": 6, **TRIANGLES, "left": "driven"},
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "duration_s": 2e-3,
+                       "shape": "gaussian"},
+        "solver": {"duration_s": 6e-3}},
+    "triangles-sheet-damped": {
+        "lattice": {"kind": "rotating_triangles_sheet", "n_rows": 2, "n_cols": 4, **TRIANGLES, "left": "driven",
+                    "bottom": "periodic", "top": "periodic",
+                    "variation": [{"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 0.4, "end": 0.8}]},
+        "excitation": {"kind": "boundary_displacement", "end": "left", "amplitude_m": 1e-3, "duration_s": 2e-3,
+                       "shape": "half_sine"},
+        "damping": {"viscous": {"damping_ratio": 0.03}},
+        "solver": {"duration_s": 6e-3}},
     "mass-striker": {
         "lattice": dict(MASS, left="free", right="fixed"),
         "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 0.5,
@@ -96,8 +159,9 @@ def _objective(shape, seed=1):
     return objective
 
 
-def _directions(raw, rng, raw_shapes):
-    """A random direction per raw block (zero on discrete columns and held DOFs' m⁻¹)."""
+def _directions(raw, rng, raw_shapes, modes=None):
+    """A random direction per raw block (zero on discrete columns and held DOFs' m⁻¹; with the
+    drives' ``modes``, friction rows vary F₊ and F₋ alike, so symmetric friction stays smooth)."""
     out = {}
     for name, arr in raw.items():
         if arr.size == 0:
@@ -105,7 +169,7 @@ def _directions(raw, rng, raw_shapes):
         finite = np.isfinite(arr)
         scale = max(np.abs(arr[finite]).max(initial=0.0), 1e-2)
         d = rng.normal(size=arr.shape) * np.maximum(np.abs(np.where(finite, arr, 0.0)), 1e-2 * scale)
-        if name == "t1" and arr.shape[1] == 7:
+        if name == "t1" and arr.ndim == 2 and arr.shape[1] == 7:
             d[:, H_SIGN] = 0.0  # the checkerboard sign is discrete
         if name == "minv":
             d[arr == 0.0] = 0.0
@@ -114,6 +178,10 @@ def _directions(raw, rng, raw_shapes):
         d[~np.isfinite(arr)] = 0.0  # e.g. a drive that never stops
         if name == "drv":  # harmonic drives: amplitude and ω only (ramp and stop times are fixed)
             d[raw_shapes == SHAPES["harmonic"], 2:] = 0.0
+            if modes is not None:
+                fr = modes == MODE_FRICTION
+                d[fr, 2] = d[fr, 0]
+                d[fr, 3] = 0.0
         if np.any(d):
             out[name] = d
     return out
@@ -148,7 +216,7 @@ def test_adjoint_matches_central_differences(name):
     assert value == pytest.approx(traj.value(raw, objective), rel=1e-13)
     rng = np.random.default_rng(0)
     worst = 0.0
-    for block, d in _directions(raw, rng, traj.terms.drv_shape).items():
+    for block, d in _directions(raw, rng, traj.terms.drv_shape, traj.terms.drv_mode).items():
         arr = getattr(raw, block)
         base = arr.copy()
         fd = _central(traj, raw, arr, base, d, objective)
@@ -159,7 +227,8 @@ def test_adjoint_matches_central_differences(name):
     assert worst < 1e-6
 
 
-@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker"])
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker", "chain-dashpots-damped",
+                                  "mass-friction-dashpots", "sheet-dashpots"])
 def test_forward_sweep_is_the_engine_run(name):
     """The differentiated run is the Stepper's velocity-Verlet run (to rounding: the engine fuses
     the two half kicks of an undamped run into one)."""
@@ -274,14 +343,15 @@ def test_checkpoint_segment_does_not_change_the_gradient():
         np.testing.assert_allclose(a, c, rtol=1e-12, atol=1e-12 * np.abs(a).max(initial=0.0), err_msg=k)
 
 
-@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker"])
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker", "chain-dashpots-damped",
+                                  "mass-friction-dashpots"])
 def test_tangent_matches_adjoint(name):
     """Forward sensitivities along a direction equal the adjoint gradient projected on it."""
     traj, raw = trajectory_of(_problem(name), nsteps=100, stride=5)
     objective = _objective((traj.n_samples, traj.obs.size), seed=3)
     _, grad, rec = traj.gradient(raw, objective)
     rng = np.random.default_rng(5)
-    dirs = _directions(raw, rng, traj.terms.drv_shape)
+    dirs = _directions(raw, rng, traj.terms.drv_shape, traj.terms.drv_mode)
     direction = raw.zeros()
     for block, d in dirs.items():
         setattr(direction, block, d)
@@ -292,8 +362,61 @@ def test_tangent_matches_adjoint(name):
     assert projected == pytest.approx(grad.dot(direction), rel=1e-10)
 
 
-def test_dashpots_are_refused():
-    data = {"name": "grad"} | copy.deepcopy(SCENES["mass-smooth-step-damped"])
-    data["damping"] = {"dashpot_n_s_per_m": 0.1}
-    with pytest.raises(GradientError, match="dashpots"):
-        trajectory_of(build_problem(scene_from_dict(data)))
+def test_velocity_terms_take_the_general_sweeps():
+    """A chain with dashpots runs the general sweeps (the column sweeps have no velocity terms),
+    and raw arrays whose dashpot coefficients do not match the dashpots are refused."""
+    traj, raw = trajectory_of(_problem("chain-dashpots-damped"), nsteps=4, stride=1)
+    assert raw.dash.size == traj.terms.dash_ij.shape[0] > 0
+    assert not traj.columns(raw) and traj.form(raw)[0] == FORM_TABLES
+    with pytest.raises(ValueError, match="dashpots"):
+        traj.run(dataclasses.replace(raw, dash=raw.dash[:-1]))
+
+
+def _anisotropic_friction(moving: bool):
+    """The friction scene without its drive, friction 0.05 N forward and 0.08 N backward; if
+    ``moving``, every site starts at ±0.1–0.3 m/s (signs mixed)."""
+    data = {"name": "grad"} | copy.deepcopy(SCENES["mass-friction-dashpots"])
+    data["lattice"] |= {"left": "free", "friction": data["lattice"]["friction"] | {"backward_force_n": 0.08}}
+    data.pop("excitation")
+    problem = build_problem(scene_from_dict(data))
+    if moving:
+        rng = np.random.default_rng(7)
+        v0 = problem.system.v0
+        v0[:] = rng.choice([-1.0, 1.0], v0.size) * rng.uniform(0.1, 0.3, v0.size) / problem.system.scales.velocity
+    return problem
+
+
+def test_anisotropic_friction_is_differentiated_while_moving():
+    """F₊ ≠ F₋ on every site, varied independently; the sites' velocities change sign during the
+    run (between steps), where the law is smooth: the adjoint matches central differences."""
+    traj, raw = trajectory_of(_anisotropic_friction(True), nsteps=200, stride=5)
+    rec, _ = traj.run(raw)
+    assert np.sum(np.diff(np.sign(rec.v), axis=0) != 0) >= 3  # velocities cross zero
+    objective = _objective((traj.n_samples, traj.obs.size))
+    _, grad, _ = traj.gradient(raw, objective, segment=7)
+    dirs = _directions(raw, np.random.default_rng(1), traj.terms.drv_shape)
+    assert np.all(dirs["drv"][:, 0] != dirs["drv"][:, 2])
+    for block, d in dirs.items():
+        arr = getattr(raw, block)
+        fd = _central(traj, raw, arr, arr.copy(), d, objective)
+        adj = float(np.vdot(getattr(grad, block), d))
+        assert abs(adj - fd) < 1e-6 * abs(fd), (block, adj, fd)
+
+
+def test_anisotropic_friction_at_rest_is_refused():
+    """Sites at rest under F₊ ≠ F₋ make the run non-differentiable (the slope of the law jumps at
+    v = 0: one-sided differences disagree), so ``trajectory_of`` refuses it."""
+    problem = _anisotropic_friction(False)
+    with pytest.raises(GradientError, match="anisotropic ground friction"):
+        trajectory_of(problem)
+    s = problem.system
+    traj = Trajectory(s.args, problem.terms, problem.dt, 100, 5, np.arange(s.ndof))
+    raw = raw_of(s, problem.terms, problem.damp)
+    objective = _objective((traj.n_samples, traj.obs.size))
+    j0 = traj.value(raw, objective)
+    e = 1e-7
+    raw.v0[2] = e
+    right = (traj.value(raw, objective) - j0) / e
+    raw.v0[2] = -e
+    left = (j0 - traj.value(raw, objective)) / e
+    assert abs(right - left) > 0.1 * abs(left)

@@ -1,11 +1,14 @@
 """Second-derivative kernels (flexmm.design.kernels) against differences of the force kernels.
 
-The Hessian-vector product is checked against central differences of both the compiled force
+Every model kind with gradient kernels (``design.kernels``, ``design.kernels_extra``): the
+Hessian-vector product is checked against central differences of both the compiled force
 kernel and the model's numpy reference (``KERNELS[...].reference``); the parameter products
 (adjoint and tangent) against central differences of the force in the parameter tables.
 """
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,6 +22,8 @@ from flexmm.design.kernels import (
     param_tables,
     with_tables,
 )
+from flexmm.design.kernels_extra import sheet_offsets
+from flexmm.models.harmonic import HarmonicArgs
 from flexmm.models.hinge import H_SIGN
 from flexmm.models.kernels import kernels_of, model_force
 
@@ -42,9 +47,60 @@ LATTICES = {"chain": CHAIN,
                                                                    "period_m": 0.02}]},
             "mass-hertz": {"kind": "mass_chain", "n_units": 7, "spacing_m": 0.01, "mass_kg": 0.01,
                            "bond": LAWS["hertz"], "left": "fixed", "right": "fixed"}}
+#: configs/j_magnets_transition_wave.yaml's units (a 2 × 3 strip)
+MAGNETS = {"kind": "rotating_squares_sheet", "n_rows": 2, "n_cols": 3, "a_m": 0.02, "k_long_n_per_m": 5e4,
+           "k_shear_n_per_m": 5e4, "k_rot_n_m_per_rad": 0.01, "mass_kg": 0.005,
+           "magnets": {"moment_a_m2": 0.253, "recess_m": 0.003, "polarity": "attract"}}
+LOADS = {"loads": [{"end": "left", "force_n": 0.2}, {"end": "right", "force_n": 0.2}], "theta_guess_rad": 0.1}
+TRIANGLES = {"a_m": 0.02, "theta0_rad": 0.1, "k_long_n_per_m": 71690, "k_shear_n_per_m": 7169,
+             "k_rot_n_m_per_rad": 0.5735, "mass_kg": 4.52e-3}
+LATTICES |= {
+    "sheet-magnets": MAGNETS,
+    # near the closed state (θ ≈ 0.7 rad): facing magnets inside their core radius
+    "sheet-magnets-closed": dict(MAGNETS, magnets={"moment_a_m2": 0.253, "recess_m": 0.003, "polarity": "attract",
+                                                   "contact_stiffness_n_per_m": 2e4}),
+    "sheet-magnets-repel-theta0": dict(MAGNETS, theta0_rad=0.1, magnets={"moment_a_m2": 0.2, "recess_m": 0.002,
+                                                                         "polarity": "repel"},
+                                       variation=[{"kind": "gradient", "target": "theta0_rad", "start": 0.05,
+                                                   "end": 0.15}]),
+    "linkage": {"kind": "bistable_linkage", "n_cols": 3, "bar_length_m": 0.02, "theta0_rad": 1.0472,
+                "theta_deployed_rad": 0.4363, "mass_kg": 0.002, "k_pin_n_per_m": 1e5, "released_energy_j": 1.5,
+                "barrier_fraction": 0.3},
+    "chain-loaded": dict(CHAIN, theta0_rad=0.05, left="free", right="free", predeform=LOADS),
+    "sheet-loaded": dict(SHEET, predeform=LOADS),
+    "triangles-chain": {"kind": "rotating_triangles_chain", "n_units": 6, **TRIANGLES},
+    "triangles-sheet": {"kind": "rotating_triangles_sheet", "n_rows": 2, "n_cols": 4, **TRIANGLES,
+                        "bottom": "periodic", "top": "periodic",
+                        "variation": [{"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 0.4,
+                                       "end": 0.8}]},
+    "harmonic": None,  # no scene: ``HarmonicArgs`` directly
+    # configs/g_magnetic_bistable_unidirectional.yaml's laws (a chain of masses: dipole bonds to
+    # first and second neighbours, an asymmetric double well on site)
+    "mass-dipole-bistable": {"kind": "mass_chain", "n_units": 7, "spacing_m": 0.02, "mass_kg": 0.005,
+                             "bond": {"law": "dipole", "distance_m": 0.02, "moment_a_m2": 0.5},
+                             "bond2": {"law": "dipole", "distance_m": 0.04, "moment_a_m2": 0.5},
+                             "onsite": [{"law": "bistable_cubic", "alpha_n_per_m3": 1e7, "beta": 0.3,
+                                         "jump_m": 0.004}]},
+}
+#: (rotation, contraction) of a state near which a lattice is checked (default: small random
+#: displacements about rest): the units rotated and their centres drawn together
+CLOSED = {"sheet-magnets-closed": (0.7, 0.3)}
+
+
+def _closed(system, name):
+    """The state ``CLOSED[name]``: θ = rotation, positions contracted about the origin."""
+    rot, contraction = CLOSED[name]
+    n, length = system.n_sites, system.scales.length_m
+    q = np.zeros(system.ndof)
+    q[:n] = -contraction * system.site_coords["x"] / length
+    q[n : 2 * n] = -contraction * system.site_coords["y"] / length
+    q[2 * n :] = rot
+    return q
 
 
 def _system(name):
+    if name == "harmonic":
+        return SimpleNamespace(args=HarmonicArgs(np.linspace(0.5, 2.0, 5)), ndof=5)
     return build_system(scene_from_dict({"name": "k", "lattice": LATTICES[name], "solver": {"duration_s": 1.0}}))[0]
 
 
@@ -63,6 +119,8 @@ def setup(request):
     rng = np.random.default_rng(4)
     n = system.ndof
     q = rng.normal(0.0, 0.01 if request.param.startswith("mass") else 0.05, n)
+    if request.param in CLOSED:
+        q += _closed(system, request.param)
     return system.args, q, rng.normal(size=n), rng
 
 
@@ -105,3 +163,17 @@ def test_parameter_adjoint_and_tangent_match_differences(setup):
     model_adjoint(q, args, dq, hv, np.zeros_like(t1), np.zeros_like(t2))  # symmetric: (∂F/∂q) dq
     projected = lam @ hv + np.vdot(g1, d1) + np.vdot(g2, d2)
     assert projected == pytest.approx(lam @ fd, rel=1e-7)
+
+
+def test_closed_magnets_are_in_their_cores():
+    """The closed state of ``sheet-magnets-closed`` exercises the dipoles' core: its r_c and k_c
+    get nonzero parameter products (zero while no magnet pair is inside r_c)."""
+    system = _system("sheet-magnets-closed")
+    args = system.args
+    rng = np.random.default_rng(1)
+    t1, t2 = param_tables(args)
+    o_core = sheet_offsets(args)[2]
+    for q, active in ((np.zeros(system.ndof), False), (_closed(system, "sheet-magnets-closed"), True)):
+        g2 = np.zeros_like(t2)
+        model_adjoint(q, args, rng.normal(size=q.size), np.zeros(q.size), np.zeros_like(t1), g2)
+        assert (g2[o_core] != 0.0 and g2[o_core + 1] != 0.0) == active

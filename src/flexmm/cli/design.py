@@ -36,7 +36,7 @@ def design(
     console = Console()
     dp = load_design(spec)
     if check_gradient:
-        report_check(dp.design.labels, *check(dp))
+        report_check(*check(dp))
         return
     directory = Path(out) if out else Path("runs") / dp.spec.name
     directory.mkdir(parents=True, exist_ok=True)

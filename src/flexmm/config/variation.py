@@ -93,7 +93,17 @@ class Defects(Strict):
         return self
 
 
-Variation = Annotated[Union[Gradient, Interface, Random, Defects], Field(discriminator="kind")]
+class Values(Strict):
+    """Every element of ``target`` takes its own value: ``values`` lists one per element, in element
+    order (a per-site target: site order; a bond or hinge target: the lattice's bond order,
+    docs/scenes.md). Written by ``flexmm design`` for a per-element design (profile each)."""
+
+    kind: Literal["values"]
+    target: str
+    values: list[Finite] = Field(min_length=1, description="one value per element of the target, in element order")
+
+
+Variation = Annotated[Union[Gradient, Interface, Random, Defects, Values], Field(discriminator="kind")]
 
 
 def _at(i: int, v, *names: str) -> str:
@@ -116,7 +126,7 @@ def check_variations(variation: Sequence, *, n_cols: int, n_rows: int, site_targ
         if v.target not in valid:
             raise ValueError(f"{_at(i, v, 'target')}: not a parameter of this lattice; valid: {', '.join(valid)}")
         size, lines = (n_rows, "rows") if getattr(v, "axis", "x") == "y" else (n_cols, "columns")
-        if size == 1:
+        if size == 1 and v.kind != "values":
             raise ValueError(f"{_at(i, v, 'axis')}: the lattice has a single row (use axis x)")
         if v.kind == "gradient":
             first, last = v.first or 0, size - 1 if v.last is None else v.last
@@ -126,6 +136,9 @@ def check_variations(variation: Sequence, *, n_cols: int, n_rows: int, site_targ
         elif v.kind == "interface" and v.position >= size:
             raise ValueError(f"{_at(i, v, 'position')}: an interface needs 1 ≤ position ≤ {size - 1} "
                              f"(the lattice has {size} {lines})")
+        elif v.kind == "values" and v.target in site_targets and len(v.values) != n_sites:
+            raise ValueError(f"variation.{i}.values: {len(v.values)} values; {v.target} is per site and the "
+                             f"lattice has {n_sites} sites (one value each, in site order)")
         elif v.kind == "defects":
             bad = [s for s in v.sites if s >= n_sites]
             if bad:

@@ -4,8 +4,8 @@ The spec names a scene, a measured table (time × site of one field, CSV or netC
 unit) and the parameters to fit (``variables.Variable``). The residuals are
 r = (model − data)/σ at every measured time and site; scipy's ``least_squares`` (trust-region
 reflective, bounds) minimises ½‖r‖² with the exact Jacobian from forward sensitivities of the
-velocity-Verlet run (``gradient.Trajectory.sensitivities``: one tangent per parameter, in the
-same run). The uncertainty is the Gauss–Newton covariance s²(JᵀJ)⁻¹ at the optimum, with
+run with the scene's integrator (velocity Verlet, PEFRL or BM6: ``gradient.Trajectory.sensitivities``,
+one tangent per parameter, in the same run). The uncertainty is the Gauss–Newton covariance s²(JᵀJ)⁻¹ at the optimum, with
 s² = ‖r‖²/(m − n) (σ only sets the weights; with the right σ, s² ≈ 1).
 
 Measured tables: CSV with a ``time_s`` column and one column per site, headed by the site
@@ -146,7 +146,8 @@ class Fit:
         h = dt_data / sc.time_s / stride
         s = self.problem.system
         obs = np.array([s.dof(self.spec.data.field, int(site)) for site in self.measured.sites], np.int64)
-        return Trajectory(s.args, self.problem.terms, h, stride * int(index[-1]), stride, obs), index
+        return Trajectory(s.args, self.problem.terms, h, stride * int(index[-1]), stride, obs,
+                          integrator=self.problem.scene.solver.integrator), index
 
     # -- residuals and Jacobian --------------------------------------------------------------
     def model(self, x: np.ndarray) -> np.ndarray:
@@ -237,14 +238,15 @@ def load_fit(path: str | Path) -> Fit:
 
 def synthetic_table(scene_data: dict, field: str, sites: list[int], dt_s: float, n_times: int,
                     noise: float, seed: int = 0, base_dir: str | Path | None = None) -> Measured:
-    """A measured table made by running a scene (velocity Verlet, the scene's dt rounded down
+    """A measured table made by running a scene (its integrator, the scene's dt rounded down
     to divide ``dt_s``) with Gaussian noise of std ``noise`` (SI) added: the fits' test data."""
     design = Design(scene_data, [], base_dir)
     problem = build_problem(design.scene(design.x0))
     s = problem.system
     stride = max(1, math.ceil(dt_s / s.scales.time_s / problem.dt - 1e-9))
     obs = np.array([s.dof(field, site) for site in sites], np.int64)
-    traj = Trajectory(s.args, problem.terms, dt_s / s.scales.time_s / stride, stride * (n_times - 1), stride, obs)
+    traj = Trajectory(s.args, problem.terms, dt_s / s.scales.time_s / stride, stride * (n_times - 1), stride, obs,
+                      integrator=problem.scene.solver.integrator)
     rec, _ = traj.run(design.raw(design.x0), segment=traj.nsteps + 1)
     kind = s.fields[s.field_index(field)].kind
     values = rec.q * s.scales.coordinate(kind)

@@ -1,10 +1,13 @@
-"""Exact gradients of trajectory objectives through a velocity-Verlet run (``sweeps``).
+"""Exact gradients of trajectory objectives through a run of velocity Verlet (``sweeps``) or of a
+symplectic splitting, PEFRL or Blanes–Moan's 6th-order method (``splitting``).
 
 The differentiable inputs of a built problem are its *raw* arrays (``Raw``): the model's two
 parameter tables (``kernels.param_tables``), the inverse masses and on-site damping per DOF,
-the contact and drive parameter rows and the initial state. ``Trajectory`` runs a problem with
-velocity Verlet and records (q, v, f) at the observed DOFs every ``stride`` steps;
-``gradient`` returns an objective and its gradient with respect to every raw array by one
+the contact and drive parameter rows (ground friction's among them), the initial state and the
+dashpot coefficients. ``Trajectory`` runs a problem with its integrator (``DIFFERENTIABLE``;
+velocity Verlet by default, with velocity-dependent forces at the engine's predicted velocity)
+and records (q, v, f) at the observed DOFs every ``stride`` steps; ``gradient`` returns an
+objective and its gradient with respect to every raw array by one
 forward run with checkpoints and one reverse sweep; ``sensitivities`` returns the records'
 derivatives along a few raw directions (forward mode, for least-squares Jacobians).
 
@@ -17,18 +20,18 @@ replays one segment at a time, so a run of N steps keeps about 2√N states, plu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Callable
 
 import numpy as np
 
-from flexmm.design import sweeps
+from flexmm.design import splitting, sweeps
 from flexmm.design.kernels import (N_CA, N_F, N_R, N_V, adjoint_kernels_of, chain_add_columns, chain_columns,
                                    chain_ordered, chain_uniform, param_tables, sheet_grid, sheet_grid_add,
                                    sheet_grid_columns, with_tables)
 from flexmm.errors import FlexmmError
 from flexmm.integrators import verlet_chain
-from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms
+from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms, has_velocity_terms
 from flexmm.models.hinge import S_KG
 
 
@@ -48,8 +51,11 @@ class GradientError(FlexmmError):
 @dataclass
 class Raw:
     """The differentiable arrays of a problem (nondimensional): model tables ``t1``, ``t2``,
-    ``minv`` and ``damp`` (ndof,), contact rows ``con`` (C, 3), drive rows ``drv`` (D, 4), the
-    initial state ``q0``, ``v0``. A gradient has the same structure."""
+    ``minv`` and ``damp`` (ndof,), contact rows ``con`` (C, 3), drive rows ``drv`` (D, 4; ground
+    friction's rows (F₊, v_ε, F₋, 0) among them), the initial state ``q0``, ``v0``, and the
+    dashpot coefficients ``dash`` (P,; last, and empty by default, so arrays built without it
+    still construct: ``Trajectory.bind`` checks its size against the dashpots). A gradient has
+    the same structure."""
 
     t1: np.ndarray
     t2: np.ndarray
@@ -59,6 +65,7 @@ class Raw:
     drv: np.ndarray
     q0: np.ndarray
     v0: np.ndarray
+    dash: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def zeros(self) -> Raw:
         return Raw(*(np.zeros_like(getattr(self, f.name)) for f in fields(self)))
@@ -82,22 +89,51 @@ def raw_of(system, terms: Terms, damp: np.ndarray) -> Raw:
     """The raw arrays of a built system (copies)."""
     t1, t2 = param_tables(system.args)
     return Raw(t1.copy(), t2.copy(), system.inv_mass.copy(), np.asarray(damp, float).copy(),
-               terms.con_prm.copy(), terms.drv_prm.copy(), system.q0.copy(), system.v0.copy())
+               terms.con_prm.copy(), terms.drv_prm.copy(), system.q0.copy(), system.v0.copy(),
+               np.asarray(terms.dash_c, float).copy())
 
 
 def check_differentiable(system, terms: Terms) -> None:
-    """Refuse models without gradient kernels and velocity-dependent external terms."""
+    """Refuse models without gradient kernels, magnets or joints of the sheet, and a run that
+    is not differentiable because of anisotropic ground friction.
+
+    Dashpots and ground friction are differentiated (``sweeps.step_forces``). The friction law
+    −F tanh(v/v_ε) is smooth, except that with F₊ ≠ F₋ its slope jumps at v = 0: a DOF at rest
+    (v = 0 exactly, as every site of a run that starts at rest is until the wave reaches it)
+    then moves either way under a perturbation, with different slopes, and the run has no
+    derivative. So anisotropic friction is differentiated only if each of its DOFs is free and
+    starts moving (v0 ≠ 0); velocities then cross zero at isolated instants, between steps.
+    """
     try:
         adjoint_kernels_of(type(system.args))
     except TypeError as err:
         raise GradientError(f"model {system.model!r}: {err}") from None
     args = system.args
-    if hasattr(args, "dipoles") and (args.dipoles[0].shape[0] or args.joints[0].shape[0]):
-        raise GradientError(f"model {system.model!r}: gradients through magnets or bistable joints are not "
-                            "implemented (hinges only)")
-    if terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION):
-        raise GradientError("gradients through dashpots or ground friction are not implemented "
-                            "(velocity-dependent external forces); use on-site viscous damping")
+    if hasattr(args, "dipoles") and args.dipoles[0].shape[0] and not np.array_equal(args.dipoles[4], args.theta0):
+        raise GradientError(f"model {system.model!r}: the magnets' rest angles differ from the units' θ0 "
+                            "(gradients take θ0 as one parameter per unit)")
+    rows = (terms.drv_mode == MODE_FRICTION) & (terms.drv_prm[:, 0] != terms.drv_prm[:, 2])
+    dofs = terms.drv_dof[rows]
+    still = dofs[(system.v0[dofs] == 0.0) | (system.inv_mass[dofs] == 0.0)]
+    if still.size:
+        raise GradientError(
+            f"anisotropic ground friction (backward force ≠ forward force) on {still.size} DOF(s) that start at "
+            f"rest or are held (first: DOF {int(still[0])}): its slope jumps at v = 0, so the run has no gradient "
+            "there; use isotropic friction (no backward_force_n) or start every friction site moving")
+
+
+#: the time steppers whose runs are differentiated (``Trajectory.integrator``)
+DIFFERENTIABLE = ("velocity_verlet", *splitting.SPLITTINGS)
+
+
+def check_integrator(name: str, terms: Terms) -> None:
+    """Refuse an integrator without an adjoint, and a splitting with velocity-dependent terms."""
+    if name not in DIFFERENTIABLE:
+        raise GradientError(f"integrator {name!r} has no adjoint: gradients are exact for "
+                            f"{', '.join(DIFFERENTIABLE)} (set solver.integrator to one of them)")
+    if name != "velocity_verlet" and (terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION)):
+        raise GradientError(f"{name}: with dashpots or ground friction its kicks are RK4 flows, which are not "
+                            "differentiated; gradients are exact for its exact (on-site damped) kicks only")
 
 
 @dataclass
@@ -144,13 +180,19 @@ class Trajectory:
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
     engine_forward: bool = True
+    #: the time stepper (``DIFFERENTIABLE``): velocity Verlet, or a splitting (``design.splitting``)
+    integrator: str = "velocity_verlet"
 
     def __post_init__(self):
         self.obs = np.asarray(self.obs, np.int64)
+        check_integrator(self.integrator, self.terms)
+        self._split = splitting.coefficients(self.integrator) if self.integrator in splitting.SPLITTINGS else None
         if self.nsteps % self.stride:
             raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
         ndof = 2 * self.args.site_prm.shape[0] if hasattr(self.args, "site_prm") else -1
-        self._ordered = chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
+        # the column sweeps take no contacts and no velocity terms (dashpots, friction)
+        self._ordered = (chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
+                         and not has_velocity_terms(self.terms))
         nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
         self._grid = sheet_grid(self.args, 3 * nsite)
 
@@ -203,7 +245,9 @@ class Trajectory:
     # -- the arrays a sweep takes -----------------------------------------------------------
     def bind(self, raw: Raw) -> tuple:
         args = with_tables(self.args, raw.t1, raw.t2)
-        terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
+        if raw.dash.shape != self.terms.dash_c.shape:
+            raise ValueError(f"raw.dash has shape {raw.dash.shape}; the problem has {self.terms.dash_c.size} dashpots")
+        terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv, dash_c=raw.dash)
         h = self.h
         g = raw.damp * raw.minv
         kick = 0.5 * h * raw.minv
@@ -221,6 +265,8 @@ class Trajectory:
     # -- runs ----------------------------------------------------------------------------------
     def run(self, raw: Raw, segment: int | None = None) -> tuple[Records, tuple]:
         """Forward run: the records, and the checkpoints (CQ, CV, CF, CT, segment)."""
+        if self._split is not None:
+            return self._split_run(raw, segment)
         args, terms, kick, pre, post = self.bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
@@ -276,6 +322,8 @@ class Trajectory:
         ⌈√nsteps⌉) and the reverse sweep replays one segment at a time (one more forward run in
         all, memory ~2√N states).
         """
+        if self._split is not None:
+            return self._split_gradient(raw, objective, segment, memory_mb)
         n, N = raw.q0.size, self.nsteps
         args, terms, kick, pre, post = self.bind(raw)
         form = self.form(raw)
@@ -283,17 +331,10 @@ class Trajectory:
         budget = min(memory_mb, CACHE_MB) if chain else memory_mb
         keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= budget * 1e6
         rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
-        value, dq, dv, df, explicit = objective(rec, raw)
-        dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
-        lq, lv, lf, lw = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+        value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
+        lw = np.zeros(n)
         GK, GV = np.zeros(n), np.zeros(n)
-        g1, g2 = np.zeros_like(raw.t1), np.zeros_like(raw.t2)
-        gcon, gdrv = np.zeros_like(raw.con), np.zeros_like(raw.drv)
-        j = N // self.stride
-        lq[self.obs] += dq[j]
-        lv[self.obs] += dv[j]
-        lf[self.obs] += df[j]
-        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form)
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form)
         uniform = self._uniform(form[3], kick, pre, post) if chain else None
         if uniform is not None:
             u, fac = uniform
@@ -324,22 +365,110 @@ class Trajectory:
                 reverse(SQ, SV, SF, ST, k0, m)
         GK += lw * CF[0]  # the products of the first step's λw with the initial state
         GV += lw * CV[0]
-        q0 = raw.q0.copy()
-        v0 = raw.v0.copy()
-        sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
-        sweeps.reverse_initial(args, terms, q0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, form)
-        if chain:
-            chain_add_columns(form[5], g1, g2)
-        elif form[0] == sweeps.FORM_GRID:
-            sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
+        self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         # K = h/2 m⁻¹, P = 1 − h/2 c m⁻¹, S = 1/(1 + h/2 c m⁻¹); GV = ∂J/∂P + S² ∂J/∂S
         hh = 0.5 * self.h
         g_minv = hh * GK - hh * raw.damp * GV
         g_damp = -hh * raw.minv * GV
-        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv)
+        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)
         if explicit is not None:
             grad = grad.axpy(1.0, explicit)
         return float(value), grad, rec
+
+    def _seed(self, rec: Records, raw: Raw, objective: Objective) -> tuple:
+        """The objective's value and explicit gradient, its adjoints of the records (dq, dv, df),
+        the state adjoints (λq, λv, λf) at the last step (its records') and zeroed parameter
+        adjoints (g1, g2, gcon, gdrv, gdash)."""
+        n = raw.q0.size
+        value, dq, dv, df, explicit = objective(rec, raw)
+        dq, dv, df = (np.ascontiguousarray(np.broadcast_to(a, rec.q.shape), float) for a in (dq, dv, df))
+        lq, lv, lf = np.zeros(n), np.zeros(n), np.zeros(n)
+        j = self.nsteps // self.stride
+        lq[self.obs] += dq[j]
+        lv[self.obs] += dv[j]
+        lf[self.obs] += df[j]
+        params = (np.zeros_like(raw.t1), np.zeros_like(raw.t2), np.zeros_like(raw.con), np.zeros_like(raw.drv),
+                  np.zeros_like(raw.dash))
+        return value, explicit, (dq, dv, df), (lq, lv, lf), params
+
+    def _reverse_start(self, raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form) -> None:
+        """Reverse of the run's start (prescription, initial force): (lq, lv) become the
+        gradients w.r.t. q0, v0; the column forms' parameter adjoints are added to (g1, g2)."""
+        q0 = raw.q0.copy()
+        v0 = raw.v0.copy()
+        sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
+        sweeps.reverse_initial(args, terms, q0, v0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
+        if form[0] == sweeps.FORM_CHAIN:
+            chain_add_columns(form[5], g1, g2)
+        elif form[0] == sweeps.FORM_GRID:
+            sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
+
+    # -- the splittings (``design.splitting``) ---------------------------------------------
+    def _split_bind(self, raw: Raw) -> tuple:
+        """The arrays a splitting sweep takes: args, terms and (kicks, drifts, E, G, fsal)."""
+        args = with_tables(self.args, raw.t1, raw.t2)
+        terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
+        kicks, drifts, fsal = self._split
+        E, G = splitting.kick_factors(kicks, raw.minv, raw.damp, self.h)
+        return args, terms, (kicks, drifts, E, G, fsal)
+
+    def _split_run(self, raw: Raw, segment: int | None) -> tuple[Records, tuple]:
+        args, terms, method = self._split_bind(raw)
+        q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
+        sweeps.initial_force(args, terms, q, v, f, self.t0)
+        seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
+        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1)
+        rec = self._records()
+        splitting.forward(args, terms, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride, self.obs,
+                          CQ, CV, CF, CT, rec.q, rec.v, rec.f)
+        return rec, (CQ, CV, CF, CT, seg)
+
+    def _split_gradient(self, raw: Raw, objective: Objective, segment: int | None,
+                        memory_mb: float) -> tuple[float, Raw, Records]:
+        """``gradient`` of a splitting run: the same checkpointing (all states kept if they fit)."""
+        n, N = raw.q0.size, self.nsteps
+        args, terms, method = self._split_bind(raw)
+        kicks = method[0]
+        form = self.form(raw)
+        keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= memory_mb * 1e6
+        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
+        value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
+        GE, GG = np.zeros((kicks.size, n)), np.zeros((kicks.size, n))
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
+        if keep_all:
+            splitting.reverse(args, terms, *method, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
+        else:
+            SQ, SV, SF, ST = self._buffers(n, seg + 1)
+            none, no_record = np.empty(0, np.int64), np.empty((1, 0))
+            for c in range((N - 1) // seg if N else -1, -1, -1):
+                k0, m = c * seg, min(seg, N - c * seg)
+                # the segment's replay: its forward run from the checkpoint, every state kept
+                splitting.forward(args, terms, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h, m,
+                                  1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record)
+                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
+        self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
+        g_minv, g_damp = splitting.kick_factor_gradients(kicks, raw.minv, raw.damp, self.h, GE, GG)
+        grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)
+        if explicit is not None:
+            grad = grad.axpy(1.0, explicit)
+        return float(value), grad, rec
+
+    def _split_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
+        args, terms, (kicks, drifts, E, G, fsal) = self._split_bind(raw)
+        nd, n = len(directions), raw.q0.size
+        dminv, ddamp = _stack(raw, directions, "minv"), _stack(raw, directions, "damp")
+        de_m, de_c, dg_m, dg_c = splitting.kick_factor_partials(kicks, raw.minv, raw.damp, self.h)
+        DE = np.ascontiguousarray(de_m[None] * dminv[:, None] + de_c[None] * ddamp[:, None])
+        DG = np.ascontiguousarray(dg_m[None] * dminv[:, None] + dg_c[None] * ddamp[:, None])
+        rec = self._records()
+        shape = (nd, self.n_samples, self.obs.size)
+        TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
+        q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
+        splitting.tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, self.t0, self.h, self.nsteps,
+                          self.stride, self.obs, *(_stack(raw, directions, k) for k in ("t1", "t2", "con", "drv")),
+                          _stack(raw, directions, "q0"), _stack(raw, directions, "v0"), rec.q, rec.v, rec.f,
+                          TQ, TV, TF)
+        return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
 
     def value(self, raw: Raw, objective: Objective) -> float:
         rec, _ = self.run(raw, segment=self.nsteps + 1)
@@ -347,13 +476,14 @@ class Trajectory:
 
     def sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
         """Records and their derivatives along each raw direction (one forward tangent run)."""
+        if self._split is not None:
+            return self._split_sensitivities(raw, directions)
         args, terms, kick, pre, post = self.bind(raw)
         nd, n = len(directions), raw.q0.size
         hh = 0.5 * self.h
 
         def stack(name):
-            return np.ascontiguousarray(np.stack([getattr(d, name) for d in directions]) if nd else
-                                        np.zeros((0,) + getattr(raw, name).shape))
+            return _stack(raw, directions, name)
 
         dminv, ddamp = stack("minv"), stack("damp")
         dg = ddamp * raw.minv + raw.damp * dminv  # d(c m⁻¹)
@@ -365,15 +495,24 @@ class Trajectory:
         TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
         sweeps.tangent(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, self.stride, self.obs,
-                       stack("t1"), stack("t2"), DK, DP, DS, stack("con"), stack("drv"), stack("q0"), stack("v0"),
+                       stack("t1"), stack("t2"), DK, DP, DS, stack("con"), stack("drv"), stack("dash"), stack("q0"),
+                       stack("v0"),
                        rec.q, rec.v, rec.f, TQ, TV, TF)
         return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
 
 
-def trajectory_of(problem, nsteps: int | None = None, stride: int = 1, obs=None, h: float | None = None) -> tuple[Trajectory, Raw]:
-    """The Trajectory and raw arrays of a built problem (``assemble.Problem``), velocity Verlet.
+def _stack(raw: Raw, directions: list[Raw], name: str) -> np.ndarray:
+    """The directions' arrays ``name`` stacked (first axis: the direction)."""
+    return np.ascontiguousarray(np.stack([getattr(d, name) for d in directions]) if directions else
+                                np.zeros((0,) + getattr(raw, name).shape))
 
-    ``nsteps`` defaults to the problem's duration in steps of ``h`` (default: its dt), rounded
+
+def trajectory_of(problem, nsteps: int | None = None, stride: int = 1, obs=None, h: float | None = None,
+                  integrator: str | None = None) -> tuple[Trajectory, Raw]:
+    """The Trajectory and raw arrays of a built problem (``assemble.Problem``).
+
+    ``integrator`` defaults to the scene's (``solver.integrator``; ``GradientError`` if it has no
+    adjoint); ``nsteps`` defaults to the problem's duration in steps of ``h`` (default: its dt), rounded
     up to a multiple of ``stride``; ``obs`` defaults to every DOF.
     """
     s = problem.system
@@ -383,5 +522,6 @@ def trajectory_of(problem, nsteps: int | None = None, stride: int = 1, obs=None,
         nsteps = max(1, math.ceil(problem.duration / h - 1e-9))
     nsteps = stride * math.ceil(nsteps / stride)
     obs = np.arange(s.ndof) if obs is None else obs
-    traj = Trajectory(s.args, problem.terms, h, nsteps, stride, obs)
+    traj = Trajectory(s.args, problem.terms, h, nsteps, stride, obs,
+                      integrator=problem.scene.solver.integrator if integrator is None else integrator)
     return traj, raw_of(s, problem.terms, problem.damp)

@@ -9,7 +9,8 @@ and a forward (tangent) step needs (∂F/∂q) dq + (∂F/∂p) dp. Both are wri
 (hinge, bond, on-site term) from the element's closed-form law, so they cost about two force
 evaluations. Parameters are the model's two tables (``param_tables``): for ``ChainArgs`` the
 hinge table (H, 7) and the site table (N, 3) of ``models.hinge``; for ``SheetArgs`` the hinge
-table and θ0 (N,); for ``MassArgs`` the bond and on-site law rows (B, 9), (S, 9) of
+table and θ0 (N,) (with dipoles, joints or loads a longer vector: ``kernels_extra``, which also
+describes the tables of loaded chains, rotating triangles and harmonic oscillators); for ``MassArgs`` the bond and on-site law rows (B, 9), (S, 9) of
 ``models.laws``. Columns that are not continuous (the hinge
 sign, a tabulated law's start and length) get zero derivatives.
 
@@ -30,7 +31,27 @@ from numba.extending import overload
 
 from flexmm._jit import JIT_OPTIONS, NO_JIT, jit
 from flexmm._trig import sincos
+from flexmm.design.kernels_extra import (
+    dipoles_second,
+    from_hinge_frame,
+    harmonic_adjoint,
+    harmonic_pack,
+    harmonic_tangent,
+    harmonic_unpack,
+    joints_adjoint,
+    joints_tangent,
+    loaded_chain_pack,
+    loaded_chain_unpack,
+    loads_adjoint,
+    loads_tangent,
+    sheet_offsets,
+    sheet_pack,
+    sheet_unpack,
+    to_hinge_frame,
+    unit_angles,
+)
 from flexmm.models import laws as lw
+from flexmm.models.harmonic import HarmonicArgs
 from flexmm.models.hinge import (
     H_HALF_A,
     H_HALF_B,
@@ -45,8 +66,10 @@ from flexmm.models.hinge import (
     ChainArgs,
     param,
 )
+from flexmm.models.loads import LoadedChainArgs
 from flexmm.models.mass_kernels import MassArgs
 from flexmm.models.sheet_kernels import SheetArgs
+from flexmm.models.triangle_kernels import TriangleArgs
 
 # ---------------------------------------------------------------- rotating-squares chain
 
@@ -586,8 +609,7 @@ def _sheet_dofs(hax, n, a, b):
 def sheet_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0 per unit).
 
-    Hinges only: a sheet with dipoles or bistable joints is refused by ``design.gradient``
-    (its constant loads have no second derivatives).
+    Hinges only (θ0 at g2[:N]); with dipoles, joints and loads: ``sheet_full_adjoint``.
     """
     ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
     n = theta0.shape[0]
@@ -621,11 +643,12 @@ FAMILY_COLS = (H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT)
 
 
 def sheet_grid(args, ndof: int) -> tuple[int, int] | None:
-    """(n_cols, first y hinge) if the sheet's hinges are a grid without wraps and 3N DOFs, else None."""
+    """(n_cols, first y hinge) if the sheet's hinges are a grid without wraps and 3N DOFs and it
+    has no other terms, else None."""
     from flexmm.models.sheet_kernels import grid_layout
 
-    if not isinstance(args, SheetArgs):
-        return None
+    if not isinstance(args, SheetArgs) or args.dipoles[0].shape[0] or args.joints[0].shape[0] or args.loads[0].shape[0]:
+        return None  # dipoles, joints and loads: ``sheet_full_adjoint``
     n = args.theta0.shape[0]
     nc, x1, y0, y1 = grid_layout(args.hinge_a, args.hinge_b, args.hinge_axis, n)
     if nc == 0 or ndof != 3 * n or x1 != y0 or y1 != args.hinge_a.shape[0] or n // nc < 2:
@@ -898,22 +921,109 @@ def mass_tangent(q, args, dq, d1, d2, out):
         out[i] -= w
 
 
+# ---------------------------------------------------------------- models with more terms
+#
+# The sheet with dipoles, joints and loads, the loaded chain and rotating triangles: the hinge
+# kernels above plus the element kernels of ``kernels_extra`` (its docstring: the tables).
+
+
+@jit
+def sheet_full_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (the t2 vector)."""
+    n, o_s, o_core, o_off, o_pos, o_j, o_l, _ = sheet_offsets(args)
+    sheet_adjoint(q, args, lam, out, g1, g2)  # hinges; θ0 at g2[:n]
+    if args.dipoles[0].shape[0] > 0:
+        dipoles_second(q, args.dipoles, n, lam, g2, o_s, o_core, o_off, o_pos, False, out, g2)
+    joints_adjoint(q, n, args.joints, lam, out, g2, o_j)
+    loads_adjoint(args.loads, lam, g2, o_l)
+
+
+@jit
+def sheet_full_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: the t2 vector)."""
+    n, o_s, o_core, o_off, o_pos, o_j, o_l, _ = sheet_offsets(args)
+    sheet_tangent(q, args, dq, d1, d2, out)  # zeroes out; θ0 directions at d2[:n]
+    if args.dipoles[0].shape[0] > 0:
+        dipoles_second(q, args.dipoles, n, dq, d2, o_s, o_core, o_off, o_pos, True, out, d2)
+    joints_tangent(q, n, args.joints, dq, d2, o_j, out)
+    loads_tangent(args.loads, d2, o_l, out)
+
+
+@jit
+def loaded_chain_adjoint(q, args, lam, out, g1, g2):
+    """The chain's (site table: g2[:3N] as (N, 3)), then the loads' values (g2[3N:])."""
+    chain = args[0]
+    n = chain.site_prm.shape[0]
+    chain_adjoint(q, chain, lam, out, g1, g2[: 3 * n].reshape((n, 3)))
+    loads_adjoint(args[1], lam, g2, 3 * n)
+
+
+@jit
+def loaded_chain_tangent(q, args, dq, d1, d2, out):
+    chain = args[0]
+    n = chain.site_prm.shape[0]
+    chain_tangent(q, chain, dq, d1, d2[: 3 * n].reshape((n, 3)), out)
+    loads_tangent(args[1], d2, 3 * n, out)
+
+
+# Rotating triangles: the squares' hinge in each hinge's frame (``kernels_extra.to_hinge_frame``).
+
+
+@jit
+def triangle_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0)."""
+    n = args.theta0.shape[0]
+    cs, sn = np.empty(n), np.empty(n)
+    unit_angles(q, args.theta0, cs, sn)
+    ql, ll, ol = np.empty(6), np.empty(6), np.empty(6)
+    for h in range(args.hinge_a.shape[0]):
+        a, b, c, s = to_hinge_frame(q, lam, args, h, ql, ll, ol)
+        ga, gb = hinge_adjoint(ql, ll, ol, g1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, cs[a], sn[a], cs[b], sn[b])
+        from_hinge_frame(ol, n, a, b, c, s, out)
+        g2[a] -= ga
+        g2[b] -= gb
+
+
+@jit
+def triangle_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""
+    n = args.theta0.shape[0]
+    for k in range(out.shape[0]):
+        out[k] = 0.0
+    cs, sn = np.empty(n), np.empty(n)
+    unit_angles(q, args.theta0, cs, sn)
+    ql, dl, ol = np.empty(6), np.empty(6), np.empty(6)
+    for h in range(args.hinge_a.shape[0]):
+        a, b, c, s = to_hinge_frame(q, dq, args, h, ql, dl, ol)
+        hinge_tangent(ql, dl, d1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, cs[a], sn[a], cs[b], sn[b], d2[a], d2[b], ol)
+        from_hinge_frame(ol, n, a, b, c, s, out)
+
+
 # ---------------------------------------------------------------- dispatch
 
 
 @dataclass(frozen=True)
 class AdjointKernels:
-    """Second-derivative kernels of one args type and the names of its two parameter tables."""
+    """Second-derivative kernels of one args type and its two parameter tables: the names of two
+    fields of the args (``tables``), or, for a model whose parameters live in more places,
+    ``pack(args) -> (t1, t2)`` and ``unpack(args, t1, t2) -> args`` (e.g. t2 a vector of several
+    tables end to end; ``kernels_extra``)."""
 
     adjoint: Callable
     tangent: Callable
-    tables: tuple[str, str]
+    tables: tuple[str, str] | None = None
+    pack: Callable | None = None
+    unpack: Callable | None = None
 
 
 ADJOINT_KERNELS: dict[type, AdjointKernels] = {
     ChainArgs: AdjointKernels(chain_adjoint, chain_tangent, ("hinge_prm", "site_prm")),
     MassArgs: AdjointKernels(mass_adjoint, mass_tangent, ("bond_prm", "site_prm")),
-    SheetArgs: AdjointKernels(sheet_adjoint, sheet_tangent, ("hinge_prm", "theta0")),
+    SheetArgs: AdjointKernels(sheet_full_adjoint, sheet_full_tangent, pack=sheet_pack, unpack=sheet_unpack),
+    LoadedChainArgs: AdjointKernels(loaded_chain_adjoint, loaded_chain_tangent, pack=loaded_chain_pack,
+                                    unpack=loaded_chain_unpack),
+    TriangleArgs: AdjointKernels(triangle_adjoint, triangle_tangent, ("hinge_prm", "theta0")),
+    HarmonicArgs: AdjointKernels(harmonic_adjoint, harmonic_tangent, pack=harmonic_pack, unpack=harmonic_unpack),
 }
 
 
@@ -927,13 +1037,19 @@ def adjoint_kernels_of(args_type: type) -> AdjointKernels:
 
 def param_tables(args) -> tuple[np.ndarray, np.ndarray]:
     """The two differentiable parameter tables of a model's args."""
-    a, b = adjoint_kernels_of(type(args)).tables
+    k = adjoint_kernels_of(type(args))
+    if k.pack is not None:
+        return k.pack(args)
+    a, b = k.tables
     return getattr(args, a), getattr(args, b)
 
 
 def with_tables(args, t1: np.ndarray, t2: np.ndarray):
     """A copy of ``args`` with its two parameter tables replaced."""
-    a, b = adjoint_kernels_of(type(args)).tables
+    k = adjoint_kernels_of(type(args))
+    if k.unpack is not None:
+        return k.unpack(args, t1, t2)
+    a, b = k.tables
     return args._replace(**{a: t1, b: t2})
 
 

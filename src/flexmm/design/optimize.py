@@ -5,12 +5,15 @@ bounds), the objective (``objectives.Term`` list, a weighted sum) and optional c
 (``total_mass``: the lattice's total mass; ``mean``: the mean over the units of the values a
 variable writes — e.g. a stiffness field held at its start's mean, so the design is compared with
 the uniform lattice at equal mean stiffness — each equal to, or at most/least, its start value or
-a given one). Every evaluation is one velocity-Verlet run with checkpoints plus one adjoint sweep
+a given one). Every evaluation is one run with the scene's integrator (velocity Verlet, PEFRL or
+BM6: ``gradient.DIFFERENTIABLE``) with checkpoints plus one adjoint sweep
 (``gradient.Trajectory.gradient``), chained through the variables' map to the raw arrays. The
 optimiser is scipy's L-BFGS-B (bounds only), SLSQP (with only linear, ``mean``, constraints: every
-iterate keeps them) or trust-constr (with a total-mass constraint), on variables scaled by their
-start values. Each evaluation is appended to a history (an xarray dataset,
-``history.nc``, rewritten atomically); ``resume`` restarts from the best design in it.
+iterate keeps them), L-BFGS-B on values projected onto equal-mean constraints and the bounds
+(``MeanProjection``; the default above 100 values, e.g. one per hinge, where SLSQP's dense steps
+get slow) or trust-constr (with a total-mass constraint), on variables scaled by their start
+values. Each evaluation is appended to a history (an xarray dataset, ``history.nc``, rewritten
+atomically); ``resume`` restarts from the best design in it.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from flexmm.design.spec import load_spec, scene_data_of
 from flexmm.design.variables import (
     Design,
     Variable,
+    VariableError,
     element_values,
     finite_difference,
     worst_relative_error,
@@ -56,6 +60,9 @@ class Constraint(Strict):
 
 class OptimizerOptions(Strict):
     max_iterations: int = Field(40, ge=1, le=10_000)
+    mean_method: Literal["auto", "slsqp", "projection"] = Field("auto", description=(
+        "with only mean constraints, all equal: SLSQP, or L-BFGS-B on values projected onto the "
+        "constraints and bounds (auto: projection above 100 values, where SLSQP's dense steps get slow)"))
     tolerance: Positive = Field(1e-8, lt=1)
     sample_every: int = Field(1, ge=1, description="record the objective's DOFs every this many steps")
 
@@ -125,7 +132,12 @@ class DesignProblem:
             if c.kind == "mean" and c.variable not in names:
                 raise ConfigError([ConfigIssue(str(spec_path), None, f"constraints[{k}].variable",
                                                f"no variable {c.variable!r} (the variables are {', '.join(names)})")])
-        self.design = Design(data, spec.variables, where, source)
+        self._mean_weights: dict[str, np.ndarray] = {}
+        try:
+            self.design = Design(data, spec.variables, where, source)
+        except VariableError as err:
+            raise ConfigError([ConfigIssue(str(spec_path), None, f"variables[{err.index}].{err.field}",
+                                           err.detail)]) from None
         #: each constraint's target (its value, or its start value), computed once
         self.targets = [c.value if c.value is not None else self.constraint_value(c, self.design.x0)
                         for c in spec.constraints]
@@ -141,7 +153,8 @@ class DesignProblem:
         bound, obs = bind_terms(spec.objective, s)
         stride = spec.optimizer.sample_every
         nsteps = stride * max(1, math.ceil(self.problem.duration / self.problem.dt / stride - 1e-9))
-        self.traj = Trajectory(s.args, self.problem.terms, self.problem.dt, nsteps, stride, obs)
+        self.traj = Trajectory(s.args, self.problem.terms, self.problem.dt, nsteps, stride, obs,
+                               integrator=self.problem.scene.solver.integrator)
         self.objective = Objective(bound, self.traj.times * s.scales.time_s)
         rec, _ = self.traj.run(self.design.raw(self.design.x0))
         self.objective.normalise(rec, self.design.raw(self.design.x0))
@@ -174,10 +187,15 @@ class DesignProblem:
         k = [v.name for v in des.variables].index(name)
         var = des.variables[k]
         start = int(np.sum(des.sizes[:k]))
+        if name in self._mean_weights:
+            return self._mean_weights[name]
         w = np.zeros(des.x0.size)
-        for j in range(var.size):
+        if var.profile == "each":  # the mean over the elements
+            w[start : start + var.size] = 1.0 / var.size
+        for j in range(var.size if var.profile != "each" else 0):
             unit = np.eye(var.size)[j]
             w[start + j] = unit[0] if var.path is not None else element_values(des.base["lattice"], var, unit).mean()
+        self._mean_weights[name] = w
         return w
 
     def constraint_value(self, c: Constraint, x: np.ndarray) -> float:
@@ -192,6 +210,61 @@ class DesignResult:
     message: str
 
 
+class MeanProjection:
+    """The Euclidean projection of values onto their variables' mean constraints (w·x = m, all
+    equal) and bounds: x = clip(z + τ w, lo, hi) per constrained variable, τ the root of the
+    (nondecreasing, w ≥ 0) constraint; and its transpose Jacobian (on the unclipped values F:
+    I − w_F w_Fᵀ/(w_F·w_F), zero on the clipped ones). L-BFGS-B on z then keeps every evaluated
+    design on the constraints exactly (to rounding), at O(n) per step."""
+
+    def __init__(self, dp: DesignProblem):
+        self.lo, self.hi = dp.design.bounds
+        self.rows = []  # (indices, weights, target)
+        for c, target in zip(dp.spec.constraints, dp.targets):
+            w = dp.mean_weights(c.variable)
+            idx = np.flatnonzero(w)
+            self.rows.append((idx, w[idx], target))
+
+    def __call__(self, z: np.ndarray) -> tuple[np.ndarray, list]:
+        x = np.clip(np.asarray(z, float), self.lo, self.hi)
+        free = []
+        for idx, w, m in self.rows:
+            zi, lo, hi = z[idx], self.lo[idx], self.hi[idx]
+
+            def excess(t, w=w, zi=zi, lo=lo, hi=hi, m=m):
+                return float(w @ np.clip(zi + t * w, lo, hi)) - m
+
+            with np.errstate(invalid="ignore", divide="ignore"):
+                a = float(np.nanmin(np.where(w > 0, (lo - zi) / w, np.nan)))  # every value at its low bound
+                b = float(np.nanmax(np.where(w > 0, (hi - zi) / w, np.nan)))  # ... at its high bound
+            if not (np.isfinite(a) and np.isfinite(b)):  # unbounded: the plain shift, refined below
+                t = (m - w @ zi) / (w @ w)
+            elif excess(a) < 0 < excess(b):
+                from scipy.optimize import brentq
+
+                t = brentq(excess, a, b, xtol=1e-300, rtol=4 * np.finfo(float).eps)
+            else:  # the target is at (or beyond) what the bounds allow
+                t = a if excess(a) >= 0 else b
+            xi = np.clip(zi + t * w, lo, hi)
+            f = (xi > lo) & (xi < hi)
+            if f.any():  # the exact τ on the free set, so the mean holds to rounding
+                t = (m - w[~f] @ xi[~f] - w[f] @ zi[f]) / (w[f] @ w[f])
+                xi[f] = zi[f] + t * w[f]
+            x[idx] = xi
+            free.append(f)
+        return x, free
+
+    def pullback(self, g: np.ndarray, z: np.ndarray, free: list) -> np.ndarray:
+        """dJ/dz from dJ/dx at x = projection(z)."""
+        out = np.array(g, float)  # unconstrained values: x = z inside the bounds
+        for (idx, w, _), f in zip(self.rows, free):
+            gi = np.zeros(idx.size)
+            wf = w[f]
+            gi[f] = g[idx][f] - wf * (wf @ g[idx][f]) / (wf @ wf) if f.any() else 0.0
+            out[idx] = gi
+        return out
+
+
 def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callable | None = None,
              save: Callable[[History], None] | None = None) -> DesignResult:
     """Minimise the objective from the start values (or the best design of ``history``)."""
@@ -203,12 +276,22 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
     scale = np.where(des.x0 != 0, np.abs(des.x0), 1.0)
     lo, hi = des.bounds
     cache: dict[bytes, tuple[float, np.ndarray]] = {}
+    opts = dp.spec.optimizer
+    means = [c for c in dp.spec.constraints if c.kind == "mean"]
+    project = (means and len(means) == len(dp.spec.constraints) and all(c.relation == "equal" for c in means)
+               and len({c.variable for c in means}) == len(means)
+               and (opts.mean_method == "projection" or (opts.mean_method == "auto" and des.x0.size > 100)))
+    projection = MeanProjection(dp) if project else None
 
     def fg(z):
         key = np.asarray(z, float).tobytes()
         if key not in cache:
             x = z * scale
+            if projection is not None:
+                x, free = projection(x)
             value, grad, terms = dp.evaluate(x)
+            if projection is not None:
+                grad = projection.pullback(grad, z * scale, free)
             gz = grad * scale
             hist.add(x, value, terms, np.linalg.norm(gz))
             if save is not None:
@@ -218,7 +301,6 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
             cache[key] = (value, gz)
         return cache[key]
 
-    opts = dp.spec.optimizer
     bounds = Bounds(lo / scale, hi / scale)
     cons = []
     for c, target in zip(dp.spec.constraints, dp.targets):
@@ -230,7 +312,10 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
                                         ub / target, jac=lambda z, target=target: (dp.mass_gradient(z * scale) * scale
                                                                                    / target)[None, :]))
     z0 = x_start / scale
-    if cons and all(c.kind == "mean" for c in dp.spec.constraints):
+    if projection is not None:
+        res = minimize(fg, z0, jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": opts.max_iterations, "ftol": opts.tolerance, "gtol": opts.tolerance})
+    elif cons and all(c.kind == "mean" for c in dp.spec.constraints):
         # linear constraints only: SLSQP keeps every iterate on them (to rounding)
         slsqp = [{"type": "eq" if lc.lb[0] == lc.ub[0] else "ineq",
                   "fun": (lambda z, lc=lc: lc.A @ z - lc.lb) if lc.lb[0] > -np.inf else (lambda z, lc=lc: lc.ub - lc.A @ z),
@@ -259,12 +344,43 @@ def _feasible(dp: DesignProblem, x: np.ndarray, rtol: float = 1e-4) -> bool:
     return True
 
 
-def check_gradient(dp: DesignProblem) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(adjoint gradient, central differences, relative errors) of the objective at the start."""
+#: ``check_gradient`` compares every variable up to this many; beyond, a sample of them
+CHECK_ALL = 24
+
+
+def check_gradient(dp: DesignProblem, directions: int = 2, limit: int = CHECK_ALL
+                   ) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
+    """(labels, adjoint gradient, central differences, relative errors) of the objective at the
+    start: every variable, or with more than ``limit`` values (a per-element design) the
+    limit/2 with the largest |gradient × value| and as many others spread over the rest of
+    those above 1 % of the largest, plus
+    ``directions`` random directions (every value moved by ±(0.5–1) of its start; label
+    ``direction[k]``), whose derivative sums the whole gradient."""
     x0 = dp.design.x0
     _, g, _ = dp.evaluate(x0)
-    fd = np.array([finite_difference(dp.value, x0, k) for k in range(x0.size)])
-    return g, fd, worst_relative_error(g, fd)
+    labels = list(dp.design.labels)
+    if x0.size <= limit:
+        picked = np.arange(x0.size)
+    else:
+        size = np.abs(g * np.where(x0 != 0, np.abs(x0), 1.0))
+        top = np.argsort(-size)[: limit // 2]
+        # the others among values whose derivative is at least 1 % of the largest: a smaller one is
+        # below what central differences resolve to 1e-6 relative (the directions still sum them all)
+        rest = np.setdiff1d(np.flatnonzero(size >= 0.01 * size.max()), top)
+        spread = np.unique(np.linspace(0, rest.size - 1, min(rest.size, limit - top.size)).astype(int))
+        picked = np.concatenate([top, rest[spread]]) if rest.size else top
+    fd = [finite_difference(dp.value, x0, k) for k in picked]
+    adj = list(g[picked])
+    names = [labels[k] for k in picked]
+    if x0.size > limit:
+        rng = np.random.default_rng(1)
+        for k in range(directions):
+            d = np.where(x0 != 0, np.abs(x0), 1.0) * rng.uniform(0.5, 1.0, x0.size) * rng.choice([-1.0, 1.0], x0.size)
+            fd.append(finite_difference(lambda s, d=d: dp.value(x0 + s[0] * d), np.zeros(1), 0))
+            adj.append(float(g @ d))
+            names.append(f"direction[{k}]")
+    fd, adj = np.array(fd), np.array(adj)
+    return names, adj, fd, worst_relative_error(adj, fd)
 
 
 def load_design(path: str | Path) -> DesignProblem:

@@ -8,7 +8,7 @@ import numpy as np
 import yaml
 
 from flexmm.design.objectives import kinetic
-from flexmm.design.variables import element_values
+from flexmm.design.variables import element_values, unit_field
 from flexmm.io.atomic import write_text_atomic
 from flexmm.io.cf import write_netcdf
 from flexmm.io.provenance import provenance_attrs
@@ -100,14 +100,15 @@ def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Pa
     r = 0
     lattice = dp.design.base["lattice"]
     for var in profiles:
-        if var.profile == "spline2d":
-            fields = [element_values(lattice, var, dp.design.split(x)[dp.design.variables.index(var)])
-                      for x in (x_start, x_best)]
+        fields = [unit_field(dp.design, var, dp.design.split(x)[dp.design.variables.index(var)])
+                  for x in (x_start, x_best)]
+        if fields[0] is not None:  # a sheet's map (a hinge target of profile each: each unit's hinges' mean)
             lo, hi = min(f.min() for f in fields), max(f.max() for f in fields)
             for k, (f, label) in enumerate(zip(fields, ("start", "best"))):
                 ax = fig.add_subplot(grid[r, k])
                 im = ax.imshow(f, origin="lower", aspect="auto", vmin=lo, vmax=hi, cmap="viridis")
-                ax.set_title(f"{var.target} ({label}; mean {f.mean():.4g})", fontsize=9)
+                hinges = " of its hinges" if var.profile == "each" and f.size != var.size else ""
+                ax.set_title(f"{var.target}{hinges} ({label}; mean {f.mean():.4g})", fontsize=9)
                 ax.set_xlabel("column")
                 ax.set_ylabel("row")
                 _outline(ax, dp)
@@ -117,7 +118,7 @@ def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Pa
             for x, style, label in ((x_start, "--", "start"), (x_best, "-", "best")):
                 values = element_values(lattice, var, dp.design.split(x)[dp.design.variables.index(var)])
                 ax.plot(np.arange(values.size), values, style, marker=".", label=label)
-            ax.set_xlabel({"x": "unit (column)", "y": "row"}[var.axis])
+            ax.set_xlabel("element" if var.profile == "each" else {"x": "unit (column)", "y": "row"}[var.axis])
             ax.set_ylabel(var.target)
             ax.legend(fontsize=7)
         r += 1
@@ -184,7 +185,8 @@ def _mean_energy_map(dp, x: np.ndarray) -> np.ndarray:
 
     s = dp.problem.system
     tr = dp.traj
-    full = Trajectory(tr.args, tr.terms, tr.h, tr.nsteps, tr.stride, np.arange(s.ndof), tr.t0)
+    full = Trajectory(tr.args, tr.terms, tr.h, tr.nsteps, tr.stride, np.arange(s.ndof), tr.t0,
+                      integrator=tr.integrator)
     raw = dp.design.raw(x)
     rec, _ = full.run(raw, segment=tr.nsteps + 1)
     mass = np.where(raw.minv > 0, 1.0 / np.where(raw.minv > 0, raw.minv, 1.0), 0.0)

@@ -18,11 +18,26 @@ of state j) + S λv (of v_j), ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/�
 v_j = S (w + K f_j), prescribed DOFs included), two per-DOF sums from which ∂J/∂m⁻¹ and ∂J/∂c
 follow (``gradient.Trajectory.gradient``).
 
+Velocity-dependent external terms V (dashpots between DOFs, ground friction) enter as the
+engine takes them (``verlet._external``): at the predicted end-of-step velocity u. With G the
+rest of the force (model, contacts, applied forces) at (q', t'):
+
+    f_a = G + V(w),   u = S (w + K f_a),   f' = G + V(u),
+
+and the reverse of this part (``_prediction_adjoint``; ∂V/∂u is symmetric) runs between the
+closing kick's and the force's:
+
+    λu = (∂V/∂u) λf,  ∂J/∂θ += (∂V/∂θ)ᵀ λf          (θ: dashpot c, friction F₊, v_ε, F₋),
+    λw += S λu,  λf_a = K S λu,                      (∂J/∂S, ∂J/∂K folded as above, with u, f_a)
+    λw += (∂V/∂w) λf_a,  ∂J/∂θ += (∂V/∂θ)ᵀ λf_a,   then λG = λf + λf_a.
+
+The reverse step takes w, f_a and u again from the state before it (one more force evaluation
+per step, only in runs with velocity terms); the initial force G(q0) + V(v0) adds (∂V/∂v)ᵀλf
+to λv0 (``reverse_initial``).
+
 This is the exact transpose of the discrete step, so gradients agree with finite differences
 of the same discrete run to rounding. The objective enters through records of (q, v, f) at
 the observed DOFs every ``stride`` steps: their adjoints are added at those steps.
-Velocity-dependent external terms (dashpots, ground friction) are not differentiated
-(``design.gradient`` refuses them).
 """
 
 from __future__ import annotations
@@ -62,9 +77,13 @@ from flexmm.design.terms import (
     drive_force_tangent,
     prescribed_adjoint,
     prescribed_tangent,
+    velocity_adjoint,
+    velocity_tangent,
     waveform_dprm,
 )
-from flexmm.integrators.common import apply_prescribed, position_forces, total_force, waveform
+from flexmm.integrators.common import (apply_prescribed, has_velocity_terms, position_forces, total_force,
+                                       velocity_forces, waveform)
+from flexmm.models.kernels import model_force
 from flexmm.models.hinge import param
 
 
@@ -76,15 +95,43 @@ def initial_force(args, terms, q, v, f, t):
 
 
 @jit
-def verlet_step(args, terms, kick, pre, post, q, v, f, t, h):
-    """One damped velocity-Verlet step in place (``integrators.verlet``); returns t + h."""
+def velocity_scratch(terms, n):
+    """The (f_a, u) buffers of ``step_forces``: (n,) each with velocity-dependent terms, else empty."""
+    m = n if has_velocity_terms(terms) else 0
+    return np.empty(m), np.empty(m)
+
+
+@jit
+def step_forces(args, terms, kick, post, q, w, t, f, fa, u):
+    """The force f' = F(q', t', u) of a step as ``verlet._external`` takes it, at the drifted q'
+    and half-kicked w (prescribed DOFs set). Without velocity terms (``fa`` empty) u = w; with
+    them fa = G + V(w) (G: the model, contacts and applied forces; V: dashpots and friction),
+    u = S (w + K fa) the predicted end-of-step velocity, and f' = G + V(u)."""
+    dd, dm, dp = terms.drv_dof, terms.drv_mode, terms.drv_prm
+    model_force(q, args, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, terms.drv_shape, dp)
+    if fa.shape[0] == 0:
+        velocity_forces(w, f, terms.dash_ij, terms.dash_c, dd, dm, dp)
+        return
+    for k in range(q.shape[0]):
+        fa[k] = f[k]
+    velocity_forces(w, fa, terms.dash_ij, terms.dash_c, dd, dm, dp)
+    for k in range(q.shape[0]):
+        u[k] = (w[k] + kick[k] * fa[k]) * post[k]
+    velocity_forces(u, f, terms.dash_ij, terms.dash_c, dd, dm, dp)
+
+
+@jit
+def verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u):
+    """One damped velocity-Verlet step in place (``integrators.verlet``; ``fa``, ``u``: the
+    scratch of ``velocity_scratch``); returns t + h."""
     n = q.shape[0]
     for k in range(n):
         v[k] = pre[k] * v[k] + kick[k] * f[k]
         q[k] += h * v[k]
     t1 = t + h
     apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
-    total_force(args, q, v, t1, f, terms)
+    step_forces(args, terms, kick, post, q, v, t1, f, fa, u)
     for k in range(n):
         v[k] = (v[k] + kick[k] * f[k]) * post[k]
     return t1
@@ -111,13 +158,14 @@ def _checkpoint(q, v, f, t, CQ, CV, CF, CT, c):
 def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, Rq, Rv, Rf):
     """Run ``nsteps`` from (q, v, f, t) in place; checkpoint every ``seg`` steps (rows of CQ, CV,
     CF, CT), record (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
+    fa, u = velocity_scratch(terms, q.shape[0])
     for k in range(nsteps + 1):
         if k % seg == 0:
             _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
         if k % stride == 0:
             _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h)
+            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u)
     return t
 
 
@@ -128,13 +176,14 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
     v = v0.copy()
     f = f0.copy()
     t = t0
+    fa, u = velocity_scratch(terms, q.shape[0])
     for s in range(nsteps + 1):
         SQ[s, :] = q
         SV[s, :] = v
         SF[s, :] = f
         ST[s] = t
         if s < nsteps:
-            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h)
+            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u)
 
 
 #: the model part of a reverse step (``_force_adjoint``'s ``form``): ``model_adjoint`` into the
@@ -178,8 +227,38 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
 
 
 @jit
+def _prediction_adjoint(args, terms, kick, pre, post, q0, v0, f0, q1, t1, lf, lw, GK, GV, gdrv, gdash, s):
+    """Reverse of the velocity terms of the step (q0, v0, f0) → (q1, ·, f1) (``step_forces``),
+    given λf of f1 (``lf``, the S λv part included) and λw so far: λu = (∂V/∂u)ᵀ λf, then
+    u = S (w + K f_a) and f_a = G + V(w); λw and the folded factor sums (GK, GV) gain their
+    terms, ``lf`` becomes λG = λf + λf_a (what ``_force_adjoint`` takes), and dashpot and
+    friction parameters theirs. w, f_a and u are taken again from the state before the step
+    (one more force evaluation; ``s``: scratch (5, n))."""
+    n = q1.shape[0]
+    w, qs, fs, fa, u = s[0], s[1], s[2], s[3], s[4]
+    dd, dm, dp = terms.drv_dof, terms.drv_mode, terms.drv_prm
+    for k in range(n):
+        w[k] = pre[k] * v0[k] + kick[k] * f0[k]
+        qs[k] = q1[k]
+    apply_prescribed(qs, w, t1, dd, dm, terms.drv_shape, dp)
+    step_forces(args, terms, kick, post, qs, w, t1, fs, fa, u)
+    for k in range(n):
+        qs[k] = 0.0  # λu
+    velocity_adjoint(u, lf, qs, terms.dash_ij, terms.dash_c, gdash, dd, dm, dp, gdrv)
+    for k in range(n):  # u = S (w + K f_a): λw += S λu, λf_a = K S λu (into fs)
+        su = post[k] * qs[k]
+        lw[k] += su
+        GK[k] += su * fa[k]
+        GV[k] += su * u[k]
+        fs[k] = kick[k] * su
+    velocity_adjoint(w, fs, lw, terms.dash_ij, terms.dash_c, gdash, dd, dm, dp, gdrv)
+    for k in range(n):
+        lf[k] += fs[k]
+
+
+@jit
 def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-            lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, form):
+            lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
@@ -193,6 +272,8 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     chain = form[0] == FORM_CHAIN
+    vdep = has_velocity_terms(terms)
+    scratch = np.empty((5, n if vdep else 0))
     cols, with_kg, acc, r, fc = form[3], form[1] != 0, form[5], form[8], form[9]  # (passing the
     for j in range(nsteps, 0, -1):  # whole tuple on each step costs a reference count per array)
         q1 = SQ[j]
@@ -211,6 +292,9 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
             GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
+        if vdep:  # dashpots, friction at the predicted velocity (never with the chain's columns)
+            _prediction_adjoint(args, terms, kick, pre, post, SQ[j - 1], SV[j - 1], SF[j - 1], q1, t1, lf, lw, GK, GV,
+                                gdrv, gdash, scratch)
         if chain:  # ``_force_adjoint`` (no contacts here)
             chain_reverse_hessian(q1, cols, lf, r, acc)
             chain_reverse_gather(q1, cols, lf, r, acc, lq)
@@ -227,10 +311,13 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
 
 
 @jit
-def reverse_initial(args, terms, q0, t0, lq, lv, lf, g1, g2, gcon, gdrv, form):
-    """Reverse of ``initial_force``: (lq, lv) become the gradients w.r.t. the given q0, v0."""
+def reverse_initial(args, terms, q0, v0, t0, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form):
+    """Reverse of ``initial_force`` at (q0, v0) (driven DOFs prescribed): (lq, lv) become the
+    gradients w.r.t. the given q0, v0."""
     dg = np.empty(4)
     ddg = np.empty(4)
+    velocity_adjoint(v0, lf, lv, terms.dash_ij, terms.dash_c, gdash, terms.drv_dof, terms.drv_mode, terms.drv_prm,
+                     gdrv)
     _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
@@ -244,14 +331,15 @@ def _force_tangent(args, terms, q, t, dq, d1, d2, dcon, ddrv, out, dg, ddg):
 
 @jit
 def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
-            D1, D2, DK, DP, DS, DCON, DDRV, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF):
+            D1, D2, DK, DP, DS, DCON, DDRV, DDASH, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF):
     """Forward run with tangents along several parameter directions (index m of every D*).
 
     From the given (q, v) at t (prescribed and force computed here, as ``initial_force``),
     records the state at the observed DOFs every ``stride`` steps (Rq, Rv, Rf: (samples, obs))
     and its derivatives along each direction (TQ, TV, TF: (dirs, samples, obs)). D1, D2 are the
-    directions of the parameter tables, DK, DP, DS of the integrator factors, DCON, DDRV of the
-    contact and drive parameters, DQ0, DV0 of the initial state. Returns t.
+    directions of the parameter tables, DK, DP, DS of the integrator factors, DCON, DDRV, DDASH
+    of the contact, drive (and friction) and dashpot parameters, DQ0, DV0 of the initial state.
+    Returns t.
     """
     n = q.shape[0]
     nd = D1.shape[0]
@@ -263,11 +351,17 @@ def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
     dw = np.empty(n)
     tmp = np.empty(n)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    dij, dc = terms.dash_ij, terms.dash_c
+    fa, u = velocity_scratch(terms, n)
+    vdep = fa.shape[0] > 0
+    dfa = np.empty(fa.shape[0])
+    du = np.empty(fa.shape[0])
     apply_prescribed(q, v, t, dd, dm, ds, dp)
     total_force(args, q, v, t, f, terms)
     for m in range(nd):
         prescribed_tangent(t, dq[m], dv[m], dd, dm, ds, dp, DDRV[m], dg, ddg)
         _force_tangent(args, terms, q, t, dq[m], D1[m], D2[m], DCON[m], DDRV[m], df[m], dg, ddg)
+        velocity_tangent(v, dv[m], df[m], dij, dc, DDASH[m], dd, dm, dp, DDRV[m])
     w = np.empty(n)
     for k in range(nsteps + 1):
         if k % stride == 0:
@@ -288,10 +382,17 @@ def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
             q[i] += h * w[i]
         t1 = t + h
         apply_prescribed(q, w, t1, dd, dm, ds, dp)
-        total_force(args, q, w, t1, f, terms)
+        step_forces(args, terms, kick, post, q, w, t1, f, fa, u)
         for m in range(nd):
             prescribed_tangent(t1, dq[m], dv[m], dd, dm, ds, dp, DDRV[m], dg, ddg)
             _force_tangent(args, terms, q, t1, dq[m], D1[m], D2[m], DCON[m], DDRV[m], tmp, dg, ddg)
+            if vdep:  # f_a = G + V(w), u = S (w + K f_a), f' = G + V(u)
+                dfa[:] = tmp
+                velocity_tangent(w, dv[m], dfa, dij, dc, DDASH[m], dd, dm, dp, DDRV[m])
+                for i in range(n):
+                    du[i] = DS[m, i] * (w[i] + kick[i] * fa[i]) + post[i] * (
+                        dv[m, i] + DK[m, i] * fa[i] + kick[i] * dfa[i])
+                velocity_tangent(u, du, tmp, dij, dc, DDASH[m], dd, dm, dp, DDRV[m])
             for i in range(n):
                 df[m, i] = tmp[i]
                 dv[m, i] = DS[m, i] * (w[i] + kick[i] * f[i]) + post[i] * (

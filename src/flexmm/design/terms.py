@@ -1,10 +1,13 @@
-"""Derivatives of the external terms (``integrators.common``): contacts and drive waveforms.
+"""Derivatives of the external terms (``integrators.common``): contacts, drive waveforms,
+dashpots and ground friction.
 
 Contacts F_i = −d k δ₊^p, F_j = +d k δ₊^p with δ = d (q_i − q_j): their Hessian-vector and
 parameter products (k, p; the direction d is discrete). Drives: ∂g/∂prm and ∂ġ/∂prm of each
 waveform of ``common.SHAPES`` — the amplitude for every shape, and the timing: T of
 ``half_sine``/``smooth_step``, σ and t_c of ``gaussian``, ω of ``harmonic`` (its ramp and stop
-times get zero derivatives).
+times get zero derivatives). Velocity forces (``common.velocity_forces``): dashpots
+F_i = c (u_j − u_i) = −F_j, linear in u and c; friction −L tanh(u/v_ε) with L = F₊ for u > 0,
+else F₋, smooth in (u, F₊, v_ε, F₋) except at u = 0 when F₊ ≠ F₋ (``gradient.check_differentiable``).
 """
 
 from __future__ import annotations
@@ -167,3 +170,51 @@ def contact_tangent(q, dq, out, con_ij, con_prm, dcon):
             w = k * p * delta ** (p - 1.0) * d * (dq[i] - dq[j]) + dcon[c, 0] * dp + k * dp * math.log(delta) * dcon[c, 1]
             out[i] -= d * w
             out[j] += d * w
+
+
+@jit
+def _friction_d(prm, x):
+    """φ(x) = −L tanh(x/ε) of ``common._friction`` (L = F₊ for x > 0, else F₋): dφ/dx and
+    ∂φ/∂(F₊, ε, F₋) — the derivatives of the branch the engine takes (at x = 0 the F₋ side)."""
+    eps = prm[1]
+    th = math.tanh(x / eps)
+    sech2 = 1.0 - th * th
+    level = prm[0] if x > 0.0 else prm[2]
+    return -level * sech2 / eps, level * sech2 * x / (eps * eps), -th, x > 0.0
+
+
+@jit
+def velocity_adjoint(u, lam, out, dash_ij, dash_c, gdash, drv_dof, drv_mode, drv_prm, gdrv):
+    """Reverse of ``common.velocity_forces`` at the velocity u: add (∂F/∂u)ᵀλ to ``out`` (∂F/∂u
+    is symmetric), λ·∂F/∂c to ``gdash`` and λ·∂F/∂(F₊, v_ε, F₋) to the friction rows of ``gdrv``."""
+    for p in range(dash_ij.shape[0]):
+        i = dash_ij[p, 0]
+        j = dash_ij[p, 1]
+        dl = lam[j] - lam[i]
+        c = dash_c[p]
+        out[i] += c * dl
+        out[j] -= c * dl
+        gdash[p] -= (u[j] - u[i]) * dl
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == 2:
+            k = drv_dof[d]
+            slope, d_eps, d_level, forward = _friction_d(drv_prm[d], u[k])
+            out[k] += slope * lam[k]
+            gdrv[d, 1] += d_eps * lam[k]
+            gdrv[d, 0 if forward else 2] += d_level * lam[k]
+
+
+@jit
+def velocity_tangent(u, du, out, dash_ij, dash_c, ddash, drv_dof, drv_mode, drv_prm, ddrv):
+    """Add the variation of ``common.velocity_forces`` at u along (du, ddash, ddrv) to ``out``."""
+    for p in range(dash_ij.shape[0]):
+        i = dash_ij[p, 0]
+        j = dash_ij[p, 1]
+        fd = dash_c[p] * (du[j] - du[i]) + ddash[p] * (u[j] - u[i])
+        out[i] += fd
+        out[j] -= fd
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == 2:
+            k = drv_dof[d]
+            slope, d_eps, d_level, forward = _friction_d(drv_prm[d], u[k])
+            out[k] += slope * du[k] + d_eps * ddrv[d, 1] + d_level * ddrv[d, 0 if forward else 2]

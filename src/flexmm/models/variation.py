@@ -8,7 +8,8 @@ a bond belongs to the two sites it joins (``ends``):
   mean over its two sites of (the ramp if that site is in range, else the bond's current value);
 - interface: the same with the constant ``value`` on the lines ≥ position;
 - random: ``default_rng([seed, crc32(target)])`` draws one ε per element in element order;
-- defects: listed sites (and ``box``) are set or scaled; a bond target changes the bonds touching them.
+- defects: listed sites (and ``box``) are set or scaled; a bond target changes the bonds touching them;
+- values: one value per element (sites in site order, bonds in the order of ``ends``).
 
 Used by the rotating-squares chain and sheet, the chains, networks and grids of masses, and the
 render layer (which reads a run's config); so one YAML entry gives the same values everywhere.
@@ -63,6 +64,12 @@ def vary(v, old: np.ndarray, col: np.ndarray, row: np.ndarray, pair) -> np.ndarr
     if v.kind == "random":
         eps = noise(v, old.size)
         return old + eps if v.std is not None else old * (1.0 + eps)
+    if v.kind == "values":
+        if len(v.values) != old.size:
+            kind = "site" if pair is None else "bond (hinge)"
+            raise ValueError(f"a variation of kind values lists {len(v.values)} values for {v.target}; the lattice "
+                             f"has {old.size} elements of it (one value per {kind}, in element order)")
+        return np.array(v.values, float)
     if v.kind == "defects":
         hit = _selected_sites(v, col, row)
         mask = hit if pair is None else hit[pair[0]] | hit[pair[1]]

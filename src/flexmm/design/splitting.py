@@ -1,0 +1,327 @@
+"""Compiled forward (with checkpoints, or every state: the replay), reverse and tangent sweeps of a
+kick/drift splitting (PEFRL, BM6).
+
+One step of ``integrators.splitting.make_splitting_advance(kicks, drifts)`` with M drifts and
+M + 1 kicks (coefficients b_s, a_s; ``SPLITTINGS``) reads, with per-DOF kick factors
+e_s = exp(−γτ_s), g_s = τ_s φ(γτ_s)/m (τ_s = b_s h, γ = c m⁻¹, φ(x) = (1 − e^{−x})/x, the
+exact damped kick flow; e_s = 1, g_s = τ_s m⁻¹ undamped) and stage times T_s = t + Σ_{r≤s} a_r h:
+
+    for s = 0 … M−1:
+        v ← e_s v + g_s f_s                       (kick; skipped where b_s = 0)
+        q ← q + a_s h v                           (drift)
+        [q_D, v_D] ← [g(T_s), ġ(T_s)];  f_{s+1} = F(q, T_s; p)    (but not after a drift-first
+                                                  method's last drift)
+    v ← e_M v + g_M f_M                          (kick-first, "first same as last": f_M is f_0
+                                                  of the next step)
+    [q_D, v_D] ← [g(t + h), ġ(t + h)]
+
+A kick-first method (BM6) carries the force of the step's end to the next step, so a state is
+(q, v, f) as in velocity Verlet; a drift-first one (PEFRL) needs no force between steps, and the
+force it records, F(q_n, t_n), is one more evaluation at each recorded step, differentiated too.
+
+``reverse`` is the exact transpose of this step: it recomputes the step's stages from the state
+at its start (q, v, f, t: one more forward step, its stage positions, velocities and forces kept
+in (M + 1) × ndof scratch) and runs back through them — kick: λf_s += g_s λv, λv ← e_s λv,
+with ∂J/∂e_s += λv ⊙ v, ∂J/∂g_s += λv ⊙ f_s accumulated per kick (``GE``, ``GG``; the caller
+maps them to m⁻¹ and γ, ``kick_factor_gradients``); drift: λv += a_s h λq; force:
+λq += (∂F/∂q)ᵀλf, parameters (``sweeps._force_adjoint``); prescription: the adjoints of the
+overwritten q_D, v_D go to the drive parameters. ``tangent`` is the forward (tangent-linear)
+counterpart. Velocity-dependent external terms (dashpots, friction: the engine integrates the
+kick with them by an RK4 flow) are not differentiated (``gradient.Trajectory`` refuses them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexmm._jit import jit
+from flexmm.design.sweeps import (
+    _checkpoint,
+    _force_adjoint,
+    _force_tangent,
+    _inject,
+    _record,
+)
+from flexmm.design.terms import prescribed_adjoint, prescribed_tangent
+from flexmm.integrators import composition
+from flexmm.integrators import splitting as engine
+from flexmm.integrators.common import apply_prescribed, position_forces
+from flexmm.models.kernels import model_force
+
+#: (kicks, drifts) of the engine's splittings (``integrators.INTEGRATORS``); one kick more than drifts
+SPLITTINGS = {
+    "pefrl": ((0.0, *engine.KICKS, 0.0), engine.DRIFTS),
+    "blanes_moan6": composition.blanes_moan_6(),
+}
+
+
+def coefficients(name: str) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(kicks, drifts, fsal) of a splitting: fsal is True for a kick-first method."""
+    kicks, drifts = SPLITTINGS[name]
+    k = np.array(kicks, float)
+    return k, np.array(drifts, float), bool(k[0] != 0.0)
+
+
+# ---------------------------------------------------------------- the kick factors
+
+
+def _phi_and_slope(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """φ(x) = (1 − e^{−x})/x and φ'(x) (series below 1e-3, where the closed form cancels)."""
+    small = np.abs(x) < 1e-3
+    xs = np.where(small, 1.0, x)
+    phi = np.where(small, 1.0 - x / 2 + x * x / 6 - x**3 / 24, -np.expm1(-xs) / xs)
+    slope = np.where(small, -0.5 + x / 3 - x * x / 8 + x**3 / 30 - x**4 / 144, (np.exp(-xs) - phi) / xs)
+    return phi, slope
+
+
+def kick_factors(kicks: np.ndarray, minv: np.ndarray, damp: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """(E, G), (M + 1, ndof): e_s and g_s of every kick, computed as the engine does
+    (``splitting._kick_factors``, the same rounding); rows of zero kicks are unused."""
+    E = np.ones((kicks.size, minv.size))
+    G = np.zeros((kicks.size, minv.size))
+    for s, b in enumerate(kicks):
+        if b != 0.0:
+            E[s], G[s] = engine._kick_factors(minv, damp, float(b) * h)
+    return E, G
+
+
+def kick_factor_partials(kicks: np.ndarray, minv: np.ndarray, damp: np.ndarray, h: float) -> tuple:
+    """∂e_s/∂m⁻¹, ∂e_s/∂γ', ∂g_s/∂m⁻¹, ∂g_s/∂γ' per kick and DOF ((M + 1, ndof) each), γ' the
+    on-site damping coefficient (the raw ``damp``; the rate is γ = γ' m⁻¹)."""
+    tau = (kicks * h)[:, None]
+    x = damp * minv * tau
+    phi, slope = _phi_and_slope(x)
+    e = np.exp(-x)
+    return (-e * damp * tau, -e * minv * tau, tau * phi + minv * tau * slope * damp * tau,
+            minv * tau * slope * minv * tau)
+
+
+def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.ndarray]:
+    """(∂J/∂m⁻¹, ∂J/∂γ') from the kick-factor adjoints GE = ∂J/∂e_s, GG = ∂J/∂g_s."""
+    de_m, de_c, dg_m, dg_c = kick_factor_partials(kicks, minv, damp, h)
+    return (GE * de_m + GG * dg_m).sum(axis=0), (GE * de_c + GG * dg_c).sum(axis=0)
+
+
+# ---------------------------------------------------------------- the sweeps
+
+
+@jit
+def _stage_force(args, terms, q, v, t, f):
+    """Prescribe the driven DOFs at t, then the position-dependent total force (as the engine)."""
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    apply_prescribed(q, v, t, dd, dm, ds, dp)
+    model_force(q, args, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+
+
+@jit
+def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, store, VB, FK, QS, TS):
+    """One step in place (the module docstring); returns t + h. With ``store``: the velocity and
+    force entering each kick (rows of VB, FK) and each stage's position and time (QS, TS)."""
+    n = q.shape[0]
+    M = drifts.shape[0]
+    ts = t
+    for s in range(M):
+        if kicks[s] != 0.0:
+            if store:
+                VB[s, :] = v
+                FK[s, :] = f
+            for k in range(n):
+                v[k] = E[s, k] * v[k] + G[s, k] * f[k]
+        c = drifts[s] * h
+        for k in range(n):
+            q[k] += c * v[k]
+        ts += c
+        if s == M - 1 and not fsal:
+            break
+        _stage_force(args, terms, q, v, ts, f)
+        if store:
+            QS[s, :] = q
+            TS[s] = ts
+    if fsal:
+        if store:
+            VB[M, :] = v
+            FK[M, :] = f
+        for k in range(n):
+            v[k] = E[M, k] * v[k] + G[M, k] * f[k]
+    t1 = t + h
+    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    return t1
+
+
+@jit
+def _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
+    """Record (q, v, F(q, t))[obs]: a drift-first method evaluates the force here (into fr)."""
+    if fsal:
+        _record(q, v, f, obs, Rq, Rv, Rf, j)
+    else:
+        model_force(q, args, fr)
+        position_forces(q, t, fr, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                        terms.drv_prm)
+        _record(q, v, fr, obs, Rq, Rv, Rf, j)
+
+
+@jit
+def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
+            Rq, Rv, Rf):
+    """Run ``nsteps`` from (q, v, f, t) (f: the force at the start) in place; checkpoint every
+    ``seg`` steps, record every ``stride`` steps (as ``sweeps.forward``); returns t. With
+    ``seg`` = 1 it is the replay of a segment (every state kept)."""
+    n = q.shape[0]
+    e2 = np.empty((0, n))
+    e1 = np.empty(0)
+    fr = np.empty(n)
+    for k in range(nsteps + 1):
+        if k % seg == 0:
+            _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
+        if k % stride == 0:
+            if k == 0:  # the caller's f is the force at the start
+                _record(q, v, f, obs, Rq, Rv, Rf, 0)
+            else:
+                _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            t = split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, False, e2, e2, e2, e1)
+    return t
+
+
+@jit
+def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+            lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
+    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
+
+    (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (its records included)
+    and leave as those at step k0 (records included); lf is the adjoint of the force carried
+    into the next step (kick-first) or of the recorded force only (drift-first). The adjoints
+    of the parameters, of the kick factors (GE, GG: (M + 1, ndof)) accumulate.
+    """
+    n = lq.shape[0]
+    M = drifts.shape[0]
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    VB = np.empty((M + 1, n))
+    FK = np.empty((M + 1, n))
+    QS = np.empty((M, n))
+    TS = np.empty(M)
+    q = np.empty(n)
+    v = np.empty(n)
+    f = np.empty(n)
+    lk = np.empty(n)  # the adjoint of the force of the kick being reversed
+    for j in range(nsteps, 0, -1):
+        t1 = ST[j]
+        if not fsal:  # the recorded force F(q_j, t_j)
+            _force_adjoint(args, terms, SQ[j], t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+            lf[:] = 0.0
+        prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
+        q[:] = SQ[j - 1]
+        v[:] = SV[j - 1]
+        f[:] = SF[j - 1]
+        split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, ST[j - 1], h, True, VB, FK, QS, TS)
+        if fsal:  # the last kick: its force is the one carried to the next step
+            for k in range(n):
+                x = lv[k]
+                GE[M, k] += x * VB[M, k]
+                GG[M, k] += x * FK[M, k]
+                lk[k] = lf[k] + G[M, k] * x
+                lv[k] = E[M, k] * x
+        for s in range(M - 1, -1, -1):
+            if s < M - 1 or fsal:  # the force f_{s+1} = F(QS[s], TS[s]) after drift s
+                _force_adjoint(args, terms, QS[s], TS[s], lk, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+                prescribed_adjoint(TS[s], lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
+            c = drifts[s] * h
+            for k in range(n):
+                lv[k] += c * lq[k]
+            if kicks[s] != 0.0:
+                for k in range(n):
+                    x = lv[k]
+                    GE[s, k] += x * VB[s, k]
+                    GG[s, k] += x * FK[s, k]
+                    lk[k] = G[s, k] * x
+                    lv[k] = E[s, k] * x
+            else:
+                lk[:] = 0.0
+        lf[:] = lk  # kick-first: the adjoint of the force at the step's start; drift-first: 0
+        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+
+
+@jit
+def _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, out, dg, ddg):
+    """Tangents of the force at (q, t) along every direction m (rows of dq, D*, out)."""
+    for m in range(dq.shape[0]):
+        _force_tangent(args, terms, q, t, dq[m], D1[m], D2[m], DCON[m], DDRV[m], out[m], dg, ddg)
+
+
+@jit
+def _prescribed_tangents(t, dq, dv, terms, DDRV, dg, ddg):
+    for m in range(dq.shape[0]):
+        prescribed_tangent(t, dq[m], dv[m], terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, DDRV[m],
+                           dg, ddg)
+
+
+@jit
+def _kick_tangent(s, E, G, DE, DG, q, v, f, dv, df):
+    """Tangent of kick s (before the primal kick: it reads the velocity entering it), then the kick."""
+    n = v.shape[0]
+    for m in range(dv.shape[0]):
+        for k in range(n):
+            dv[m, k] = E[s, k] * dv[m, k] + DE[m, s, k] * v[k] + G[s, k] * df[m, k] + DG[m, s, k] * f[k]
+    for k in range(n):
+        v[k] = E[s, k] * v[k] + G[s, k] * f[k]
+
+
+@jit
+def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nsteps, stride, obs,
+            D1, D2, DCON, DDRV, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF):
+    """Forward run with tangents along several directions (index m of every D*), as
+    ``sweeps.tangent``; DE, DG (dirs, M + 1, ndof) are the directions of the kick factors.
+    From (q, v) at t (prescribed and force computed here); returns t."""
+    n = q.shape[0]
+    M = drifts.shape[0]
+    nd = D1.shape[0]
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    dq = DQ0.copy()
+    dv = DV0.copy()
+    df = np.zeros((nd, n))
+    fr = np.empty(n)
+    dfr = np.zeros((nd, n))
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    _stage_force(args, terms, q, v, t, f)
+    _prescribed_tangents(t, dq, dv, terms, DDRV, dg, ddg)
+    _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, df, dg, ddg)
+    for k in range(nsteps + 1):
+        if k % stride == 0:
+            j = k // stride
+            if fsal or k == 0:
+                _record(q, v, f, obs, Rq, Rv, Rf, j)
+                for m in range(nd):
+                    _record(dq[m], dv[m], df[m], obs, TQ[m], TV[m], TF[m], j)
+            else:
+                _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j)
+                _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, dfr, dg, ddg)
+                for m in range(nd):
+                    _record(dq[m], dv[m], dfr[m], obs, TQ[m], TV[m], TF[m], j)
+        if k == nsteps:
+            break
+        ts = t
+        for s in range(M):
+            if kicks[s] != 0.0:
+                _kick_tangent(s, E, G, DE, DG, q, v, f, dv, df)
+            c = drifts[s] * h
+            for i in range(n):
+                q[i] += c * v[i]
+            for m in range(nd):
+                for i in range(n):
+                    dq[m, i] += c * dv[m, i]
+            ts += c
+            if s == M - 1 and not fsal:
+                break
+            _stage_force(args, terms, q, v, ts, f)
+            _prescribed_tangents(ts, dq, dv, terms, DDRV, dg, ddg)
+            _forces_tangent(args, terms, q, ts, dq, D1, D2, DCON, DDRV, df, dg, ddg)
+        if fsal:
+            _kick_tangent(M, E, G, DE, DG, q, v, f, dv, df)
+        t += h
+        apply_prescribed(q, v, t, dd, dm, ds, dp)
+        _prescribed_tangents(t, dq, dv, terms, DDRV, dg, ddg)
+    return t

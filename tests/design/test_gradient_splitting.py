@@ -1,0 +1,179 @@
+"""Exact gradients through the symplectic splittings PEFRL and BM6 (``design.splitting``).
+
+The scenes, objective, directions and central differences are ``test_gradient``'s (velocity
+Verlet): the adjoint of each splitting must match central differences of the same discrete run
+to 1e-6 relative on every model kind, with damping (exact damped kicks), prescribed and applied
+drives at the stage times, the striker contact and checkpointed reverse sweeps; the forward
+sweep must be the engine's run; and the gradient of a smooth objective must converge to the
+continuous one at each method's order as h → 0.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+import yaml
+
+from flexmm.assemble import build_problem
+from flexmm.config import scene_from_dict
+from flexmm.design.fit import load_fit, solve
+from flexmm.design.gradient import GradientError, Trajectory, trajectory_of
+from flexmm.design.optimize import check_gradient, load_design
+from flexmm.integrators import INTEGRATORS
+from flexmm.integrators.common import total_force
+from flexmm.integrators.stepper import make_stepper
+
+from . import test_fit
+from .test_design import SCENE as DESIGN_SCENE
+from .test_design import TERMS, VARIABLES
+from .test_gradient import SCENES, _central, _directions, _objective, _problem
+
+SPLITTINGS = ("pefrl", "blanes_moan6")
+#: test_gradient's scenes: every model kind, damping, each drive shape and mode, the striker
+NAMES = ["chain-displacement-damped", "chain-force-shaker", "chain-gaussian-rotation", "mass-smooth-step-damped",
+         "mass-striker", "sheet-tilted-pulse-damped"]
+
+
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("name", NAMES)
+def test_adjoint_matches_central_differences(name, integrator):
+    problem = _problem(name)
+    traj, raw = trajectory_of(problem, nsteps=120, stride=5, integrator=integrator)
+    objective = _objective((traj.n_samples, traj.obs.size))
+    value, grad, _ = traj.gradient(raw, objective, segment=7)  # 18 checkpointed segments
+    assert value == pytest.approx(traj.value(raw, objective), rel=1e-13)
+    rng = np.random.default_rng(0)
+    for block, d in _directions(raw, rng, traj.terms.drv_shape).items():
+        arr = getattr(raw, block)
+        if not np.any(arr):  # e.g. no damping: a direction of unit size (1e-4 is lost in rounding)
+            d = d / np.abs(d).max()
+        base = arr.copy()
+        fd = _central(traj, raw, arr, base, d, objective)
+        adj = float(np.vdot(getattr(grad, block), d))
+        assert abs(adj - fd) < 1e-6 * abs(fd), (block, adj, fd)
+
+
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker", "sheet-tilted-pulse-damped"])
+def test_forward_sweep_is_the_engine_run(name, integrator):
+    """The differentiated run is the Stepper's run of that integrator (frame by frame), and the
+    recorded force is the total force at the recorded state (drift-first PEFRL evaluates it there)."""
+    problem = _problem(name)
+    traj, raw = trajectory_of(problem, nsteps=120, stride=40, integrator=integrator)
+    rec, _ = traj.run(raw)
+    stepper = make_stepper(problem, integrator, h=traj.h)
+    f = np.empty_like(stepper.q)
+    for j in range(1, 4):
+        stepper.advance(40)
+        for got, want in ((rec.q[j], stepper.q), (rec.v[j], stepper.v)):
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+        total_force(stepper.args, stepper.q, stepper.v, stepper.t, f, stepper.terms)
+        np.testing.assert_allclose(rec.f[j], f, rtol=0, atol=1e-12 * np.abs(f).max())
+
+
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+def test_checkpointing_does_not_change_the_gradient(integrator):
+    traj, raw = trajectory_of(_problem("chain-force-shaker"), nsteps=96, stride=4, integrator=integrator)
+    objective = _objective((traj.n_samples, traj.obs.size))
+    _, ref, _ = traj.gradient(raw, objective)  # every state kept
+    for segment in (1, 13, 96):
+        _, grad, _ = traj.gradient(raw, objective, segment=segment)
+        for (k, a), (_, b) in zip(grad.items(), ref.items()):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
+
+
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker"])
+def test_tangent_matches_adjoint(name, integrator):
+    """Forward sensitivities along a direction equal the adjoint gradient projected on it."""
+    traj, raw = trajectory_of(_problem(name), nsteps=100, stride=5, integrator=integrator)
+    objective = _objective((traj.n_samples, traj.obs.size), seed=3)
+    _, grad, rec = traj.gradient(raw, objective)
+    direction = raw.zeros()
+    for block, d in _directions(raw, np.random.default_rng(5), traj.terms.drv_shape).items():
+        setattr(direction, block, d)
+    rec2, (tan,) = traj.sensitivities(raw, [direction])
+    np.testing.assert_array_equal(rec2.q, rec.q)
+    np.testing.assert_allclose(rec2.f, rec.f, rtol=0, atol=1e-13 * np.abs(rec.f).max())
+    _, dq, dv, df, _ = objective(rec, raw)
+    projected = np.sum(dq * tan.q) + np.sum(dv * tan.v) + np.sum(df * tan.f)
+    assert projected == pytest.approx(grad.dot(direction), rel=1e-10)
+
+
+def test_gradient_converges_at_each_methods_order():
+    """dJ/d(raw) of a smooth objective (records at four fixed times, a prescribed Gaussian rotation
+    at the stage times) against the finest BM6 run: the measured order over a range of h where
+    the error is asymptotic and above rounding is 2, 4, 6 within 0.3. (Not the damping's
+    gradient: BM6's order conditions hold for forces of q only, docs/physics.md §3.)"""
+    problem = _problem("chain-gaussian-rotation")
+    T = problem.duration
+
+    def gradient(integrator, n):
+        traj, raw = trajectory_of(problem, nsteps=n, stride=n // 4, h=T / n, integrator=integrator)
+        _, g, _ = traj.gradient(raw, _objective((traj.n_samples, traj.obs.size)))
+        return np.concatenate([getattr(g, k).ravel() for k in ("t1", "t2", "minv", "drv", "q0", "v0")])
+
+    ref = gradient("blanes_moan6", 1024)
+    for integrator, steps in (("velocity_verlet", [64, 128, 256, 512]), ("pefrl", [32, 48, 64, 96, 128]),
+                              ("blanes_moan6", [16, 24, 32, 48, 64])):
+        err = [np.linalg.norm(gradient(integrator, n) - ref) / np.linalg.norm(ref) for n in steps]
+        order = -np.polyfit(np.log(steps), np.log(err), 1)[0]
+        assert abs(order - INTEGRATORS[integrator].order) < 0.3, (integrator, order, err)
+        assert max(err) < 1e-1 and min(err) > 1e-13  # on the asymptotic range, above rounding
+
+
+def test_integrators_without_adjoint_and_rk4_kicks_are_refused():
+    problem = _problem("chain-force-shaker")
+    for name in ("rk4", "dopri5", "implicit_midpoint"):
+        with pytest.raises(GradientError, match="velocity_verlet, pefrl, blanes_moan6"):
+            trajectory_of(problem, integrator=name)
+    data = {"name": "grad"} | copy.deepcopy(SCENES["mass-smooth-step-damped"])
+    data["damping"] = {"dashpot_n_s_per_m": 0.1}
+    dashpots = build_problem(scene_from_dict(data))
+    s = dashpots.system
+    with pytest.raises(GradientError, match="dashpots"):
+        Trajectory(s.args, dashpots.terms, dashpots.dt, 10, 1, [0], integrator="pefrl")
+
+
+def _pefrl(scene: dict) -> dict:
+    return copy.deepcopy(scene) | {"solver": dict(scene["solver"], integrator="pefrl")}
+
+
+def test_design_differentiates_the_scenes_integrator(tmp_path):
+    spec = {"name": "small_design", "scene": _pefrl(DESIGN_SCENE), "variables": VARIABLES,
+            "objective": [TERMS["peak_force"], TERMS["energy"]], "optimizer": {"max_iterations": 3}}
+    path = tmp_path / "design.yaml"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    design = load_design(path)
+    assert design.traj.integrator == "pefrl"
+    _, _, _, err = check_gradient(design)
+    assert np.all(err < 1e-6), err
+    spec["scene"]["solver"]["integrator"] = "rk4"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    with pytest.raises(GradientError, match="has no adjoint"):
+        load_design(path)
+
+
+def test_fit_with_pefrl_recovers_the_parameters(tmp_path, monkeypatch):
+    """A PEFRL scene fitted to its own noise-free trace (exact Jacobian from the PEFRL tangents)."""
+    monkeypatch.setattr(test_fit, "SCENE", _pefrl(test_fit.SCENE))
+    fit = load_fit(test_fit._spec(tmp_path))
+    assert fit.traj.integrator == "pefrl"
+    result = solve(fit)
+    np.testing.assert_allclose(result.x, [test_fit.TRUE["k_rot"], test_fit.TRUE["zeta"]], rtol=1e-6)
+
+
+
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "sheet-tilted-pulse-damped"])
+def test_column_forms_give_the_tables_gradient(name):
+    """The reverse sweep's force adjoint in column form (a chain-ordered chain, a grid sheet) and
+    the model's own adjoint kernel give the same gradient (PEFRL's reverse takes either)."""
+    traj, raw = trajectory_of(_problem(name), nsteps=60, stride=3, integrator="pefrl")
+    objective = _objective((traj.n_samples, traj.obs.size), seed=2)
+    _, ref, _ = dataclasses.replace(traj, column_sweeps=False).gradient(raw, objective)
+    _, grad, _ = traj.gradient(raw, objective)
+    for (k, a), (_, b) in zip(grad.items(), ref.items()):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
