@@ -42,6 +42,8 @@ CACHE_MB = 4.0
 #: chains of this many sites or more run forward with the engine's time-blocked kernel when it
 #: gives the same bits (``Trajectory._engine_run``)
 ENGINE_SITES = 4096
+#: ... if it stops (checkpoints, records) at most every this many steps
+ENGINE_MIN_STEPS = 8
 
 
 class GradientError(FlexmmError):
@@ -289,10 +291,11 @@ class Trajectory:
         ``chain_forward``'s bits and is faster: a damped chain (undamped, the engine adds the two
         half kicks between steps as one: a different rounding) of ``ENGINE_SITES`` sites or more
         (shorter ones fit in cache, where ``chain_forward`` is as fast), stopping at most every
-        ``TIME_BLOCK`` steps. Returns whether it ran."""
+        ``ENGINE_MIN_STEPS`` steps (each call is blocked in time over its steps). Returns whether
+        it ran."""
         n = raw.t2.shape[0]
         if (not (self.engine_forward and self.columns(raw)) or n < ENGINE_SITES
-                or min(seg, self.stride) < verlet_chain.TIME_BLOCK or not np.any(raw.damp * raw.minv != 0.0)
+                or min(seg, self.stride) < ENGINE_MIN_STEPS or not np.any(raw.damp * raw.minv != 0.0)
                 or not verlet_chain.fusable(args, q, raw.minv, raw.damp, terms)):
             return False
         tables = verlet_chain.prepare(args, raw.minv, raw.damp, self.h)
