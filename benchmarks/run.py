@@ -213,12 +213,12 @@ def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float, float]:
 
 
 #: flops per unit-step of the fused chain kernel, counted from its loops (no FMA: a multiply and
-#: an add are two): sincos 40, θ0 + θ 1, lateral hinges 1 (5 with lateral stretch), the hinge
+#: an add are two): sincos 36, θ0 + θ 1, lateral hinges 1 (5 with lateral stretch), the hinge
 #: to the right 27, the site's two hinges 3, kicks and drift 10
-CHAIN_FLOPS = 82
-#: flops per unit-step of velocity Verlet on the sheet: sincos 40, θ0 + θ 1, two hinges 2 × 30,
+CHAIN_FLOPS = 78
+#: flops per unit-step of velocity Verlet on the sheet: sincos 36, θ0 + θ 1, two hinges 2 × 30,
 #: the sites' sums 12, kicks and drift 15
-SHEET_FLOPS = 128
+SHEET_FLOPS = 124
 
 
 def _sheet_bytes(system) -> float:
