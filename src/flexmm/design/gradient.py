@@ -165,6 +165,8 @@ class Trajectory:
     replays and reverses with scalar parameters (``sweeps.chain_uniform_*``: ~0.7 of the column
     sweeps' cost), and a long damped one runs forward with the engine's fused kernel
     (``_engine_run``); ``uniform_sweeps=False``, ``engine_forward=False`` keep the column path.
+    A uniform grid sheet (``kernels.sheet_uniform``) reverses with its shared hinge law as
+    scalars (``sweeps.sheet_uniform_reverse``; ``uniform_sweeps=False``: the grid columns).
     ``column_sweeps=False`` runs the model's own adjoint kernel always."""
 
     args: tuple
@@ -176,8 +178,9 @@ class Trajectory:
     t0: float = 0.0
     #: run the column sweeps where they apply (``columns``); False: the general sweeps always
     column_sweeps: bool = True
-    #: a uniform chain's reverse sweep with scalar parameters (``sweeps.chain_uniform_reverse``)
-    #: where it applies; False: the column sweeps' (for comparisons)
+    #: a uniform chain's or grid sheet's reverse sweep with scalar parameters
+    #: (``sweeps.chain_uniform_reverse``, ``sheet_uniform_reverse``) where it applies; False: the
+    #: column sweeps' (for comparisons)
     uniform_sweeps: bool = True
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
