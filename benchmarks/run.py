@@ -837,7 +837,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     steps). DifFlexMM's jax.grad on the same-size sheet: ``benchmarks/difflexmm.py`` (a separate
     JAX environment; JAX is not a flexmm dependency). ``compare_old``: also the previous path,
     interleaved (a uniform chain's column sweeps and column forward run: ``Trajectory``'s
-    ``uniform_sweeps=False, engine_forward=False``), where the default path differs from it.
+    ``uniform_sweeps=False, engine_forward=False``; a uniform sheet's grid-column sweeps), where
+    the default path differs from it.
     """
     import tracemalloc
 
@@ -863,7 +864,11 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         raw = raw_of(system, terms, damp)
         old = dataclasses.replace(traj, uniform_sweeps=False, engine_forward=False)
         runners = [lambda: st.advance(steps), lambda: traj.gradient(raw, objective)]
-        if compare_old and kind == "chain":
+        kick, pre, post = traj.bind(raw)[2:]
+        columns = traj.columns(raw)
+        uniform = (columns and traj._uniform(traj._columns(raw)[0], kick, pre, post) is not None
+                   or traj._sheet_uniform(raw, traj.form(raw), kick, pre, post) is not None)
+        if compare_old and (kind == "chain" or uniform):
             runners.append(lambda: old.gradient(raw, objective))
         for t in (traj, old):
             small = dataclasses.replace(t, nsteps=4, stride=4)
@@ -876,11 +881,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
         n = system.ndof
-        columns = traj.columns(raw)
         budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
         keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
         seg = max(1, math.isqrt(steps))
-        uniform = columns and traj._uniform(traj._columns(raw)[0], *traj.bind(raw)[2:]) is not None
         # the chain-column replay keeps (q, v) only; a uniform chain's also cos/sin of θ0+θ
         per_state = (3 if uniform or not columns else 2) * n * 8
         if keep_all:
@@ -908,7 +911,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
             row.update(previous_min_s=min(prev), previous_median_s=float(np.median(prev)),
                        previous_ratio_min=min(prev) / min(fwd), previous_ratio_median=float(np.median(prev) / np.median(fwd)),
                        previous_cpu_ratio_median=float(np.median(prev_cpu) / np.median(fwd_cpu)))
-            print(f"    previous path (column sweeps, column forward), interleaved: gradient {min(prev):.3g} s (wall "
+            print(f"    previous path (column sweeps, column forward; a sheet's grid columns), interleaved: gradient {min(prev):.3g} s (wall "
                   f"x{row['previous_ratio_min']:.2f} min, x{row['previous_ratio_median']:.2f} median; CPU "
                   f"x{row['previous_cpu_ratio_median']:.2f} median)")
         rows.append(row)

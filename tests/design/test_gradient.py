@@ -307,6 +307,35 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
         np.testing.assert_array_equal(a, b)
     objective = _objective((traj.n_samples, traj.obs.size), seed=4)
     refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
+    _assert_same_gradients(traj, refs, raw, objective)
+
+
+@pytest.mark.parametrize("excitation", ["shaker", "displacement"])
+def test_uniform_sheet_sweeps_match_the_general_sweeps(excitation):
+    """A uniform grid sheet's reverse sweep (the shared hinge law as scalars, signs per hinge;
+    integrator factors scalar per field under an applied force, per-DOF columns with a driven
+    edge), damped and driven, equals the general sweeps' and the grid columns' gradient to
+    rounding, checkpointed or not, the objective entering every 3 steps."""
+    data = {"name": "grad"} | copy.deepcopy(SCENES["sheet-tilted-pulse-damped"])
+    data.pop("imperfection")
+    if excitation == "shaker":
+        data["lattice"]["left"] = "free"
+        data["excitation"] = {"kind": "shaker", "end": "left", "amplitude_n": 5.0, "frequency_hz": 2000.0,
+                              "ramp_cycles": 1.0}
+    traj, raw = trajectory_of(build_problem(scene_from_dict(data)), nsteps=120, stride=3)
+    raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
+    kick, pre, post = traj.bind(raw)[2:]
+    sheet = traj._sheet_uniform(raw, traj.form(raw), kick, pre, post)
+    assert sheet is not None and all(isinstance(x, float) for x in sheet[3]) == (excitation == "shaker")
+    objective = _objective((traj.n_samples, traj.obs.size), seed=7)
+    refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
+    assert refs[1].form(raw)[0] == sweeps.FORM_GRID and refs[1]._sheet_uniform(raw, refs[1].form(raw), kick, pre,
+                                                                              post) is None
+    _assert_same_gradients(traj, refs, raw, objective)
+
+
+def _assert_same_gradients(traj, refs, raw, objective):
+    """traj's gradient equals each of refs' to rounding, checkpointed (segments of 11) or not."""
     for segment in (None, 11):
         _, grad, _ = traj.gradient(raw, objective, segment=segment)
         for other in refs:

@@ -28,11 +28,11 @@ import numpy as np
 from flexmm.design import splitting, sweeps
 from flexmm.design.kernels import (N_CA, N_F, N_R, N_V, adjoint_kernels_of, chain_add_columns, chain_columns,
                                    chain_ordered, chain_uniform, param_tables, sheet_grid, sheet_grid_add,
-                                   sheet_grid_columns, with_tables)
+                                   sheet_grid_columns, sheet_uniform, sheet_uniform_scratch, with_tables)
 from flexmm.errors import FlexmmError
 from flexmm.integrators import verlet_chain
 from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms, has_velocity_terms
-from flexmm.models.hinge import S_KG
+from flexmm.models.hinge import H_SIGN, S_KG
 
 
 #: a run whose states fit in this many MB keeps them all (no replay); larger runs checkpoint
@@ -165,6 +165,8 @@ class Trajectory:
     replays and reverses with scalar parameters (``sweeps.chain_uniform_*``: ~0.7 of the column
     sweeps' cost), and a long damped one runs forward with the engine's fused kernel
     (``_engine_run``); ``uniform_sweeps=False``, ``engine_forward=False`` keep the column path.
+    A uniform grid sheet (``kernels.sheet_uniform``) reverses with its shared hinge law as
+    scalars (``sweeps.sheet_uniform_reverse``; ``uniform_sweeps=False``: the grid columns).
     ``column_sweeps=False`` runs the model's own adjoint kernel always."""
 
     args: tuple
@@ -176,8 +178,9 @@ class Trajectory:
     t0: float = 0.0
     #: run the column sweeps where they apply (``columns``); False: the general sweeps always
     column_sweeps: bool = True
-    #: a uniform chain's reverse sweep with scalar parameters (``sweeps.chain_uniform_reverse``)
-    #: where it applies; False: the column sweeps' (for comparisons)
+    #: a uniform chain's or grid sheet's reverse sweep with scalar parameters
+    #: (``sweeps.chain_uniform_reverse``, ``sheet_uniform_reverse``) where it applies; False: the
+    #: column sweeps' (for comparisons)
     uniform_sweeps: bool = True
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
@@ -230,11 +233,18 @@ class Trajectory:
         u = chain_uniform(cols) if self.uniform_sweeps else None
         if u is None:
             return None
-        n = cols.shape[1]
-        fields = [a[sl] for a in (kick, post, pre) for sl in (slice(0, n), slice(n, None))]
-        if all(np.all(a == a[0]) for a in fields):
-            return u, tuple(float(a[0]) for a in fields)
-        return u, tuple(np.ascontiguousarray(a) for a in fields)
+        return u, _field_factors(kick, pre, post, 2)
+
+    def _sheet_uniform(self, raw: Raw, form: tuple, kick, pre, post) -> tuple | None:
+        """(shared law, x and y shear signs, integrator factors) of a uniform grid sheet's reverse
+        sweep (``sweeps.sheet_uniform_reverse``: no contacts, no velocity terms), or None."""
+        if not (self.uniform_sweeps and form[0] == sweeps.FORM_GRID and self.terms.con_ij.shape[0] == 0
+                and not has_velocity_terms(self.terms)):
+            return None
+        p = sheet_uniform(raw.t1, raw.t2)
+        if p is None:
+            return None
+        return p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(), _field_factors(kick, pre, post, 3)
 
     @property
     def n_samples(self) -> int:
@@ -347,6 +357,14 @@ class Trajectory:
 
             def reverse(SQ, SV, SF, ST, k0, m):
                 sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, self.h, k0, m, *urev)
+        elif (sheet := self._sheet_uniform(raw, form, kick, pre, post)) is not None:
+            p, sgx, sgy, fac = sheet
+            nc = form[1]
+            sr = sheet_uniform_scratch(n // 3, nc)
+            srev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gdrv, form[5], form[6], form[7], sr)
+
+            def reverse(SQ, SV, SF, ST, k0, m):
+                sweeps.sheet_uniform_reverse(terms, p, nc, sgx, sgy, fac, SQ, SV, SF, ST, self.h, k0, m, *srev)
         else:
             def reverse(SQ, SV, SF, ST, k0, m):
                 sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
@@ -502,6 +520,16 @@ class Trajectory:
                        stack("v0"),
                        rec.q, rec.v, rec.f, TQ, TV, TF)
         return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
+
+
+def _field_factors(kick, pre, post, nf: int) -> tuple:
+    """The integrator factors (K per field, then S, then P) of ``nf`` equal fields of DOFs:
+    scalars if each is constant on every field, else per-field columns."""
+    n = kick.size // nf
+    fields = [a[i * n : (i + 1) * n] for a in (kick, post, pre) for i in range(nf)]
+    if all(np.all(a == a[0]) for a in fields):
+        return tuple(float(a[0]) for a in fields)
+    return tuple(np.ascontiguousarray(a) for a in fields)
 
 
 def _stack(raw: Raw, directions: list[Raw], name: str) -> np.ndarray:

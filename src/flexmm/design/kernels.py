@@ -772,6 +772,134 @@ def sheet_grid_adjoint(q, theta0, nc, xc, yc, lam, out, acc_x, acc_y, acc_t0, r)
     _family(q, lam, cs, sn, yc, nc, n, 0, n, n - nc, r, acc_y, out, acc_t0)
 
 
+# ---------------------------------------------------------------- uniform grid sheets, fused reverse
+#
+# A grid sheet whose hinges all have the same law but for the shear sign (±1) and whose units
+# all have the same θ0 (``sheet_uniform``): the model part of the reverse step with the law's
+# parameters as scalars, in the chain's style (``chain_uniform_*``): per family one pass for
+# the strains' variations along λ, the Hessian products and the parameter products together
+# (``hinge_adjoint``'s algebra regrouped) into padded rows, one pass per family for the
+# hinge-parameter adjoints (kept per hinge: a design varies them), and one pass over the sites
+# gathering their four hinges. The row ends' dummy x hinges compute with the shared parameters
+# and are zeroed in the rows (their parameter adjoints are never read: ``sheet_grid_add``).
+
+#: rows of the uniform sheet reverse step's scratch (``sheet_uniform_scratch``): cos/sin; the x
+#: family's products (entry s + 1 for the hinge from site s); the y family's (entry s + n_cols);
+#: each family's strains and their variations (entry s)
+(W_COS, W_SIN, W_XP, W_XS, W_XA, W_XB, W_XK, W_YP, W_YS, W_YA, W_YB, W_YK, W_EL, W_ES, W_DL, W_DS) = range(16)
+N_W = 16
+
+
+def sheet_uniform(hprm: np.ndarray, theta0: np.ndarray) -> np.ndarray | None:
+    """The shared law (rest, h_A, h_B, k_l, k_s, k_θ, θ0) of a sheet whose hinges all have the
+    same parameters but for a shear sign of ±1 and whose units the same θ0, or None."""
+    cols = [H_REST, H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT]
+    law = hprm[:, cols]
+    if hprm.shape[0] == 0 or not (np.all(law == law[:1]) and np.all(np.abs(hprm[:, H_SIGN]) == 1.0)
+                                  and np.all(theta0 == theta0[:1])):
+        return None
+    return np.concatenate([law[0], theta0[:1]])
+
+
+@jit
+def sheet_uniform_scratch(n, nc):
+    """The scratch (N_W, n + n_cols) of ``sheet_uniform_adjoint``, its padding zeroed."""
+    return np.zeros((N_W, n + nc))
+
+
+@jit
+def _uniform_family(qla, qlb, qsa, qsb, qta, qtb, lla, llb, lsa, lsb, lta, ltb, ca, sa, cb, sb, sig, p, m,
+                    P_, S_, TA, TB, KD, el_, es_, dl_, ds_):
+    """Hinges k < m of a family (views from their A and B ends): the strains el, es and their
+    variations dl, ds along λ (kept for ``_uniform_family_params``), and the Hessian products:
+    k_l δl (P_), k_s δs (S_), at the two rotations without k_θ (TA, TB), k_θ δφ (KD)."""
+    rest, hA, hB, kl, ks, kt = p[0], p[1], p[2], p[3], p[4], p[5]
+    for k in range(m):
+        c_a, s_a, c_b, s_b, sg, l_a, l_b = ca[k], sa[k], cb[k], sb[k], sig[k], lta[k], ltb[k]
+        el = qlb[k] - qla[k] + rest - (hA * c_a + hB * c_b)
+        es = sg * (hB * s_b - hA * s_a) + (qsb[k] - qsa[k])
+        dl = llb[k] - lla[k] + hA * s_a * l_a + hB * s_b * l_b
+        ds = sg * (hB * c_b * l_b - hA * c_a * l_a) + (lsb[k] - lsa[k])
+        e = kl * el
+        pp = kl * dl
+        ss = ks * ds
+        fs = sg * (ks * es)
+        gs = sg * ss
+        wa = e * l_a - gs
+        ua = pp + fs * l_a
+        wb = e * l_b + gs
+        ub = pp - fs * l_b
+        P_[k] = pp
+        S_[k] = ss
+        TA[k] = hA * (s_a * ua + c_a * wa)
+        TB[k] = hB * (s_b * ub + c_b * wb)
+        KD[k] = kt * (l_a + l_b)
+        el_[k] = el
+        es_[k] = es
+        dl_[k] = dl
+        ds_[k] = ds
+
+
+@jit
+def _uniform_family_params(qta, qtb, lta, ltb, ca, sa, cb, sb, sig, p, m, el_, es_, dl_, ds_, acc):
+    """The family's hinge-parameter adjoints (``FAMILY_COLS`` rows of acc) from its strains."""
+    kl, ks = p[3], p[4]
+    a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
+    for k in range(m):
+        c_a, s_a, c_b, s_b, sg, l_a, l_b = ca[k], sa[k], cb[k], sb[k], sig[k], lta[k], ltb[k]
+        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
+        e = kl * el
+        pp = kl * dl
+        fs = sg * (ks * es)
+        gs = sg * (ks * ds)
+        a_rest[k] -= pp
+        a_ha[k] -= s_a * (e * l_a - gs) - c_a * (pp + fs * l_a)
+        a_hb[k] -= s_b * (e * l_b + gs) - c_b * (pp - fs * l_b)
+        a_kl[k] -= el * dl
+        a_ks[k] -= es * ds
+        a_kt[k] -= (qta[k] + qtb[k]) * (l_a + l_b)
+
+
+@jit
+def sheet_uniform_adjoint(q, lam, out, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r):
+    """``sheet_grid_adjoint`` of a uniform grid sheet (``sheet_uniform``'s p; the families' shear
+    signs sgx (n − 1), sgy (n − nc), 0 at the dummies): (∂F/∂q)ᵀλ added to ``out``, parameter
+    adjoints to the family accumulators and θ0's; r the scratch of ``sheet_uniform_scratch``."""
+    n = acc_t0.shape[0]
+    cs, sn = r[W_COS, :n], r[W_SIN, :n]
+    qu, qv, qt = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
+    lu, lv, lt = lam[:n], lam[n : 2 * n], lam[2 * n : 3 * n]
+    th0 = p[6]
+    for i in range(n):
+        s, c = sincos(th0 + qt[i])
+        cs[i] = c
+        sn[i] = s
+    el_, es_, dl_, ds_ = r[W_EL], r[W_ES], r[W_DL], r[W_DS]
+    m = n - 1  # x family: site s to s + 1, rows from entry 1
+    _uniform_family(qu, qu[1:], qv, qv[1:], qt, qt[1:], lu, lu[1:], lv, lv[1:], lt, lt[1:], cs, sn, cs[1:], sn[1:],
+                    sgx, p, m, r[W_XP, 1:], r[W_XS, 1:], r[W_XA, 1:], r[W_XB, 1:], r[W_XK, 1:], el_, es_, dl_, ds_)
+    _uniform_family_params(qt, qt[1:], lt, lt[1:], cs, sn, cs[1:], sn[1:], sgx, p, m, el_, es_, dl_, ds_, acc_x)
+    for e in range(0, n + 1, nc):  # the dummies at the rows' ends (and the padding)
+        for row in range(W_XP, W_XK + 1):
+            r[row, e] = 0.0
+    m = n - nc  # y family: site s to s + nc, rows from entry nc
+    _uniform_family(qv, qv[nc:], qu, qu[nc:], qt, qt[nc:], lv, lv[nc:], lu, lu[nc:], lt, lt[nc:], cs, sn, cs[nc:],
+                    sn[nc:], sgy, p, m, r[W_YP, nc:], r[W_YS, nc:], r[W_YA, nc:], r[W_YB, nc:], r[W_YK, nc:], el_,
+                    es_, dl_, ds_)
+    _uniform_family_params(qt, qt[nc:], lt, lt[nc:], cs, sn, cs[nc:], sn[nc:], sgy, p, m, el_, es_, dl_, ds_, acc_y)
+    xp, xs, xa, xb, xk = r[W_XP], r[W_XS], r[W_XA], r[W_XB], r[W_XK]
+    xp1, xs1, xa1, xk1 = r[W_XP, 1:], r[W_XS, 1:], r[W_XA, 1:], r[W_XK, 1:]
+    yp, ys, ya, yb, yk = r[W_YP], r[W_YS], r[W_YA], r[W_YB], r[W_YK]
+    yp1, ys1, ya1, yk1 = r[W_YP, nc:], r[W_YS, nc:], r[W_YA, nc:], r[W_YK, nc:]
+    ou, ov, ot = out[:n], out[n : 2 * n], out[2 * n : 3 * n]
+    for i in range(n):  # each site: A end of x hinge i and y hinge i, B end of x hinge i − 1 and y hinge i − nc
+        ou[i] += (xp1[i] - xp[i]) + (ys1[i] - ys[i])
+        ov[i] += (xs1[i] - xs[i]) + (yp1[i] - yp[i])
+        t = (xa1[i] + xb[i]) + (ya1[i] + yb[i])
+        ot[i] -= t + ((xk1[i] + xk[i]) + (yk1[i] + yk[i]))
+        acc_t0[i] -= t
+
+
 @jit
 def sheet_tangent(q, args, dq, d1, d2, out):
     """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""

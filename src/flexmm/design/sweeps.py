@@ -69,6 +69,7 @@ from flexmm.design.kernels import (
     model_adjoint,
     model_tangent,
     sheet_grid_adjoint,
+    sheet_uniform_adjoint,
 )
 from flexmm.design.terms import (
     contact_adjoint,
@@ -584,6 +585,16 @@ def swap_mxcsr(typingctx, value):
 
 
 @jit
+def flush_subnormals():
+    """Flush subnormal results and inputs to zero on this thread (x86: MXCSR FTZ/DAZ from the
+    default word); returns the previous word for ``swap_mxcsr`` to restore (−1 elsewhere)."""
+    csr = swap_mxcsr(np.int64(0x1F80))
+    if csr >= 0:
+        swap_mxcsr(csr | FTZ_DAZ)
+    return csr
+
+
+@jit
 def _uniform_update(lq, lv, lf, lw, kick, pre, h):
     """The close of a reverse step on one field: λw += h λq, λv = P λw, λf = K λw."""
     for k in range(lq.shape[0]):
@@ -619,9 +630,7 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, h, k0, nsteps, stride, 
     end): the adjoint of a long damped run decays through the subnormal range (below 2.2e-308),
     where vectorised arithmetic runs ~1.6× slower (100 units × 1e6 steps,
     benchmarks/run.py gradient); only entries that small change (to zero or near it)."""
-    csr = swap_mxcsr(np.int64(0x1F80))  # the default word, then with subnormals flushed
-    if csr >= 0:
-        swap_mxcsr(csr | FTZ_DAZ)
+    csr = flush_subnormals()
     n = lq.shape[0] // 2
     dg = np.empty(4)
     ddg = np.empty(4)
@@ -651,6 +660,72 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, h, k0, nsteps, stride, 
         if not pending:
             _uniform_update(lq[:n], lv[:n], lf[:n], lw[:n], fac[0], fac[4], h)
             _uniform_update(lq[n:], lv[n:], lf[n:], lw[n:], fac[1], fac[5], h)
+            _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+    if csr >= 0:
+        swap_mxcsr(csr)
+
+
+# ---------------------------------------------------------------- uniform grid sheets
+#
+# The reverse sweep of a uniform grid sheet (``kernels.sheet_uniform``): ``reverse``'s steps
+# (no contacts, no velocity terms) with the model part from the shared law
+# (``kernels.sheet_uniform_adjoint``) and the integrator factors as scalars per field (u, v, θ)
+# or per-DOF columns, through ``param``; the close of a step folded into the next step's
+# factor pass unless the objective enters between them, as ``chain_uniform_reverse``.
+
+
+@jit
+def _sheet_open(lq, lv, lf, lw, v, f, GK, GV, kick, pre, post, h, close):
+    """One field of a reverse step's products at the state (v, f): λw = S λv, λf += K S λv,
+    with z = λw + S λv: ∂J/∂K += z f, ∂J/∂P + S² ∂J/∂S += z v. If ``close``, first the close
+    of the step before (λw += h λq, λv = P λw, λf = K λw) in the same pass."""
+    if close:
+        for k in range(lq.shape[0]):
+            x = lw[k] + h * lq[k]
+            sl = param(post, k) * (param(pre, k) * x)
+            z = x + sl
+            GK[k] += z * f[k]
+            GV[k] += z * v[k]
+            lw[k] = sl
+            lf[k] = param(kick, k) * x + param(kick, k) * sl
+    else:
+        for k in range(lq.shape[0]):
+            sl = param(post, k) * lv[k]
+            z = lw[k] + sl
+            GK[k] += z * f[k]
+            GV[k] += z * v[k]
+            lw[k] = sl
+            lf[k] += param(kick, k) * sl
+
+
+@jit
+def sheet_uniform_reverse(terms, p, nc, sgx, sgy, fac, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+                          lq, lv, lf, lw, GK, GV, gdrv, acc_x, acc_y, acc_t0, r):
+    """``reverse`` of a uniform grid sheet (the same arguments where they exist; p, sgx, sgy, r:
+    ``kernels.sheet_uniform_adjoint``'s; ``fac`` = (K_u, K_v, K_θ, S_u, S_v, S_θ, P_u, P_v, P_θ)
+    scalars or per-field columns). Subnormals flushed to zero as ``chain_uniform_reverse``."""
+    csr = flush_subnormals()
+    n = lq.shape[0] // 3
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    pending = False
+    for j in range(nsteps, 0, -1):
+        q1, v1, f1, t1 = SQ[j], SV[j], SF[j], ST[j]
+        for c in range(3):
+            a, b = c * n, (c + 1) * n
+            _sheet_open(lq[a:b], lv[a:b], lf[a:b], lw[a:b], v1[a:b], f1[a:b], GK[a:b], GV[a:b], fac[c], fac[6 + c],
+                        fac[3 + c], h, pending)
+        sheet_uniform_adjoint(q1, lf, lq, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r)
+        if dd.shape[0]:
+            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
+            prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
+        k = k0 + j - 1
+        pending = j > 1 and k % stride != 0
+        if not pending:
+            for c in range(3):
+                a, b = c * n, (c + 1) * n
+                _uniform_update(lq[a:b], lv[a:b], lf[a:b], lw[a:b], fac[c], fac[6 + c], h)
             _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
     if csr >= 0:
         swap_mxcsr(csr)

@@ -87,11 +87,27 @@ def waveform_dprm(shape, prm, t, dg, ddg):
 
 
 @jit
+def _same_waveform(d, e, drv_shape, drv_prm):
+    """Whether drive d has the waveform (shape and parameters) of drive e (−1: none), so the
+    same derivatives at any t: an edge driven as one (a shaker's column of sites) evaluates
+    them once a step, not once a site."""
+    if e < 0 or drv_shape[d] != drv_shape[e]:
+        return False
+    for c in range(drv_prm.shape[1]):
+        if drv_prm[d, c] != drv_prm[e, c]:
+            return False
+    return True
+
+
+@jit
 def drive_force_adjoint(t, lf, drv_dof, drv_mode, drv_shape, drv_prm, gdrv, dg, ddg):
     """Add λ_f · ∂(applied forces)/∂prm to ``gdrv`` (force drives, mode 1)."""
+    last = -1  # the drive whose derivatives dg holds
     for d in range(drv_dof.shape[0]):
         if drv_mode[d] == 1:
-            waveform_dprm(drv_shape[d], drv_prm[d], t, dg, ddg)
+            if not _same_waveform(d, last, drv_shape, drv_prm):
+                waveform_dprm(drv_shape[d], drv_prm[d], t, dg, ddg)
+                last = d
             for c in range(4):
                 gdrv[d, c] += lf[drv_dof[d]] * dg[c]
 
@@ -100,10 +116,13 @@ def drive_force_adjoint(t, lf, drv_dof, drv_mode, drv_shape, drv_prm, gdrv, dg, 
 def prescribed_adjoint(t, lq, lv, drv_dof, drv_mode, drv_shape, drv_prm, gdrv, dg, ddg):
     """Reverse of ``common.apply_prescribed`` at t: the adjoints of the overwritten q, v of
     driven DOFs go to the drive parameters, and are zeroed."""
+    last = -1
     for d in range(drv_dof.shape[0]):
         if drv_mode[d] == 0:
             k = drv_dof[d]
-            waveform_dprm(drv_shape[d], drv_prm[d], t, dg, ddg)
+            if not _same_waveform(d, last, drv_shape, drv_prm):
+                waveform_dprm(drv_shape[d], drv_prm[d], t, dg, ddg)
+                last = d
             for c in range(4):
                 gdrv[d, c] += lq[k] * dg[c] + lv[k] * ddg[c]
             lq[k] = 0.0
