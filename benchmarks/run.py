@@ -940,22 +940,19 @@ def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> l
     cases = {"without dashpots": terms,
              "dashpots": terms._replace(dash_ij=np.stack([idx, idx + 1], axis=1), dash_c=np.full(n - 1, 0.02))}
     obs = np.arange(system.ndof - n, system.ndof)
-    runs = {}
-    for tag, tm in cases.items():
+    runners = []
+    for tm in cases.values():
         st = Stepper(INTEGRATORS["velocity_verlet"], system, tm, damp, 0.1, check_energy=False)
         st.warm_up()
         raw = raw_of(system, tm, damp)
         for seg in (None, 2):  # compile both reverse paths
             Trajectory(system.args, tm, 0.1, 4, 4, obs, column_sweeps=False).gradient(raw, objective, segment=seg)
-        runs[tag] = (st, Trajectory(system.args, tm, 0.1, steps, steps, obs, column_sweeps=False), raw, [], [])
-    for _ in range(repeats):
-        for st, traj, raw, fwd, grad in runs.values():
-            for runner, cpu in ((lambda: st.advance(steps), fwd), (lambda: traj.gradient(raw, objective), grad)):
-                c0 = time.process_time()
-                runner()
-                cpu.append(time.process_time() - c0)
+        traj = Trajectory(system.args, tm, 0.1, steps, steps, obs, column_sweeps=False)
+        runners += [lambda st=st: st.advance(steps), lambda traj=traj, raw=raw: traj.gradient(raw, objective)]
+    _, cpus = _interleaved_all(runners, repeats)  # both cases' forward and gradient in turn
     rows = []
-    for tag, (_, _, _, fwd, grad) in runs.items():
+    for k, tag in enumerate(cases):
+        fwd, grad = cpus[2 * k], cpus[2 * k + 1]
         row = {"case": tag, "n_units": n, "steps": steps, "load": os.getloadavg()[0],
                "forward_cpu_min_s": min(fwd), "forward_cpu_median_s": float(np.median(fwd)),
                "gradient_cpu_min_s": min(grad), "gradient_cpu_median_s": float(np.median(grad)),
