@@ -884,8 +884,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
         keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
         seg = max(1, math.isqrt(steps))
-        # the chain-column replay keeps (q, v) only; a uniform chain's also cos/sin of θ0+θ
-        per_state = (3 if uniform or not columns else 2) * n * 8
+        # the chain-column replay keeps (q, v) only; a uniform chain's also f and cos/sin of θ0+θ
+        per_state = (4 if uniform and columns else 3 if not columns else 2) * n * 8
         if keep_all:
             stored = (steps + 1) * 3 * n * 8
         else:

@@ -299,8 +299,10 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
         if replay is sweeps.chain_replay:
             replay(*extra, terms, kick, pre, post, CQ[1], CV[1], CF[1], CT[1], traj.h, 50, SQ, SV, ST)
         else:
-            replay(*extra, terms, CQ[1], CV[1], CF[1], CT[1], traj.h, 50, SQ, SV, ST, np.empty((51, 2, raw.t2.shape[0])),
-                   np.empty((N_V, raw.t2.shape[0] + 1)))
+            SF = np.empty((51, raw.q0.size))
+            replay(*extra, terms, CQ[1], CV[1], CF[1], CT[1], traj.h, 50, SQ, SV, SF, ST,
+                   np.empty((51, 2, raw.t2.shape[0])), np.empty((N_V, raw.t2.shape[0] + 1)))
+            np.testing.assert_array_equal(SF[-1], CF[2])  # the kept forces are the run's
         np.testing.assert_array_equal(SQ[-1], CQ[2])  # the replay ends on the next checkpoint
         states.append((SQ, SV, ST))
     for a, b in zip(*states):  # the uniform replay is the column replay, bit for bit

@@ -356,7 +356,7 @@ class Trajectory:
             SC = np.empty((0 if keep_all else seg + 1, 2, n // 2))
 
             def reverse(SQ, SV, SF, ST, k0, m):
-                sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, self.h, k0, m, *urev)
+                sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, self.h, k0, m, *urev)
         elif (sheet := self._sheet_uniform(raw, form, kick, pre, post)) is not None:
             p, sgx, sgy, fac = sheet
             nc = form[1]
@@ -372,12 +372,13 @@ class Trajectory:
             reverse(CQ, CV, CF, CT, 0, N)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1) if not chain else (
-                np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0, n)), np.empty(seg + 1))
+                np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0 if uniform is None else seg + 1, n)),
+                np.empty(seg + 1))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
                 if uniform is not None:
                     sweeps.chain_uniform_replay(u, form[1] != 0, fac, terms, CQ[c], CV[c], CF[c], CT[c], self.h, m,
-                                                SQ, SV, ST, SC, ur)
+                                                SQ, SV, SF, ST, SC, ur)
                 elif chain:
                     sweeps.chain_replay(form[3], form[1] != 0, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c],
                                         self.h, m, SQ, SV, ST)

@@ -436,10 +436,10 @@ def chain_reverse_gather(q, cols, lam, r, acc, out):
 #: entries of ``chain_uniform``'s parameter vector
 (U_REST, U_HA, U_HB, U_KL, U_KS, U_KT, U_TH0, U_KG, U_KR, U_C0, U_S0) = range(11)
 N_U = 11
-#: rows of the uniform reverse step's scratch (n + 1 entries; padded rows: hinge h at entry h + 1,
-#: entries 0 and n zero)
-(V_COS, V_SIN, V_FL, V_GA, V_GB, V_PL, V_TA, V_TB, V_KD, V_ZU, V_ZT) = range(11)
-N_V = 11
+#: rows of the uniform chain's scratch (n + 1 entries; padded rows: hinge h at entry h + 1,
+#: entries 0 and n zero): cos/sin, the force's hinge rows (replay), the reverse's hinge rows
+(V_COS, V_SIN, V_FL, V_GA, V_GB, V_PL, V_TA, V_TB, V_KD) = range(9)
+N_V = 9
 
 
 def chain_uniform(cols: np.ndarray) -> np.ndarray | None:
@@ -505,47 +505,21 @@ def chain_uniform_sites(qt, th0, cs, sn):
 
 
 @jit
-def chain_uniform_open(lq, lv, lf, lw, v, GV, z, kick, pre, post, h, close):
-    """One field of a reverse step's products at the state: λw = S λv, λf += K S λv, z = λw + S λv
-    (kept for ∂J/∂K += z f) and ∂J/∂P + S² ∂J/∂S += z v. If ``close``, first the close of the
-    step before (λw += h λq, λv = P λw, λf = K λw) in the same pass. K, P, S: scalars or columns."""
-    if close:
-        for k in range(lq.shape[0]):
-            x = lw[k] + h * lq[k]
-            sl = param(post, k) * (param(pre, k) * x)
-            zk = x + sl
-            z[k] = zk
-            GV[k] += zk * v[k]
-            lw[k] = sl
-            lf[k] = param(kick, k) * x + param(kick, k) * sl
-    else:
-        for k in range(lq.shape[0]):
-            sl = param(post, k) * lv[k]
-            zk = lw[k] + sl
-            z[k] = zk
-            GV[k] += zk * v[k]
-            lw[k] = sl
-            lf[k] += param(kick, k) * sl
-
-
-@jit
 def chain_uniform_hinges(q, lf, cs, sn, r, acc, u):
-    """Every hinge of a uniform chain at the state q, in one pass: its force (as
-    ``chain_force_columns``, the same bits), and along λf its share of −∇²E λ (rows V_PL: k_l δl,
-    V_TA, V_TB: at its two rotations without k_θ, V_KD: k_θ δφ) and its parameters' adjoints into
-    acc (``chain_reverse_hessian``'s algebra, σ dropped and the products regrouped)."""
+    """Every hinge of a uniform chain at the state q, in one pass: along λf its share of
+    −∇²E λ (rows V_PL: k_l δl, V_TA, V_TB: at its two rotations without k_θ, V_KD: k_θ δφ) and
+    its parameters' adjoints into acc (``chain_reverse_hessian``'s algebra, σ dropped and the
+    products regrouped), from its stretch and shear as ``chain_force_columns`` takes them."""
     n = r.shape[1] - 1
     rest, hA, hB, kl, ks, kt = u[U_REST], u[U_HA], u[U_HB], u[U_KL], u[U_KS], u[U_KT]
     qu, qt, lu, lt = q[:n], q[n:], lf[:n], lf[n:]
-    fl, ga, gb, pl, ta, tb, kd = (r[V_FL, 1:], r[V_GA, 1:], r[V_GB, 1:], r[V_PL, 1:], r[V_TA, 1:], r[V_TB, 1:],
-                                  r[V_KD, 1:])
+    pl, ta, tb, kd = r[V_PL, 1:], r[V_TA, 1:], r[V_TB, 1:], r[V_KD, 1:]
     a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[CA_REST], acc[CA_HA], acc[CA_HB], acc[CA_KL], acc[CA_KS], acc[CA_KT]
     for h in range(n - 1):
         ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
         qa, qb, lta, ltb = qt[h], qt[h + 1], lt[h], lt[h + 1]
-        el, x, e, xs, ga[h], gb[h] = _uniform_hinge_force(qu[h], qu[h + 1], qa, qb, ca, sa, cb, sb, rest, hA, hB,
-                                                          kl, ks, kt)
-        fl[h] = e
+        el, x, e, xs, _, _ = _uniform_hinge_force(qu[h], qu[h + 1], qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks,
+                                                  kt)
         dl = lu[h + 1] - lu[h] + hA * sa * lta + hB * sb * ltb  # δ(stretch), δ(unsigned shear)
         d = hB * cb * ltb - hA * ca * lta
         p = kl * dl
@@ -564,28 +538,24 @@ def chain_uniform_hinges(q, lf, cs, sn, r, acc, u):
         a_kl[h] -= el * dl
         a_ks[h] -= x * d
         a_kt[h] -= (qa + qb) * dp
-    for row in (V_FL, V_GA, V_GB, V_PL, V_TA, V_TB, V_KD):
+    for row in (V_PL, V_TA, V_TB, V_KD):
         r[row, 0] = 0.0
         r[row, n] = 0.0
 
 
 @jit
-def chain_uniform_gather(q, lf, lq, GK, cs, sn, r, acc, u):
-    """Every site of a uniform chain, in one pass: its force from its hinges and on-site term
-    (∂J/∂K += z f, z of ``chain_uniform_open``), its two hinges' and its on-site term's share
+def chain_uniform_gather(q, lf, lq, cs, sn, r, acc, u):
+    """Every site of a uniform chain, in one pass: its two hinges' and its on-site term's share
     of (∂F/∂q)ᵀλf added to λq, its parameters' adjoints (θ0, k_g, k_r) into acc."""
     n = r.shape[1] - 1
     kg, kr, c0, s0 = u[U_KG], u[U_KR], u[U_C0], u[U_S0]
     qt, lt = q[n:], lf[n:]
-    zu, zt = r[V_ZU], r[V_ZT]
-    fl, ga, gb, pl, ta, tb, kd = r[V_FL], r[V_GA], r[V_GB], r[V_PL], r[V_TA], r[V_TB], r[V_KD]
-    gku, gkt, ou, ot = GK[:n], GK[n:], lq[:n], lq[n:]
+    pl, ta, tb, kd = r[V_PL], r[V_TA], r[V_TB], r[V_KD]
+    ou, ot = lq[:n], lq[n:]
     a_th0, a_kg, a_kr = acc[CA_TH0], acc[CA_KG], acc[CA_KR]
     for i in range(n):
         c, s, qi, li = cs[i], sn[i], qt[i], lt[i]
         g = c0 - c
-        gku[i] += zu[i] * (fl[i + 1] - fl[i])
-        gkt[i] += zt[i] * (-(kg * g * s + kr * qi) - (gb[i] + ga[i + 1]))
         ou[i] += pl[i + 1] - pl[i]
         t = tb[i] + ta[i + 1]
         ot[i] -= t + (kd[i] + kd[i + 1]) + (kg * (s * s + g * c) + kr) * li

@@ -55,8 +55,6 @@ from flexmm.design.kernels import (
     U_TH0,
     V_COS,
     V_SIN,
-    V_ZT,
-    V_ZU,
     chain_force_columns,
     chain_reverse_gather,
     chain_reverse_hessian,
@@ -64,7 +62,6 @@ from flexmm.design.kernels import (
     chain_uniform_force,
     chain_uniform_gather,
     chain_uniform_hinges,
-    chain_uniform_open,
     chain_uniform_sites,
     model_adjoint,
     model_tangent,
@@ -83,7 +80,7 @@ from flexmm.design.terms import (
     waveform_dprm,
 )
 from flexmm.integrators.common import (apply_prescribed, has_velocity_terms, position_forces, total_force,
-                                       velocity_forces, waveform)
+                                       velocity_forces)
 from flexmm.models.kernels import model_force
 from flexmm.models.hinge import param
 
@@ -436,11 +433,20 @@ def _chain_close(v, f, kick, post):
 
 
 @jit
-def _chain_close_open(q, v, f, kick, pre, post, h, sq, sv, store):
-    """Closing kick of a step (if ``store``, the new state's q, v copied to sq, sv) and the
-    opening kick and drift of the next in one pass: the operations of ``_chain_close`` then
-    ``_chain_open``."""
-    if store:
+def _chain_close_open(q, v, f, kick, pre, post, h, sq, sv, sf, store):
+    """Closing kick of a step (if ``store``, the new state's q, v copied to sq, sv, and its f to
+    sf unless that is empty) and the opening kick and drift of the next in one pass: the
+    operations of ``_chain_close`` then ``_chain_open``."""
+    if store and sf.shape[0]:
+        for k in range(q.shape[0]):
+            x = (v[k] + param(kick, k) * f[k]) * param(post, k)
+            sq[k] = q[k]
+            sv[k] = x
+            sf[k] = f[k]
+            x = param(pre, k) * x + param(kick, k) * f[k]
+            v[k] = x
+            q[k] += h * x
+    elif store:
         for k in range(q.shape[0]):
             x = (v[k] + param(kick, k) * f[k]) * param(post, k)
             sq[k] = q[k]
@@ -486,7 +492,7 @@ def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, 
             if keep:
                 _chain_open(q, v, f, kick, pre, h)
             elif k > 0:
-                _chain_close_open(q, v, f, kick, pre, post, h, q, v, False)
+                _chain_close_open(q, v, f, kick, pre, post, h, q, v, f[:0], False)
     return t
 
 
@@ -513,7 +519,7 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
         _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
         ST[s] = t
         if s < nsteps:
-            _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], True)
+            _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], f[:0], True)
         else:
             _chain_close(v, f, kick, post)
             SQ[s, :] = q
@@ -530,11 +536,12 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
 
 
 @jit
-def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, ST, SC, r):
+def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST, SC, r):
     """``chain_replay`` of a uniform chain (``chain_uniform_reverse``'s ``u``, ``fac``, scratch r):
     the force from scalar parameters (``kernels.chain_uniform_force``) and the kicks with the
     factors per field, the same operations, so the same states bit for bit. Keeps each state's
-    cos/sin of θ0+θ too (SC[s] = (cos, sin), rows 1..nsteps), which the reverse step reads."""
+    force and cos/sin of θ0+θ too (SF[s], SC[s] = (cos, sin), rows 1..nsteps), which the
+    reverse step reads."""
     n = q0.shape[0] // 2
     q, v, f = _segment_start(q0, v0, f0, t0, SQ, SV, ST)
     t = t0
@@ -549,13 +556,14 @@ def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, 
         position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
         ST[s] = t
         if s < nsteps:
-            _chain_close_open(q[:n], v[:n], f[:n], fac[0], fac[4], fac[2], h, SQ[s, :n], SV[s, :n], True)
-            _chain_close_open(q[n:], v[n:], f[n:], fac[1], fac[5], fac[3], h, SQ[s, n:], SV[s, n:], True)
+            _chain_close_open(q[:n], v[:n], f[:n], fac[0], fac[4], fac[2], h, SQ[s, :n], SV[s, :n], SF[s, :n], True)
+            _chain_close_open(q[n:], v[n:], f[n:], fac[1], fac[5], fac[3], h, SQ[s, n:], SV[s, n:], SF[s, n:], True)
         else:
             _chain_close(v[:n], f[:n], fac[0], fac[2])
             _chain_close(v[n:], f[n:], fac[1], fac[3])
             SQ[s, :] = q
             SV[s, :] = v
+            SF[s, :] = f
 
 
 #: MXCSR bits: flush subnormal results to zero, treat subnormal inputs as zero (x86 SSE/AVX)
@@ -605,26 +613,41 @@ def _uniform_update(lq, lv, lf, lw, kick, pre, h):
 
 
 @jit
-def _applied_products(t, z, GK, dd, dm, ds, dp):
-    """∂J/∂K += z g of the applied forces g(t) (force drives), which the state's force includes
-    (z: (2, n), the u and θ fields)."""
-    n = z.shape[1]
-    for d in range(dd.shape[0]):
-        if dm[d] == 1:
-            g, _ = waveform(ds[d], dp[d], t)
-            k = dd[d]
-            GK[k] += z[k // n, k % n] * g
+def _field_open(lq, lv, lf, lw, v, f, GK, GV, kick, pre, post, h, close):
+    """One field of a uniform chain's or sheet's reverse step's products at the state (v, f):
+    λw = S λv, λf += K S λv, with z = λw + S λv: ∂J/∂K += z f, ∂J/∂P + S² ∂J/∂S += z v. If
+    ``close``, first the close of the step before (λw += h λq, λv = P λw, λf = K λw) in the same
+    pass. K, P, S: scalars or columns."""
+    if close:
+        for k in range(lq.shape[0]):
+            x = lw[k] + h * lq[k]
+            sl = param(post, k) * (param(pre, k) * x)
+            z = x + sl
+            GK[k] += z * f[k]
+            GV[k] += z * v[k]
+            lw[k] = sl
+            lf[k] = param(kick, k) * x + param(kick, k) * sl
+    else:
+        for k in range(lq.shape[0]):
+            sl = param(post, k) * lv[k]
+            z = lw[k] + sl
+            GK[k] += z * f[k]
+            GV[k] += z * v[k]
+            lw[k] = sl
+            lf[k] += param(kick, k) * sl
 
 
 @jit
-def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
                           lq, lv, lf, lw, GK, GV, gdrv, acc, r):
     """``reverse`` of a uniform chain (the same arguments where they exist; ``u``: its
     parameters, ``fac`` = (K_u, K_θ, S_u, S_θ, P_u, P_θ) scalars or per-field columns, acc the
-    column accumulator (N_CA, n), r scratch (N_V, n + 1), SC the replay's cos/sin of θ0+θ or
-    empty: then taken here). A step is four passes: cos/sin at the sites (unless kept); the integrator factors' products (with the close of the step before, unless
-    the objective enters between them); the hinges (force, Hessian and parameter products);
-    the sites (force, gathering, site parameters). Drives as ``reverse``.
+    column accumulator (N_CA, n), r scratch (N_V, n + 1), SF, SC the replay's forces and
+    cos/sin of θ0+θ, SC possibly empty: then taken here). A step is four passes: cos/sin at the
+    sites (unless kept); per field, the integrator factors' products (with the close of the step
+    before, unless the objective enters between them), ∂J/∂K from the kept force, applied
+    forces included (``_field_open``); the hinges (Hessian and parameter products); the sites
+    (gathering, site parameters). Drives as ``reverse``.
 
     Subnormal numbers are flushed to zero during the sweep (x86: MXCSR FTZ/DAZ, restored at the
     end): the adjoint of a long damped run decays through the subnormal range (below 2.2e-308),
@@ -635,24 +658,19 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, h, k0, nsteps, stride, 
     dg = np.empty(4)
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    z = r[V_ZU : V_ZT + 1, :n]
     pending = False
     for j in range(nsteps, 0, -1):
-        q1 = SQ[j]
-        t1 = ST[j]
+        q1, v1, f1, t1 = SQ[j], SV[j], SF[j], ST[j]
         if SC.shape[0]:
             cs, sn = SC[j, 0], SC[j, 1]
         else:
             cs, sn = r[V_COS, :n], r[V_SIN, :n]
             chain_uniform_sites(q1[n:], u[U_TH0], cs, sn)
-        chain_uniform_open(lq[:n], lv[:n], lf[:n], lw[:n], SV[j, :n], GV[:n], z[0], fac[0], fac[4], fac[2], h,
-                           pending)
-        chain_uniform_open(lq[n:], lv[n:], lf[n:], lw[n:], SV[j, n:], GV[n:], z[1], fac[1], fac[5], fac[3], h,
-                           pending)
+        _field_open(lq[:n], lv[:n], lf[:n], lw[:n], v1[:n], f1[:n], GK[:n], GV[:n], fac[0], fac[4], fac[2], h, pending)
+        _field_open(lq[n:], lv[n:], lf[n:], lw[n:], v1[n:], f1[n:], GK[n:], GV[n:], fac[1], fac[5], fac[3], h, pending)
         chain_uniform_hinges(q1, lf, cs, sn, r, acc, u)
-        chain_uniform_gather(q1, lf, lq, GK, cs, sn, r, acc, u)
+        chain_uniform_gather(q1, lf, lq, cs, sn, r, acc, u)
         if dd.shape[0]:
-            _applied_products(t1, z, GK, dd, dm, ds, dp)
             drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
             prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         k = k0 + j - 1
@@ -675,30 +693,6 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, ST, SC, h, k0, nsteps, stride, 
 
 
 @jit
-def _sheet_open(lq, lv, lf, lw, v, f, GK, GV, kick, pre, post, h, close):
-    """One field of a reverse step's products at the state (v, f): λw = S λv, λf += K S λv,
-    with z = λw + S λv: ∂J/∂K += z f, ∂J/∂P + S² ∂J/∂S += z v. If ``close``, first the close
-    of the step before (λw += h λq, λv = P λw, λf = K λw) in the same pass."""
-    if close:
-        for k in range(lq.shape[0]):
-            x = lw[k] + h * lq[k]
-            sl = param(post, k) * (param(pre, k) * x)
-            z = x + sl
-            GK[k] += z * f[k]
-            GV[k] += z * v[k]
-            lw[k] = sl
-            lf[k] = param(kick, k) * x + param(kick, k) * sl
-    else:
-        for k in range(lq.shape[0]):
-            sl = param(post, k) * lv[k]
-            z = lw[k] + sl
-            GK[k] += z * f[k]
-            GV[k] += z * v[k]
-            lw[k] = sl
-            lf[k] += param(kick, k) * sl
-
-
-@jit
 def sheet_uniform_reverse(terms, p, nc, sgx, sgy, fac, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
                           lq, lv, lf, lw, GK, GV, gdrv, acc_x, acc_y, acc_t0, r):
     """``reverse`` of a uniform grid sheet (the same arguments where they exist; p, sgx, sgy, r:
@@ -714,7 +708,7 @@ def sheet_uniform_reverse(terms, p, nc, sgx, sgy, fac, SQ, SV, SF, ST, h, k0, ns
         q1, v1, f1, t1 = SQ[j], SV[j], SF[j], ST[j]
         for c in range(3):
             a, b = c * n, (c + 1) * n
-            _sheet_open(lq[a:b], lv[a:b], lf[a:b], lw[a:b], v1[a:b], f1[a:b], GK[a:b], GV[a:b], fac[c], fac[6 + c],
+            _field_open(lq[a:b], lv[a:b], lf[a:b], lw[a:b], v1[a:b], f1[a:b], GK[a:b], GV[a:b], fac[c], fac[6 + c],
                         fac[3 + c], h, pending)
         sheet_uniform_adjoint(q1, lf, lq, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r)
         if dd.shape[0]:
