@@ -842,7 +842,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     """
     import tracemalloc
 
-    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, raw_of
+    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, _chain_segment, raw_of
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
@@ -883,9 +883,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         n = system.ndof
         budget = min(MEMORY_MB, CACHE_MB) if columns else MEMORY_MB  # what Trajectory.gradient does by default
         keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
-        seg = max(1, math.isqrt(steps))
         # the chain-column replay keeps (q, v) only; a uniform chain's also f and cos/sin of θ0+θ
         per_state = (4 if uniform and columns else 3 if not columns else 2) * n * 8
+        seg = _chain_segment(steps, n, per_state, MEMORY_MB) if columns else max(1, math.isqrt(steps))
         if keep_all:
             stored = (steps + 1) * 3 * n * 8
         else:

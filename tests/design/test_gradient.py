@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -21,7 +22,8 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.design import sweeps
-from flexmm.design.gradient import ENGINE_SITES, GradientError, Trajectory, raw_of, trajectory_of
+from flexmm.design.gradient import (ENGINE_MIN_STEPS, ENGINE_SITES, MEMORY_MB, SEGMENT_MB, GradientError, Trajectory,
+                                    _chain_segment, raw_of, trajectory_of)
 from flexmm.design.kernels import N_R, N_V, chain_columns, chain_force_columns
 from flexmm.design.sweeps import FORM_TABLES
 from flexmm.integrators.common import MODE_FRICTION, SHAPES
@@ -372,6 +374,21 @@ def test_checkpoint_segment_does_not_change_the_gradient():
     for (k, a), (_, b), (_, c) in zip(g1.items(), g2.items(), g3.items()):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(a).max(initial=0.0), err_msg=k)
         np.testing.assert_allclose(a, c, rtol=1e-12, atol=1e-12 * np.abs(a).max(initial=0.0), err_msg=k)
+
+
+@pytest.mark.parametrize("nsteps,ndof,state", [(1000, 20_000, 4), (4000, 2000, 4), (10**6, 200, 4),
+                                               (10**6, 20_000, 2), (1000, 200_000, 4)])
+def test_chain_segment_fits_the_cache_with_bounded_memory(nsteps, ndof, state):
+    """A chain's default segment: √N steps, or fewer where a segment's replayed states would pass
+    SEGMENT_MB, never below ENGINE_MIN_STEPS nor so short that the checkpoints pass the memory
+    budget (so a 10⁶-step run stays bounded)."""
+    seg = _chain_segment(nsteps, ndof, state * ndof * 8, MEMORY_MB)
+    assert 1 <= seg <= max(1, math.isqrt(nsteps))
+    fits = seg * state * ndof * 8 <= SEGMENT_MB * 1e6
+    checkpoints_mb = (nsteps // seg + 1) * 3 * ndof * 8 / 1e6
+    assert checkpoints_mb <= MEMORY_MB * 1.01 or seg == math.isqrt(nsteps)
+    if not fits:  # too long for the cache only where the floors hold it
+        assert seg in (math.isqrt(nsteps), ENGINE_MIN_STEPS) or checkpoints_mb >= 0.99 * MEMORY_MB
 
 
 @pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker", "chain-dashpots-damped",

@@ -12,9 +12,10 @@ forward run with checkpoints and one reverse sweep; ``sensitivities`` returns th
 derivatives along a few raw directions (forward mode, for least-squares Jacobians).
 
 Memory: a run whose states fit in ``MEMORY_MB`` keeps them all; a longer one keeps
-checkpoints every ``segment`` steps (default ⌈√nsteps⌉) of (q, v, f) and the reverse sweep
-replays one segment at a time, so a run of N steps keeps about 2√N states, plus the records
-(a 1e6-step run of a 100-unit chain: 10 MB instead of 4.8 GB).
+checkpoints every ``segment`` steps (default ⌈√nsteps⌉, on chains at most ``SEGMENT_MB`` of
+replayed states) of (q, v, f) and the reverse sweep replays one segment at a time, so a run of
+N steps keeps about 2√N states, plus the records (a 1e6-step run of a 100-unit chain: 10 MB
+instead of 4.8 GB).
 """
 
 from __future__ import annotations
@@ -44,6 +45,10 @@ CACHE_MB = 4.0
 ENGINE_SITES = 4096
 #: ... if it stops (checkpoints, records) at most every this many steps
 ENGINE_MIN_STEPS = 8
+#: a chain's default segment is shortened so that its replayed states take at most this many MB
+#: (they are read back by the reverse sweep from cache, not memory), down to ``ENGINE_MIN_STEPS``
+#: steps and as long as the checkpoints stay within the memory budget
+SEGMENT_MB = 8.0
 
 
 class GradientError(FlexmmError):
@@ -343,12 +348,14 @@ class Trajectory:
         chain = form[0] == sweeps.FORM_CHAIN
         budget = min(memory_mb, CACHE_MB) if chain else memory_mb
         keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= budget * 1e6
+        uniform = self._uniform(form[3], kick, pre, post) if chain else None
+        if chain and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
+            segment = _chain_segment(N, n, (4 if uniform is not None else 2) * n * 8, memory_mb)
         rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         lw = np.zeros(n)
         GK, GV = np.zeros(n), np.zeros(n)
         adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form)
-        uniform = self._uniform(form[3], kick, pre, post) if chain else None
         if uniform is not None:
             u, fac = uniform
             ur = np.empty((N_V, n // 2 + 1))
@@ -521,6 +528,16 @@ class Trajectory:
                        stack("v0"),
                        rec.q, rec.v, rec.f, TQ, TV, TF)
         return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
+
+
+def _chain_segment(nsteps: int, ndof: int, state_bytes: int, memory_mb: float) -> int:
+    """A chain's checkpoint segment: ⌈√nsteps⌉ steps, or fewer so that a segment's replayed states
+    (``state_bytes`` a step) take at most ``SEGMENT_MB``, but not fewer than ``ENGINE_MIN_STEPS``
+    nor than keeps the checkpoints ((q, v, f) every segment) within ``memory_mb``."""
+    seg = max(1, math.isqrt(max(nsteps, 1)))
+    fit = max(ENGINE_MIN_STEPS, int(SEGMENT_MB * 1e6 // state_bytes))
+    bounded = -(-(nsteps + 1) * 3 * ndof * 8 // int(memory_mb * 1e6))  # ceil: checkpoints within the budget
+    return min(seg, max(fit, bounded))
 
 
 def _field_factors(kick, pre, post, nf: int) -> tuple:
