@@ -47,6 +47,8 @@ class Predeform(Strict):
     theta_guess_rad: Finite = 0.0
     gradient_tolerance: Positive = Field(1e-10, description="on the nondimensional forces")
     max_steps: int = Field(2_000_000, ge=1, description="of the FIRE minimiser")
+    newton: bool = Field(True, description="polish FIRE's state with Newton steps to round-off (where the "
+                         "Hessian is positive definite)")
 
 
 # ---------------------------------------------------------------- magnets
