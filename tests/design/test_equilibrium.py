@@ -33,6 +33,8 @@ LATTICES = {
                                                                               "theta_guess_rad": 0.1}),
     # x held by the strain, y free: a free translation along y
     "sheet-strained": dict(SHEET, n_rows=3, n_cols=4, predeform={"strain_x": -0.02}),
+    "sheet-loaded": dict(SHEET, n_rows=3, n_cols=4, left="fixed",
+                         predeform={"loads": [{"end": "right", "force_n": 0.5}]}),
 }
 
 
@@ -85,6 +87,8 @@ def test_polish_keeps_fires_state_where_the_hessian_is_indefinite():
                         {"name": "strain", "path": "lattice.predeform.strain_x", "initial": -0.01}]),
     ("sheet-strained", [{"name": "k_rot", "target": "k_rot_n_m_per_rad", "initial": 2e-4},
                         {"name": "strain", "path": "lattice.predeform.strain_x", "initial": -0.02}]),
+    ("sheet-loaded", [{"name": "theta0", "target": "theta0_rad", "profile": "linear", "initial": [0.08, 0.12]},
+                      {"name": "load", "path": "lattice.predeform.loads.0.force_n", "initial": 0.5}]),
 ])
 def test_equilibrium_derivative_matches_extrapolated_builder_differences(name, variables):
     """The Jacobian rows of q0 (implicit function theorem) against Richardson-extrapolated
