@@ -22,6 +22,7 @@ from flexmm.design.optimize import check_gradient, load_design
 from flexmm.design.variables import Design, Variable, _unflat
 from flexmm.linalg import dense_matrix, force_hessian
 from flexmm.models import MODELS
+from flexmm.models.predeform import hessian
 
 SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
          "k_rot_n_m_per_rad": 2e-4, "areal_density_kg_m2": 20.0, "theta0_rad": 0.1}
@@ -65,6 +66,17 @@ def test_newton_polish_reaches_round_off_at_fires_equilibrium(name):
     free_axis = {"chain-loaded": 0, "sheet-strained": 1}.get(name)  # the field nothing holds
     if free_axis is not None:  # FIRE conserves its mean (zero here); the polish restores it
         assert abs(polished.q0[free_axis * n : (free_axis + 1) * n].sum()) < 1e-13
+
+
+@pytest.mark.parametrize("name", ["chain-loaded", "sheet-strained"])
+def test_coloured_hessian_equals_the_dense_one(name):
+    """The sparse Hessian from nine colourings of the units equals the one assembled column by
+    column (both central differences of the force along unit vectors or their sums)."""
+    system = _build(LATTICES[name])
+    free = system.predeformation.free
+    dense = dense_matrix(force_hessian(system.force, system.args, system.q0), system.ndof, free)
+    coloured = hessian(system, system.q0, free).toarray()
+    assert np.abs(coloured - dense).max() < 1e-8 * np.abs(dense).max()
 
 
 def test_polish_keeps_fires_state_where_the_hessian_is_indefinite():

@@ -144,6 +144,8 @@ def hessian(system: System, q: np.ndarray, free: np.ndarray) -> sparse.csr_array
     ``DENSE_MAX`` free DOFs, else None.
     """
     n, ndof, m = system.n_sites, q.size, free.size
+    if m == 0:
+        return None
     op = force_hessian(system.force, system.args, q)
     pos = np.full(ndof, -1)
     pos[free] = np.arange(m)
