@@ -444,7 +444,7 @@ class Design:
     def _differences(self, x: np.ndarray) -> sparse.csc_array:
         cols: dict[int, np.ndarray] = {}
         for k in np.flatnonzero(~self.each):
-            xp, xm, step = _pair(x, [k])
+            xp, xm, step = _pair(x, [k], self.bounds)
             self.jacobian_builds += 2
             cols[k] = _change(_flat(self.raw(xp)), _flat(self.raw(xm))) / (2.0 * step[0])
         if self.each.any():
@@ -458,7 +458,7 @@ class Design:
         idx = np.flatnonzero(self.each)
 
         def change(moved: np.ndarray) -> np.ndarray:
-            xp, xm, _ = _pair(x, idx[moved])
+            xp, xm, _ = _pair(x, idx[moved], self.bounds)
             self.jacobian_builds += 2
             return _change(_flat(self.raw(xp)), _flat(self.raw(xm)))
 
@@ -486,13 +486,19 @@ class Design:
         return np.asarray(self.jacobian_matrix(x, raw).T @ _flat(graw)).ravel()
 
 
-def _pair(x: np.ndarray, moved) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(x + h, x − h, h) with the builder's relative step h on the values ``moved`` only."""
+def _pair(x: np.ndarray, moved, bounds: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x + h, x − h, h) with the builder's relative step h on the values ``moved`` only; a value
+    within h of one of its ``bounds`` (low, high arrays) moves the pair inside them, (x, x + 2h)
+    or (x − 2h, x): the scene may not exist beyond (a damping coefficient below 0)."""
     moved = np.asarray(moved, np.int64)
     step = np.where(x[moved] != 0, BUILD_STEP * np.abs(x[moved]), BUILD_STEP)
+    shift = np.zeros(moved.size)
+    if bounds is not None:
+        lo, hi = bounds[0][moved], bounds[1][moved]
+        shift = np.where(x[moved] - step < lo, step, np.where(x[moved] + step > hi, -step, 0.0))
     xp, xm = x.copy(), x.copy()
-    xp[moved] += step
-    xm[moved] -= step
+    xp[moved] += step + shift
+    xm[moved] += shift - step
     return xp, xm, step
 
 
