@@ -212,13 +212,14 @@ def _triad_gbs(nbytes: float, repeats: int = 9) -> tuple[float, float, float]:
     return 24 * n / min(walls) / 1e9, 24 * n / float(np.median(walls)) / 1e9, 24 * n / max(min(cpus), 1e-9) / 1e9
 
 
-#: flops per unit-step of the fused chain kernel, counted from its loops (no FMA: a multiply and
-#: an add are two): sincos 36, θ0 + θ 1, lateral hinges 1 (5 with lateral stretch), the hinge
-#: to the right 27, the site's two hinges 3, kicks and drift 10
-CHAIN_FLOPS = 78
-#: flops per unit-step of velocity Verlet on the sheet: sincos 36, θ0 + θ 1, two hinges 2 × 30,
-#: the sites' sums 12, kicks and drift 15
-SHEET_FLOPS = 124
+#: flops per unit-step of the fused chain kernel, counted from its loops (a fused multiply-add,
+#: ``_jit.fma``, counts as two, as a multiply and an add): sincos 36 (17 of its 19 operations
+#: fused), θ0 + θ 1, lateral hinges 1 (5 with lateral stretch), the hinge to the right 25 (6 of
+#: 19 fused), the site's two hinges 3, kicks and drift 10
+CHAIN_FLOPS = 76
+#: flops per unit-step of velocity Verlet on the sheet: sincos 36, θ0 + θ 1, two hinges 2 × 29
+#: (6 fused multiply-adds each), the sites' sums 12, kicks and drift 15
+SHEET_FLOPS = 122
 
 
 def _sheet_bytes(system) -> float:

@@ -4,11 +4,14 @@ All numba flags live here: ``cache=True``, a fastmath subset that keeps NaN/inf 
 working (no ``nnan``/``ninf``), and ``FLEXMM_NO_JIT=1`` in the environment to run every
 kernel as plain Python for debugging.
 
-No reassociation and no contraction into fused multiply-adds: with them, a kernel inlined into
-a stepper compiled in the same process (a cold numba cache) and the same kernel loaded from the
-cache were optimised differently, and the same config gave results differing in the last bits
-(≈ 1e-15) depending on the cache state. Without them the operations keep their written order
-and rounding everywhere.
+No reassociation and no contraction into fused multiply-adds by the optimiser: with them, a
+kernel inlined into a stepper compiled in the same process (a cold numba cache) and the same
+kernel loaded from the cache were optimised differently, and the same config gave results
+differing in the last bits (≈ 1e-15) depending on the cache state. Without them the operations
+keep their written order and rounding everywhere. Fused multiply-adds are written out instead
+(``fma``): each is one ``llvm.fma`` (one rounding) where the compile target has FMA, or a
+multiply then an add (two roundings) where it has not, whatever the optimiser does around it,
+so a kernel's bits depend on the machine, never on the cache state.
 
 Compiled once per machine. No kernel takes another compiled function as an argument (models
 are reached through ``flexmm.models.kernels``, dispatched on the type of their arguments), so
@@ -38,6 +41,8 @@ from pathlib import Path
 
 import llvmlite.binding
 import numba
+from numba.core import types
+from numba.extending import intrinsic, overload
 
 NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
 
@@ -58,6 +63,49 @@ JIT_OPTIONS = {
 }
 
 prange = range if NO_JIT else numba.prange
+
+
+def _target_has_fma() -> bool:
+    """Whether numba compiles for a CPU with fused multiply-add instructions (the host, unless
+    NUMBA_CPU_NAME / NUMBA_CPU_FEATURES say otherwise: a generic target gets none)."""
+    features = numba.config.CPU_FEATURES
+    if features:
+        return "+fma" in features.split(",")
+    if numba.config.CPU_NAME not in (None, "", "host"):
+        return False
+    return bool(llvmlite.binding.get_host_cpu_features().get("fma", False))
+
+
+#: ``fma`` is one fused instruction (else a multiply and an add: never a slow library call)
+HAS_FMA = not NO_JIT and _target_has_fma()
+
+
+def fma(a, b, c):
+    """a·b + c in compiled kernels: rounded once (``llvm.fma``, vectorises to vfmadd) where the
+    target has FMA, else a·b then + c; the same in every compiled kernel and cache state.
+    In Python (``FLEXMM_NO_JIT``) a·b + c, rounded twice."""
+    return a * b + c
+
+
+if not NO_JIT:
+
+    @intrinsic
+    def _fma(typingctx, a, b, c):
+        if not all(isinstance(x, (types.Float, types.Integer)) for x in (a, b, c)):
+            return None
+        sig = types.float64(a, b, c)
+
+        def codegen(context, builder, signature, args):
+            x, y, z = (context.cast(builder, v, t, types.float64) for v, t in zip(args, signature.args))
+            if HAS_FMA:
+                return builder.fma(x, y, z)
+            return builder.fadd(builder.fmul(x, y), z)
+
+        return sig, codegen
+
+    @overload(fma, jit_options=JIT_OPTIONS)
+    def _fma_overload(a, b, c):
+        return lambda a, b, c: _fma(a, b, c)
 
 _PACKAGE = Path(__file__).resolve().parent
 #: packages and modules whose source is compiled (their text keys the cache directory)

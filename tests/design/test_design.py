@@ -535,3 +535,18 @@ def test_coded_differences_recover_a_sparse_map_and_refuse_a_dense_one():
     assert len(calls) < n / 2
     dense = rng.uniform(0.5, 2.0, (5, n))
     assert coded_differences(lambda moved: dense @ np.where(moved, 2.0 * steps, 0.0), n, steps) is None
+
+
+def test_builder_differences_stay_inside_the_bounds():
+    """A variable on a bound the scene cannot cross (a damping coefficient at 0, where an
+    optimiser often leaves it) is differentiated by a pair inside the bounds, not rejected as a
+    negative coefficient; the map is linear, so the column equals any secant."""
+    from flexmm.design.variables import Design, Variable, _flat
+
+    scene = copy.deepcopy(SCENE) | {"damping": {"viscous": {"coefficient_n_s_per_m": 0.0}}}
+    var = Variable(name="c", path="damping.viscous.coefficient_n_s_per_m", initial=0.0, bounds=(0.0, 1.0))
+    des = Design(scene, [var])
+    column = des.jacobian_matrix(des.x0).toarray()[:, 0]
+    secant = (_flat(des.raw(np.array([0.01]))) - _flat(des.raw(des.x0))) / 0.01
+    assert np.abs(secant).max() > 0
+    np.testing.assert_allclose(column, secant, rtol=1e-6, atol=1e-9 * np.abs(secant).max())

@@ -2,7 +2,9 @@
 
 Each case runs a fresh interpreter twice on an empty cache directory (NUMBA_CACHE_DIR): the
 first compiles and saves, the second must load the stepper's advance kernel from the cache
-(no cache miss) and produce bit-identical states. Also: an unwritable cache location falls
+(no cache miss) and produce bit-identical states: a graded chain by default (the fused kernel
+reading parameter columns; sincos and the hinge laws with explicit fused multiply-adds,
+``_jit.fma``, which must not depend on what was inlined where). Also: an unwritable cache location falls
 back to a temporary one, then to no caching, with a note that says so.
 """
 
@@ -25,8 +27,8 @@ from flexmm.integrators.stepper import make_stepper
 import flexmm._jit as J
 
 integrator, model = sys.argv[1], sys.argv[2]
-if model == "chain":
-    lat = json.loads(sys.argv[3])  # the LEGO chain of tests/conftest.py, 12 units
+if model in ("chain", "graded"):
+    lat = json.loads(sys.argv[3])  # the LEGO chain of tests/conftest.py, 12 units (graded: θ0 and k_θ vary)
     excitation = {"kind": "impact", "end": "left", "velocity_m_s": 1.0, "angular_velocity_rad_s": 50.0}
 else:  # the sheet, driven on its left column (Verlet fused with the sheet force)
     lat = {"kind": "rotating_squares_sheet", "n_rows": 5, "n_cols": 7, "a_m": 0.01, "theta0_rad": 0.35,
@@ -45,15 +47,22 @@ print(json.dumps({"hits": sum(stats.cache_hits.values()), "misses": sum(stats.ca
 """
 
 
+#: a graded LEGO chain: the fused kernel streams its site columns (sincos and hinges: ``_jit.fma``)
+GRADED = dict(LEGO_CHAIN, n_units=12, theta0_rad=0.1, lateral_stretch=True, variation=[
+    {"kind": "gradient", "target": "theta0_rad", "start": 0.05, "end": 0.3},
+    {"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 5e-4, "end": 2e-3}])
+
+
 def _run(integrator: str, env: dict, model: str = "chain") -> dict:
-    chain = json.dumps(dict(LEGO_CHAIN, n_units=12))
+    chain = json.dumps(GRADED if model == "graded" else dict(LEGO_CHAIN, n_units=12))
     out = subprocess.run([sys.executable, "-c", SCRIPT, integrator, model, chain], env=env, capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     return {**json.loads(out.stdout.strip().splitlines()[-1]), "stderr": out.stderr}
 
 
-@pytest.mark.parametrize(("integrator", "model"), [("velocity_verlet", "chain"),
+@pytest.mark.parametrize(("integrator", "model"), [("velocity_verlet", "graded"),
+                                                   pytest.param("velocity_verlet", "chain", marks=pytest.mark.slow),
                                                    pytest.param("pefrl", "chain", marks=pytest.mark.slow),
                                                    pytest.param("velocity_verlet", "sheet", marks=pytest.mark.slow)])
 def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator, model, tmp_path) -> None:
@@ -64,6 +73,7 @@ def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator,
     assert warm["misses"] == 0 and warm["hits"] >= 1
     assert warm["q"] == cold["q"] and warm["v"] == cold["v"]  # bit for bit
     assert model != "sheet" or cold["kernel"] == "sheet_verlet_advance"
+    assert model != "graded" or cold["kernel"].startswith("chain_verlet_advance")
     assert warm["compile_s"] < cold["compile_s"]
     print(f"{integrator}: compile {cold['compile_s']:.2f} s cold, {warm['compile_s']:.3f} s from cache")
 

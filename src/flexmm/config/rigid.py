@@ -38,7 +38,9 @@ class Predeform(Strict):
     ∓ε L/2 along the axis (L = distance between the ends) during relaxation and dynamics;
     ``loads`` are constant end forces that stay on. With neither, the lattice just relaxes (e.g.
     after a θ0 variation). ``theta_guess_rad`` starts the minimiser from a uniform staggered
-    rotation, which picks a branch past a buckling point.
+    rotation, which picks a branch past a buckling point. FIRE's state (residual below
+    ``gradient_tolerance``) is then polished by Newton steps to round-off where the Hessian is
+    positive definite (``newton``; docs/physics.md §1.2).
     """
 
     strain_x: Finite | None = Field(None, gt=-0.5, lt=0.5, description="nominal strain along x")
@@ -47,6 +49,8 @@ class Predeform(Strict):
     theta_guess_rad: Finite = 0.0
     gradient_tolerance: Positive = Field(1e-10, description="on the nondimensional forces")
     max_steps: int = Field(2_000_000, ge=1, description="of the FIRE minimiser")
+    newton: bool = Field(True, description="polish FIRE's state with Newton steps to round-off (where the "
+                         "Hessian is positive definite)")
 
 
 # ---------------------------------------------------------------- magnets

@@ -64,6 +64,7 @@ from flexmm.models.hinge import (
     S_KR,
     S_THETA0,
     ChainArgs,
+    chain_hinge_terms,
     param,
 )
 from flexmm.models.loads import LoadedChainArgs
@@ -313,19 +314,10 @@ def chain_force_columns(q, cols, with_kg, r, f):
     kl, ks, kt = cols[CC_KL], cols[CC_KS], cols[CC_KT]
     fl, ga, gb, el_, es_ = r[R_FL, 1:], r[R_GA, 1:], r[R_GB, 1:], r[R_EL, 1:], r[R_ES, 1:]
     for h in range(n - 1):
-        hA, hB, sg = ha[h], hb[h], sig[h]
-        ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
-        el = qu[h + 1] - qu[h] + rest[h] - (hA * ca + hB * cb)
-        x = hB * sb - hA * sa
-        es = sg * x
-        f_l = kl[h] * el
-        f_s = ks[h] * sg * x  # written as hinge.chain_hinge (rounding)
-        f_p = kt[h] * (qt[h] + qt[h + 1])
-        fl[h] = f_l
-        ga[h] = f_l * hA * sa - f_s * sg * hA * ca + f_p
-        gb[h] = f_l * hB * sb + f_s * sg * hB * cb + f_p
+        el, x, fl[h], _, ga[h], gb[h] = chain_hinge_terms(qu[h + 1] - qu[h], qt[h], qt[h + 1], cs[h], sn[h], cs[h + 1],
+                                                          sn[h + 1], rest[h], ha[h], hb[h], kl[h], ks[h], kt[h])
         el_[h] = el
-        es_[h] = es
+        es_[h] = sig[h] * x
     for row in (R_FL, R_GA, R_GB):
         r[row, 0] = 0.0
         r[row, n] = 0.0
@@ -347,9 +339,10 @@ def chain_strains(q, cols, r):
         s, c = sincos(th0[i] + qt[i])
         cs[i] = c
         sn[i] = s
-    for h in range(n - 1):
-        el_[h] = qu[h + 1] - qu[h] + rest[h] - (ha[h] * cs[h] + hb[h] * cs[h + 1])
-        es_[h] = sig[h] * (hb[h] * sn[h + 1] - ha[h] * sn[h])
+    for h in range(n - 1):  # as chain_force_columns (its force unused)
+        el_[h], x, _, _, _, _ = chain_hinge_terms(qu[h + 1] - qu[h], qt[h], qt[h + 1], cs[h], sn[h], cs[h + 1],
+                                                  sn[h + 1], rest[h], ha[h], hb[h], 0.0, 0.0, 0.0)
+        es_[h] = sig[h] * x
 
 
 @jit
@@ -459,12 +452,7 @@ def chain_uniform(cols: np.ndarray) -> np.ndarray | None:
 def _uniform_hinge_force(ua, ub, qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt):
     """A uniform hinge's stretch el, unsigned shear x, k_l el, k_s x and its (f_l, g_A, g_B) as
     ``chain_force_columns`` (the same bits: k_s σ x σ = k_s x exactly)."""
-    el = ub - ua + rest - (hA * ca + hB * cb)
-    x = hB * sb - hA * sa
-    e = kl * el
-    xs = ks * x
-    fp = kt * (qa + qb)
-    return el, x, e, xs, e * hA * sa - xs * hA * ca + fp, e * hB * sb + xs * hB * cb + fp
+    return chain_hinge_terms(ub - ua, qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt)
 
 
 @jit

@@ -1,8 +1,11 @@
 """Scene-level design variables and their map to a problem's raw arrays.
 
 A variable is either a scalar at a dotted ``path`` of the scene (``damping.viscous.damping_ratio``,
-``excitation.velocity_m_s``, ...) or a per-element ``target`` of the lattice's ``variation``
-list (``k_rot_n_m_per_rad``, ``mass_kg``, ``bond.k1_n_per_m``, ...) with a ``profile``:
+``excitation.velocity_m_s``, ``lattice.predeform.strain_x``, ...; a number picks an element of a
+list, ``*`` every element: ``lattice.predeform.loads.0.force_n`` one end load,
+``lattice.predeform.loads.*.force_n`` all of them, as balanced loads on free ends need) or a
+per-element ``target`` of the lattice's ``variation`` list (``k_rot_n_m_per_rad``, ``mass_kg``,
+``bond.k1_n_per_m``, ...) with a ``profile``:
 
 - ``uniform`` (1 value): every element takes it (a gradient variation with start = end);
 - ``linear`` (2 values): a linear ramp over the elements from the first to the last value;
@@ -43,6 +46,16 @@ its base parameters and every design is a runnable scene (``Design.scene_data``)
 variables to the raw arrays (``gradient.Raw``) is the scene builder itself; its derivative is
 taken by central differences of the builder (no time stepping, so it is cheap; relative error
 about 1e-9 for these smooth maps), and chained with the exact adjoint of the run.
+
+A predeformed lattice's initial state is the equilibrium the builder relaxes to
+(``models.predeform``: FIRE, then Newton steps to round-off), which moves with k_θ, the loads,
+the strain, θ0, ...: the rows of its free DOFs are replaced by their exact derivatives from the
+implicit function theorem (``Design._equilibrium``, ``equilibrium.equilibrium_tangents``), the
+differences of the builder giving only the explicit tables and the held DOFs. Where the Newton
+polish was not kept (an indefinite Hessian: ``Predeformation.newton_steps`` 0) or a launch has
+displaced the equilibrium's DOFs (a soliton on a predeformed chain), those rows stay the
+builder's differences through the relaxation (good to ~1e-8 after the polish, to FIRE's
+tolerance over λ_min without it).
 """
 
 from __future__ import annotations
@@ -60,6 +73,7 @@ from scipy import sparse
 from flexmm.assemble import build_system, damping_arrays
 from flexmm.config import scene_from_dict
 from flexmm.config.base import Finite, Strict
+from flexmm.design.equilibrium import equilibrium_tangents
 from flexmm.design.gradient import GradientError, Raw, raw_of
 from flexmm.integrators.common import Terms
 
@@ -71,7 +85,7 @@ class Variable(Strict):
     """One design or fit variable (see the module docstring)."""
 
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
-    path: str | None = Field(None, description="dotted scene path of a scalar (e.g. damping.viscous.damping_ratio)")
+    path: str | None = Field(None, description="dotted scene path of a scalar (e.g. damping.viscous.damping_ratio; a number indexes a list, * sets every element: lattice.predeform.loads.*.force_n)")
     target: str | None = Field(None, description="per-element lattice variation target (e.g. k_rot_n_m_per_rad)")
     profile: Literal["uniform", "linear", "spline", "spline2d", "each"] = "uniform"
     knots: int = Field(4, ge=2, le=200, description="spline knots (profile: spline; spline2d: along x)")
@@ -128,13 +142,30 @@ class VariableError(GradientError):
 
 
 def _set_path(data: dict, dotted: str, value) -> None:
-    *head, last = dotted.split(".")
-    for key in head:
-        nxt = data.get(key)
-        if not isinstance(nxt, dict):
-            nxt = data[key] = {}
-        data = nxt
-    data[last] = value
+    """Set ``value`` at a dotted path of a scene dict: a number indexes a list (``loads.0``), ``*``
+    goes through every element of one (``loads.*.force_n``: every load); missing mappings are
+    made. Raises ValueError for an index past a list's end or a list key on something else."""
+    key, _, rest = dotted.partition(".")
+    if isinstance(data, list):
+        if not rest:
+            raise ValueError("a list element is not a scalar: name one of its fields")
+        if key == "*" and data:
+            picked = data
+        elif key.isdigit() and int(key) < len(data):
+            picked = [data[int(key)]]
+        else:
+            raise ValueError(f"{key!r} is not an element of a list of {len(data)} (give an index or *)")
+        for item in picked:
+            _set_path(item, rest, value)
+        return
+    if not isinstance(data, dict):
+        raise ValueError(f"{key!r} goes into a {type(data).__name__}, not a mapping")
+    if not rest:
+        data[key] = value
+        return
+    if not isinstance(data.get(key), (dict, list)):
+        data[key] = {}
+    _set_path(data[key], rest, value)
 
 
 def spline_values(coefficients: np.ndarray, n: int) -> np.ndarray:
@@ -269,6 +300,7 @@ class Design:
         for var, idx in zip(self.variables, np.split(np.arange(self.x0.size), np.cumsum(self.sizes)[:-1])):
             self.each[idx] = var.profile == "each"
         self.scales = None
+        self._built: tuple | None = None  # (x, system) of the last build
         built = self.build(self.x0)
         self.scales = built[0].scales
         #: the raw arrays at the start (their shapes, to unflatten Jacobian columns)
@@ -303,9 +335,12 @@ class Design:
         """The base scene dict with the variables set to ``x``."""
         data = copy.deepcopy(self.base)
         lat = data.setdefault("lattice", {})
-        for var, vals in zip(self.variables, self.split(x)):
+        for k, (var, vals) in enumerate(zip(self.variables, self.split(x))):
             if var.path is not None:
-                _set_path(data, var.path, float(vals[0]))
+                try:
+                    _set_path(data, var.path, float(vals[0]))
+                except ValueError as err:
+                    raise VariableError(k, "path", f"{var.path!r}: {err}") from None
                 continue
             variations = lat.setdefault("variation", [])
             if var.profile in ("uniform", "linear"):
@@ -339,6 +374,7 @@ class Design:
             changed = [v.name for v in self.variables if v.path is not None]
             raise GradientError(f"variables {changed} change the lattice's reference scales; give a "
                                 "per-element target (profile: uniform) instead of the base parameter's path")
+        self._built = (np.array(x, float), system)
         return system, Terms(**terms), damp
 
     def raw(self, x: np.ndarray) -> Raw:
@@ -352,7 +388,9 @@ class Design:
         x = np.asarray(x, float)
         if raw is not None and self._affine is not None and self._predicts(x, raw):
             return self._affine[2]
-        out = self._differences(x)
+        built = self._built if self._built is not None and np.array_equal(self._built[0], x) else None
+        system = built[1] if built is not None else self.build(x)[0]  # before the differences' builds
+        out = self._equilibrium(x, system, self._differences(x))
         if raw is not None:
             self._affine = (x.copy(), raw, out)
         return out
@@ -374,10 +412,39 @@ class Design:
         x_ref, raw_ref, jac = self._affine
         return _close(raw, _unflat(_flat(raw_ref) + jac @ (x - x_ref), raw_ref), 1e-9)
 
+    def _equilibrium(self, x: np.ndarray, system, J: sparse.csc_array) -> sparse.csc_array:
+        """J with the rows of a predeformed equilibrium's free DOFs in q0 replaced by their exact
+        derivatives (``equilibrium.equilibrium_tangents``; ``system``: built at x), where they
+        apply: the Newton polish was kept and no launch has displaced those DOFs (q0 = the rest
+        state there)."""
+        pre = system.predeformation
+        if pre is None or pre.free is None or not np.array_equal(system.q0[pre.free], pre.rest_state[pre.free]):
+            return J
+        like = self.template
+        start = np.cumsum([0] + [a.size for _, a in like.items()])
+        at = {name: (start[k], start[k + 1]) for k, (name, _) in enumerate(like.items())}
+        J = sparse.csr_array(J)
+
+        def block(name, shape):
+            lo, hi = at[name]
+            return J[lo:hi].toarray().T.reshape((x.size, *shape))
+
+        tang = equilibrium_tangents(system, block("t1", like.t1.shape), block("t2", like.t2.shape),
+                                    block("q0", like.q0.shape))
+        if tang is None:
+            return sparse.csc_array(J)
+        rows = at["q0"][0] + pre.free
+        keep = np.ones(J.shape[0])
+        keep[rows] = 0.0
+        new = tang[:, pre.free].T  # (free, values)
+        r, c = np.nonzero(new)
+        return sparse.csc_array(sparse.diags_array(keep) @ J
+                                + sparse.csr_array((new[r, c], (rows[r], c)), shape=J.shape))
+
     def _differences(self, x: np.ndarray) -> sparse.csc_array:
         cols: dict[int, np.ndarray] = {}
         for k in np.flatnonzero(~self.each):
-            xp, xm, step = _pair(x, [k])
+            xp, xm, step = _pair(x, [k], self.bounds)
             self.jacobian_builds += 2
             cols[k] = _change(_flat(self.raw(xp)), _flat(self.raw(xm))) / (2.0 * step[0])
         if self.each.any():
@@ -391,7 +458,7 @@ class Design:
         idx = np.flatnonzero(self.each)
 
         def change(moved: np.ndarray) -> np.ndarray:
-            xp, xm, _ = _pair(x, idx[moved])
+            xp, xm, _ = _pair(x, idx[moved], self.bounds)
             self.jacobian_builds += 2
             return _change(_flat(self.raw(xp)), _flat(self.raw(xm)))
 
@@ -419,13 +486,19 @@ class Design:
         return np.asarray(self.jacobian_matrix(x, raw).T @ _flat(graw)).ravel()
 
 
-def _pair(x: np.ndarray, moved) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(x + h, x − h, h) with the builder's relative step h on the values ``moved`` only."""
+def _pair(x: np.ndarray, moved, bounds: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x + h, x − h, h) with the builder's relative step h on the values ``moved`` only; a value
+    within h of one of its ``bounds`` (low, high arrays) moves the pair inside them, (x, x + 2h)
+    or (x − 2h, x): the scene may not exist beyond (a damping coefficient below 0)."""
     moved = np.asarray(moved, np.int64)
     step = np.where(x[moved] != 0, BUILD_STEP * np.abs(x[moved]), BUILD_STEP)
+    shift = np.zeros(moved.size)
+    if bounds is not None:
+        lo, hi = bounds[0][moved], bounds[1][moved]
+        shift = np.where(x[moved] - step < lo, step, np.where(x[moved] + step > hi, -step, 0.0))
     xp, xm = x.copy(), x.copy()
-    xp[moved] += step
-    xm[moved] -= step
+    xp[moved] += step + shift
+    xm[moved] += shift - step
     return xp, xm, step
 
 

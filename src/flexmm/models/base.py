@@ -47,11 +47,15 @@ class Predeformation:
     rest_state: np.ndarray
     """(n_fields * n_sites,) nondimensional lattice state of the loaded equilibrium (no extra DOFs)."""
     residual: float
-    """Max |force| over the free DOFs at the end of the minimisation (nondimensional)."""
+    """Max |force| over the free DOFs at the end of the minimisation and its Newton polish (nondimensional)."""
     steps: int
     """FIRE steps taken."""
     energy: float
     """Potential energy of the equilibrium, loads included (nondimensional)."""
+    newton_steps: int = 0
+    """Newton steps that polished FIRE's state to round-off (``predeform.polish``); 0: FIRE's state."""
+    free: np.ndarray | None = None
+    """The DOFs the minimiser moved (indices; the others were fixed or held by a strain)."""
 
 
 @dataclass(frozen=True)

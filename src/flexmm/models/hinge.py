@@ -26,7 +26,7 @@ import numpy as np
 from numba import types
 from numba.extending import overload
 
-from flexmm._jit import JIT_OPTIONS, NO_JIT, jit, prange
+from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit, prange
 from flexmm._trig import sincos
 
 # Columns of the per-hinge parameter table.
@@ -55,38 +55,57 @@ def hinge_law(dl, ds, tA, tB, cA, sA, cB, sB, prm):
     hA = prm[H_HALF_A]
     hB = prm[H_HALF_B]
     sig = prm[H_SIGN]
-    el = dl + prm[H_REST] - (hA * cA + hB * cB)
-    es = ds + sig * (hB * sB - hA * sA)
+    el = dl + prm[H_REST] - fma(hA, cA, hB * cB)
+    es = ds + sig * fma(hB, sB, -(hA * sA))
     ep = tA + tB
     fl = prm[H_KL] * el
     fs = prm[H_KS] * es
     fp = prm[H_KT] * ep
     energy = 0.5 * (fl * el + fs * es + fp * ep)
-    gA = fl * hA * sA - fs * sig * hA * cA + fp
-    gB = fl * hB * sB + fs * sig * hB * cB + fp
+    gA, gB = hinge_torques(fl, fs * sig, fp, hA, hB, cA, sA, cB, sB)
     return energy, fl, fs, gA, gB
+
+
+@jit
+def hinge_torques(fl, w, fp, hA, hB, cA, sA, cB, sB):
+    """(∂E/∂θ_A, ∂E/∂θ_B) of a hinge from k_l Δl (fl), σ k_s Δs (w) and k_θ Δφ (fp):
+    fl h_A sin_A − w h_A cos_A + fp and fl h_B sin_B + w h_B cos_B + fp, as fused multiply-adds
+    (``_jit.fma``), the same in every hinge law below."""
+    return fma(fl * hA, sA, fma(-(w * hA), cA, fp)), fma(fl * hB, sB, fma(w * hB, cB, fp))
 
 
 @jit
 def hinge_forces(dl, ds, tA, tB, cA, sA, cB, sB, rest, hA, hB, sig, kl, ks, kt):
     """``hinge_law``'s (∂E/∂d_l, ∂E/∂d_s, ∂E/∂θ_A, ∂E/∂θ_B) from scalar parameters (same
     operations: the same results), for loops that vectorise."""
-    el = dl + rest - (hA * cA + hB * cB)
-    es = ds + sig * (hB * sB - hA * sA)
+    el = dl + rest - fma(hA, cA, hB * cB)
+    es = ds + sig * fma(hB, sB, -(hA * sA))
     fl = kl * el
     fs = ks * es
-    fp = kt * (tA + tB)
-    return fl, fs, fl * hA * sA - fs * sig * hA * cA + fp, fl * hB * sB + fs * sig * hB * cB + fp
+    gA, gB = hinge_torques(fl, fs * sig, kt * (tA + tB), hA, hB, cA, sA, cB, sB)
+    return fl, fs, gA, gB
 
 
 @jit
-def chain_hinge(du, ta, tb, ca, sa, cb, sb, rest, hA, hB, sig, kl, ks, kt):
-    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of a chain hinge (no shear d_s): ``du`` = u_B − u_A,
-    ``ca, sa, cb, sb`` the cos/sin of θ0+θ at its two sites, then its law's parameters."""
-    fl = kl * (du + rest - (hA * ca + hB * cb))
-    fs = ks * sig * (hB * sb - hA * sa)
-    fp = kt * (ta + tb)
-    return fl, fl * hA * sa - fs * sig * hA * ca + fp, fl * hB * sb + fs * sig * hB * cb + fp
+def chain_hinge_terms(du, ta, tb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt):
+    """A chain hinge (no shear d_s): its stretch Δl, unsigned shear x = Δs/σ, k_l Δl, k_s x and
+    (∂E/∂θ_A, ∂E/∂θ_B). ``du`` = u_B − u_A, ``ca, sa, cb, sb`` the cos/sin of θ0+θ at its two
+    sites, then its law's parameters. The shear sign σ = ±1 drops out (σ k_s σ x = k_s x
+    exactly), so these are ``hinge_law``'s results for d_s = 0, bit for bit. The design
+    sweeps (design/kernels.py) call this too, so their forces have the same bits."""
+    el = du + rest - fma(hA, ca, hB * cb)
+    x = fma(hB, sb, -(hA * sa))
+    fl = kl * el
+    xs = ks * x
+    ga, gb = hinge_torques(fl, xs, kt * (ta + tb), hA, hB, ca, sa, cb, sb)
+    return el, x, fl, xs, ga, gb
+
+
+@jit
+def chain_hinge(du, ta, tb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt):
+    """(∂E/∂d_l, ∂E/∂θ_A, ∂E/∂θ_B) of a chain hinge (``chain_hinge_terms``)."""
+    _, _, fl, _, ga, gb = chain_hinge_terms(du, ta, tb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt)
+    return fl, ga, gb
 
 
 def param(x, i):
@@ -139,12 +158,12 @@ def chain_sites(qt, th0, kg, kr, c0, cs, sn, ft, m, with_kg):
 
 
 @jit
-def chain_hinges(qu, qt, cs, sn, rest, ha, hb, sig, kl, ks, kt, fl, ga, gb, m):
+def chain_hinges(qu, qt, cs, sn, rest, ha, hb, kl, ks, kt, fl, ga, gb, m):
     """Hinges i ↔ i+1 for i < m − 1 into fl[i], ga[i], gb[i]."""
     for i in range(m - 1):
         fl[i], ga[i], gb[i] = chain_hinge(qu[i + 1] - qu[i], qt[i], qt[i + 1], cs[i], sn[i], cs[i + 1], sn[i + 1],
-                                          param(rest, i), param(ha, i), param(hb, i), param(sig, i), param(kl, i),
-                                          param(ks, i), param(kt, i))
+                                          param(rest, i), param(ha, i), param(hb, i), param(kl, i), param(ks, i),
+                                          param(kt, i))
 
 
 @jit
@@ -172,7 +191,7 @@ def chain_block_hinges(qu, qt, prm, w, m, right, ub, tb, th0_next, fl_left, gb_l
     rest, ha, hb, sig, kl, ks, kt, th0, kg, kr, c0 = prm
     cs, sn, ft, fl, ga, gb = w[W_COS], w[W_SIN], w[W_FT], w[W_FL], w[W_GA], w[W_GB]
     chain_sites(qt, th0, kg, kr, c0, cs, sn, ft, m, with_kg)
-    chain_hinges(qu, qt, cs, sn, rest, ha, hb, sig, kl, ks, kt, fl[1:], ga[1:], gb[1:], m)
+    chain_hinges(qu, qt, cs, sn, rest, ha, hb, kl, ks, kt, fl[1:], ga[1:], gb[1:], m)
     fl[0] = fl_left
     gb[0] = gb_left
     fr, gar, gbr = 0.0, 0.0, 0.0
@@ -180,7 +199,7 @@ def chain_block_hinges(qu, qt, prm, w, m, right, ub, tb, th0_next, fl_left, gb_l
         j = m - 1
         sb, cb = sincos(th0_next + tb)
         fr, gar, gbr = chain_hinge(ub - qu[j], qt[j], tb, cs[j], sn[j], cb, sb, param(rest, j), param(ha, j),
-                                   param(hb, j), param(sig, j), param(kl, j), param(ks, j), param(kt, j))
+                                   param(hb, j), param(kl, j), param(ks, j), param(kt, j))
     fl[m] = fr
     ga[m] = gar
     gb[m] = gbr
@@ -215,7 +234,7 @@ def _left_hinge(q, hprm, sprm, n, i):
     sa, ca = sincos(sprm[h, S_THETA0] + q[n + h])
     sb, cb = sincos(sprm[i, S_THETA0] + q[n + i])
     fl, _, gb = chain_hinge(q[i] - q[h], q[n + h], q[n + i], ca, sa, cb, sb, hprm[h, H_REST], hprm[h, H_HALF_A],
-                            hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT])
+                            hprm[h, H_HALF_B], hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT])
     return fl, gb
 
 
