@@ -370,7 +370,11 @@ def test_checkpoint_segment_does_not_change_the_gradient():
     objective = _objective((traj.n_samples, traj.obs.size))
     _, g1, _ = traj.gradient(raw, objective, segment=1)
     _, g2, _ = traj.gradient(raw, objective, segment=240)
-    _, g3, _ = traj.gradient(raw, objective)  # √N
+    _, g3, rec3 = traj.gradient(raw, objective)  # √N
+    _, g4, rec4 = traj.gradient(raw, objective)  # again, in the arrays the last one left (``_scratch_array``)
+    assert rec4.q is not rec3.q
+    for (k, c), (_, d) in zip(g3.items(), g4.items()):
+        np.testing.assert_array_equal(c, d, err_msg=k)
     for (k, a), (_, b), (_, c) in zip(g1.items(), g2.items(), g3.items()):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(a).max(initial=0.0), err_msg=k)
         np.testing.assert_allclose(a, c, rtol=1e-12, atol=1e-12 * np.abs(a).max(initial=0.0), err_msg=k)

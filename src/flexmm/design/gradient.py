@@ -197,6 +197,7 @@ class Trajectory:
         self.obs = np.asarray(self.obs, np.int64)
         check_integrator(self.integrator, self.terms)
         self._split = splitting.coefficients(self.integrator) if self.integrator in splitting.SPLITTINGS else None
+        self._scratch: dict[str, np.ndarray] = {}  # ``_scratch_array``
         if self.nsteps % self.stride:
             raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
         ndof = 2 * self.args.site_prm.shape[0] if hasattr(self.args, "site_prm") else -1
@@ -272,23 +273,38 @@ class Trajectory:
         post = 1.0 / (1.0 + 0.5 * h * g)
         return args, terms, kick, pre, post
 
-    def _buffers(self, ndof: int, rows: int) -> tuple:
+    def _buffers(self, ndof: int, rows: int, reuse: str = "") -> tuple:
+        """(Q, V, F, T) for ``rows`` states; named by ``reuse``: kept for the next call
+        (``_scratch_array``)."""
+        if reuse:
+            shapes = ((rows, ndof),) * 3 + ((rows,),)
+            return tuple(self._scratch_array(f"{reuse}.{x}", shape) for x, shape in zip("QVFT", shapes))
         return np.empty((rows, ndof)), np.empty((rows, ndof)), np.empty((rows, ndof)), np.empty(rows)
+
+    def _scratch_array(self, name: str, shape: tuple) -> np.ndarray:
+        """An array that a gradient uses only while it runs, kept for the next gradient of this
+        trajectory (one shape per name): freshly allocated, its pages are faulted in again on
+        every call (10 000 units × 1000 steps: a third of the forward run's time)."""
+        a = self._scratch.get(name)
+        if a is None or a.shape != shape:
+            a = self._scratch[name] = np.empty(shape)
+        return a
 
     def _records(self) -> Records:
         shape = (self.n_samples, self.obs.size)
         return Records(np.empty(shape), np.empty(shape), np.empty(shape))
 
     # -- runs ----------------------------------------------------------------------------------
-    def run(self, raw: Raw, segment: int | None = None) -> tuple[Records, tuple]:
-        """Forward run: the records, and the checkpoints (CQ, CV, CF, CT, segment)."""
+    def run(self, raw: Raw, segment: int | None = None, scratch: bool = False) -> tuple[Records, tuple]:
+        """Forward run: the records, and the checkpoints (CQ, CV, CF, CT, segment); ``scratch``:
+        the checkpoints in arrays the next such run overwrites (``_scratch_array``)."""
         if self._split is not None:
             return self._split_run(raw, segment)
         args, terms, kick, pre, post = self.bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
-        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1)
+        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1, "checkpoints" if scratch else "")
         rec = self._records()
         if self._engine_run(raw, args, terms, q, v, f, seg, CQ, CV, CF, CT, rec):
             pass
@@ -351,7 +367,7 @@ class Trajectory:
         uniform = self._uniform(form[3], kick, pre, post) if chain else None
         if chain and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
             segment = _chain_segment(N, n, (4 if uniform is not None else 2) * n * 8, memory_mb)
-        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
+        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment, scratch=True)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         lw = np.zeros(n)
         GK, GV = np.zeros(n), np.zeros(n)
@@ -360,7 +376,7 @@ class Trajectory:
             u, fac = uniform
             ur = np.empty((N_V, n // 2 + 1))
             urev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gdrv, form[5], ur)
-            SC = np.empty((0 if keep_all else seg + 1, 2, n // 2))
+            SC = self._scratch_array("cos/sin", (0 if keep_all else seg + 1, 2, n // 2))
 
             def reverse(SQ, SV, SF, ST, k0, m):
                 sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, self.h, k0, m, *urev)
@@ -378,9 +394,7 @@ class Trajectory:
         if keep_all:  # every state was kept by the forward run
             reverse(CQ, CV, CF, CT, 0, N)
         else:
-            SQ, SV, SF, ST = self._buffers(n, seg + 1) if not chain else (
-                np.empty((seg + 1, n)), np.empty((seg + 1, n)), np.empty((0 if uniform is None else seg + 1, n)),
-                np.empty(seg + 1))
+            SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")  # SF unused by the chain columns
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
                 if uniform is not None:
