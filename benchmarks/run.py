@@ -877,8 +877,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
             small.gradient(raw, objective, segment=2)
         walls, cpus = _interleaved_all(runners, repeats)
         fwd, grad, fwd_cpu, grad_cpu = walls[0], walls[1], cpus[0], cpus[1]
+        fresh = dataclasses.replace(traj)  # no arrays kept from the gradients above (``_scratch_array``)
         tracemalloc.start()
-        traj.gradient(raw, objective)
+        fresh.gradient(raw, objective)
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
         n = system.ndof
