@@ -299,7 +299,7 @@ class Trajectory:
         """Forward run: the records, and the checkpoints (CQ, CV, CF, CT, segment); ``scratch``:
         the checkpoints in arrays the next such run overwrites (``_scratch_array``)."""
         if self._split is not None:
-            return self._split_run(raw, segment)
+            return self._split_run(raw, segment, scratch)
         args, terms, kick, pre, post = self.bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
@@ -455,12 +455,12 @@ class Trajectory:
         E, G = splitting.kick_factors(kicks, raw.minv, raw.damp, self.h)
         return args, terms, (kicks, drifts, E, G, fsal)
 
-    def _split_run(self, raw: Raw, segment: int | None) -> tuple[Records, tuple]:
+    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False) -> tuple[Records, tuple]:
         args, terms, method = self._split_bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
-        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1)
+        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1, "checkpoints" if scratch else "")
         rec = self._records()
         splitting.forward(args, terms, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride, self.obs,
                           CQ, CV, CF, CT, rec.q, rec.v, rec.f)
@@ -474,14 +474,14 @@ class Trajectory:
         kicks = method[0]
         form = self.form(raw)
         keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= memory_mb * 1e6
-        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment)
+        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment, scratch=True)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         GE, GG = np.zeros((kicks.size, n)), np.zeros((kicks.size, n))
         adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
         if keep_all:
             splitting.reverse(args, terms, *method, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
         else:
-            SQ, SV, SF, ST = self._buffers(n, seg + 1)
+            SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")
             none, no_record = np.empty(0, np.int64), np.empty((1, 0))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
