@@ -186,7 +186,8 @@ class Trajectory:
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
     engine_forward: bool = True
-    #: the time stepper (``DIFFERENTIABLE``): velocity Verlet, or a splitting (``design.splitting``)
+    #: the time stepper (``DIFFERENTIABLE``): velocity Verlet, a splitting (``design.splitting``) or the
+    #: implicit midpoint rule (``design.midpoint``)
     integrator: str = "velocity_verlet"
 
     def __post_init__(self):

@@ -97,8 +97,9 @@ def _jv(args, terms, minv, damp, Q, V, h, x, out, y, z1, z2, zc, zd, zp):
 @jit
 def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
     """x = J⁻¹ b (b zero on held DOFs) by conjugate gradients preconditioned with the diagonal
-    M + (h/2) c, to ``SOLVE_RTOL``; J is symmetric (module docstring). Returns whether it
-    converged (an indefinite J, compression past buckling, may not). W: scratch (5, n)."""
+    M + (h/2) c, to ``SOLVE_RTOL``; J is symmetric (module docstring). Returns the iterations
+    taken, or −1 if it did not converge (an indefinite J, compression past buckling, may not).
+    W: scratch (5, n)."""
     n = b.shape[0]
     r, z, p, Ap, y = W[0], W[1], W[2], W[3], W[4]
     z1, z2, zc, zd, zp = Z
@@ -108,7 +109,7 @@ def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
         r[k] = b[k]
         b2 += b[k] * b[k]
     if b2 == 0.0:
-        return True
+        return 0
     rz = 0.0
     for k in range(n):
         z[k] = r[k] / (1.0 / minv[k] + 0.5 * h * damp[k]) if minv[k] > 0.0 else 0.0
@@ -116,7 +117,7 @@ def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
         rz += r[k] * z[k]
     tol2 = SOLVE_RTOL * SOLVE_RTOL * b2
     r2 = b2
-    for _ in range(10 * n + 200):
+    for it in range(1, 10 * n + 201):
         _jv(args, terms, minv, damp, Q, V, h, p, Ap, y, z1, z2, zc, zd, zp)
         pap = 0.0
         for k in range(n):
@@ -130,7 +131,7 @@ def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
             r[k] -= alpha * Ap[k]
             r2 += r[k] * r[k]
         if r2 <= tol2:
-            return True
+            return it
         rz_new = 0.0
         for k in range(n):
             z[k] = r[k] / (1.0 / minv[k] + 0.5 * h * damp[k]) if minv[k] > 0.0 else 0.0
@@ -139,7 +140,7 @@ def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
         rz = rz_new
         for k in range(n):
             p[k] = z[k] + beta * p[k]
-    return r2 <= SOLVE_ACCEPT * SOLVE_ACCEPT * b2
+    return 10 * n + 200 if r2 <= SOLVE_ACCEPT * SOLVE_ACCEPT * b2 else -1
 
 
 @jit
@@ -202,10 +203,10 @@ def reverse(args, terms, minv, damp, SQ, SV, SW, ST, h, k0, nsteps, stride, obs,
     for j in range(nsteps, 0, -1):
         t1 = ST[j]
         q1 = SQ[j]
-        # the recorded force F(q_j, v_j, t_j)
-        velocity_adjoint(SV[j], lf, lv, dij, dc, gdash, dd, dm, dp, gdrv)
-        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
-        lf[:] = 0.0
+        if (k0 + j) % stride == 0:  # the recorded force F(q_j, v_j, t_j) (λf is 0 between records)
+            velocity_adjoint(SV[j], lf, lv, dij, dc, gdash, dd, dm, dp, gdrv)
+            _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+            lf[:] = 0.0
         prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
         q, v, V, t = SQ[j - 1], SV[j - 1], SW[j - 1], ST[j - 1]
         for k in range(n):
@@ -213,7 +214,7 @@ def reverse(args, terms, minv, damp, SQ, SV, SW, ST, h, k0, nsteps, stride, obs,
             lV[k] = h * lq[k] + 2.0 * lv[k]
             lv[k] = -lv[k]
             a[k] = lV[k] if minv[k] > 0.0 else 0.0
-        if not _solve(args, terms, minv, damp, Q, V, h, a, mu, W, Z):
+        if _solve(args, terms, minv, damp, Q, V, h, a, mu, W, Z) < 0:
             return k0 + j - 1
         for k in range(n):
             w[k] = 0.5 * h * mu[k]
@@ -309,7 +310,7 @@ def tangent(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, stride, obs, D
                             + 0.5 * h * (b[i] - DDAMP[m, i] * V[i]))
                 else:
                     b[i] = 0.0
-            if not _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
+            if _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z) < 0:
                 return t, k
             for i in range(n):
                 dV = x[i] + dVH[i]
