@@ -967,6 +967,27 @@ def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> l
     return rows
 
 
+def _final_theta_objective(rec, raw):
+    """½ Σ θ(T)² over the observed DOFs (an ``Objective`` of ``design.gradient``)."""
+    dq = np.zeros_like(rec.q)
+    dq[-1] = rec.q[-1]
+    return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+
+def _gradient_runs(cases, sheets):
+    """(label, system, terms, damp, steps, observed rotations, raw) of the LEGO impact chains
+    (``cases``: units x steps) and configs/sheet_pulse.yaml's sheets (rows x cols x steps),
+    lightly damped (on-site 0.01 m)."""
+    from flexmm.design.gradient import raw_of
+
+    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
+    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    for label, (system, terms, damp), steps in runs:
+        damp = damp + 0.01 * system.mass
+        obs = np.arange(system.ndof - system.n_sites, system.ndof)
+        yield label, system, terms, damp, steps, obs, raw_of(system, terms, damp)
+
+
 def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integrators=("pefrl", "blanes_moan6"),
                        repeats: int = 5) -> list[dict]:
     """Cost of an exact gradient through a splitting (``design.splitting``: forward run with its
@@ -974,22 +995,13 @@ def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integra
     engine's Stepper with the same integrator, interleaved, wall and CPU time. The LEGO impact
     chain (``cases``: units x steps) and the sheet of configs/sheet_pulse.yaml (rows x cols x
     steps), lightly damped (both take the exact damped kicks); h = 0.1."""
-    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.design.gradient import Trajectory
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
-    def objective(rec, raw):  # ½ Σ θ(T)²
-        dq = np.zeros_like(rec.q)
-        dq[-1] = rec.q[-1]
-        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
-
-    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
-    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    objective = _final_theta_objective
     rows = []
-    for label, (system, terms, damp), steps in runs:
-        damp = damp + 0.01 * system.mass
-        obs = np.arange(system.ndof - system.n_sites, system.ndof)
-        raw = raw_of(system, terms, damp)
+    for label, system, terms, damp, steps, obs, raw in _gradient_runs(cases, sheets):
         for name in integrators:
             st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
             st.warm_up()
@@ -1017,37 +1029,29 @@ def gradient_midpoint(cases=((1_000, 1_000),), sheets=((40, 20, 300),), repeats:
     run alone (``Trajectory.value``) is the third contender, interleaved; wall and CPU time. The
     runs of ``gradient_splitting`` (LEGO impact chain, configs/sheet_pulse.yaml's sheet, lightly
     damped), h = 0.1."""
-    from flexmm.design.gradient import Trajectory, raw_of
+    from functools import partial
+
+    from flexmm.design.gradient import Trajectory
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.common import Accumulators
     from flexmm.integrators.stepper import Stepper
 
-    def objective(rec, raw):  # ½ Σ θ(T)²
-        dq = np.zeros_like(rec.q)
-        dq[-1] = rec.q[-1]
-        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
-
-    name = "implicit_midpoint"
-    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
-    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    name, objective = "implicit_midpoint", _final_theta_objective
     rows = []
-    for label, (system, terms, damp), steps in runs:
-        damp = damp + 0.01 * system.mass
-        obs = np.arange(system.ndof - system.n_sites, system.ndof)
-        raw = raw_of(system, terms, damp)
+    for label, system, terms, damp, steps, obs, raw in _gradient_runs(cases, sheets):
         st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
         st.warm_up()
         start = st.q.copy(), st.v.copy(), st.f.copy()
 
-        def engine():  # from the start every time (Newton's work depends on the state)
+        def engine(st=st, start=start, steps=steps):  # from the start each time (Newton's work depends on it)
             st.q[:], st.v[:], st.f[:] = start
             st.t = 0.0
             st.advance(steps)
 
         traj = Trajectory(system.args, terms, 0.1, steps, steps, obs, integrator=name)
         Trajectory(system.args, terms, 0.1, 4, 4, obs, integrator=name).gradient(raw, objective)  # compile
-        wall, cpu = _interleaved_all((engine, lambda: traj.value(raw, objective),
-                                      lambda: traj.gradient(raw, objective)), repeats)
+        wall, cpu = _interleaved_all((engine, partial(traj.value, raw, objective),
+                                      partial(traj.gradient, raw, objective)), repeats)
         fwd, tight, grad = (min(w) for w in wall)
         med = [float(np.median(w)) for w in wall]
         counts = Accumulators(st.acc).counters()
