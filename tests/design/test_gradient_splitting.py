@@ -179,11 +179,13 @@ def test_fit_recovers_the_parameters(tmp_path, monkeypatch, integrator):
 
 
 
+@pytest.mark.parametrize("integrator", ["pefrl", "implicit_midpoint"])
 @pytest.mark.parametrize("name", ["chain-displacement-damped", "sheet-tilted-pulse-damped"])
-def test_column_forms_give_the_tables_gradient(name):
+def test_column_forms_give_the_tables_gradient(name, integrator):
     """The reverse sweep's force adjoint in column form (a chain-ordered chain, a grid sheet) and
-    the model's own adjoint kernel give the same gradient (PEFRL's reverse takes either)."""
-    traj, raw = trajectory_of(_problem(name), nsteps=60, stride=3, integrator="pefrl")
+    the model's own adjoint kernel give the same gradient (PEFRL's reverse and the midpoint rule's,
+    its Hessian products in the linear solve too, take either)."""
+    traj, raw = trajectory_of(_problem(name), nsteps=60, stride=3, integrator=integrator)
     objective = _objective((traj.n_samples, traj.obs.size), seed=2)
     _, ref, _ = dataclasses.replace(traj, column_sweeps=False).gradient(raw, objective)
     _, grad, _ = traj.gradient(raw, objective)

@@ -499,10 +499,11 @@ class Trajectory:
 
     # -- the implicit midpoint rule (``design.midpoint``) ----------------------------------
     def _midpoint_bind(self, raw: Raw) -> tuple:
-        """args, terms and the zero parameter directions of ``midpoint._solve``."""
+        """args, terms and the arguments of ``midpoint._jv``'s Hessian-vector product: the run's
+        ``form`` (fresh accumulators), parameter-adjoint sinks, zero dashpot and drive directions."""
         args, terms = self.bind(raw)[:2]
-        zeros = tuple(np.zeros_like(a) for a in (raw.t1, raw.t2, raw.con, raw.drv, raw.dash))
-        return args, terms, zeros
+        sinks = tuple(np.zeros_like(a) for a in (raw.t1, raw.t2, raw.con, raw.drv))
+        return args, terms, (self.form(raw), *sinks, np.zeros_like(raw.dash), np.zeros_like(raw.drv))
 
     def _midpoint_failed(self, step: int, what: str) -> None:
         if step >= 0:
@@ -513,7 +514,7 @@ class Trajectory:
 
     def _midpoint_run(self, raw: Raw, segment: int | None, keep_v: bool = False) -> tuple:
         """(records, checkpoints, midpoint velocities of every step if ``keep_v``)."""
-        args, terms, _ = self._midpoint_bind(raw)
+        args, terms = self.bind(raw)[:2]
         n, N = raw.q0.size, self.nsteps
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
@@ -531,12 +532,13 @@ class Trajectory:
         """``gradient`` of an implicit-midpoint run: the same checkpointing (all states and
         midpoint velocities kept if they fit), one linear solve per step."""
         n, N = raw.q0.size, self.nsteps
-        args, terms, zeros = self._midpoint_bind(raw)
+        args, terms, mv = self._midpoint_bind(raw)
+        form = self.form(raw)
         keep_all = segment is None and (N + 1) * (4 * n + 1) * 8 <= memory_mb * 1e6
         rec, (CQ, CV, CF, CT, seg), SW = self._midpoint_run(raw, 1 if keep_all else segment, keep_all)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         gminv, gdamp = np.zeros(n), np.zeros(n)
-        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, g1, g2, gcon, gdrv, gdash, gminv, gdamp, zeros)
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, g1, g2, gcon, gdrv, gdash, gminv, gdamp, form, mv)
         prm = (args, terms, raw.minv, raw.damp)
         failed = -1
         if keep_all:
@@ -553,14 +555,14 @@ class Trajectory:
                 if failed >= 0:
                     break
         self._midpoint_failed(failed, "the adjoint's linear solve")
-        self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, midpoint.tables_form())
+        self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         grad = Raw(g1, g2, gminv, gdamp, gcon, gdrv, lq, lv, gdash)
         if explicit is not None:
             grad = grad.axpy(1.0, explicit)
         return float(value), grad, rec
 
     def _midpoint_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
-        args, terms, zeros = self._midpoint_bind(raw)
+        args, terms, mv = self._midpoint_bind(raw)
         nd, n = len(directions), raw.q0.size
         rec = self._records()
         shape = (nd, self.n_samples, self.obs.size)
@@ -570,7 +572,7 @@ class Trajectory:
             args, terms, raw.minv, raw.damp, midpoint.NEWTON_RTOL, q, v, f, self.t0, self.h, self.nsteps, self.stride,
             self.obs, *(_stack(raw, directions, k) for k in ("t1", "t2", "con", "drv", "dash", "minv", "damp", "q0",
                                                              "v0")),
-            rec.q, rec.v, rec.f, TQ, TV, TF, zeros)
+            rec.q, rec.v, rec.f, TQ, TV, TF, mv)
         self._midpoint_failed(failed, "Newton's iteration or the tangent's linear solve")
         return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
 

@@ -19,8 +19,8 @@ The reverse of a step, given the adjoints (λq', λv') of its end (after the pre
 reverse, which sends λ of the overwritten q'_D, v'_D to the drive parameters):
 
     λV = h λq' + 2 λv',   λq = λq',   λv = −λv',
-    J μ = λV_free                         (one linear solve: ``_solve``, CG with the exact
-                                           Hessian-vector products of ``design.kernels``)
+    J μ = λV_free                         (one linear solve: ``_solve``, CG with exact Hessian-
+                                           vector products: ``sweeps._force_adjoint``'s)
     w = (h/2) μ:  λq += (∂F/∂Q)ᵀ w,  ∂J/∂p += (∂F/∂p)ᵀ w   (model, contacts, drives at t + h/2;
                   dashpots, friction: (∂F/∂V)ᵀ w, their parameters),
     free DOFs:    λv += M μ,  ∂J/∂m⁻¹ += μ ⊙ (V − v) M²,  ∂J/∂c −= (h/2) μ ⊙ V,
@@ -42,9 +42,7 @@ import math
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.design.kernels import model_tangent
 from flexmm.design.sweeps import (
-    FORM_TABLES,
     _checkpoint,
     _force_adjoint,
     _force_tangent,
@@ -52,7 +50,6 @@ from flexmm.design.sweeps import (
     _record,
 )
 from flexmm.design.terms import (
-    contact_tangent,
     prescribed_adjoint,
     prescribed_tangent,
     velocity_adjoint,
@@ -71,21 +68,17 @@ SOLVE_ACCEPT = 1e-11
 
 
 @jit
-def tables_form():
-    """The ``form`` of ``sweeps._force_adjoint`` that runs the model's own adjoint kernel."""
-    e1, e2 = np.zeros(0), np.zeros((0, 0))
-    return (FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2, e1)
-
-
-@jit
-def _jv(args, terms, minv, damp, Q, V, h, x, out, y, z1, z2, zc, zd, zp):
-    """out = J x on the free DOFs (x zero on held ones; out zero there); y: scratch; z*: zero
-    parameter directions of the model tables, contacts, drives, dashpots."""
+def _jv(args, terms, minv, damp, Q, V, tm, h, x, out, y, mv, dg, ddg):
+    """out = J x on the free DOFs (x zero on held ones; out zero there); y: scratch. The
+    Hessian-vector product is the force adjoint's (K is symmetric) in the run's ``form`` (a
+    chain's or grid sheet's columns: 2–3× cheaper than the model's tangent kernel); ``mv`` =
+    (that form, parameter-adjoint sinks g1, g2, gcon, gdrv, zero dashpot and drive directions)."""
     n = x.shape[0]
+    form, s1, s2, sc, sd, zp, zd = mv
     for k in range(n):
         y[k] = 0.5 * h * x[k]
-    model_tangent(Q, args, y, z1, z2, out)
-    contact_tangent(Q, y, out, terms.con_ij, terms.con_prm, zc)
+        out[k] = 0.0
+    _force_adjoint(args, terms, Q, tm, y, out, s1, s2, sc, sd, dg, ddg, form, False)
     velocity_tangent(V, x, out, terms.dash_ij, terms.dash_c, zp, terms.drv_dof, terms.drv_mode, terms.drv_prm, zd)
     for k in range(n):
         if minv[k] > 0.0:
@@ -95,14 +88,15 @@ def _jv(args, terms, minv, damp, Q, V, h, x, out, y, z1, z2, zc, zd, zp):
 
 
 @jit
-def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
+def _solve(args, terms, minv, damp, Q, V, tm, h, b, x, W, mv):
     """x = J⁻¹ b (b zero on held DOFs) by conjugate gradients preconditioned with the diagonal
     M + (h/2) c, to ``SOLVE_RTOL``; J is symmetric (module docstring). Returns the iterations
     taken, or −1 if it did not converge (an indefinite J, compression past buckling, may not).
-    W: scratch (5, n)."""
+    W: scratch (5, n); ``mv``: as ``_jv``'s (t_m = t + h/2)."""
     n = b.shape[0]
     r, z, p, Ap, y = W[0], W[1], W[2], W[3], W[4]
-    z1, z2, zc, zd, zp = Z
+    dg = np.empty(4)
+    ddg = np.empty(4)
     b2 = 0.0
     for k in range(n):
         x[k] = 0.0
@@ -118,7 +112,7 @@ def _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z):
     tol2 = SOLVE_RTOL * SOLVE_RTOL * b2
     r2 = b2
     for it in range(1, 10 * n + 201):
-        _jv(args, terms, minv, damp, Q, V, h, p, Ap, y, z1, z2, zc, zd, zp)
+        _jv(args, terms, minv, damp, Q, V, tm, h, p, Ap, y, mv, dg, ddg)
         pap = 0.0
         for k in range(n):
             pap += p[k] * Ap[k]
@@ -182,18 +176,18 @@ def forward(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, seg, stride, o
 
 @jit
 def reverse(args, terms, minv, damp, SQ, SV, SW, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf, lq, lv, lf,
-            g1, g2, gcon, gdrv, gdash, gminv, gdamp, Z):
+            g1, g2, gcon, gdrv, gdash, gminv, gdamp, form, mv):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, ST rows 0..nsteps, SW:
     the midpoint velocity of each step, rows 0..nsteps − 1).
 
     (lq, lv) enter as the adjoints of the state at step k0 + nsteps, lf as that of its recorded
     force; they leave as those at step k0 (its records included). Parameter adjoints accumulate
-    (gminv, gdamp: m⁻¹ and c per DOF). Returns the first step (counted from the run's start)
+    (gminv, gdamp: m⁻¹ and c per DOF; the model's in ``form``, ``sweeps._force_adjoint``'s; ``mv``:
+    ``_jv``'s). Returns the first step (counted from the run's start)
     whose linear solve did not converge, or −1."""
     n = lq.shape[0]
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     dij, dc = terms.dash_ij, terms.dash_c
-    form = tables_form()
     dg = np.empty(4)
     ddg = np.empty(4)
     S = np.empty((6, n))
@@ -214,13 +208,13 @@ def reverse(args, terms, minv, damp, SQ, SV, SW, ST, h, k0, nsteps, stride, obs,
             lV[k] = h * lq[k] + 2.0 * lv[k]
             lv[k] = -lv[k]
             a[k] = lV[k] if minv[k] > 0.0 else 0.0
-        if _solve(args, terms, minv, damp, Q, V, h, a, mu, W, Z) < 0:
+        tm = t + 0.5 * h
+        if _solve(args, terms, minv, damp, Q, V, tm, h, a, mu, W, mv) < 0:
             return k0 + j - 1
         for k in range(n):
             w[k] = 0.5 * h * mu[k]
             a[k] = 0.0
             lqe[k] = 0.0
-        tm = t + 0.5 * h
         _force_adjoint(args, terms, Q, tm, w, a, g1, g2, gcon, gdrv, dg, ddg, form, False)
         velocity_adjoint(V, w, lqe, dij, dc, gdash, dd, dm, dp, gdrv)  # lqe: (∂F/∂V)ᵀ w for now
         for k in range(n):
@@ -253,9 +247,9 @@ def _state_force_tangent(args, terms, q, v, t, dq, dv, d1, d2, dcon, ddrv, ddash
 
 @jit
 def tangent(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, stride, obs, D1, D2, DCON, DDRV, DDASH,
-            DMINV, DDAMP, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF, Z):
+            DMINV, DDAMP, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF, mv):
     """Forward run with tangents along several directions (index m of every D*), as
-    ``sweeps.tangent``; DMINV, DDAMP are the directions of m⁻¹ and c. From (q, v) at t
+    ``sweeps.tangent``; DMINV, DDAMP are the directions of m⁻¹ and c (``mv``: ``_jv``'s). From (q, v) at t
     (prescribed and force computed here). Returns (t, the first step whose Newton iteration or
     linear solve failed, or −1)."""
     n = q.shape[0]
@@ -310,7 +304,7 @@ def tangent(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, stride, obs, D
                             + 0.5 * h * (b[i] - DDAMP[m, i] * V[i]))
                 else:
                     b[i] = 0.0
-            if _solve(args, terms, minv, damp, Q, V, h, b, x, W, Z) < 0:
+            if _solve(args, terms, minv, damp, Q, V, tm, h, b, x, W, mv) < 0:
                 return t, k
             for i in range(n):
                 dV = x[i] + dVH[i]
