@@ -3,7 +3,8 @@
     python benchmarks/run.py                  # startup + sweep + throughput + memory + sheet (minutes)
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
                                               #              | roofline | sheet_throughput | contention | sheet | workprecision
-                                              #              | render | gradient | gradient_dashpots | gradient_splitting | accuracy
+                                              #              | render | gradient | gradient_dashpots | gradient_splitting | gradient_midpoint
+                                              #              | accuracy
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -968,6 +969,27 @@ def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> l
     return rows
 
 
+def _final_theta_objective(rec, raw):
+    """½ Σ θ(T)² over the observed DOFs (an ``Objective`` of ``design.gradient``)."""
+    dq = np.zeros_like(rec.q)
+    dq[-1] = rec.q[-1]
+    return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+
+def _gradient_runs(cases, sheets):
+    """(label, system, terms, damp, steps, observed rotations, raw) of the LEGO impact chains
+    (``cases``: units x steps) and configs/sheet_pulse.yaml's sheets (rows x cols x steps),
+    lightly damped (on-site 0.01 m)."""
+    from flexmm.design.gradient import raw_of
+
+    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
+    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    for label, (system, terms, damp), steps in runs:
+        damp = damp + 0.01 * system.mass
+        obs = np.arange(system.ndof - system.n_sites, system.ndof)
+        yield label, system, terms, damp, steps, obs, raw_of(system, terms, damp)
+
+
 def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integrators=("pefrl", "blanes_moan6"),
                        repeats: int = 5) -> list[dict]:
     """Cost of an exact gradient through a splitting (``design.splitting``: forward run with its
@@ -975,22 +997,13 @@ def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integra
     engine's Stepper with the same integrator, interleaved, wall and CPU time. The LEGO impact
     chain (``cases``: units x steps) and the sheet of configs/sheet_pulse.yaml (rows x cols x
     steps), lightly damped (both take the exact damped kicks); h = 0.1."""
-    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.design.gradient import Trajectory
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
-    def objective(rec, raw):  # ½ Σ θ(T)²
-        dq = np.zeros_like(rec.q)
-        dq[-1] = rec.q[-1]
-        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
-
-    runs = [(f"{n} units", _chain(n), steps) for n, steps in cases]
-    runs += [(f"{r}x{c} sheet", _sheet(r, c), steps) for r, c, steps in sheets]
+    objective = _final_theta_objective
     rows = []
-    for label, (system, terms, damp), steps in runs:
-        damp = damp + 0.01 * system.mass
-        obs = np.arange(system.ndof - system.n_sites, system.ndof)
-        raw = raw_of(system, terms, damp)
+    for label, system, terms, damp, steps, obs, raw in _gradient_runs(cases, sheets):
         for name in integrators:
             st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
             st.warm_up()
@@ -1007,6 +1020,54 @@ def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integra
                   f"{row['gradient_min_s']:.3g} s (wall x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
                   f"CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; {_load()})", flush=True)
             rows.append(row)
+    return rows
+
+
+def gradient_midpoint(cases=((1_000, 1_000),), sheets=((40, 20, 300),), repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient through the implicit midpoint rule (``design.midpoint``: forward
+    run with its Newton iteration to round-off, keeping every state, then one reverse sweep with
+    one CG solve per step) as a multiple of one forward run of the engine's Stepper with
+    ``implicit_midpoint`` (its adaptive Newton tolerance) from the same state; the tight forward
+    run alone (``Trajectory.value``) is the third contender, interleaved; wall and CPU time. The
+    runs of ``gradient_splitting`` (LEGO impact chain, configs/sheet_pulse.yaml's sheet, lightly
+    damped), h = 0.1."""
+    from functools import partial
+
+    from flexmm.design.gradient import Trajectory
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.common import Accumulators
+    from flexmm.integrators.stepper import Stepper
+
+    name, objective = "implicit_midpoint", _final_theta_objective
+    rows = []
+    for label, system, terms, damp, steps, obs, raw in _gradient_runs(cases, sheets):
+        st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
+        st.warm_up()
+        start = st.q.copy(), st.v.copy(), st.f.copy()
+
+        def engine(st=st, start=start, steps=steps):  # from the start each time (Newton's work depends on it)
+            st.q[:], st.v[:], st.f[:] = start
+            st.t = 0.0
+            st.advance(steps)
+
+        traj = Trajectory(system.args, terms, 0.1, steps, steps, obs, integrator=name)
+        Trajectory(system.args, terms, 0.1, 4, 4, obs, integrator=name).gradient(raw, objective)  # compile
+        wall, cpu = _interleaved_all((engine, partial(traj.value, raw, objective),
+                                      partial(traj.gradient, raw, objective)), repeats)
+        fwd, tight, grad = (min(w) for w in wall)
+        med = [float(np.median(w)) for w in wall]
+        counts = Accumulators(st.acc).counters()
+        row = {"integrator": name, "size": label, "steps": steps, "load": os.getloadavg()[0],
+               "forward_min_s": fwd, "tight_forward_min_s": tight, "gradient_min_s": grad,
+               "ratio_min": grad / fwd, "ratio_median": med[2] / med[0], "tight_ratio_median": med[1] / med[0],
+               "cpu_ratio_min": min(cpu[2]) / min(cpu[0]),
+               "cpu_ratio_median": float(np.median(cpu[2]) / np.median(cpu[0])), "engine_counters": counts}
+        print(f"  gradient, {name}, {label} x {steps} steps: engine forward {fwd:.3g} s, tight forward {tight:.3g} s "
+              f"(x{med[1] / med[0]:.2f} median), gradient {grad:.3g} s (wall x{row['ratio_min']:.2f} min, "
+              f"x{row['ratio_median']:.2f} median; CPU x{row['cpu_ratio_min']:.2f} min, "
+              f"x{row['cpu_ratio_median']:.2f} median; engine per step: "
+              f"{counts['force_evaluations'] / counts['steps']:.1f} force evaluations; {_load()})", flush=True)
+        rows.append(row)
     return rows
 
 
@@ -1093,7 +1154,7 @@ SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughpu
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
-            "accuracy": accuracy}
+            "gradient_midpoint": gradient_midpoint, "accuracy": accuracy}
 
 
 def main(argv: list[str]) -> None:

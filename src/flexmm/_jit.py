@@ -111,7 +111,7 @@ _PACKAGE = Path(__file__).resolve().parent
 #: packages and modules whose source is compiled (their text keys the cache directory)
 _KERNEL_SOURCES = ("_jit.py", "_trig.py", "stability.py", "models", "integrators",
                    "design/kernels.py", "design/kernels_extra.py", "design/terms.py", "design/sweeps.py",
-                   "design/splitting.py")
+                   "design/splitting.py", "design/midpoint.py")
 #: cache directories of other source states are removed once unused this long
 PRUNE_AGE_S = 7 * 86400.0
 

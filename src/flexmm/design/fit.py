@@ -4,7 +4,8 @@ The spec names a scene, a measured table (time × site of one field, CSV or netC
 unit) and the parameters to fit (``variables.Variable``). The residuals are
 r = (model − data)/σ at every measured time and site; scipy's ``least_squares`` (trust-region
 reflective, bounds) minimises ½‖r‖² with the exact Jacobian from forward sensitivities of the
-run with the scene's integrator (velocity Verlet, PEFRL or BM6: ``gradient.Trajectory.sensitivities``,
+run with the scene's integrator (velocity Verlet, PEFRL, BM6 or implicit midpoint:
+``gradient.Trajectory.sensitivities``,
 one tangent per parameter, in the same run). The uncertainty is the Gauss–Newton covariance s²(JᵀJ)⁻¹ at the optimum, with
 s² = ‖r‖²/(m − n) (σ only sets the weights; with the right σ, s² ≈ 1).
 

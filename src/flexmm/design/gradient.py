@@ -1,5 +1,6 @@
-"""Exact gradients of trajectory objectives through a run of velocity Verlet (``sweeps``) or of a
-symplectic splitting, PEFRL or Blanes–Moan's 6th-order method (``splitting``).
+"""Exact gradients of trajectory objectives through a run of velocity Verlet (``sweeps``), of a
+symplectic splitting, PEFRL or Blanes–Moan's 6th-order method (``splitting``), or of the implicit
+midpoint rule (``midpoint``: its Newton iteration run to round-off).
 
 The differentiable inputs of a built problem are its *raw* arrays (``Raw``): the model's two
 parameter tables (``kernels.param_tables``), the inverse masses and on-site damping per DOF,
@@ -26,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from flexmm.design import splitting, sweeps
+from flexmm.design import midpoint, splitting, sweeps
 from flexmm.design.kernels import (N_CA, N_F, N_R, N_V, adjoint_kernels_of, chain_add_columns, chain_columns,
                                    chain_ordered, chain_uniform, param_tables, sheet_grid, sheet_grid_add,
                                    sheet_grid_columns, sheet_uniform, sheet_uniform_scratch, with_tables)
@@ -130,7 +131,7 @@ def check_differentiable(system, terms: Terms) -> None:
 
 
 #: the time steppers whose runs are differentiated (``Trajectory.integrator``)
-DIFFERENTIABLE = ("velocity_verlet", *splitting.SPLITTINGS)
+DIFFERENTIABLE = ("velocity_verlet", *splitting.SPLITTINGS, "implicit_midpoint")
 
 
 def check_integrator(name: str, terms: Terms) -> None:
@@ -138,7 +139,7 @@ def check_integrator(name: str, terms: Terms) -> None:
     if name not in DIFFERENTIABLE:
         raise GradientError(f"integrator {name!r} has no adjoint: gradients are exact for "
                             f"{', '.join(DIFFERENTIABLE)} (set solver.integrator to one of them)")
-    if name != "velocity_verlet" and (terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION)):
+    if name in splitting.SPLITTINGS and (terms.dash_ij.shape[0] or np.any(terms.drv_mode == MODE_FRICTION)):
         raise GradientError(f"{name}: with dashpots or ground friction its kicks are RK4 flows, which are not "
                             "differentiated; gradients are exact for its exact (on-site damped) kicks only")
 
@@ -190,7 +191,8 @@ class Trajectory:
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
     engine_forward: bool = True
-    #: the time stepper (``DIFFERENTIABLE``): velocity Verlet, or a splitting (``design.splitting``)
+    #: the time stepper (``DIFFERENTIABLE``): velocity Verlet, a splitting (``design.splitting``) or the
+    #: implicit midpoint rule (``design.midpoint``)
     integrator: str = "velocity_verlet"
 
     def __post_init__(self):
@@ -300,6 +302,8 @@ class Trajectory:
         the checkpoints in arrays the next such run overwrites (``_scratch_array``)."""
         if self._split is not None:
             return self._split_run(raw, segment, scratch)
+        if self.integrator == "implicit_midpoint":
+            return self._midpoint_run(raw, segment)[:2]
         args, terms, kick, pre, post = self.bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
@@ -358,6 +362,8 @@ class Trajectory:
         """
         if self._split is not None:
             return self._split_gradient(raw, objective, segment, memory_mb)
+        if self.integrator == "implicit_midpoint":
+            return self._midpoint_gradient(raw, objective, segment, memory_mb)
         n, N = raw.q0.size, self.nsteps
         args, terms, kick, pre, post = self.bind(raw)
         form = self.form(raw)
@@ -513,6 +519,85 @@ class Trajectory:
                           TQ, TV, TF)
         return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
 
+    # -- the implicit midpoint rule (``design.midpoint``) ----------------------------------
+    def _midpoint_bind(self, raw: Raw) -> tuple:
+        """args, terms and the arguments of ``midpoint._jv``'s Hessian-vector product: the run's
+        ``form`` (fresh accumulators), parameter-adjoint sinks, zero dashpot and drive directions."""
+        args, terms = self.bind(raw)[:2]
+        sinks = tuple(np.zeros_like(a) for a in (raw.t1, raw.t2, raw.con, raw.drv))
+        return args, terms, (self.form(raw), *sinks, np.zeros_like(raw.dash), np.zeros_like(raw.drv))
+
+    def _midpoint_failed(self, step: int, what: str) -> None:
+        if step >= 0:
+            raise GradientError(
+                f"implicit_midpoint: {what} did not converge at step {step} (t = {self.t0 + step * self.h:.6g}); "
+                "the engine would split that step into substeps, which the adjoint does not follow (compression "
+                "past buckling, or a step far beyond the explicit limit): reduce solver.dt_s")
+
+    def _midpoint_run(self, raw: Raw, segment: int | None, keep_v: bool = False) -> tuple:
+        """(records, checkpoints, midpoint velocities of every step if ``keep_v``)."""
+        args, terms = self.bind(raw)[:2]
+        n, N = raw.q0.size, self.nsteps
+        q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
+        sweeps.initial_force(args, terms, q, v, f, self.t0)
+        seg = segment or max(1, math.isqrt(max(N, 1)))
+        CQ, CV, CF, CT = self._buffers(n, N // seg + 1)
+        SW = np.empty((N if keep_v else 0, n))
+        rec = self._records()
+        _, failed = midpoint.forward(args, terms, raw.minv, raw.damp, midpoint.NEWTON_RTOL, q, v, f, self.t0, self.h,
+                                     N, seg, self.stride, self.obs, CQ, CV, CF, CT, SW, rec.q, rec.v, rec.f)
+        self._midpoint_failed(failed, "Newton's iteration (to the design tolerance)")
+        return rec, (CQ, CV, CF, CT, seg), SW
+
+    def _midpoint_gradient(self, raw: Raw, objective: Objective, segment: int | None,
+                           memory_mb: float) -> tuple[float, Raw, Records]:
+        """``gradient`` of an implicit-midpoint run: the same checkpointing (all states and
+        midpoint velocities kept if they fit), one linear solve per step."""
+        n, N = raw.q0.size, self.nsteps
+        args, terms, mv = self._midpoint_bind(raw)
+        form = self.form(raw)
+        keep_all = segment is None and (N + 1) * (4 * n + 1) * 8 <= memory_mb * 1e6
+        rec, (CQ, CV, CF, CT, seg), SW = self._midpoint_run(raw, 1 if keep_all else segment, keep_all)
+        value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
+        gminv, gdamp = np.zeros(n), np.zeros(n)
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, g1, g2, gcon, gdrv, gdash, gminv, gdamp, form, mv)
+        prm = (args, terms, raw.minv, raw.damp)
+        failed = -1
+        if keep_all:
+            failed = midpoint.reverse(*prm, CQ, CV, SW, CT, self.h, 0, N, *adjoints)
+        else:
+            SQ, SV, SF, ST = self._buffers(n, seg + 1)
+            SW = np.empty((seg, n))
+            none, no_record = np.empty(0, np.int64), np.empty((1, 0))
+            for c in range((N - 1) // seg if N else -1, -1, -1):
+                k0, m = c * seg, min(seg, N - c * seg)
+                midpoint.forward(*prm, midpoint.NEWTON_RTOL, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h,
+                                 m, 1, m + 1, none, SQ, SV, SF, ST, SW, no_record, no_record, no_record)
+                failed = midpoint.reverse(*prm, SQ, SV, SW, ST, self.h, k0, m, *adjoints)
+                if failed >= 0:
+                    break
+        self._midpoint_failed(failed, "the adjoint's linear solve")
+        self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
+        grad = Raw(g1, g2, gminv, gdamp, gcon, gdrv, lq, lv, gdash)
+        if explicit is not None:
+            grad = grad.axpy(1.0, explicit)
+        return float(value), grad, rec
+
+    def _midpoint_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
+        args, terms, mv = self._midpoint_bind(raw)
+        nd, n = len(directions), raw.q0.size
+        rec = self._records()
+        shape = (nd, self.n_samples, self.obs.size)
+        TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
+        q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
+        _, failed = midpoint.tangent(
+            args, terms, raw.minv, raw.damp, midpoint.NEWTON_RTOL, q, v, f, self.t0, self.h, self.nsteps, self.stride,
+            self.obs, *(_stack(raw, directions, k) for k in ("t1", "t2", "con", "drv", "dash", "minv", "damp", "q0",
+                                                             "v0")),
+            rec.q, rec.v, rec.f, TQ, TV, TF, mv)
+        self._midpoint_failed(failed, "Newton's iteration or the tangent's linear solve")
+        return rec, [Records(TQ[m], TV[m], TF[m]) for m in range(nd)]
+
     def value(self, raw: Raw, objective: Objective) -> float:
         rec, _ = self.run(raw, segment=self.nsteps + 1)
         return float(objective(rec, raw)[0])
@@ -521,6 +606,8 @@ class Trajectory:
         """Records and their derivatives along each raw direction (one forward tangent run)."""
         if self._split is not None:
             return self._split_sensitivities(raw, directions)
+        if self.integrator == "implicit_midpoint":
+            return self._midpoint_sensitivities(raw, directions)
         args, terms, kick, pre, post = self.bind(raw)
         nd, n = len(directions), raw.q0.size
         hh = 0.5 * self.h

@@ -5,8 +5,8 @@ bounds), the objective (``objectives.Term`` list, a weighted sum) and optional c
 (``total_mass``: the lattice's total mass; ``mean``: the mean over the units of the values a
 variable writes — e.g. a stiffness field held at its start's mean, so the design is compared with
 the uniform lattice at equal mean stiffness — each equal to, or at most/least, its start value or
-a given one). Every evaluation is one run with the scene's integrator (velocity Verlet, PEFRL or
-BM6: ``gradient.DIFFERENTIABLE``) with checkpoints plus one adjoint sweep
+a given one). Every evaluation is one run with the scene's integrator (velocity Verlet, PEFRL,
+BM6 or implicit midpoint: ``gradient.DIFFERENTIABLE``) with checkpoints plus one adjoint sweep
 (``gradient.Trajectory.gradient``), chained through the variables' map to the raw arrays. The
 optimiser is scipy's L-BFGS-B (bounds only), SLSQP (with only linear, ``mean``, constraints: every
 iterate keeps them), L-BFGS-B on values projected onto equal-mean constraints and the bounds

@@ -166,8 +166,12 @@ def _cg(args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W):
 
 
 @jit
-def _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
-    """One midpoint step of size h in place; False (q, v untouched) if Newton did not converge."""
+def _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol_fixed):
+    """One midpoint step of size h in place; False (q, v untouched) if Newton did not converge.
+
+    ``rtol_fixed`` > 0 replaces the adaptive relative tolerance (``newton_rtol``): the design
+    sweeps (``design.midpoint``) solve every step to round-off, so the run is the exact implicit
+    map their adjoint differentiates. On success V and Q of the step are left in work[7], work[8]."""
     drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     n = q.shape[0]
     counting = acc.shape[0] > ACC_FAILED
@@ -192,7 +196,7 @@ def _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
             acc[ACC_REJECTED] += 1
         res, size = _residual_size(R, V, v, f, minv, h)
         if it == 0:
-            rtol = newton_rtol(res, size)
+            rtol = newton_rtol(res, size) if rtol_fixed <= 0.0 else rtol_fixed
         if res <= rtol * size + FORCE_FLOOR * h:
             acc[ACC_DISSIPATED] += h * damping_power(V, cd, terms.dash_ij, terms.dash_c)
             acc[ACC_WORK] += h * power
@@ -225,7 +229,7 @@ def midpoint_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     work = np.empty((14, n))
     saved = np.empty((3, n))
     for _ in range(nsteps):
-        if not _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work):
+        if not _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, 0.0):
             saved[0], saved[1], saved[2] = q, v, f
             ledger = (acc[ACC_DISSIPATED], acc[ACC_WORK])
             sub, ok = 2, False
@@ -234,7 +238,7 @@ def midpoint_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
                 acc[ACC_DISSIPATED], acc[ACC_WORK] = ledger
                 ok = True
                 for j in range(sub):
-                    if not _step(args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work):
+                    if not _step(args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work, 0.0):
                         ok = False
                         break
                 sub *= 2
