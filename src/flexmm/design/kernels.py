@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 from numba.extending import overload
 
-from flexmm._jit import JIT_OPTIONS, NO_JIT, jit
+from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit
 from flexmm._trig import sincos
 from flexmm.design.kernels_extra import (
     dipoles_second,
@@ -508,24 +508,24 @@ def chain_uniform_hinges(q, lf, cs, sn, r, acc, u):
         qa, qb, lta, ltb = qt[h], qt[h + 1], lt[h], lt[h + 1]
         el, x, e, xs, _, _ = _uniform_hinge_force(qu[h], qu[h + 1], qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks,
                                                   kt)
-        dl = lu[h + 1] - lu[h] + hA * sa * lta + hB * sb * ltb  # δ(stretch), δ(unsigned shear)
-        d = hB * cb * ltb - hA * ca * lta
+        dl = fma(hB * sb, ltb, fma(hA * sa, lta, lu[h + 1] - lu[h]))  # δ(stretch), δ(unsigned shear)
+        d = fma(hB * cb, ltb, -(hA * ca) * lta)
         p = kl * dl
-        w = e * lta - ks * d
-        ua = p + xs * lta
-        ub = p - xs * ltb
-        wb = e * ltb + ks * d
+        w = fma(e, lta, -ks * d)
+        ua = fma(xs, lta, p)
+        ub = fma(-xs, ltb, p)
+        wb = fma(e, ltb, ks * d)
         dp = lta + ltb
         pl[h] = p
-        ta[h] = hA * (sa * ua + ca * w)
-        tb[h] = hB * (sb * ub + cb * wb)
+        ta[h] = hA * fma(sa, ua, ca * w)
+        tb[h] = hB * fma(sb, ub, cb * wb)
         kd[h] = kt * dp
         a_rest[h] -= p
-        a_ha[h] -= sa * w - ca * ua
-        a_hb[h] -= sb * wb - cb * ub
-        a_kl[h] -= el * dl
-        a_ks[h] -= x * d
-        a_kt[h] -= (qa + qb) * dp
+        a_ha[h] -= fma(sa, w, -ca * ua)
+        a_hb[h] -= fma(sb, wb, -cb * ub)
+        a_kl[h] = fma(-el, dl, a_kl[h])
+        a_ks[h] = fma(-x, d, a_ks[h])
+        a_kt[h] = fma(-(qa + qb), dp, a_kt[h])
     for row in (V_PL, V_TA, V_TB, V_KD):
         r[row, 0] = 0.0
         r[row, n] = 0.0
@@ -546,10 +546,10 @@ def chain_uniform_gather(q, lf, lq, cs, sn, r, acc, u):
         g = c0 - c
         ou[i] += pl[i + 1] - pl[i]
         t = tb[i] + ta[i + 1]
-        ot[i] -= t + (kd[i] + kd[i + 1]) + (kg * (s * s + g * c) + kr) * li
-        a_th0[i] -= t + kg * ((s - s0) * s + g * c) * li
-        a_kg[i] -= g * s * li
-        a_kr[i] -= qi * li
+        ot[i] -= fma(fma(kg, fma(s, s, g * c), kr), li, t + (kd[i] + kd[i + 1]))
+        a_th0[i] -= fma(kg * fma(s - s0, s, g * c), li, t)
+        a_kg[i] = fma(-g * s, li, a_kg[i])
+        a_kr[i] = fma(-qi, li, a_kr[i])
 
 
 # ---------------------------------------------------------------- 2D sheet

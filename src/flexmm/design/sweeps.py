@@ -49,7 +49,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from flexmm._jit import jit
+from flexmm._jit import fma, jit
 from flexmm.design.kernels import (
     N_R,
     U_TH0,
@@ -606,7 +606,7 @@ def flush_subnormals():
 def _uniform_update(lq, lv, lf, lw, kick, pre, h):
     """The close of a reverse step on one field: λw += h λq, λv = P λw, λf = K λw."""
     for k in range(lq.shape[0]):
-        x = lw[k] + h * lq[k]
+        x = fma(h, lq[k], lw[k])
         lw[k] = x
         lv[k] = param(pre, k) * x
         lf[k] = param(kick, k) * x
@@ -620,21 +620,21 @@ def _field_open(lq, lv, lf, lw, v, f, GK, GV, kick, pre, post, h, close):
     pass. K, P, S: scalars or columns."""
     if close:
         for k in range(lq.shape[0]):
-            x = lw[k] + h * lq[k]
+            x = fma(h, lq[k], lw[k])
             sl = param(post, k) * (param(pre, k) * x)
             z = x + sl
-            GK[k] += z * f[k]
-            GV[k] += z * v[k]
+            GK[k] = fma(z, f[k], GK[k])
+            GV[k] = fma(z, v[k], GV[k])
             lw[k] = sl
-            lf[k] = param(kick, k) * x + param(kick, k) * sl
+            lf[k] = param(kick, k) * z
     else:
         for k in range(lq.shape[0]):
             sl = param(post, k) * lv[k]
             z = lw[k] + sl
-            GK[k] += z * f[k]
-            GV[k] += z * v[k]
+            GK[k] = fma(z, f[k], GK[k])
+            GV[k] = fma(z, v[k], GV[k])
             lw[k] = sl
-            lf[k] += param(kick, k) * sl
+            lf[k] = fma(param(kick, k), sl, lf[k])
 
 
 @jit
