@@ -997,7 +997,7 @@ def _gradient_runs(cases, sheets):
 def gradient_splitting(cases=((1_000, 1_000),), sheets=((40, 20, 300),), integrators=("pefrl", "blanes_moan6"),
                        repeats: int = 5) -> list[dict]:
     """Cost of an exact gradient through a splitting (``design.splitting``: forward run with its
-    states, reverse sweep recomputing each step's stages) as a multiple of one forward run of the
+    states and stage forces, reverse sweep reading them) as a multiple of one forward run of the
     engine's Stepper with the same integrator, interleaved, wall and CPU time. The LEGO impact
     chain (``cases``: units x steps) and the sheet of configs/sheet_pulse.yaml (rows x cols x
     steps), lightly damped (both take the exact damped kicks); h = 0.1."""

@@ -461,7 +461,10 @@ class Trajectory:
         E, G = splitting.kick_factors(kicks, raw.minv, raw.damp, self.h)
         return args, terms, (kicks, drifts, E, G, fsal)
 
-    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False) -> tuple[Records, tuple]:
+    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False,
+                   FS: np.ndarray | None = None) -> tuple[Records, tuple]:
+        """``run`` of a splitting; ``FS`` (nsteps, stage forces, ndof): keep every step's stage
+        forces there (``splitting.forward``; with ``segment`` = 1)."""
         args, terms, method = self._split_bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
@@ -469,23 +472,31 @@ class Trajectory:
         CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1, "checkpoints" if scratch else "")
         rec = self._records()
         splitting.forward(args, terms, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride, self.obs,
-                          CQ, CV, CF, CT, rec.q, rec.v, rec.f)
+                          CQ, CV, CF, CT, rec.q, rec.v, rec.f, np.empty((1, 0, q.size)) if FS is None else FS)
         return rec, (CQ, CV, CF, CT, seg)
 
-    def _split_gradient(self, raw: Raw, objective: Objective, segment: int | None,
-                        memory_mb: float) -> tuple[float, Raw, Records]:
-        """``gradient`` of a splitting run: the same checkpointing (all states kept if they fit)."""
+    def _split_gradient(self, raw: Raw, objective: Objective, segment: int | None, memory_mb: float,
+                        stages: bool = True) -> tuple[float, Raw, Records]:
+        """``gradient`` of a splitting run: the same checkpointing (all states kept if they fit).
+        The replay (or the forward run that keeps every state) also keeps each step's stage
+        forces for the reverse sweep, which then evaluates none; the memory of a step counts
+        them. ``stages`` = False: the reverse sweep recomputes them (the same bits, one more
+        forward run)."""
         n, N = raw.q0.size, self.nsteps
         args, terms, method = self._split_bind(raw)
-        kicks = method[0]
+        kicks, drifts, _, _, fsal = method
         form = self.form(raw)
-        keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= memory_mb * 1e6
-        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment, scratch=True)
+        ns = splitting.n_stage_forces(drifts, fsal) if stages else 0
+        keep_all = segment is None and (N + 1) * ((3 + ns) * n + 1) * 8 <= memory_mb * 1e6
+        if not keep_all and segment is None:  # a segment's replayed states and stage forces in cache
+            segment = _chain_segment(N, n, (3 + ns) * n * 8, memory_mb)
+        FS = self._scratch_array("stages", (N if keep_all else segment, ns, n)) if ns else np.empty((1, 0, n))
+        rec, (CQ, CV, CF, CT, seg) = self._split_run(raw, 1 if keep_all else segment, True, FS if keep_all else None)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         GE, GG = np.zeros((kicks.size, n)), np.zeros((kicks.size, n))
         adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
         if keep_all:
-            splitting.reverse(args, terms, *method, CQ, CV, CF, CT, self.h, 0, N, *adjoints)
+            splitting.reverse(args, terms, *method, CQ, CV, CF, CT, FS, self.h, 0, N, *adjoints)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")
             none, no_record = np.empty(0, np.int64), np.empty((1, 0))
@@ -493,8 +504,8 @@ class Trajectory:
                 k0, m = c * seg, min(seg, N - c * seg)
                 # the segment's replay: its forward run from the checkpoint, every state kept
                 splitting.forward(args, terms, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h, m,
-                                  1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record)
-                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
+                                  1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record, FS)
+                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
         self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         g_minv, g_damp = splitting.kick_factor_gradients(kicks, raw.minv, raw.damp, self.h, GE, GG)
         grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)

@@ -19,15 +19,21 @@ A kick-first method (BM6) carries the force of the step's end to the next step, 
 (q, v, f) as in velocity Verlet; a drift-first one (PEFRL) needs no force between steps, and the
 force it records, F(q_n, t_n), is one more evaluation at each recorded step, differentiated too.
 
-``reverse`` is the exact transpose of this step: it recomputes the step's stages from the state
-at its start (q, v, f, t: one more forward step, its stage positions, velocities and forces kept
-in (M + 1) × ndof scratch) and runs back through them — kick: λf_s += g_s λv, λv ← e_s λv,
+``reverse`` is the exact transpose of this step: it redoes the step's kicks and drifts from the
+state at its start (q, v, f, t), reading the stage forces the replay kept (``forward``'s FS, one
+row per force evaluation: PEFRL 4, BM6 11 a step) instead of evaluating them (the same bits; with
+none kept it evaluates them, one more forward step), the stage positions, velocities and forces
+in (M + 1) × ndof scratch, and runs back through them — kick: λf_s += g_s λv, λv ← e_s λv,
 with ∂J/∂e_s += λv ⊙ v, ∂J/∂g_s += λv ⊙ f_s accumulated per kick (``GE``, ``GG``; the caller
 maps them to m⁻¹ and γ, ``kick_factor_gradients``); drift: λv += a_s h λq; force:
 λq += (∂F/∂q)ᵀλf, parameters (``sweeps._force_adjoint``); prescription: the adjoints of the
 overwritten q_D, v_D go to the drive parameters. ``tangent`` is the forward (tangent-linear)
 counterpart. Velocity-dependent external terms (dashpots, friction: the engine integrates the
 kick with them by an RK4 flow) are not differentiated (``gradient.Trajectory`` refuses them).
+
+Cost of a gradient on a 1000-unit chain × 1000 steps (docs/design.md): ×4.6–4.8 the engine's
+forward run with PEFRL, ×3.8–4.1 with BM6 (×5.2 and ×4.6–4.7 re-evaluating the stage forces);
+most of it is the transposes (the reverse sweep alone ×2.7–3.5).
 """
 
 from __future__ import annotations
@@ -114,10 +120,18 @@ def _stage_force(args, terms, q, v, t, f):
     position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
 
 
+def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
+    """The forces a step evaluates (after each drift but a drift-first method's last): the rows
+    of a step's stage forces kept by the replay (``forward``'s FS)."""
+    return drifts.size if fsal else drifts.size - 1
+
+
 @jit
-def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, store, VB, FK, QS, TS):
+def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, store, VB, FK, QS, TS, stages, FS):
     """One step in place (the module docstring); returns t + h. With ``store``: the velocity and
-    force entering each kick (rows of VB, FK) and each stage's position and time (QS, TS)."""
+    force entering each kick (rows of VB, FK) and each stage's position and time (QS, TS).
+    ``stages``: 0 evaluates the stage forces, 1 also saves them (rows of FS), 2 reads them from FS
+    instead (the values a step with 1 saved: the same bits)."""
     n = q.shape[0]
     M = drifts.shape[0]
     ts = t
@@ -134,7 +148,13 @@ def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, store, VB,
         ts += c
         if s == M - 1 and not fsal:
             break
-        _stage_force(args, terms, q, v, ts, f)
+        if stages == 2:
+            apply_prescribed(q, v, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+            f[:] = FS[s]
+        else:
+            _stage_force(args, terms, q, v, ts, f)
+            if stages == 1:
+                FS[s, :] = f
         if store:
             QS[s, :] = q
             TS[s] = ts
@@ -163,11 +183,14 @@ def _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
 
 @jit
 def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
-            Rq, Rv, Rf):
+            Rq, Rv, Rf, FS):
     """Run ``nsteps`` from (q, v, f, t) (f: the force at the start) in place; checkpoint every
     ``seg`` steps, record every ``stride`` steps (as ``sweeps.forward``); returns t. With
-    ``seg`` = 1 it is the replay of a segment (every state kept)."""
+    ``seg`` = 1 it is the replay of a segment (every state kept). FS (nsteps, stage forces,
+    ndof) keeps each step's stage forces for ``reverse``; with no columns (shape (1, 0, ndof))
+    none are kept."""
     n = q.shape[0]
+    save = FS.shape[1] > 0
     e2 = np.empty((0, n))
     e1 = np.empty(0)
     fr = np.empty(n)
@@ -180,14 +203,16 @@ def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, 
             else:
                 _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            t = split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, False, e2, e2, e2, e1)
+            t = split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, False, e2, e2, e2, e1,
+                           1 if save else 0, FS[k if save else 0])
     return t
 
 
 @jit
-def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-            lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
-    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
+def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
+            dRf, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
+    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
+    FS rows 0..nsteps − 1: the stage forces the replay kept, or no columns: recomputed here).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (its records included)
     and leave as those at step k0 (records included); lf is the adjoint of the force carried
@@ -207,6 +232,7 @@ def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, h, k0, nstep
     v = np.empty(n)
     f = np.empty(n)
     lk = np.empty(n)  # the adjoint of the force of the kick being reversed
+    read = FS.shape[1] > 0
     for j in range(nsteps, 0, -1):
         t1 = ST[j]
         if not fsal:  # the recorded force F(q_j, t_j)
@@ -216,7 +242,8 @@ def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, h, k0, nstep
         q[:] = SQ[j - 1]
         v[:] = SV[j - 1]
         f[:] = SF[j - 1]
-        split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, ST[j - 1], h, True, VB, FK, QS, TS)
+        split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, ST[j - 1], h, True, VB, FK, QS, TS,
+                   2 if read else 0, FS[j - 1 if read else 0])
         if fsal:  # the last kick: its force is the one carried to the next step
             for k in range(n):
                 x = lv[k]
