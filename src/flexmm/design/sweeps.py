@@ -638,6 +638,37 @@ def _field_open(lq, lv, lf, lw, v, f, GK, GV, kick, pre, post, h, close):
 
 
 @jit
+def _uniform_open(lq, lv, lf, lw, v, f, GK, GV, fac, nf, h, close):
+    """``_field_open`` on each of the ``nf`` equal fields of a uniform chain's or sheet's DOFs;
+    ``fac``: K per field, then S, then P (scalars or per-field columns)."""
+    n = lq.shape[0] // nf
+    for c in range(nf):
+        a, b = c * n, (c + 1) * n
+        _field_open(lq[a:b], lv[a:b], lf[a:b], lw[a:b], v[a:b], f[a:b], GK[a:b], GV[a:b], fac[c], fac[2 * nf + c],
+                    fac[nf + c], h, close)
+
+
+@jit
+def _uniform_close(terms, fac, nf, t1, h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv, dg, ddg):
+    """The end of a uniform reverse step: the drives' adjoints, then, unless the objective
+    enters before the next step's factor pass (which then folds the close in: returns True),
+    the close on each field and the objective's injection."""
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    if dd.shape[0]:
+        drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
+        prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
+    k = k0 + j - 1
+    pending = j > 1 and k % stride != 0
+    if not pending:
+        n = lq.shape[0] // nf
+        for c in range(nf):
+            a, b = c * n, (c + 1) * n
+            _uniform_update(lq[a:b], lv[a:b], lf[a:b], lw[a:b], fac[c], fac[2 * nf + c], h)
+        _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+    return pending
+
+
+@jit
 def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
                           lq, lv, lf, lw, GK, GV, gdrv, acc, r):
     """``reverse`` of a uniform chain (the same arguments where they exist; ``u``: its
@@ -657,28 +688,19 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stri
     n = lq.shape[0] // 2
     dg = np.empty(4)
     ddg = np.empty(4)
-    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     pending = False
     for j in range(nsteps, 0, -1):
-        q1, v1, f1, t1 = SQ[j], SV[j], SF[j], ST[j]
+        q1 = SQ[j]
         if SC.shape[0]:
             cs, sn = SC[j, 0], SC[j, 1]
         else:
             cs, sn = r[V_COS, :n], r[V_SIN, :n]
             chain_uniform_sites(q1[n:], u[U_TH0], cs, sn)
-        _field_open(lq[:n], lv[:n], lf[:n], lw[:n], v1[:n], f1[:n], GK[:n], GV[:n], fac[0], fac[4], fac[2], h, pending)
-        _field_open(lq[n:], lv[n:], lf[n:], lw[n:], v1[n:], f1[n:], GK[n:], GV[n:], fac[1], fac[5], fac[3], h, pending)
+        _uniform_open(lq, lv, lf, lw, SV[j], SF[j], GK, GV, fac, 2, h, pending)
         chain_uniform_hinges(q1, lf, cs, sn, r, acc, u)
         chain_uniform_gather(q1, lf, lq, cs, sn, r, acc, u)
-        if dd.shape[0]:
-            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
-            prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
-        k = k0 + j - 1
-        pending = j > 1 and k % stride != 0
-        if not pending:
-            _uniform_update(lq[:n], lv[:n], lf[:n], lw[:n], fac[0], fac[4], h)
-            _uniform_update(lq[n:], lv[n:], lf[n:], lw[n:], fac[1], fac[5], h)
-            _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+        pending = _uniform_close(terms, fac, 2, ST[j], h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv,
+                                 dg, ddg)
     if csr >= 0:
         swap_mxcsr(csr)
 
@@ -699,27 +721,13 @@ def sheet_uniform_reverse(terms, p, nc, sgx, sgy, fac, SQ, SV, SF, ST, h, k0, ns
     ``kernels.sheet_uniform_adjoint``'s; ``fac`` = (K_u, K_v, K_θ, S_u, S_v, S_θ, P_u, P_v, P_θ)
     scalars or per-field columns). Subnormals flushed to zero as ``chain_uniform_reverse``."""
     csr = flush_subnormals()
-    n = lq.shape[0] // 3
     dg = np.empty(4)
     ddg = np.empty(4)
-    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     pending = False
     for j in range(nsteps, 0, -1):
-        q1, v1, f1, t1 = SQ[j], SV[j], SF[j], ST[j]
-        for c in range(3):
-            a, b = c * n, (c + 1) * n
-            _field_open(lq[a:b], lv[a:b], lf[a:b], lw[a:b], v1[a:b], f1[a:b], GK[a:b], GV[a:b], fac[c], fac[6 + c],
-                        fac[3 + c], h, pending)
-        sheet_uniform_adjoint(q1, lf, lq, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r)
-        if dd.shape[0]:
-            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
-            prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
-        k = k0 + j - 1
-        pending = j > 1 and k % stride != 0
-        if not pending:
-            for c in range(3):
-                a, b = c * n, (c + 1) * n
-                _uniform_update(lq[a:b], lv[a:b], lf[a:b], lw[a:b], fac[c], fac[6 + c], h)
-            _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+        _uniform_open(lq, lv, lf, lw, SV[j], SF[j], GK, GV, fac, 3, h, pending)
+        sheet_uniform_adjoint(SQ[j], lf, lq, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r)
+        pending = _uniform_close(terms, fac, 3, ST[j], h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv,
+                                 dg, ddg)
     if csr >= 0:
         swap_mxcsr(csr)
