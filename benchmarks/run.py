@@ -4,6 +4,7 @@
     python benchmarks/run.py startup          # one section: startup | sweep | throughput | bandwidth | memory
                                               #              | roofline | sheet_throughput | contention | sheet | workprecision
                                               #              | render | gradient | gradient_dashpots | gradient_splitting | gradient_midpoint
+                                              #              | gradient_models
                                               #              | accuracy
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
@@ -1075,6 +1076,66 @@ def gradient_midpoint(cases=((1_000, 1_000),), sheets=((40, 20, 300),), repeats:
     return rows
 
 
+#: shipped scenes of every model kind the general sweeps differentiate (``gradient_models``)
+MODEL_SCENES = ("c_buckled_beams_rarefaction", "fpu_second_harmonic_shaker", "hertz_granular_impact",
+                "h_raney_transition_wave", "sine_gordon_breather", "f_slinky_friction_locomotion", "l_grid_guide",
+                "j_magnets_transition_wave", "k_linkage_transition_wave", "predeformed_rarefaction_pull",
+                "rotating_triangles_chain", "rotating_triangles_sheet")
+
+
+def gradient_models(names=MODEL_SCENES, steps: int = 2_000, repeats: int = 5) -> list[dict]:
+    """Cost of an exact gradient on the shipped scenes of every other model kind (chains of
+    masses with bistable, softening, polynomial, on-site and contact laws, ground friction, a
+    spring network, magnet and linkage sheets, a loaded chain, rotating triangles; the general
+    sweeps: ``sweeps.forward``, ``reverse`` with ``model_adjoint``) as a multiple of one forward
+    run of the engine's Stepper on the same problem (the scene's h, ``steps`` steps or the
+    scene's duration if shorter), interleaved; objective ½ Σ q(T)² over every DOF; wall and
+    CPU time (min and median of ``repeats``)."""
+    from flexmm.assemble import build_problem
+    from flexmm.config import load_scene
+    from flexmm.design.gradient import trajectory_of
+    from flexmm.integrators.stepper import make_stepper
+
+    rows = []
+    for name in names:
+        problem = build_problem(load_scene(ROOT.parent / "configs" / f"{name}.yaml"))
+        n = min(steps, max(1, math.ceil(problem.duration / problem.dt - 1e-9)))
+        st = make_stepper(problem, "velocity_verlet", threads=1, check_energy=False)
+        start = st.q.copy(), st.v.copy(), st.f.copy()
+
+        def engine(st=st, start=start, n=n):
+            st.q[:], st.v[:], st.f[:] = start
+            st.t = 0.0
+            st.advance(n)
+
+        traj, raw = trajectory_of(problem, n, stride=n, integrator="velocity_verlet")
+        small, _ = trajectory_of(problem, 4, stride=4, integrator="velocity_verlet")
+        small.gradient(raw, _final_q_objective)  # compile
+        small.gradient(raw, _final_q_objective, segment=2)
+        wall, cpu = _interleaved_all((engine, lambda traj=traj, raw=raw: traj.gradient(raw, _final_q_objective)),
+                                     repeats)
+        s = problem.system
+        row = {"scene": name, "model": type(s.args).__name__, "ndof": s.ndof, "steps": n, "load": os.getloadavg()[0],
+               "forward_min_s": min(wall[0]), "gradient_min_s": min(wall[1]),
+               "ratio_min": min(wall[1]) / min(wall[0]), "ratio_median": float(np.median(wall[1]) / np.median(wall[0])),
+               "cpu_ratio_min": min(cpu[1]) / min(cpu[0]),
+               "cpu_ratio_median": float(np.median(cpu[1]) / np.median(cpu[0])),
+               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]]}
+        print(f"  gradient, {name} ({row['model']}, {s.ndof} DOFs) x {n} steps ({row['sweeps']}): forward "
+              f"{row['forward_min_s']:.3g} s, gradient {row['gradient_min_s']:.3g} s (wall x{row['ratio_min']:.2f} min, "
+              f"x{row['ratio_median']:.2f} median; CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} "
+              f"median; load {row['load']:.1f})", flush=True)
+        rows.append(row)
+    return rows
+
+
+def _final_q_objective(rec, raw):
+    """½ Σ q(T)² over the observed DOFs (an ``Objective`` of ``design.gradient``)."""
+    dq = np.zeros_like(rec.q)
+    dq[-1] = rec.q[-1]
+    return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
+
+
 def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor: int = 16) -> list[dict]:
     """Issue 14: the default (solver.accuracy) against the old default, over the shipped scenes.
 
@@ -1158,7 +1219,8 @@ SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughpu
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
-            "gradient_midpoint": gradient_midpoint, "accuracy": accuracy}
+            "gradient_midpoint": gradient_midpoint,
+            "gradient_models": gradient_models, "accuracy": accuracy}
 
 
 def main(argv: list[str]) -> None:
