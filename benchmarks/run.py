@@ -827,6 +827,20 @@ def _interleaved_all(runners, repeats: int) -> tuple[list, list]:
     return wall, cpu
 
 
+def _from_start(stepper, steps: int):
+    """A runner of ``steps`` steps of ``stepper`` from its state now, restored before each call:
+    every repeat takes the same run (a damped run continued call after call decays into the
+    subnormal range, which is far slower on some processors)."""
+    start = stepper.q.copy(), stepper.v.copy(), stepper.f.copy(), stepper.t
+
+    def run():
+        stepper.q[:], stepper.v[:], stepper.f[:] = start[:3]
+        stepper.t = start[3]
+        stepper.advance(steps)
+
+    return run
+
+
 def _interleaved(first, second, repeats: int) -> tuple[list, list, list, list]:
     """Wall and CPU seconds of two runners called alternately: (wall₁, wall₂, cpu₁, cpu₂)."""
     wall, cpu = _interleaved_all((first, second), repeats)
@@ -870,7 +884,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         traj = Trajectory(system.args, terms, 0.1, steps, steps, obs)
         raw = raw_of(system, terms, damp)
         old = dataclasses.replace(traj, uniform_sweeps=False, engine_forward=False)
-        runners = [lambda: st.advance(steps), lambda: traj.gradient(raw, objective)]
+        runners = [_from_start(st, steps), lambda: traj.gradient(raw, objective)]
         kick, pre, post = traj.bind(raw)[2:]
         columns = traj.columns(raw)
         uniform = (columns and traj._uniform(traj._columns(raw)[0], kick, pre, post) is not None
@@ -929,47 +943,55 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
 
 def gradient_dashpots(n: int = 1_000, steps: int = 4_000, repeats: int = 5) -> list[dict]:
     """Cost of an exact gradient through dashpots (velocity forces at the predicted velocity) on
-    the LEGO impact chain with a dashpot between each pair of neighbours, lightly damped: against
-    the engine's forward run of the same problem (its general Verlet kernel) and against the
-    gradient of the same chain without dashpots through the same general sweeps (what the
-    velocity terms add), interleaved, process CPU time (min and median of ``repeats``)."""
+    the LEGO impact chain with a dashpot between each pair of neighbours, lightly damped, against
+    the engine's forward run of the same problem (its general Verlet kernel: velocity terms keep
+    it off the fused chain kernel), from the same state each time; the gradient's default path
+    (the general run keeping each state's G, the chain's column form in the reverse step) and the
+    previous one (``column_sweeps=False``: the model's own adjoint kernel), and the same chain
+    without dashpots (what the velocity terms add), interleaved, process CPU time (min and median
+    of ``repeats``)."""
     from flexmm.design.gradient import Trajectory, raw_of
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
-    def objective(rec, raw):  # ½ Σ θ(T)²
-        dq = np.zeros_like(rec.q)
-        dq[-1] = rec.q[-1]
-        return 0.5 * float(rec.q[-1] @ rec.q[-1]), dq, 0.0, 0.0, None
-
     system, terms, damp = _chain(n)
     damp = damp + 0.01 * system.mass
     idx = np.arange(n - 1, dtype=np.int64)
-    cases = {"without dashpots": terms,
-             "dashpots": terms._replace(dash_ij=np.stack([idx, idx + 1], axis=1), dash_c=np.full(n - 1, 0.02))}
+    cases = {"dashpots": terms._replace(dash_ij=np.stack([idx, idx + 1], axis=1), dash_c=np.full(n - 1, 0.02)),
+             "without dashpots": terms}
     obs = np.arange(system.ndof - n, system.ndof)
-    runners = []
-    for tm in cases.values():
+    runners, labels = [], []
+    for tag, tm in cases.items():
         st = Stepper(INTEGRATORS["velocity_verlet"], system, tm, damp, 0.1, check_energy=False)
         st.warm_up()
         raw = raw_of(system, tm, damp)
-        for seg in (None, 2):  # compile both reverse paths
-            Trajectory(system.args, tm, 0.1, 4, 4, obs, column_sweeps=False).gradient(raw, objective, segment=seg)
-        traj = Trajectory(system.args, tm, 0.1, steps, steps, obs, column_sweeps=False)
-        runners += [lambda st=st: st.advance(steps), lambda traj=traj, raw=raw: traj.gradient(raw, objective)]
-    _, cpus = _interleaved_all(runners, repeats)  # both cases' forward and gradient in turn
+        paths = {"default": True, "previous (model's adjoint)": False} if tag == "dashpots" else {"default": True}
+        runners.append(_from_start(st, steps))
+        labels.append((tag, "engine"))
+        for path, columns in paths.items():
+            for seg in (None, 2):  # compile both reverse paths
+                Trajectory(system.args, tm, 0.1, 4, 4, obs, column_sweeps=columns).gradient(raw, _final_theta_objective,
+                                                                                              segment=seg)
+            traj = Trajectory(system.args, tm, 0.1, steps, steps, obs, column_sweeps=columns)
+            runners.append(lambda traj=traj, raw=raw: traj.gradient(raw, _final_theta_objective))
+            labels.append((tag, path))
+    _, cpus = _interleaved_all(runners, repeats)
     rows = []
-    for k, tag in enumerate(cases):
-        fwd, grad = cpus[2 * k], cpus[2 * k + 1]
-        row = {"case": tag, "n_units": n, "steps": steps, "load": os.getloadavg()[0],
-               "forward_cpu_min_s": min(fwd), "forward_cpu_median_s": float(np.median(fwd)),
-               "gradient_cpu_min_s": min(grad), "gradient_cpu_median_s": float(np.median(grad)),
-               "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd))}
-        print(f"  gradient, {n} units x {steps} steps, {tag} (general sweeps): forward {min(fwd):.3g} s, gradient "
-              f"{min(grad):.3g} s CPU (x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
+    fwd = {}
+    for (tag, path), cpu in zip(labels, cpus):
+        if path == "engine":
+            fwd[tag] = cpu
+            continue
+        f = fwd[tag]
+        row = {"case": tag, "path": path, "n_units": n, "steps": steps, "load": os.getloadavg()[0],
+               "forward_cpu_min_s": min(f), "forward_cpu_median_s": float(np.median(f)),
+               "gradient_cpu_min_s": min(cpu), "gradient_cpu_median_s": float(np.median(cpu)),
+               "ratio_min": min(cpu) / min(f), "ratio_median": float(np.median(cpu) / np.median(f))}
+        print(f"  gradient, {n} units x {steps} steps, {tag}, {path} path: forward {min(f):.3g} s, gradient "
+              f"{min(cpu):.3g} s CPU (x{row['ratio_min']:.2f} min, x{row['ratio_median']:.2f} median; "
               f"load {row['load']:.1f})")
         rows.append(row)
-    extra = rows[1]["gradient_cpu_min_s"] / rows[0]["gradient_cpu_min_s"]
+    extra = rows[0]["gradient_cpu_min_s"] / rows[-1]["gradient_cpu_min_s"]
     print(f"  the velocity terms make the gradient x{extra:.2f} (min CPU) of the same chain's without them")
     return rows
 
@@ -1048,13 +1070,7 @@ def gradient_midpoint(cases=((1_000, 1_000),), sheets=((40, 20, 300),), repeats:
     for label, system, terms, damp, steps, obs, raw in _gradient_runs(cases, sheets):
         st = Stepper(INTEGRATORS[name], system, terms, damp, 0.1, check_energy=False)
         st.warm_up()
-        start = st.q.copy(), st.v.copy(), st.f.copy()
-
-        def engine(st=st, start=start, steps=steps):  # from the start each time (Newton's work depends on it)
-            st.q[:], st.v[:], st.f[:] = start
-            st.t = 0.0
-            st.advance(steps)
-
+        engine = _from_start(st, steps)  # (Newton's work depends on the state)
         traj = Trajectory(system.args, terms, 0.1, steps, steps, obs, integrator=name)
         Trajectory(system.args, terms, 0.1, 4, 4, obs, integrator=name).gradient(raw, objective)  # compile
         wall, cpu = _interleaved_all((engine, partial(traj.value, raw, objective),
@@ -1101,13 +1117,7 @@ def gradient_models(names=MODEL_SCENES, steps: int = 2_000, repeats: int = 5) ->
         problem = build_problem(load_scene(ROOT.parent / "configs" / f"{name}.yaml"))
         n = min(steps, max(1, math.ceil(problem.duration / problem.dt - 1e-9)))
         st = make_stepper(problem, "velocity_verlet", threads=1, check_energy=False)
-        start = st.q.copy(), st.v.copy(), st.f.copy()
-
-        def engine(st=st, start=start, n=n):
-            st.q[:], st.v[:], st.f[:] = start
-            st.t = 0.0
-            st.advance(n)
-
+        engine = _from_start(st, n)
         traj, raw = trajectory_of(problem, n, stride=n, integrator="velocity_verlet")
         small, _ = trajectory_of(problem, 4, stride=4, integrator="velocity_verlet")
         small.gradient(raw, _final_q_objective)  # compile

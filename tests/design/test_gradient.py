@@ -25,7 +25,7 @@ from flexmm.design import sweeps
 from flexmm.design.gradient import (ENGINE_MIN_STEPS, ENGINE_SITES, MEMORY_MB, SEGMENT_MB, GradientError, Trajectory,
                                     _chain_segment, raw_of, trajectory_of)
 from flexmm.design.kernels import N_R, N_V, chain_columns, chain_force_columns
-from flexmm.design.sweeps import FORM_TABLES
+from flexmm.design.sweeps import FORM_CHAIN, FORM_TABLES
 from flexmm.integrators.common import MODE_FRICTION, SHAPES
 from flexmm.integrators.stepper import make_stepper
 from flexmm.models.hinge import BLOCK, H_SIGN, S_KG, ChainArgs, chain_force
@@ -130,6 +130,12 @@ SCENES = {
                        "shape": "half_sine"},
         "damping": {"viscous": {"damping_ratio": 0.03}},
         "solver": {"duration_s": 6e-3}},
+    "chain-striker": {  # a striker's DOF after the chain's, a Hertzian contact between them
+        "lattice": dict(CHAIN, left="free", right="fixed"),
+        "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 0.5,
+                       "striker": {"mass_kg": 0.05, "contact_stiffness_n_per_m": 1e6, "exponent": 1.5}},
+        "damping": {"viscous": {"damping_ratio": 0.02}},
+        "solver": {"duration_s": 3e-3}},
     "mass-striker": {
         "lattice": dict(MASS, left="free", right="fixed"),
         "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 0.5,
@@ -262,21 +268,25 @@ def test_column_force_is_the_chain_force():
     np.testing.assert_array_equal(got, expected)
 
 
-@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "sheet-tilted-pulse-damped"])
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "sheet-tilted-pulse-damped",
+                                  "chain-dashpots-damped", "chain-loaded-pull", "chain-striker"])
 def test_column_sweeps_match_the_general_sweeps(name):
     """Same records bit for bit, same gradient to rounding, checkpointed or not (chains: the
-    column sweeps; grid sheets: the general sweeps with the grid's hinges in column form)."""
+    column sweeps, uniform or not — with dashpots the general run and the column reverse step,
+    with constant loads and with a striker's DOF and contact too; grid sheets: the general sweeps
+    with the grid's hinges in column form)."""
     traj, raw = trajectory_of(_problem(name), nsteps=120, stride=3)
     assert traj.form(raw)[0] != FORM_TABLES
     general = dataclasses.replace(traj, column_sweeps=False)
     objective = _objective((traj.n_samples, traj.obs.size), seed=2)
     _, ref, rec_ref = general.gradient(raw, objective)
-    for segment in (None, 11):
-        _, grad, rec = traj.gradient(raw, objective, segment=segment)
-        np.testing.assert_array_equal(rec.q, rec_ref.q)
-        np.testing.assert_array_equal(rec.f, rec_ref.f)
-        for (k, a), (_, b) in zip(grad.items(), ref.items()):
-            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
+    for path in (traj, dataclasses.replace(traj, uniform_sweeps=False)):
+        for segment in (None, 11):
+            _, grad, rec = path.gradient(raw, objective, segment=segment)
+            np.testing.assert_array_equal(rec.q, rec_ref.q)
+            np.testing.assert_array_equal(rec.f, rec_ref.f)
+            for (k, a), (_, b) in zip(grad.items(), ref.items()):
+                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
 
 
 @pytest.mark.parametrize("name,free", [("chain-force-shaker", True), ("chain-displacement-damped", False)])
@@ -295,7 +305,9 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
     u, fac = traj._uniform(traj._columns(raw)[0], kick, pre, post)
     assert all(isinstance(x, float) for x in fac) == free
     states = []
-    for replay, extra in ((sweeps.chain_uniform_replay, (u, False, fac)), (sweeps.chain_replay, traj._columns(raw))):
+    loads = traj._columns(raw)[2:]
+    for replay, extra in ((sweeps.chain_uniform_replay, (u, False, *loads, fac)),
+                          (sweeps.chain_replay, traj._columns(raw))):
         _, (CQ, CV, CF, CT, _) = traj.run(raw, segment=50)
         SQ, SV, ST = np.empty((51, raw.q0.size)), np.empty((51, raw.q0.size)), np.empty(51)
         if replay is sweeps.chain_replay:
@@ -414,12 +426,13 @@ def test_tangent_matches_adjoint(name):
     assert projected == pytest.approx(grad.dot(direction), rel=1e-10)
 
 
-def test_velocity_terms_take_the_general_sweeps():
-    """A chain with dashpots runs the general sweeps (the column sweeps have no velocity terms),
-    and raw arrays whose dashpot coefficients do not match the dashpots are refused."""
+def test_velocity_terms_take_the_general_run_and_the_column_reverse():
+    """A chain with dashpots runs forward by the general sweeps (the column run has no velocity
+    terms) and reverses with the chain's column form, reading the G each state kept; raw arrays
+    whose dashpot coefficients do not match the dashpots are refused."""
     traj, raw = trajectory_of(_problem("chain-dashpots-damped"), nsteps=4, stride=1)
     assert raw.dash.size == traj.terms.dash_ij.shape[0] > 0
-    assert not traj.columns(raw) and traj.form(raw)[0] == FORM_TABLES
+    assert traj.columns(raw) and not traj._column_run(raw) and traj.form(raw)[0] == FORM_CHAIN
     with pytest.raises(ValueError, match="dashpots"):
         traj.run(dataclasses.replace(raw, dash=raw.dash[:-1]))
 

@@ -35,6 +35,7 @@ from flexmm.errors import FlexmmError
 from flexmm.integrators import verlet_chain
 from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms, has_velocity_terms
 from flexmm.models.hinge import H_SIGN, S_KG
+from flexmm.models.loads import LoadedChainArgs
 
 
 #: a run whose states fit in this many MB keeps them all (no replay); larger runs checkpoint
@@ -164,10 +165,12 @@ class Trajectory:
     observed DOFs ``obs``, and the start time ``t0``.
 
     The model part of the reverse step takes column form where it can (``form``): a
-    chain-ordered rotating-squares chain without contacts (whose forward run and replay then use
-    the column force, ``sweeps.chain_forward``/``chain_replay``: the same trajectory bit for
-    bit) and a grid sheet; the gradient is the same to rounding, at a third to a half of the
-    cost (``python benchmarks/run.py gradient``). A uniform chain (``kernels.chain_uniform``)
+    chain-ordered rotating-squares chain, loaded or not, with contacts (a striker) or not (whose
+    forward run and replay then use the column force, ``sweeps.chain_forward``/``chain_replay``:
+    the same trajectory bit for bit; with dashpots or ground friction the general run, which
+    keeps each step's f_a, and the column form in the reverse step only — a uniform chain's by
+    its fused kernels) and a grid sheet; the gradient is the same to rounding, at a third to a
+    half of the cost (``python benchmarks/run.py gradient``). A uniform chain (``kernels.chain_uniform``)
     replays and reverses with scalar parameters (``sweeps.chain_uniform_*``: ~0.7 of the column
     sweeps' cost), and a long damped one runs forward with the engine's fused kernel
     (``_engine_run``); ``uniform_sweeps=False``, ``engine_forward=False`` keep the column path.
@@ -202,43 +205,62 @@ class Trajectory:
         self._scratch: dict[str, np.ndarray] = {}  # ``_scratch_array``
         if self.nsteps % self.stride:
             raise ValueError(f"nsteps ({self.nsteps}) must be a multiple of the stride ({self.stride})")
-        ndof = 2 * self.args.site_prm.shape[0] if hasattr(self.args, "site_prm") else -1
-        # the column sweeps take no contacts and no velocity terms (dashpots, friction)
-        self._ordered = (chain_ordered(self.args, ndof) and self.terms.con_ij.shape[0] == 0
-                         and not has_velocity_terms(self.terms))
+        chain = self.args.chain if isinstance(self.args, LoadedChainArgs) else self.args
+        ndof = 2 * chain.site_prm.shape[0] if hasattr(chain, "site_prm") else -1
+        #: a chain-ordered chain (loaded or not; contacts, a striker's DOFs, velocity terms allowed)
+        self._ordered = chain_ordered(chain, ndof)
+        self._nchain = ndof // 2
+        #: dashpots or ground friction: the reverse step reads each step's f_a (``sweeps.step_forces``)
+        self._vdep = has_velocity_terms(self.terms)
         nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
         self._grid = sheet_grid(self.args, 3 * nsite)
 
     def form(self, raw: Raw) -> tuple:
         """The ``form`` argument of the reverse sweep (``sweeps._force_adjoint``): a chain-ordered
         chain's columns, a grid sheet's hinge families, or the model's own adjoint kernel."""
-        e1, e2 = np.zeros(0), np.zeros((0, 0))
+        e1, e2, ei = np.zeros(0), np.zeros((0, 0)), np.zeros(0, np.int64)
         if self.columns(raw):
-            n = raw.t2.shape[0]
-            cols, with_kg = self._columns(raw)
-            return (sweeps.FORM_CHAIN, int(with_kg), e1, cols, e2, np.zeros((N_CA, n)), e2, e1, np.empty((N_R, n + 1)),
-                    np.empty(2 * n))
+            n = self._nchain
+            cols, with_kg, ldof, lval = self._columns(raw)
+            u = chain_uniform(cols) if self.uniform_sweeps else None  # a uniform chain: fused kernels
+            return (sweeps.FORM_CHAIN, int(with_kg), e1 if u is None else u, cols, e2, np.zeros((N_CA, n)), e2, e1, np.empty((N_R, n + 1)),
+                    np.empty(raw.q0.size), ldof, lval, np.zeros(ldof.size))
         if self.column_sweeps and self._grid and raw.q0.size == 3 * raw.t2.shape[0]:
             nc, y0 = self._grid
             n = raw.t2.shape[0]
             xc, yc = sheet_grid_columns(raw.t1, n, nc, y0)
             return (sweeps.FORM_GRID, nc, raw.t2, xc, yc, np.zeros((6, n - 1)), np.zeros((6, n - nc)), np.zeros(n),
-                    np.empty((N_F + 2, n)), e1)
-        return (sweeps.FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2, e1)
+                    np.empty((N_F + 2, n)), e1, ei, e1, e1)
+        return (sweeps.FORM_TABLES, 0, e1, e2, e2, e2, e2, e1, e2, e1, ei, e1, e1)
 
     def columns(self, raw: Raw) -> bool:
-        """Whether the run takes the column sweeps (``sweeps.chain_*``): a chain-ordered chain of
-        2N DOFs without contacts."""
-        return self.column_sweeps and self._ordered and raw.q0.size == 2 * self.args.site_prm.shape[0]
+        """Whether the reverse step takes a chain's column form (``sweeps.FORM_CHAIN``): a
+        chain-ordered chain, loaded or not, with or without contacts (a striker's DOFs after the
+        chain's 2N) and velocity terms."""
+        return self.column_sweeps and self._ordered and raw.q0.size >= 2 * self._nchain
+
+    def _column_run(self, raw: Raw) -> bool:
+        """Whether the run and its replay take the column force too (``sweeps.chain_forward``,
+        ``chain_replay``; the reverse step then takes each state's force again): without velocity
+        terms (their forward run is the general one, which keeps each state's G)."""
+        return self.columns(raw) and not self._vdep
 
     def _columns(self, raw: Raw) -> tuple:
-        return chain_columns(raw.t1, raw.t2), bool(np.any(raw.t2[:, S_KG] != 0.0))
+        """(columns, lateral stretch?, load DOFs, load values) of a chain-ordered chain; a loaded
+        chain's t2 is its site table then its loads' values (``kernels_extra.loaded_chain_pack``)."""
+        n = self._nchain
+        sprm = raw.t2[: 3 * n].reshape(n, 3)
+        if isinstance(self.args, LoadedChainArgs):
+            ldof, lval = self.args.loads[0], raw.t2[3 * n :]
+        else:
+            ldof, lval = np.zeros(0, np.int64), np.zeros(0)
+        return chain_columns(raw.t1, sprm), bool(np.any(sprm[:, S_KG] != 0.0)), ldof, lval
 
     def _uniform(self, cols: np.ndarray, kick, pre, post) -> tuple | None:
         """(parameters, integrator factors) of the uniform chain's reverse sweep, or None: the
         factors (K_u, K_θ, S_u, S_θ, P_u, P_θ) as scalars if constant on each field, else as
-        per-field columns."""
-        u = chain_uniform(cols) if self.uniform_sweeps else None
+        per-field columns. Not with velocity terms, nor with DOFs past the chain's (a striker's)."""
+        u = chain_uniform(cols) if self.uniform_sweeps and not self._vdep and kick.size == 2 * self._nchain else None
         if u is None:
             return None
         return u, _field_factors(kick, pre, post, 2)
@@ -304,21 +326,30 @@ class Trajectory:
             return self._split_run(raw, segment, scratch)
         if self.integrator == "implicit_midpoint":
             return self._midpoint_run(raw, segment)[:2]
+        return self._run(raw, segment, scratch)[:2]
+
+    def _run(self, raw: Raw, segment: int | None, scratch: bool) -> tuple[Records, tuple, np.ndarray]:
+        """``run`` of velocity Verlet, and the f_a of every step (``sweeps.step_forces``) where the
+        gradient's run keeps every state of a run with velocity terms (else no rows)."""
         args, terms, kick, pre, post = self.bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
-        CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1, "checkpoints" if scratch else "")
+        rows = self.nsteps // seg + 1
+        CQ, CV, CF, CT = self._buffers(q.size, rows, "checkpoints" if scratch else "")
         rec = self._records()
         if self._engine_run(raw, args, terms, q, v, f, seg, CQ, CV, CF, CT, rec):
             pass
-        elif self.columns(raw):
+        elif self._column_run(raw):
             sweeps.chain_forward(*self._columns(raw), terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps,
                                  seg, self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
-        else:
+        else:  # with velocity terms, the gradient's run keeping every state keeps each step's f_a too
+            keep_fa = scratch and self._vdep and seg == 1
+            CA = self._scratch_array("checkpoints.fa", (rows if keep_fa else 0, q.size))
             sweeps.forward(args, terms, kick, pre, post, q, v, f, self.t0, self.h, self.nsteps, seg,
-                           self.stride, self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f)
-        return rec, (CQ, CV, CF, CT, seg)
+                           self.stride, self.obs, CQ, CV, CF, CT, CA, rec.q, rec.v, rec.f)
+            return rec, (CQ, CV, CF, CT, seg), CA
+        return rec, (CQ, CV, CF, CT, seg), np.empty((0, q.size))
 
     def _engine_run(self, raw: Raw, args, terms, q, v, f, seg, CQ, CV, CF, CT, rec: Records) -> bool:
         """The forward run by the engine's fused, time-blocked chain kernel
@@ -329,7 +360,7 @@ class Trajectory:
         ``ENGINE_MIN_STEPS`` steps (each call is blocked in time over its steps). Returns whether
         it ran."""
         n = raw.t2.shape[0]
-        if (not (self.engine_forward and self.columns(raw)) or n < ENGINE_SITES
+        if (not (self.engine_forward and self._column_run(raw)) or n < ENGINE_SITES
                 or min(seg, self.stride) < ENGINE_MIN_STEPS or not np.any(raw.damp * raw.minv != 0.0)
                 or not verlet_chain.fusable(args, q, raw.minv, raw.damp, terms)):
             return False
@@ -367,13 +398,14 @@ class Trajectory:
         n, N = raw.q0.size, self.nsteps
         args, terms, kick, pre, post = self.bind(raw)
         form = self.form(raw)
-        chain = form[0] == sweeps.FORM_CHAIN
-        budget = min(memory_mb, CACHE_MB) if chain else memory_mb
-        keep_all = segment is None and (N + 1) * (3 * n + 1) * 8 <= budget * 1e6
-        uniform = self._uniform(form[3], kick, pre, post) if chain else None
-        if chain and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
+        column_run = self._column_run(raw)
+        budget = min(memory_mb, CACHE_MB) if column_run else memory_mb
+        per_state = 4 if self._vdep else 3  # q, v, f (and f_a)
+        keep_all = segment is None and (N + 1) * (per_state * n + 1) * 8 <= budget * 1e6
+        uniform = self._uniform(form[3], kick, pre, post) if column_run else None
+        if column_run and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
             segment = _chain_segment(N, n, (4 if uniform is not None else 2) * n * 8, memory_mb)
-        rec, (CQ, CV, CF, CT, seg) = self.run(raw, 1 if keep_all else segment, scratch=True)
+        rec, (CQ, CV, CF, CT, seg), CA = self._run(raw, 1 if keep_all else segment, scratch=True)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         lw = np.zeros(n)
         GK, GV = np.zeros(n), np.zeros(n)
@@ -381,10 +413,11 @@ class Trajectory:
         if uniform is not None:
             u, fac = uniform
             ur = np.empty((N_V, n // 2 + 1))
-            urev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gdrv, form[5], ur)
+            urev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gcon, gdrv, form[5], ur, form[10],
+                    form[12])
             SC = self._scratch_array("cos/sin", (0 if keep_all else seg + 1, 2, n // 2))
 
-            def reverse(SQ, SV, SF, ST, k0, m):
+            def reverse(SQ, SV, SF, ST, SA, k0, m):
                 sweeps.chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, self.h, k0, m, *urev)
         elif (sheet := self._sheet_uniform(raw, form, kick, pre, post)) is not None:
             p, sgx, sgy, fac = sheet
@@ -392,26 +425,28 @@ class Trajectory:
             sr = sheet_uniform_scratch(n // 3, nc)
             srev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gdrv, form[5], form[6], form[7], sr)
 
-            def reverse(SQ, SV, SF, ST, k0, m):
+            def reverse(SQ, SV, SF, ST, SA, k0, m):
                 sweeps.sheet_uniform_reverse(terms, p, nc, sgx, sgy, fac, SQ, SV, SF, ST, self.h, k0, m, *srev)
         else:
-            def reverse(SQ, SV, SF, ST, k0, m):
-                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, self.h, k0, m, *adjoints)
+            def reverse(SQ, SV, SF, ST, SA, k0, m):
+                sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, SA, self.h, k0, m, *adjoints)
         if keep_all:  # every state was kept by the forward run
-            reverse(CQ, CV, CF, CT, 0, N)
+            reverse(CQ, CV, CF, CT, CA, 0, N)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")  # SF unused by the chain columns
+            SA = self._scratch_array("segment.fa", (seg + 1 if self._vdep else 0, n))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
                 if uniform is not None:
-                    sweeps.chain_uniform_replay(u, form[1] != 0, fac, terms, CQ[c], CV[c], CF[c], CT[c], self.h, m,
-                                                SQ, SV, SF, ST, SC, ur)
-                elif chain:
-                    sweeps.chain_replay(form[3], form[1] != 0, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c],
-                                        self.h, m, SQ, SV, ST)
+                    sweeps.chain_uniform_replay(u, form[1] != 0, form[10], form[11], fac, terms, CQ[c], CV[c], CF[c],
+                                                CT[c], self.h, m, SQ, SV, SF, ST, SC, ur)
+                elif column_run:
+                    sweeps.chain_replay(form[3], form[1] != 0, form[10], form[11], terms, kick, pre, post, CQ[c], CV[c],
+                                        CF[c], CT[c], self.h, m, SQ, SV, ST)
                 else:
-                    sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST)
-                reverse(SQ, SV, SF, ST, k0, m)
+                    sweeps.replay(args, terms, kick, pre, post, CQ[c], CV[c], CF[c], CT[c], self.h, m, SQ, SV, SF, ST,
+                                  SA)
+                reverse(SQ, SV, SF, ST, SA, k0, m)
         GK += lw * CF[0]  # the products of the first step's λw with the initial state
         GV += lw * CV[0]
         self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
@@ -447,8 +482,10 @@ class Trajectory:
         v0 = raw.v0.copy()
         sweeps.apply_prescribed_only(terms, q0, v0, self.t0)
         sweeps.reverse_initial(args, terms, q0, v0, self.t0, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
-        if form[0] == sweeps.FORM_CHAIN:
-            chain_add_columns(form[5], g1, g2)
+        if form[0] == sweeps.FORM_CHAIN:  # a loaded chain's t2: its site table, then its loads' values
+            n, flat = self._nchain, g2.reshape(-1)
+            chain_add_columns(form[5], g1, flat[: 3 * n].reshape(n, 3))
+            flat[3 * n :] += form[12]
         elif form[0] == sweeps.FORM_GRID:
             sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
 

@@ -31,9 +31,10 @@ closing kick's and the force's:
     λw += S λu,  λf_a = K S λu,                      (∂J/∂S, ∂J/∂K folded as above, with u, f_a)
     λw += (∂V/∂w) λf_a,  ∂J/∂θ += (∂V/∂θ)ᵀ λf_a,   then λG = λf + λf_a.
 
-The reverse step takes w, f_a and u again from the state before it (one more force evaluation
-per step, only in runs with velocity terms); the initial force G(q0) + V(v0) adds (∂V/∂v)ᵀλf
-to λv0 (``reverse_initial``).
+The run keeps each step's f_a with its state (only in runs with velocity terms: four arrays a
+state instead of three), and the reverse step takes w and u again from it and the state before
+by the forward run's operations (the same bits, no force evaluation); the initial force
+G(q0) + V(v0) adds (∂V/∂v)ᵀλf to λv0 (``reverse_initial``).
 
 This is the exact transpose of the discrete step, so gradients agree with finite differences
 of the same discrete run to rounding. The objective enters through records of (q, v, f) at
@@ -81,8 +82,9 @@ from flexmm.design.terms import (
 )
 from flexmm.integrators.common import (apply_prescribed, has_velocity_terms, position_forces, total_force,
                                        velocity_forces)
-from flexmm.models.kernels import model_force
 from flexmm.models.hinge import param
+from flexmm.models.kernels import model_force
+from flexmm.models.loads import load_terms
 
 
 @jit
@@ -122,7 +124,7 @@ def step_forces(args, terms, kick, post, q, w, t, f, fa, u):
 @jit
 def verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u):
     """One damped velocity-Verlet step in place (``integrators.verlet``; ``fa``, ``u``: the
-    scratch of ``velocity_scratch``); returns t + h."""
+    scratch of ``velocity_scratch``, f_a of the step left in ``fa``); returns t + h."""
     n = q.shape[0]
     for k in range(n):
         v[k] = pre[k] * v[k] + kick[k] * f[k]
@@ -153,13 +155,18 @@ def _checkpoint(q, v, f, t, CQ, CV, CF, CT, c):
 
 
 @jit
-def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, Rq, Rv, Rf):
+def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, CA, Rq, Rv, Rf):
     """Run ``nsteps`` from (q, v, f, t) in place; checkpoint every ``seg`` steps (rows of CQ, CV,
-    CF, CT), record (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
+    CF, CT; with velocity terms and rows in CA, also the f_a of the step into the state,
+    ``step_forces``: what ``reverse`` reads when every state is kept, seg = 1), record
+    (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
     fa, u = velocity_scratch(terms, q.shape[0])
+    keep_fa = fa.shape[0] > 0 and CA.shape[0] > 0
     for k in range(nsteps + 1):
         if k % seg == 0:
             _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
+            if keep_fa and k > 0:
+                CA[k // seg, :] = fa
         if k % stride == 0:
             _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
@@ -168,8 +175,9 @@ def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, ob
 
 
 @jit
-def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST):
-    """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST."""
+def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST, SA):
+    """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST (with
+    velocity terms, the f_a of the step into each later state into SA: ``step_forces``)."""
     q = q0.copy()
     v = v0.copy()
     f = f0.copy()
@@ -180,6 +188,8 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
         SV[s, :] = v
         SF[s, :] = f
         ST[s] = t
+        if s > 0 and fa.shape[0] > 0:
+            SA[s, :] = fa
         if s < nsteps:
             t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u)
 
@@ -190,22 +200,54 @@ FORM_TABLES, FORM_GRID, FORM_CHAIN = 0, 1, 2
 
 
 @jit
+def _chain_model_force(q, cols, with_kg, r, f, ldof, lval):
+    """The model force of a chain-ordered chain from its columns (``chain_force_columns``), zero
+    on DOFs past its 2n (a striker's), plus constant loads (``models.loads``: the engine's
+    ``chain_loaded_force``, the same bits)."""
+    chain_force_columns(q, cols, with_kg, r, f)
+    for k in range(2 * cols.shape[1], q.shape[0]):
+        f[k] = 0.0
+    load_terms(q, (ldof, lval), f, True)
+
+
+@jit
+def _chain_adjoint(q, cols, u, lf, r, acc, lq, ldof, gload, ready):
+    """The column form's model part of ``_force_adjoint``: λq += (∂F/∂q)ᵀλf, the hinge and site
+    parameters' adjoints into ``acc``, the constant loads' into ``gload``; a uniform chain's
+    (``u``: ``kernels.chain_uniform``'s parameters, else empty) by the fused kernels of its
+    reverse sweep (``chain_uniform_reverse``), another's by the column kernels (``ready``: r
+    already holds the state's strains, from its force)."""
+    n = cols.shape[1]
+    if u.shape[0]:
+        cs, sn = r[V_COS, :n], r[V_SIN, :n]
+        chain_uniform_sites(q[n : 2 * n], u[U_TH0], cs, sn)
+        chain_uniform_hinges(q, lf, cs, sn, r, acc, u)
+        chain_uniform_gather(q, lf, lq, cs, sn, r, acc, u)
+    else:
+        if not ready:
+            chain_strains(q, cols, r)
+        chain_reverse_hessian(q, cols, lf, r, acc)
+        chain_reverse_gather(q, cols, lf, r, acc, lq)
+    for k in range(ldof.shape[0]):
+        gload[k] += lf[ldof[k]]
+
+
+@jit
 def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, ready):
     """λq += (∂F/∂q)ᵀλf at (q, t); parameter adjoints of the model, contacts, applied forces.
 
     ``form`` = (kind, n_cols, θ0, columns, columns, accumulator, accumulator, accumulator,
-    scratch, force scratch): FORM_GRID (·, n_cols, θ0, x and y columns, their accumulators, θ0's,
-    scratch: ``kernels.sheet_grid_adjoint``), FORM_CHAIN (·, lateral stretch?, ·,
+    scratch, force scratch, load DOFs, load values, load accumulator): FORM_GRID (·, n_cols, θ0,
+    x and y columns, their accumulators, θ0's, scratch: ``kernels.sheet_grid_adjoint``),
+    FORM_CHAIN (·, lateral stretch?, a uniform chain's parameters or empty,
     ``kernels.chain_columns``, ·, their accumulator, ·, ·, scratch, F at the state: the reverse
-    sweep takes the force again, ``ready``: the scratch already holds the state's strains),
-    FORM_TABLES (``model_adjoint`` into g1, g2).
+    sweep takes the force again, ``ready``: the scratch already holds the state's strains; a
+    loaded chain's constant loads, their values' adjoints: ``_chain_adjoint``), FORM_TABLES
+    (``model_adjoint`` into g1, g2).
     """
     kind = form[0]
     if kind == FORM_CHAIN:
-        if not ready:
-            chain_strains(q, form[3], form[8])
-        chain_reverse_hessian(q, form[3], lf, form[8], form[5])
-        chain_reverse_gather(q, form[3], lf, form[8], form[5], lq)
+        _chain_adjoint(q, form[3], form[2], lf, form[8], form[5], lq, form[10], form[12], ready)
     elif kind == FORM_GRID:
         sheet_grid_adjoint(q, form[2], form[1], form[3], form[4], lf, lq, form[5], form[6], form[7], form[8])
     else:
@@ -225,26 +267,26 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
 
 
 @jit
-def _prediction_adjoint(args, terms, kick, pre, post, q0, v0, f0, q1, t1, lf, lw, GK, GV, gdrv, gdash, s):
-    """Reverse of the velocity terms of the step (q0, v0, f0) → (q1, ·, f1) (``step_forces``),
+def _prediction_adjoint(terms, kick, pre, post, v0, f0, fa, t1, lf, lw, GK, GV, gdrv, gdash, s):
+    """Reverse of the velocity terms of the step (·, v0, f0) → (·, ·, f1) (``step_forces``),
     given λf of f1 (``lf``, the S λv part included) and λw so far: λu = (∂V/∂u)ᵀ λf, then
     u = S (w + K f_a) and f_a = G + V(w); λw and the folded factor sums (GK, GV) gain their
     terms, ``lf`` becomes λG = λf + λf_a (what ``_force_adjoint`` takes), and dashpot and
-    friction parameters theirs. w, f_a and u are taken again from the state before the step
-    (one more force evaluation; ``s``: scratch (5, n))."""
-    n = q1.shape[0]
-    w, qs, fs, fa, u = s[0], s[1], s[2], s[3], s[4]
+    friction parameters theirs. w and u are taken again, by the forward run's operations (the
+    same bits), from the state before the step and the step's f_a the run kept (``fa``);
+    ``s``: scratch (4, n)."""
+    n = fa.shape[0]
+    w, u, lu, fs = s[0], s[1], s[2], s[3]
     dd, dm, dp = terms.drv_dof, terms.drv_mode, terms.drv_prm
     for k in range(n):
         w[k] = pre[k] * v0[k] + kick[k] * f0[k]
-        qs[k] = q1[k]
-    apply_prescribed(qs, w, t1, dd, dm, terms.drv_shape, dp)
-    step_forces(args, terms, kick, post, qs, w, t1, fs, fa, u)
+    apply_prescribed(fs, w, t1, dd, dm, terms.drv_shape, dp)  # (fs: scratch for the prescribed q)
     for k in range(n):
-        qs[k] = 0.0  # λu
-    velocity_adjoint(u, lf, qs, terms.dash_ij, terms.dash_c, gdash, dd, dm, dp, gdrv)
+        u[k] = (w[k] + kick[k] * fa[k]) * post[k]
+        lu[k] = 0.0
+    velocity_adjoint(u, lf, lu, terms.dash_ij, terms.dash_c, gdash, dd, dm, dp, gdrv)
     for k in range(n):  # u = S (w + K f_a): λw += S λu, λf_a = K S λu (into fs)
-        su = post[k] * qs[k]
+        su = post[k] * lu[k]
         lw[k] += su
         GK[k] += su * fa[k]
         GV[k] += su * u[k]
@@ -255,31 +297,35 @@ def _prediction_adjoint(args, terms, kick, pre, post, q0, v0, f0, q1, t1, lf, lw
 
 
 @jit
-def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
+def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, SA, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
             lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form):
-    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps).
+    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
+    with velocity terms SA: the f_a of the step into each state, ``step_forces``).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
     and leave as those at step k0 (objective at k0 included); ``lw`` enters as λw of the step
     out of state k0 + nsteps (zero at the end of the run) and leaves as that of the step out of
     k0. Parameter adjoints accumulate; the integrator factors' in the folded form of the module
-    docstring (GK, GV; the caller adds the initial state's products).
+    docstring (GK, GV; the caller adds the initial state's products). A chain's column form
+    without velocity terms takes each state's force again (its replay, ``chain_replay``, keeps
+    none); with them it reads the kept force as the other forms do.
     """
     n = lq.shape[0]
     dg = np.empty(4)
     ddg = np.empty(4)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    chain = form[0] == FORM_CHAIN
     vdep = has_velocity_terms(terms)
-    scratch = np.empty((5, n if vdep else 0))
-    cols, with_kg, acc, r, fc = form[3], form[1] != 0, form[5], form[8], form[9]  # (passing the
-    for j in range(nsteps, 0, -1):  # whole tuple on each step costs a reference count per array)
+    again = form[0] == FORM_CHAIN and not vdep
+    scratch = np.empty((4, n if vdep else 0))
+    cols, with_kg, r, fc = form[3], form[1] != 0, form[8], form[9]  # (passing the whole tuple on each
+    ldof, lval = form[10], form[11]  # step costs a reference count per array)
+    for j in range(nsteps, 0, -1):
         q1 = SQ[j]
         v1 = SV[j]
         t1 = ST[j]
-        if chain:  # the force again (cheaper than keeping it), strains with it
+        if again:  # the force again (cheaper than keeping it), strains with it
             f1 = fc
-            chain_force_columns(q1, cols, with_kg, r, f1)
+            _chain_model_force(q1, cols, with_kg, r, f1, ldof, lval)
             position_forces(q1, t1, f1, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
         else:
             f1 = SF[j]
@@ -290,15 +336,10 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, h, k0, nsteps, stride,
             GV[k] += z * v1[k]
             lw[k] = sl
             lf[k] += kick[k] * sl
-        if vdep:  # dashpots, friction at the predicted velocity (never with the chain's columns)
-            _prediction_adjoint(args, terms, kick, pre, post, SQ[j - 1], SV[j - 1], SF[j - 1], q1, t1, lf, lw, GK, GV,
-                                gdrv, gdash, scratch)
-        if chain:  # ``_force_adjoint`` (no contacts here)
-            chain_reverse_hessian(q1, cols, lf, r, acc)
-            chain_reverse_gather(q1, cols, lf, r, acc, lq)
-            drive_force_adjoint(t1, lf, dd, dm, ds, dp, gdrv, dg, ddg)
-        else:
-            _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, True)
+        if vdep:  # dashpots, friction at the predicted velocity
+            _prediction_adjoint(terms, kick, pre, post, SV[j - 1], SF[j - 1], SA[j], t1, lf, lw, GK, GV, gdrv, gdash,
+                                scratch)
+        _force_adjoint(args, terms, q1, t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, again)
         prescribed_adjoint(t1, lq, lw, dd, dm, ds, dp, gdrv, dg, ddg)
         for k in range(n):
             x = lw[k] + h * lq[k]
@@ -409,10 +450,13 @@ def apply_prescribed_only(terms, q, v, t):
 
 # ---------------------------------------------------------------- chain-ordered chains
 #
-# The same scheme on a chain-ordered rotating-squares chain (``kernels.chain_ordered``, no
-# contacts) from parameter columns: the forward run and the replay step with the column force
-# (bit-identical to ``verlet_step``); the replay keeps (q, v) only, and the reverse step takes
-# the force at each state again with its Hessian-vector product (cos/sin once per site). The
+# The same scheme on a chain-ordered rotating-squares chain (``kernels.chain_ordered``; with
+# constant loads, contacts and a striker's DOFs past the chain's too) from parameter columns:
+# the forward run and the replay step with the column force (bit-identical to ``verlet_step``);
+# the replay keeps (q, v) only, and the reverse step takes the force at each state again with
+# its Hessian-vector product (cos/sin once per site). With velocity terms the run and replay
+# are the general ones (``forward``, ``replay``), and only the reverse step's model part takes
+# the column form (``_chain_adjoint``; a uniform chain's by its fused kernels). The
 # integrator-factor adjoints are folded: with z = λw(step j) + S λv(into j), the products at
 # state j are ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (v_j = S (w + K f_j)), so two
 # per-DOF accumulators GK, GV (``gradient.Trajectory.gradient`` turns them into m⁻¹, c).
@@ -463,16 +507,17 @@ def _chain_close_open(q, v, f, kick, pre, post, h, sq, sv, sf, store):
 
 
 @jit
-def _chain_force_at(cols, with_kg, terms, q, v, f, t, w):
-    """Prescribe the driven DOFs at t, then the total force (the column force, applied forces)."""
+def _chain_force_at(cols, with_kg, ldof, lval, terms, q, v, f, t, w):
+    """Prescribe the driven DOFs at t, then the total force (the column force, constant loads,
+    contacts, applied forces)."""
     apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
-    chain_force_columns(q, cols, with_kg, w, f)
+    _chain_model_force(q, cols, with_kg, w, f, ldof, lval)
     position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
                     terms.drv_prm)
 
 
 @jit
-def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs,
+def chain_forward(cols, with_kg, ldof, lval, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs,
                   CQ, CV, CF, CT, Rq, Rv, Rf):
     """``forward`` with the column force (the same arithmetic: the same run). Between the states
     it keeps, the closing kick of a step and the opening of the next take one pass."""
@@ -480,7 +525,7 @@ def chain_forward(cols, with_kg, terms, kick, pre, post, q, v, f, t, h, nsteps, 
     for k in range(nsteps + 1):
         if k > 0:
             t += h
-            _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
+            _chain_force_at(cols, with_kg, ldof, lval, terms, q, v, f, t, w)
         keep = k % seg == 0 or k % stride == 0 or k == nsteps
         if k > 0 and keep:
             _chain_close(v, f, kick, post)
@@ -506,7 +551,7 @@ def _segment_start(q0, v0, f0, t0, SQ, SV, ST):
 
 
 @jit
-def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, ST):
+def chain_replay(cols, with_kg, ldof, lval, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, ST):
     """States 0..nsteps of a segment from its checkpoint: (q, v, t) into rows of SQ, SV, ST (the
     reverse step takes the force again)."""
     w = np.empty((N_R, cols.shape[1] + 1))
@@ -516,7 +561,7 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
         _chain_open(q, v, f, kick, pre, h)
     for s in range(1, nsteps + 1):
         t += h
-        _chain_force_at(cols, with_kg, terms, q, v, f, t, w)
+        _chain_force_at(cols, with_kg, ldof, lval, terms, q, v, f, t, w)
         ST[s] = t
         if s < nsteps:
             _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], f[:0], True)
@@ -536,9 +581,10 @@ def chain_replay(cols, with_kg, terms, kick, pre, post, q0, v0, f0, t0, h, nstep
 
 
 @jit
-def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST, SC, r):
+def chain_uniform_replay(u, with_kg, ldof, lval, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST, SC, r):
     """``chain_replay`` of a uniform chain (``chain_uniform_reverse``'s ``u``, ``fac``, scratch r):
-    the force from scalar parameters (``kernels.chain_uniform_force``) and the kicks with the
+    the force from scalar parameters (``kernels.chain_uniform_force``; constant loads, contacts
+    and applied forces as ``chain_replay``) and the kicks with the
     factors per field, the same operations, so the same states bit for bit. Keeps each state's
     force and cos/sin of θ0+θ too (SF[s], SC[s] = (cos, sin), rows 1..nsteps), which the
     reverse step reads."""
@@ -553,6 +599,7 @@ def chain_uniform_replay(u, with_kg, fac, terms, q0, v0, f0, t0, h, nsteps, SQ, 
         t += h
         apply_prescribed(q, v, t, dd, dm, ds, dp)
         chain_uniform_force(q, u, with_kg, SC[s, 0], SC[s, 1], r, f)
+        load_terms(q, (ldof, lval), f, True)
         position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
         ST[s] = t
         if s < nsteps:
@@ -670,15 +717,16 @@ def _uniform_close(terms, fac, nf, t1, h, j, k0, stride, obs, dRq, dRv, dRf, lq,
 
 @jit
 def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-                          lq, lv, lf, lw, GK, GV, gdrv, acc, r):
+                          lq, lv, lf, lw, GK, GV, gcon, gdrv, acc, r, ldof, gload):
     """``reverse`` of a uniform chain (the same arguments where they exist; ``u``: its
     parameters, ``fac`` = (K_u, K_θ, S_u, S_θ, P_u, P_θ) scalars or per-field columns, acc the
     column accumulator (N_CA, n), r scratch (N_V, n + 1), SF, SC the replay's forces and
-    cos/sin of θ0+θ, SC possibly empty: then taken here). A step is four passes: cos/sin at the
+    cos/sin of θ0+θ, SC possibly empty: then taken here; ldof, gload: constant loads' DOFs and
+    their values' adjoints). A step is four passes: cos/sin at the
     sites (unless kept); per field, the integrator factors' products (with the close of the step
     before, unless the objective enters between them), ∂J/∂K from the kept force, applied
     forces included (``_field_open``); the hinges (Hessian and parameter products); the sites
-    (gathering, site parameters). Drives as ``reverse``.
+    (gathering, site parameters). Contacts, loads and drives as ``reverse``.
 
     Subnormal numbers are flushed to zero during the sweep (x86: MXCSR FTZ/DAZ, restored at the
     end): the adjoint of a long damped run decays through the subnormal range (below 2.2e-308),
@@ -699,6 +747,9 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stri
         _uniform_open(lq, lv, lf, lw, SV[j], SF[j], GK, GV, fac, 2, h, pending)
         chain_uniform_hinges(q1, lf, cs, sn, r, acc, u)
         chain_uniform_gather(q1, lf, lq, cs, sn, r, acc, u)
+        contact_adjoint(q1, lf, lq, terms.con_ij, terms.con_prm, gcon)
+        for k in range(ldof.shape[0]):
+            gload[k] += lf[ldof[k]]
         pending = _uniform_close(terms, fac, 2, ST[j], h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv,
                                  dg, ddg)
     if csr >= 0:
