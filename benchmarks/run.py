@@ -1092,11 +1092,12 @@ def gradient_midpoint(cases=((1_000, 1_000),), sheets=((40, 20, 300),), repeats:
     return rows
 
 
-#: shipped scenes of every model kind the general sweeps differentiate (``gradient_models``)
+#: shipped scenes (configs/ unless a folder is given) of every model kind the general sweeps
+#: differentiate, and of a chain with a striker (the impact-mitigation showcase's) (``gradient_models``)
 MODEL_SCENES = ("c_buckled_beams_rarefaction", "fpu_second_harmonic_shaker", "hertz_granular_impact",
                 "h_raney_transition_wave", "sine_gordon_breather", "f_slinky_friction_locomotion", "l_grid_guide",
                 "j_magnets_transition_wave", "k_linkage_transition_wave", "predeformed_rarefaction_pull",
-                "rotating_triangles_chain", "rotating_triangles_sheet")
+                "rotating_triangles_chain", "rotating_triangles_sheet", "designs/lego_impact_scene")
 
 
 def gradient_models(names=MODEL_SCENES, steps: int = 2_000, repeats: int = 5) -> list[dict]:
@@ -1114,7 +1115,7 @@ def gradient_models(names=MODEL_SCENES, steps: int = 2_000, repeats: int = 5) ->
 
     rows = []
     for name in names:
-        problem = build_problem(load_scene(ROOT.parent / "configs" / f"{name}.yaml"))
+        problem = build_problem(load_scene(ROOT.parent / ("" if "/" in name else "configs") / f"{name}.yaml"))
         n = min(steps, max(1, math.ceil(problem.duration / problem.dt - 1e-9)))
         st = make_stepper(problem, "velocity_verlet", threads=1, check_energy=False)
         engine = _from_start(st, n)
