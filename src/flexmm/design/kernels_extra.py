@@ -9,7 +9,7 @@ tangent kernels (``kernels.model_adjoint``/``model_tangent``) of:
 - the loaded rotating-squares chain (``LoadedChainArgs``, ``models.predeform``): the chain's
   kernels plus constant loads;
 - rotating triangles (``TriangleArgs``): the squares' hinge law in each hinge's own frame
-  (``to_hinge_frame``, ``from_hinge_frame``);
+  (``to_frame``, ``from_frame``);
 - independent harmonic oscillators (``HarmonicArgs``: ``harmonic_adjoint``, here in full).
 
 Each element's second derivatives are the directional derivative of its gradient (forward
@@ -339,21 +339,19 @@ def loaded_chain_unpack(args: LoadedChainArgs, t1: np.ndarray, t2: np.ndarray) -
 # ---------------------------------------------------------------- rotating triangles
 #
 # A triangle hinge is the squares' hinge in its own frame: d_l = e·Δx, d_s = n·Δx (e = (c, s)
-# the hinge axis, n = (−s, c), Δx = x_B − x_A). Its energy is Ẽ(L q) with L linear (local
-# coordinates (0, d_l, 0, d_s, θ_A, θ_B) of ``hinge_adjoint``'s DOFs 0..5), so the Hessian-vector
-# product is Lᵀ ∇²Ẽ (L λ): the local product of ``hinge_adjoint`` rotated back.
+# the hinge axis, n = (−s, c), Δx = x_B − x_A). Its energy is Ẽ(L q) with L linear (q to the
+# local coordinates (d_l, d_s, θ_A, θ_B): ``to_frame``), so the Hessian-vector product is
+# Lᵀ ∇²Ẽ (L λ): ``kernels.hinge_second`` on the local coordinates of q and λ, rotated back
+# (``from_frame``).
 
 
 @jit
-def _to_frame(x, n, a, b, c, s, loc):
+def to_frame(x, n, a, b, c, s):
+    """(e·Δx, n·Δx) of x (q, λ or δq; N-blocks u, v, θ) across a triangle hinge from a to b with
+    axis e = (c, s), n = (−s, c): its relative displacement along and across the hinge."""
     dx = x[b] - x[a]
     dy = x[n + b] - x[n + a]
-    loc[0] = 0.0
-    loc[1] = c * dx + s * dy
-    loc[2] = 0.0
-    loc[3] = c * dy - s * dx
-    loc[4] = x[2 * n + a]
-    loc[5] = x[2 * n + b]
+    return c * dx + s * dy, c * dy - s * dx
 
 
 @jit
@@ -367,28 +365,18 @@ def unit_angles(q, theta0, cs, sn):
 
 
 @jit
-def to_hinge_frame(q, x, args, h, ql, xl, ol):
-    """Triangle hinge h in its frame: ql = L q, xl = L x (x: λ or δq), ol zeroed; returns its
-    triangles a, b and axis (c, s)."""
-    a = args.hinge_a[h]
-    b = args.hinge_b[h]
-    c, s = args.axis_cos[h], args.axis_sin[h]
-    n = args.theta0.shape[0]
-    _to_frame(q, n, a, b, c, s, ql)
-    _to_frame(x, n, a, b, c, s, xl)
-    ol[:] = 0.0
-    return a, b, c, s
-
-
-@jit
-def from_hinge_frame(loc, n, a, b, c, s, out):
-    """Add Lᵀ loc to ``out`` (loc[0] = −loc[1], loc[2] = −loc[3]: the A ends)."""
-    out[a] += c * loc[0] - s * loc[2]
-    out[b] += c * loc[1] - s * loc[3]
-    out[n + a] += s * loc[0] + c * loc[2]
-    out[n + b] += s * loc[1] + c * loc[3]
-    out[2 * n + a] += loc[4]
-    out[2 * n + b] += loc[5]
+def from_frame(out, n, a, b, c, s, fl, fs, ga, gb):
+    """Add Lᵀ(−fl, −fs, −ga, −gb) to ``out``: a hinge-frame derivative (fl, fs, ga, gb) along
+    (d_l, d_s, θ_A, θ_B), negated, taken back to the units' DOFs — +(c fl − s fs, s fl + c fs)
+    at x_A, the opposite at x_B, −ga, −gb at θ_A, θ_B (the force's pattern, ``triangle_kernels``)."""
+    fx = c * fl - s * fs
+    fy = s * fl + c * fs
+    out[a] += fx
+    out[b] -= fx
+    out[n + a] += fy
+    out[n + b] -= fy
+    out[2 * n + a] -= ga
+    out[2 * n + b] -= gb
 
 
 # ---------------------------------------------------------------- harmonic oscillators
