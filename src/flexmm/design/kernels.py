@@ -60,6 +60,7 @@ from flexmm.models.hinge import (
     H_KT,
     H_REST,
     H_SIGN,
+    N_HINGE_PARAMS,
     S_KG,
     S_KR,
     S_THETA0,
@@ -106,31 +107,49 @@ def hinge_second(dlq, dsq, ep, dll, dsl, lta, ltb, rest, hA, hB, sig, kl, ks, kt
 
     dlq, dsq: the relative displacements of B and A along and across the hinge axis; ep = θ_A + θ_B;
     dll, dsl: the same differences of λ; lta, ltb: λ at θ_A, θ_B; then the hinge's parameters
-    and cos/sin of θ0 + θ at A and B. With the stretch, shear and bend (``models.hinge``)
+    and cos/sin of φ = θ0 + θ at A and B. With the levers a_s = h_A sin φ_A, a_c = h_A cos φ_A
+    (b_s, b_c at B), the stretch, shear and bend of ``models.hinge``
 
-        el = d_l + r − (h_A cos φ_A + h_B cos φ_B),   es = d_s + σ (h_B sin φ_B − h_A sin φ_A),
+        el = d_l + r − (a_c + b_c),   es = d_s + σ (b_s − a_s),   ep = θ_A + θ_B,
 
-    their variations along λ δl = λ_l + h_A sin φ_A λ_A + h_B sin φ_B λ_B,
-    δs = λ_s + σ (h_B cos φ_B λ_B − h_A cos φ_A λ_A), δp = λ_A + λ_B, and
-    D = λ·∇E = k_l el δl + k_s es δs + k_θ ep δp, returns
+    their variations along λ δl = λ_l + a_s λ_A + b_s λ_B, δs = λ_s + σ (b_c λ_B − a_c λ_A),
+    δp = λ_A + λ_B, and D = λ·∇E = k_l el δl + k_s es δs + k_θ ep δp: with f_l = k_l el,
+    f_s = σ k_s es, p_l = k_l δl, p_s = σ k_s δs and X_A = p_l + f_s λ_A, Y_A = f_l λ_A − p_s,
+    X_B = p_l − f_s λ_B, Y_B = f_l λ_B + p_s,
 
-        (k_l δl, k_s δs, ∂D/∂θ_A, ∂D/∂θ_B, ∂D/∂θ0_A, ∂D/∂θ0_B, ∂D/∂h_A, ∂D/∂h_B, el δl, es δs, ep δp):
+        ∂D/∂θ0_A = a_s X_A + a_c Y_A,   ∂D/∂θ_A = ∂D/∂θ0_A + k_θ δp,   ∂D/∂h_A = sin φ_A Y_A − cos φ_A X_A
 
-    ∂D/∂d_l = k_l δl (and ∂D/∂r), ∂D/∂d_s = k_s δs, ∂D/∂θ the rotations' share of the
-    Hessian-vector product (∂D/∂θ0 the same without k_θ δp), then the parameter products
-    (∂D/∂k_l, ∂D/∂k_s, ∂D/∂k_θ). The forces' products are these negated.
+    (B likewise), ∂D/∂d_l = ∂D/∂r = p_l, ∂D/∂d_s = k_s δs, ∂D/∂k_l = el δl, ∂D/∂k_s = es δs,
+    ∂D/∂k_θ = ep δp. Returns (p_l, k_s δs, ∂D/∂θ_A, ∂D/∂θ_B, ∂D/∂θ0_A, ∂D/∂θ0_B, ∂D/∂h_A,
+    ∂D/∂h_B, ∂D/∂k_l, ∂D/∂k_s, ∂D/∂k_θ): the Hessian-vector and parameter products of the
+    force are these negated.
     """
-    el = dlq + rest - (hA * ca + hB * cb)
-    es = sig * (hB * sb - hA * sa) + dsq
-    dl = dll + hA * sa * lta + hB * sb * ltb
-    ds = sig * (hB * cb * ltb - hA * ca * lta) + dsl
+    a_s, a_c, b_s, b_c = hA * sa, hA * ca, hB * sb, hB * cb
+    el = dlq + rest - (a_c + b_c)
+    es = sig * (b_s - a_s) + dsq
+    dl = dll + a_s * lta + b_s * ltb
+    ds = sig * (b_c * ltb - a_c * lta) + dsl
     dp = lta + ltb
     kdp = kt * dp
-    d_ta = kl * (hA * sa * dl + el * hA * ca * lta) + ks * (-sig * hA * ca * ds + es * sig * hA * sa * lta) + kdp
-    d_tb = kl * (hB * sb * dl + el * hB * cb * ltb) + ks * (sig * hB * cb * ds - es * sig * hB * sb * ltb) + kdp
-    g_ha = kl * (-ca * dl + el * sa * lta) + ks * (-sig * sa * ds - es * sig * ca * lta)
-    g_hb = kl * (-cb * dl + el * sb * ltb) + ks * (sig * sb * ds + es * sig * cb * ltb)
-    return kl * dl, ks * ds, d_ta, d_tb, d_ta - kdp, d_tb - kdp, g_ha, g_hb, el * dl, es * ds, ep * dp
+    pl = kl * dl
+    pss = ks * ds
+    fl = kl * el
+    fs = sig * (ks * es)
+    ps = sig * pss
+    xa = pl + fs * lta
+    ya = fl * lta - ps
+    xb = pl - fs * ltb
+    yb = fl * ltb + ps
+    t0a = hA * (sa * xa + ca * ya)
+    t0b = hB * (sb * xb + cb * yb)
+    return pl, pss, t0a + kdp, t0b + kdp, t0a, t0b, sa * ya - ca * xa, sb * yb - cb * xb, el * dl, es * ds, ep * dp
+
+
+@jit
+def hinge_row(hf, h):
+    """(r, h_A, h_B, σ, k_l, k_s, k_θ) of hinge h from the hinge table flattened (``hprm.ravel()``)."""
+    p = N_HINGE_PARAMS * h
+    return hf[p + H_REST], hf[p + H_HALF_A], hf[p + H_HALF_B], hf[p + H_SIGN], hf[p + H_KL], hf[p + H_KS], hf[p + H_KT]
 
 
 @jit
@@ -606,29 +625,32 @@ def sheet_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0 per unit).
 
     Hinges only (θ0 at g2[:N]); with dipoles, joints and loads: ``sheet_full_adjoint``.
-    One loop over the hinges, each ``hinge_second`` on scalars.
+    One loop over the hinges, each ``hinge_second`` on scalars (DOF indices unsigned: no
+    negative-index wraparound on the dozen gathers and scatters of a hinge).
     """
     ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
     n = theta0.shape[0]
     cs = np.empty(n)
     sn = np.empty(n)
     unit_angles(q, theta0, cs, sn)
+    hf = hprm.ravel()
     for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
-        la, lb, sa_, sb_ = _sheet_dofs(hax[h], n, a, b)
-        ta, tb = 2 * n + a, 2 * n + b
-        fl_, fs_, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
-            q[lb] - q[la], q[sb_] - q[sa_], q[ta] + q[tb], lam[lb] - lam[la], lam[sb_] - lam[sa_], lam[ta], lam[tb],
-            hprm[h, H_REST], hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS],
-            hprm[h, H_KT], cs[a], sn[a], cs[b], sn[b])
-        out[la] += fl_
-        out[lb] -= fl_
-        out[sa_] += fs_
-        out[sb_] -= fs_
+        a = np.uint64(ha[h])
+        b = np.uint64(hb[h])
+        la_, lb_, sa_, sb_ = _sheet_dofs(hax[h], n, ha[h], hb[h])
+        la, lb, sa, sb = np.uint64(la_), np.uint64(lb_), np.uint64(sa_), np.uint64(sb_)
+        ta, tb = np.uint64(2 * n + ha[h]), np.uint64(2 * n + hb[h])
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
+            q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], lam[lb] - lam[la], lam[sb] - lam[sa], lam[ta], lam[tb],
+            rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
+        out[la] += pl
+        out[lb] -= pl
+        out[sa] += pss
+        out[sb] -= pss
         out[ta] -= d_ta
         out[tb] -= d_tb
-        add_hinge_grads(g1, h, fl_, g_ha, g_hb, g_kl, g_ks, g_kt)
+        add_hinge_grads(g1, h, pl, g_ha, g_hb, g_kl, g_ks, g_kt)
         g2[a] -= d_t0a
         g2[b] -= d_t0b
 
@@ -1108,24 +1130,28 @@ def triangle_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0).
 
     One loop over the hinges: q and λ into the hinge's frame (``kernels_extra.to_frame``),
-    ``hinge_second`` on scalars, its products back (``from_frame``).
+    ``hinge_second`` on scalars, its products back (``from_frame``); fields as views, unit
+    indices unsigned (no negative-index wraparound).
     """
     ha, hb, ec, es, hprm, theta0 = args[0], args[1], args[2], args[3], args[4], args[5]
     n = theta0.shape[0]
     cs, sn = np.empty(n), np.empty(n)
     unit_angles(q, theta0, cs, sn)
+    u, v, t = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
+    lu, lv, lt = lam[:n], lam[n : 2 * n], lam[2 * n : 3 * n]
+    ou, ov, ot = out[:n], out[n : 2 * n], out[2 * n : 3 * n]
+    hf = hprm.ravel()
     for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
+        a = np.uint64(ha[h])
+        b = np.uint64(hb[h])
         c, s = ec[h], es[h]
-        dlq, dsq = to_frame(q, n, a, b, c, s)
-        dll, dsl = to_frame(lam, n, a, b, c, s)
-        fl_, fs_, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
-            dlq, dsq, q[2 * n + a] + q[2 * n + b], dll, dsl, lam[2 * n + a], lam[2 * n + b], hprm[h, H_REST],
-            hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT],
-            cs[a], sn[a], cs[b], sn[b])
-        from_frame(out, n, a, b, c, s, fl_, fs_, d_ta, d_tb)
-        add_hinge_grads(g1, h, fl_, g_ha, g_hb, g_kl, g_ks, g_kt)
+        dlq, dsq = to_frame(u, v, a, b, c, s)
+        dll, dsl = to_frame(lu, lv, a, b, c, s)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
+            dlq, dsq, t[a] + t[b], dll, dsl, lt[a], lt[b], rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
+        from_frame(ou, ov, ot, a, b, c, s, pl, pss, d_ta, d_tb)
+        add_hinge_grads(g1, h, pl, g_ha, g_hb, g_kl, g_ks, g_kt)
         g2[a] -= d_t0a
         g2[b] -= d_t0b
 
@@ -1139,18 +1165,22 @@ def triangle_tangent(q, args, dq, d1, d2, out):
         out[k] = 0.0
     cs, sn = np.empty(n), np.empty(n)
     unit_angles(q, theta0, cs, sn)
+    u, v, t = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
+    du, dv, dt = dq[:n], dq[n : 2 * n], dq[2 * n : 3 * n]
+    ou, ov, ot = out[:n], out[n : 2 * n], out[2 * n : 3 * n]
+    hf, df = hprm.ravel(), d1.ravel()
     for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
+        a = np.uint64(ha[h])
+        b = np.uint64(hb[h])
         c, s = ec[h], es[h]
-        dlq, dsq = to_frame(q, n, a, b, c, s)
-        ddl, dds = to_frame(dq, n, a, b, c, s)
+        dlq, dsq = to_frame(u, v, a, b, c, s)
+        ddl, dds = to_frame(du, dv, a, b, c, s)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        drest, dhA, dhB, _, dkl, dks, dkt = hinge_row(df, h)
         d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
-            dlq, dsq, q[2 * n + a] + q[2 * n + b], ddl, dds, dq[2 * n + a], dq[2 * n + b], d2[a], d2[b],
-            hprm[h, H_REST], hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS],
-            hprm[h, H_KT], d1[h, H_REST], d1[h, H_HALF_A], d1[h, H_HALF_B], d1[h, H_KL], d1[h, H_KS], d1[h, H_KT],
-            cs[a], sn[a], cs[b], sn[b])
-        from_frame(out, n, a, b, c, s, d_fl, d_fs, d_ga, d_gb)
+            dlq, dsq, t[a] + t[b], ddl, dds, dt[a], dt[b], d2[a], d2[b], rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB,
+            dkl, dks, dkt, cs[a], sn[a], cs[b], sn[b])
+        from_frame(ou, ov, ot, a, b, c, s, d_fl, d_fs, d_ga, d_gb)
 
 
 # ---------------------------------------------------------------- dispatch

@@ -346,11 +346,12 @@ def loaded_chain_unpack(args: LoadedChainArgs, t1: np.ndarray, t2: np.ndarray) -
 
 
 @jit
-def to_frame(x, n, a, b, c, s):
-    """(e·Δx, n·Δx) of x (q, λ or δq; N-blocks u, v, θ) across a triangle hinge from a to b with
-    axis e = (c, s), n = (−s, c): its relative displacement along and across the hinge."""
-    dx = x[b] - x[a]
-    dy = x[n + b] - x[n + a]
+def to_frame(xu, xv, a, b, c, s):
+    """(e·Δx, n·Δx) across a triangle hinge from unit a to b with axis e = (c, s), n = (−s, c):
+    Δx = (xu[b] − xu[a], xv[b] − xv[a]) the relative displacement of q, λ or δq (xu, xv: its
+    x and y fields, (N,)), along and across the hinge."""
+    dx = xu[b] - xu[a]
+    dy = xv[b] - xv[a]
     return c * dx + s * dy, c * dy - s * dx
 
 
@@ -365,18 +366,19 @@ def unit_angles(q, theta0, cs, sn):
 
 
 @jit
-def from_frame(out, n, a, b, c, s, fl, fs, ga, gb):
-    """Add Lᵀ(−fl, −fs, −ga, −gb) to ``out``: a hinge-frame derivative (fl, fs, ga, gb) along
-    (d_l, d_s, θ_A, θ_B), negated, taken back to the units' DOFs — +(c fl − s fs, s fl + c fs)
-    at x_A, the opposite at x_B, −ga, −gb at θ_A, θ_B (the force's pattern, ``triangle_kernels``)."""
+def from_frame(ou, ov, ot, a, b, c, s, fl, fs, ga, gb):
+    """Add Lᵀ(−fl, −fs, −ga, −gb) to the output's fields ou, ov, ot (x, y, θ; (N,)): a
+    hinge-frame derivative (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, taken back
+    to the units — +(c fl − s fs, s fl + c fs) at unit a, the opposite at b, −ga, −gb at
+    their rotations (the force's pattern, ``triangle_kernels``)."""
     fx = c * fl - s * fs
     fy = s * fl + c * fs
-    out[a] += fx
-    out[b] -= fx
-    out[n + a] += fy
-    out[n + b] -= fy
-    out[2 * n + a] -= ga
-    out[2 * n + b] -= gb
+    ou[a] += fx
+    ou[b] -= fx
+    ov[a] += fy
+    ov[b] -= fy
+    ot[a] -= ga
+    ot[b] -= gb
 
 
 # ---------------------------------------------------------------- harmonic oscillators
