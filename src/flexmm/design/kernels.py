@@ -613,11 +613,16 @@ def chain_uniform_gather(q, lf, lq, cs, sn, r, acc, u):
 
 
 @jit
-def _sheet_dofs(hax, n, a, b):
-    """(la, lb, sa, sb) of a sheet hinge: along-axis and across-axis DOFs of its units."""
-    if hax == 0:
-        return a, b, n + a, n + b
-    return n + a, n + b, a, b
+def _sheet_dofs(ha, hb, hax, n, h):
+    """Sheet hinge h's units a, b and DOFs: along its axis la, lb, across sa, sb, rotations ta,
+    tb — unsigned, so indexing with them skips numba's negative-index wraparound."""
+    a, b = ha[h], hb[h]
+    if hax[h] == 0:
+        la, lb, sa, sb = a, b, n + a, n + b
+    else:
+        la, lb, sa, sb = n + a, n + b, a, b
+    u = np.uint64
+    return u(a), u(b), u(la), u(lb), u(sa), u(sb), u(2 * n + a), u(2 * n + b)
 
 
 @jit
@@ -635,11 +640,7 @@ def sheet_adjoint(q, args, lam, out, g1, g2):
     unit_angles(q, theta0, cs, sn)
     hf = hprm.ravel()
     for h in range(ha.shape[0]):
-        a = np.uint64(ha[h])
-        b = np.uint64(hb[h])
-        la_, lb_, sa_, sb_ = _sheet_dofs(hax[h], n, ha[h], hb[h])
-        la, lb, sa, sb = np.uint64(la_), np.uint64(lb_), np.uint64(sa_), np.uint64(sb_)
-        ta, tb = np.uint64(2 * n + ha[h]), np.uint64(2 * n + hb[h])
+        a, b, la, lb, sa, sb, ta, tb = _sheet_dofs(ha, hb, hax, n, h)
         rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
         pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
             q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], lam[lb] - lam[la], lam[sb] - lam[sa], lam[ta], lam[tb],
@@ -928,7 +929,8 @@ def sheet_uniform_adjoint(q, lam, out, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r)
 
 @jit
 def sheet_tangent(q, args, dq, d1, d2, out):
-    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions); indices
+    as ``sheet_adjoint``'s."""
     ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
     n = theta0.shape[0]
     for k in range(out.shape[0]):
@@ -936,12 +938,20 @@ def sheet_tangent(q, args, dq, d1, d2, out):
     cs = np.empty(n)
     sn = np.empty(n)
     unit_angles(q, theta0, cs, sn)
+    hf, df = hprm.ravel(), d1.ravel()
     for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
-        la, lb, sa_, sb_ = _sheet_dofs(hax[h], n, a, b)
-        hinge_tangent(q, dq, d1, h, hprm, la, lb, sa_, sb_, 2 * n + a, 2 * n + b, cs[a], sn[a], cs[b], sn[b], d2[a],
-                      d2[b], out)
+        a, b, la, lb, sa, sb, ta, tb = _sheet_dofs(ha, hb, hax, n, h)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        drest, dhA, dhB, _, dkl, dks, dkt = hinge_row(df, h)
+        d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
+            q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], dq[lb] - dq[la], dq[sb] - dq[sa], dq[ta], dq[tb], d2[a], d2[b],
+            rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB, dkl, dks, dkt, cs[a], sn[a], cs[b], sn[b])
+        out[la] += d_fl
+        out[lb] -= d_fl
+        out[sa] += d_fs
+        out[sb] -= d_fs
+        out[ta] -= d_ga
+        out[tb] -= d_gb
 
 
 # ---------------------------------------------------------------- chains of masses

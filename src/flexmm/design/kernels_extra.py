@@ -65,38 +65,50 @@ def loads_tangent(loads, d, off, out):
 
 
 @jit
-def _joint_second(q, n, joints, j):
-    """DOFs a, b of joint j, V''(ψ) and ∂V'/∂(k, β, ψ*) of its law V'(ψ) = k ψ (ψ − βψ*)(ψ − ψ*)."""
-    ja, jb, jp = joints
-    a = 2 * n + ja[j]
-    b = 2 * n + jb[j]
-    k, beta, ps = jp[j, 0], jp[j, 1], jp[j, 2]
-    psi = q[a] + q[b]
+def _joint_second(psi, k, beta, ps):
+    """V''(ψ) and ∂V'/∂(k, β, ψ*) of the joint law V'(ψ) = k ψ (ψ − βψ*)(ψ − ψ*) (scalars)."""
     u = psi - beta * ps
     w = psi - ps
-    v2 = k * (u * w + psi * w + psi * u)
-    return a, b, v2, psi * u * w, -k * psi * ps * w, -k * psi * (beta * w + u)
+    return k * (u * w + psi * w + psi * u), psi * u * w, -k * psi * ps * w, -k * psi * (beta * w + u)
+
+
+@jit
+def _joint_views(x, n, joints, g, off):
+    """The rotations x[2n:3n] (of q, λ, δq or the output), the joints' flattened (k, β, ψ*) rows
+    and g[off:] (their gradient or direction in the t2 vector)."""
+    return x[2 * n : 3 * n], joints[2].ravel(), g[off:]
 
 
 @jit
 def joints_adjoint(q, n, joints, lam, out, g, off):
-    for j in range(joints[0].shape[0]):
-        a, b, v2, dk, db, dps = _joint_second(q, n, joints, j)
-        lp = lam[a] + lam[b]
-        out[a] -= v2 * lp
-        out[b] -= v2 * lp
-        g[off + 3 * j] -= dk * lp
-        g[off + 3 * j + 1] -= db * lp
-        g[off + 3 * j + 2] -= dps * lp
+    """ψ = θ_a + θ_b: (∂F/∂θ)ᵀλ = −V''(ψ) (λ_a + λ_b) at both units, −∂V'/∂p (λ_a + λ_b) into g."""
+    ja, jb = joints[0], joints[1]
+    t, jp, gj = _joint_views(q, n, joints, g, off)
+    lt, ot = lam[2 * n : 3 * n], out[2 * n : 3 * n]
+    for j in range(ja.shape[0]):
+        a = np.uint64(ja[j])
+        b = np.uint64(jb[j])
+        v2, dk, db, dps = _joint_second(t[a] + t[b], jp[3 * j], jp[3 * j + 1], jp[3 * j + 2])
+        lp = lt[a] + lt[b]
+        ot[a] -= v2 * lp
+        ot[b] -= v2 * lp
+        gj[3 * j] -= dk * lp
+        gj[3 * j + 1] -= db * lp
+        gj[3 * j + 2] -= dps * lp
 
 
 @jit
 def joints_tangent(q, n, joints, dq, d, off, out):
-    for j in range(joints[0].shape[0]):
-        a, b, v2, dk, db, dps = _joint_second(q, n, joints, j)
-        dv = v2 * (dq[a] + dq[b]) + dk * d[off + 3 * j] + db * d[off + 3 * j + 1] + dps * d[off + 3 * j + 2]
-        out[a] -= dv
-        out[b] -= dv
+    ja, jb = joints[0], joints[1]
+    t, jp, dj = _joint_views(q, n, joints, d, off)
+    dt, ot = dq[2 * n : 3 * n], out[2 * n : 3 * n]
+    for j in range(ja.shape[0]):
+        a = np.uint64(ja[j])
+        b = np.uint64(jb[j])
+        v2, dk, db, dps = _joint_second(t[a] + t[b], jp[3 * j], jp[3 * j + 1], jp[3 * j + 2])
+        dv = v2 * (dt[a] + dt[b]) + dk * dj[3 * j] + db * dj[3 * j + 1] + dps * dj[3 * j + 2]
+        ot[a] -= dv
+        ot[b] -= dv
 
 
 # ---------------------------------------------------------------- point dipoles
