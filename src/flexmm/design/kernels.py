@@ -32,7 +32,9 @@ from numba.extending import overload
 from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit
 from flexmm._trig import sincos
 from flexmm.design.kernels_extra import (
+    add_to_ends,
     dipoles_second,
+    fields,
     from_frame,
     harmonic_adjoint,
     harmonic_pack,
@@ -47,7 +49,7 @@ from flexmm.design.kernels_extra import (
     sheet_offsets,
     sheet_pack,
     sheet_unpack,
-    to_frame,
+    triangle_frame,
     unit_angles,
 )
 from flexmm.models import laws as lw
@@ -645,12 +647,7 @@ def sheet_adjoint(q, args, lam, out, g1, g2):
         pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
             q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], lam[lb] - lam[la], lam[sb] - lam[sa], lam[ta], lam[tb],
             rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
-        out[la] += pl
-        out[lb] -= pl
-        out[sa] += pss
-        out[sb] -= pss
-        out[ta] -= d_ta
-        out[tb] -= d_tb
+        add_to_ends(out, out, out, la, lb, sa, sb, ta, tb, pl, pss, d_ta, d_tb)
         add_hinge_grads(g1, h, pl, g_ha, g_hb, g_kl, g_ks, g_kt)
         g2[a] -= d_t0a
         g2[b] -= d_t0b
@@ -946,12 +943,7 @@ def sheet_tangent(q, args, dq, d1, d2, out):
         d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
             q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], dq[lb] - dq[la], dq[sb] - dq[sa], dq[ta], dq[tb], d2[a], d2[b],
             rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB, dkl, dks, dkt, cs[a], sn[a], cs[b], sn[b])
-        out[la] += d_fl
-        out[lb] -= d_fl
-        out[sa] += d_fs
-        out[sb] -= d_fs
-        out[ta] -= d_ga
-        out[tb] -= d_gb
+        add_to_ends(out, out, out, la, lb, sa, sb, ta, tb, d_fl, d_fs, d_ga, d_gb)
 
 
 # ---------------------------------------------------------------- chains of masses
@@ -1132,14 +1124,14 @@ def loaded_chain_tangent(q, args, dq, d1, d2, out):
     loads_tangent(args[1], d2, 3 * n, out)
 
 
-# Rotating triangles: the squares' hinge in each hinge's frame (``kernels_extra.to_frame``).
+# Rotating triangles: the squares' hinge in each hinge's frame (``kernels_extra.triangle_frame``).
 
 
 @jit
 def triangle_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0).
 
-    One loop over the hinges: q and λ into the hinge's frame (``kernels_extra.to_frame``),
+    One loop over the hinges: q and λ into the hinge's frame (``kernels_extra.triangle_frame``),
     ``hinge_second`` on scalars, its products back (``from_frame``); fields as views, unit
     indices unsigned (no negative-index wraparound).
     """
@@ -1147,16 +1139,10 @@ def triangle_adjoint(q, args, lam, out, g1, g2):
     n = theta0.shape[0]
     cs, sn = np.empty(n), np.empty(n)
     unit_angles(q, theta0, cs, sn)
-    u, v, t = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
-    lu, lv, lt = lam[:n], lam[n : 2 * n], lam[2 * n : 3 * n]
-    ou, ov, ot = out[:n], out[n : 2 * n], out[2 * n : 3 * n]
+    (u, v, t), (lu, lv, lt), (ou, ov, ot) = fields(q, n), fields(lam, n), fields(out, n)
     hf = hprm.ravel()
     for h in range(ha.shape[0]):
-        a = np.uint64(ha[h])
-        b = np.uint64(hb[h])
-        c, s = ec[h], es[h]
-        dlq, dsq = to_frame(u, v, a, b, c, s)
-        dll, dsl = to_frame(lu, lv, a, b, c, s)
+        a, b, c, s, dlq, dsq, dll, dsl = triangle_frame(ha, hb, ec, es, u, v, lu, lv, h)
         rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
         pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
             dlq, dsq, t[a] + t[b], dll, dsl, lt[a], lt[b], rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
@@ -1175,16 +1161,10 @@ def triangle_tangent(q, args, dq, d1, d2, out):
         out[k] = 0.0
     cs, sn = np.empty(n), np.empty(n)
     unit_angles(q, theta0, cs, sn)
-    u, v, t = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
-    du, dv, dt = dq[:n], dq[n : 2 * n], dq[2 * n : 3 * n]
-    ou, ov, ot = out[:n], out[n : 2 * n], out[2 * n : 3 * n]
+    (u, v, t), (du, dv, dt), (ou, ov, ot) = fields(q, n), fields(dq, n), fields(out, n)
     hf, df = hprm.ravel(), d1.ravel()
     for h in range(ha.shape[0]):
-        a = np.uint64(ha[h])
-        b = np.uint64(hb[h])
-        c, s = ec[h], es[h]
-        dlq, dsq = to_frame(u, v, a, b, c, s)
-        ddl, dds = to_frame(du, dv, a, b, c, s)
+        a, b, c, s, dlq, dsq, ddl, dds = triangle_frame(ha, hb, ec, es, u, v, du, dv, h)
         rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
         drest, dhA, dhB, _, dkl, dks, dkt = hinge_row(df, h)
         d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(

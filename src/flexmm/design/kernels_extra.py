@@ -65,30 +65,26 @@ def loads_tangent(loads, d, off, out):
 
 
 @jit
-def _joint_second(psi, k, beta, ps):
-    """V''(ψ) and ∂V'/∂(k, β, ψ*) of the joint law V'(ψ) = k ψ (ψ − βψ*)(ψ − ψ*) (scalars)."""
+def _joint_second(t, jp, ja, jb, j):
+    """Units a, b of joint j (unsigned), V''(ψ) and ∂V'/∂(k, β, ψ*) of its law
+    V'(ψ) = k ψ (ψ − βψ*)(ψ − ψ*) at ψ = t[a] + t[b] (t: the rotations; jp: the (k, β, ψ*) rows
+    flattened)."""
+    a = np.uint64(ja[j])
+    b = np.uint64(jb[j])
+    psi = t[a] + t[b]
+    k, beta, ps = jp[3 * j], jp[3 * j + 1], jp[3 * j + 2]
     u = psi - beta * ps
     w = psi - ps
-    return k * (u * w + psi * w + psi * u), psi * u * w, -k * psi * ps * w, -k * psi * (beta * w + u)
-
-
-@jit
-def _joint_views(x, n, joints, g, off):
-    """The rotations x[2n:3n] (of q, λ, δq or the output), the joints' flattened (k, β, ψ*) rows
-    and g[off:] (their gradient or direction in the t2 vector)."""
-    return x[2 * n : 3 * n], joints[2].ravel(), g[off:]
+    return a, b, k * (u * w + psi * w + psi * u), psi * u * w, -k * psi * ps * w, -k * psi * (beta * w + u)
 
 
 @jit
 def joints_adjoint(q, n, joints, lam, out, g, off):
     """ψ = θ_a + θ_b: (∂F/∂θ)ᵀλ = −V''(ψ) (λ_a + λ_b) at both units, −∂V'/∂p (λ_a + λ_b) into g."""
-    ja, jb = joints[0], joints[1]
-    t, jp, gj = _joint_views(q, n, joints, g, off)
-    lt, ot = lam[2 * n : 3 * n], out[2 * n : 3 * n]
+    ja, jb, jp, gj = joints[0], joints[1], joints[2].ravel(), g[off:]
+    t, lt, ot = q[2 * n : 3 * n], lam[2 * n : 3 * n], out[2 * n : 3 * n]
     for j in range(ja.shape[0]):
-        a = np.uint64(ja[j])
-        b = np.uint64(jb[j])
-        v2, dk, db, dps = _joint_second(t[a] + t[b], jp[3 * j], jp[3 * j + 1], jp[3 * j + 2])
+        a, b, v2, dk, db, dps = _joint_second(t, jp, ja, jb, j)
         lp = lt[a] + lt[b]
         ot[a] -= v2 * lp
         ot[b] -= v2 * lp
@@ -99,13 +95,10 @@ def joints_adjoint(q, n, joints, lam, out, g, off):
 
 @jit
 def joints_tangent(q, n, joints, dq, d, off, out):
-    ja, jb = joints[0], joints[1]
-    t, jp, dj = _joint_views(q, n, joints, d, off)
-    dt, ot = dq[2 * n : 3 * n], out[2 * n : 3 * n]
+    ja, jb, jp, dj = joints[0], joints[1], joints[2].ravel(), d[off:]
+    t, dt, ot = q[2 * n : 3 * n], dq[2 * n : 3 * n], out[2 * n : 3 * n]
     for j in range(ja.shape[0]):
-        a = np.uint64(ja[j])
-        b = np.uint64(jb[j])
-        v2, dk, db, dps = _joint_second(t[a] + t[b], jp[3 * j], jp[3 * j + 1], jp[3 * j + 2])
+        a, b, v2, dk, db, dps = _joint_second(t, jp, ja, jb, j)
         dv = v2 * (dt[a] + dt[b]) + dk * dj[3 * j] + db * dj[3 * j + 1] + dps * dj[3 * j + 2]
         ot[a] -= dv
         ot[b] -= dv
@@ -378,19 +371,43 @@ def unit_angles(q, theta0, cs, sn):
 
 
 @jit
+def triangle_frame(ha, hb, ec, es, u, v, xu, xv, h):
+    """Triangle hinge h: its units a, b (unsigned), axis (c, s), and the relative displacements
+    along and across it of q (fields u, v) and of x (λ or δq: xu, xv) (``to_frame``)."""
+    a = np.uint64(ha[h])
+    b = np.uint64(hb[h])
+    c, s = ec[h], es[h]
+    dlq, dsq = to_frame(u, v, a, b, c, s)
+    dlx, dsx = to_frame(xu, xv, a, b, c, s)
+    return a, b, c, s, dlq, dsq, dlx, dsx
+
+
+@jit
+def add_to_ends(ol, os, ot, la, lb, sa, sb, ta, tb, fl, fs, ga, gb):
+    """A hinge's derivatives (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, on its units'
+    DOFs: +fl at ol[la], −fl at ol[lb], +fs at os[sa], −fs at os[sb], −ga at ot[ta], −gb at ot[tb]
+    (d_l = x_B − x_A along the axis, d_s across)."""
+    ol[la] += fl
+    ol[lb] -= fl
+    os[sa] += fs
+    os[sb] -= fs
+    ot[ta] -= ga
+    ot[tb] -= gb
+
+
+@jit
 def from_frame(ou, ov, ot, a, b, c, s, fl, fs, ga, gb):
     """Add Lᵀ(−fl, −fs, −ga, −gb) to the output's fields ou, ov, ot (x, y, θ; (N,)): a
     hinge-frame derivative (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, taken back
     to the units — +(c fl − s fs, s fl + c fs) at unit a, the opposite at b, −ga, −gb at
     their rotations (the force's pattern, ``triangle_kernels``)."""
-    fx = c * fl - s * fs
-    fy = s * fl + c * fs
-    ou[a] += fx
-    ou[b] -= fx
-    ov[a] += fy
-    ov[b] -= fy
-    ot[a] -= ga
-    ot[b] -= gb
+    add_to_ends(ou, ov, ot, a, b, a, b, a, b, c * fl - s * fs, s * fl + c * fs, ga, gb)
+
+
+@jit
+def fields(x, n):
+    """The three fields (u, v, θ) of a sheet's or triangles' state-like vector x (3N) as views."""
+    return x[:n], x[n : 2 * n], x[2 * n : 3 * n]
 
 
 # ---------------------------------------------------------------- harmonic oscillators
