@@ -9,7 +9,7 @@ tangent kernels (``kernels.model_adjoint``/``model_tangent``) of:
 - the loaded rotating-squares chain (``LoadedChainArgs``, ``models.predeform``): the chain's
   kernels plus constant loads;
 - rotating triangles (``TriangleArgs``): the squares' hinge law in each hinge's own frame
-  (``to_frame``, ``from_frame``);
+  (``triangle_frame``, ``from_frame``);
 - independent harmonic oscillators (``HarmonicArgs``: ``harmonic_adjoint``, here in full).
 
 Each element's second derivatives are the directional derivative of its gradient (forward
@@ -95,6 +95,7 @@ def joints_adjoint(q, n, joints, lam, out, g, off):
 
 @jit
 def joints_tangent(q, n, joints, dq, d, off, out):
+    """−(V''(ψ) (δθ_a + δθ_b) + ∂V'/∂p · δp) added at both units (δp: d[off:], the joints' rows)."""
     ja, jb, jp, dj = joints[0], joints[1], joints[2].ravel(), d[off:]
     t, dt, ot = q[2 * n : 3 * n], dq[2 * n : 3 * n], out[2 * n : 3 * n]
     for j in range(ja.shape[0]):
@@ -383,16 +384,17 @@ def triangle_frame(ha, hb, ec, es, u, v, xu, xv, h):
 
 
 @jit
-def add_to_ends(ol, os, ot, la, lb, sa, sb, ta, tb, fl, fs, ga, gb):
+def add_to_ends(o_l, o_s, o_t, la, lb, sa, sb, ta, tb, fl, fs, ga, gb):
     """A hinge's derivatives (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, on its units'
-    DOFs: +fl at ol[la], −fl at ol[lb], +fs at os[sa], −fs at os[sb], −ga at ot[ta], −gb at ot[tb]
-    (d_l = x_B − x_A along the axis, d_s across)."""
-    ol[la] += fl
-    ol[lb] -= fl
-    os[sa] += fs
-    os[sb] -= fs
-    ot[ta] -= ga
-    ot[tb] -= gb
+    DOFs: +fl at o_l[la], −fl at o_l[lb], +fs at o_s[sa], −fs at o_s[sb], −ga at o_t[ta], −gb at
+    o_t[tb] (d_l = x_B − x_A along the axis, d_s across; the sheet's hinges pass ``out`` thrice
+    with DOF indices, the triangles' the fields with unit indices: ``from_frame``)."""
+    o_l[la] += fl
+    o_l[lb] -= fl
+    o_s[sa] += fs
+    o_s[sb] -= fs
+    o_t[ta] -= ga
+    o_t[tb] -= gb
 
 
 @jit
