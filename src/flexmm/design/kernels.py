@@ -32,8 +32,10 @@ from numba.extending import overload
 from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit
 from flexmm._trig import sincos
 from flexmm.design.kernels_extra import (
+    add_to_ends,
     dipoles_second,
-    from_hinge_frame,
+    fields,
+    from_frame,
     harmonic_adjoint,
     harmonic_pack,
     harmonic_tangent,
@@ -47,7 +49,7 @@ from flexmm.design.kernels_extra import (
     sheet_offsets,
     sheet_pack,
     sheet_unpack,
-    to_hinge_frame,
+    triangle_frame,
     unit_angles,
 )
 from flexmm.models import laws as lw
@@ -60,6 +62,7 @@ from flexmm.models.hinge import (
     H_KT,
     H_REST,
     H_SIGN,
+    N_HINGE_PARAMS,
     S_KG,
     S_KR,
     S_THETA0,
@@ -101,81 +104,137 @@ def _chain_site_terms(q, sprm, lam, out, g2, n, cs, sn):
 
 
 @jit
-def _hinge_strains(q, hprm, h, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb):
-    """h_A, h_B, σ, k_l, k_s, k_θ of hinge h and its stretch el, shear es and bend ep."""
-    hA, hB, sig = hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN]
-    el = q[lb] - q[la] + hprm[h, H_REST] - (hA * ca + hB * cb)
-    es = sig * (hB * sb - hA * sa)
-    if sa_ >= 0:
-        es += q[sb_] - q[sa_]
-    return hA, hB, sig, hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT], el, es, q[ta] + q[tb]
+def hinge_second(dlq, dsq, ep, dll, dsl, lta, ltb, rest, hA, hB, sig, kl, ks, kt, ca, sa, cb, sb):
+    """One hinge's second derivatives along λ, from scalars (no arrays: it inlines into loops).
+
+    dlq, dsq: the relative displacements of B and A along and across the hinge axis; ep = θ_A + θ_B;
+    dll, dsl: the same differences of λ; lta, ltb: λ at θ_A, θ_B; then the hinge's parameters
+    and cos/sin of φ = θ0 + θ at A and B. With the levers a_s = h_A sin φ_A, a_c = h_A cos φ_A
+    (b_s, b_c at B), the stretch, shear and bend of ``models.hinge``
+
+        el = d_l + r − (a_c + b_c),   es = d_s + σ (b_s − a_s),   ep = θ_A + θ_B,
+
+    their variations along λ δl = λ_l + a_s λ_A + b_s λ_B, δs = λ_s + σ (b_c λ_B − a_c λ_A),
+    δp = λ_A + λ_B, and D = λ·∇E = k_l el δl + k_s es δs + k_θ ep δp: with f_l = k_l el,
+    f_s = σ k_s es, p_l = k_l δl, p_s = σ k_s δs and X_A = p_l + f_s λ_A, Y_A = f_l λ_A − p_s,
+    X_B = p_l − f_s λ_B, Y_B = f_l λ_B + p_s,
+
+        ∂D/∂θ0_A = a_s X_A + a_c Y_A,   ∂D/∂θ_A = ∂D/∂θ0_A + k_θ δp,   ∂D/∂h_A = sin φ_A Y_A − cos φ_A X_A
+
+    (B likewise), ∂D/∂d_l = ∂D/∂r = p_l, ∂D/∂d_s = k_s δs, ∂D/∂k_l = el δl, ∂D/∂k_s = es δs,
+    ∂D/∂k_θ = ep δp. Returns (p_l, k_s δs, ∂D/∂θ_A, ∂D/∂θ_B, ∂D/∂θ0_A, ∂D/∂θ0_B, ∂D/∂h_A,
+    ∂D/∂h_B, ∂D/∂k_l, ∂D/∂k_s, ∂D/∂k_θ): the Hessian-vector and parameter products of the
+    force are these negated.
+    """
+    a_s, a_c, b_s, b_c = hA * sa, hA * ca, hB * sb, hB * cb
+    el = dlq + rest - (a_c + b_c)
+    es = sig * (b_s - a_s) + dsq
+    dl = dll + a_s * lta + b_s * ltb
+    ds = sig * (b_c * ltb - a_c * lta) + dsl
+    dp = lta + ltb
+    kdp = kt * dp
+    pl = kl * dl
+    pss = ks * ds
+    fl = kl * el
+    fs = sig * (ks * es)
+    ps = sig * pss
+    xa = pl + fs * lta
+    ya = fl * lta - ps
+    xb = pl - fs * ltb
+    yb = fl * ltb + ps
+    t0a = hA * (sa * xa + ca * ya)
+    t0b = hB * (sb * xb + cb * yb)
+    return pl, pss, t0a + kdp, t0b + kdp, t0a, t0b, sa * ya - ca * xa, sb * yb - cb * xb, el * dl, es * ds, ep * dp
+
+
+@jit
+def hinge_row(hf, h):
+    """(r, h_A, h_B, σ, k_l, k_s, k_θ) of hinge h from the hinge table flattened (``hprm.ravel()``)."""
+    p = N_HINGE_PARAMS * h
+    return hf[p + H_REST], hf[p + H_HALF_A], hf[p + H_HALF_B], hf[p + H_SIGN], hf[p + H_KL], hf[p + H_KS], hf[p + H_KT]
+
+
+@jit
+def hinge_tangent_terms(dlq, dsq, ep, ddl, dds, dta, dtb, dt0a, dt0b, rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB,
+                        dkl, dks, dkt, ca, sa, cb, sb):
+    """One hinge's tangent from scalars: the variations (d f_l, d f_s, d g_A, d g_B) of its
+    (∂E/∂d_l, ∂E/∂d_s, ∂E/∂θ_A, ∂E/∂θ_B) along δq and δp (the force's tangent is their negation).
+
+    dlq, dsq, ep as ``hinge_second``; ddl, dds: the differences of δq along and across the axis;
+    dta, dtb: δθ_A, δθ_B; dt0a, dt0b: δθ0 of the units; drest … dkt: δ of the hinge's parameters.
+    With δφ = δθ0 + δθ, ∂E/∂θ_A = f_l h_A sin φ_A − σ f_s h_A cos φ_A + f_p (f = k × strain;
+    likewise B with + σ), differentiated factor by factor.
+    """
+    el = dlq + rest - (hA * ca + hB * cb)
+    es = sig * (hB * sb - hA * sa) + dsq
+    dpa = dt0a + dta
+    dpb = dt0b + dtb
+    d_el = ddl + drest - (dhA * ca + dhB * cb) + hA * sa * dpa + hB * sb * dpb
+    d_es = sig * (dhB * sb + hB * cb * dpb - dhA * sa - hA * ca * dpa) + dds
+    d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
+    d_fb = dhB * sb + hB * cb * dpb
+    d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
+    d_gb = dhB * cb - hB * sb * dpb
+    d_fl = dkl * el + kl * d_el
+    d_fs = dks * es + ks * d_es
+    d_fp = dkt * ep + kt * (dta + dtb)
+    fl, fs = kl * el, ks * es
+    return (d_fl, d_fs, d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp,
+            d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp)
+
+
+@jit
+def add_hinge_grads(g1, h, fl_, g_ha, g_hb, g_kl, g_ks, g_kt):
+    """Subtract ``hinge_second``'s parameter products from row h of the hinge table's gradient."""
+    g1[h, H_REST] -= fl_
+    g1[h, H_HALF_A] -= g_ha
+    g1[h, H_HALF_B] -= g_hb
+    g1[h, H_KL] -= g_kl
+    g1[h, H_KS] -= g_ks
+    g1[h, H_KT] -= g_kt
 
 
 @jit
 def hinge_adjoint(q, lam, out, g1, h, hprm, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb):
-    """One hinge's share of ``chain_adjoint``/``sheet_adjoint``; returns ∂D/∂θ0 of its two units.
-
-    la, lb: the DOFs along the hinge axis; sa_, sb_: across it (−1: none, a chain); ta, tb: the
-    rotations. With el, es, ep the hinge's stretch, shear and bend (``models.hinge``) and del,
-    des, dep their derivatives along λ, D = λ·∇E = k_l el del + k_s es des + k_θ ep dep: the
-    Hessian-vector product is ∂D/∂q and the parameter product ∂D/∂p (both negated).
-    """
-    hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_strains(q, hprm, h, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb)
+    """One hinge's share of ``chain_adjoint`` (``hinge_second`` on its DOFs); returns ∂D/∂θ0 of
+    its two units. la, lb: the DOFs along the hinge axis; sa_, sb_: across it (−1: none, a
+    chain); ta, tb: the rotations."""
     shear = sa_ >= 0
-    lta, ltb = lam[ta], lam[tb]
-    dl = lam[lb] - lam[la] + hA * sa * lta + hB * sb * ltb
-    ds = sig * (hB * cb * ltb - hA * ca * lta)
+    dsq = q[sb_] - q[sa_] if shear else 0.0
+    dsl = lam[sb_] - lam[sa_] if shear else 0.0
+    fl_, fs_, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
+        q[lb] - q[la], dsq, q[ta] + q[tb], lam[lb] - lam[la], dsl, lam[ta], lam[tb], hprm[h, H_REST],
+        hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT], ca, sa, cb,
+        sb)
+    out[la] += fl_
+    out[lb] -= fl_
     if shear:
-        ds += lam[sb_] - lam[sa_]
-    dp = lta + ltb
-    d_ta = kl * (hA * sa * dl + el * hA * ca * lta) + ks * (-sig * hA * ca * ds + es * sig * hA * sa * lta) + kt * dp
-    d_tb = kl * (hB * sb * dl + el * hB * cb * ltb) + ks * (sig * hB * cb * ds - es * sig * hB * sb * ltb) + kt * dp
-    out[la] += kl * dl
-    out[lb] -= kl * dl
-    if shear:
-        out[sa_] += ks * ds
-        out[sb_] -= ks * ds
+        out[sa_] += fs_
+        out[sb_] -= fs_
     out[ta] -= d_ta
     out[tb] -= d_tb
-    g1[h, H_REST] -= kl * dl
-    g1[h, H_HALF_A] -= kl * (-ca * dl + el * sa * lta) + ks * (-sig * sa * ds - es * sig * ca * lta)
-    g1[h, H_HALF_B] -= kl * (-cb * dl + el * sb * ltb) + ks * (sig * sb * ds + es * sig * cb * ltb)
-    g1[h, H_KL] -= el * dl
-    g1[h, H_KS] -= es * ds
-    g1[h, H_KT] -= ep * dp
-    return d_ta - kt * dp, d_tb - kt * dp
+    add_hinge_grads(g1, h, fl_, g_ha, g_hb, g_kl, g_ks, g_kt)
+    return d_t0a, d_t0b
 
 
 @jit
 def hinge_tangent(q, dq, d1, h, hprm, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb, dt0a, dt0b, out):
     """One hinge's share of the tangent (∂F/∂q) dq + (∂F/∂p) dp, added to ``out`` (DOFs as in
     ``hinge_adjoint``; dt0a, dt0b: the directions of the units' θ0)."""
-    hA, hB, sig, kl, ks, kt, el, es, ep = _hinge_strains(q, hprm, h, la, lb, sa_, sb_, ta, tb, ca, sa, cb, sb)
     shear = sa_ >= 0
-    dpa = dt0a + dq[ta]
-    dpb = dt0b + dq[tb]
-    dhA, dhB = d1[h, H_HALF_A], d1[h, H_HALF_B]
-    # variations of el, es, ep, and of the factors (h sin φ, σ h cos φ) in the gradient
-    d_el = dq[lb] - dq[la] + d1[h, H_REST] - (dhA * ca + dhB * cb) + hA * sa * dpa + hB * sb * dpb
-    d_es = sig * (dhB * sb + hB * cb * dpb - dhA * sa - hA * ca * dpa)
-    if shear:
-        d_es += dq[sb_] - dq[sa_]
-    d_ep = dq[ta] + dq[tb]
-    d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
-    d_fb = dhB * sb + hB * cb * dpb
-    d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
-    d_gb = dhB * cb - hB * sb * dpb
-    d_fl = d1[h, H_KL] * el + kl * d_el
-    d_fs = d1[h, H_KS] * es + ks * d_es
-    d_fp = d1[h, H_KT] * ep + kt * d_ep
-    fl, fs = kl * el, ks * es
+    dsq = q[sb_] - q[sa_] if shear else 0.0
+    dds = dq[sb_] - dq[sa_] if shear else 0.0
+    d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
+        q[lb] - q[la], dsq, q[ta] + q[tb], dq[lb] - dq[la], dds, dq[ta], dq[tb], dt0a, dt0b, hprm[h, H_REST],
+        hprm[h, H_HALF_A], hprm[h, H_HALF_B], hprm[h, H_SIGN], hprm[h, H_KL], hprm[h, H_KS], hprm[h, H_KT],
+        d1[h, H_REST], d1[h, H_HALF_A], d1[h, H_HALF_B], d1[h, H_KL], d1[h, H_KS], d1[h, H_KT], ca, sa, cb, sb)
     out[la] += d_fl
     out[lb] -= d_fl
     if shear:
         out[sa_] += d_fs
         out[sb_] -= d_fs
-    out[ta] -= d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp
-    out[tb] -= d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp
+    out[ta] -= d_ga
+    out[tb] -= d_gb
 
 
 @jit
@@ -556,11 +615,16 @@ def chain_uniform_gather(q, lf, lq, cs, sn, r, acc, u):
 
 
 @jit
-def _sheet_dofs(hax, n, a, b):
-    """(la, lb, sa, sb) of a sheet hinge: along-axis and across-axis DOFs of its units."""
-    if hax == 0:
-        return a, b, n + a, n + b
-    return n + a, n + b, a, b
+def _sheet_dofs(ha, hb, hax, n, h):
+    """Sheet hinge h's units a, b and DOFs: along its axis la, lb, across sa, sb, rotations ta,
+    tb — unsigned, so indexing with them skips numba's negative-index wraparound."""
+    a, b = ha[h], hb[h]
+    if hax[h] == 0:
+        la, lb, sa, sb = a, b, n + a, n + b
+    else:
+        la, lb, sa, sb = n + a, n + b, a, b
+    u = np.uint64
+    return u(a), u(b), u(la), u(lb), u(sa), u(sb), u(2 * n + a), u(2 * n + b)
 
 
 @jit
@@ -568,23 +632,25 @@ def sheet_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0 per unit).
 
     Hinges only (θ0 at g2[:N]); with dipoles, joints and loads: ``sheet_full_adjoint``.
+    One loop over the hinges, each ``hinge_second`` on scalars (DOF indices unsigned: no
+    negative-index wraparound on the dozen gathers and scatters of a hinge).
     """
     ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
     n = theta0.shape[0]
     cs = np.empty(n)
     sn = np.empty(n)
-    for i in range(n):
-        s, c = sincos(theta0[i] + q[2 * n + i])
-        cs[i] = c
-        sn[i] = s
+    unit_angles(q, theta0, cs, sn)
+    hf = hprm.ravel()
     for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
-        la, lb, sa_, sb_ = _sheet_dofs(hax[h], n, a, b)
-        ga, gb = hinge_adjoint(q, lam, out, g1, h, hprm, la, lb, sa_, sb_, 2 * n + a, 2 * n + b,
-                               cs[a], sn[a], cs[b], sn[b])
-        g2[a] -= ga
-        g2[b] -= gb
+        a, b, la, lb, sa, sb, ta, tb = _sheet_dofs(ha, hb, hax, n, h)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
+            q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], lam[lb] - lam[la], lam[sb] - lam[sa], lam[ta], lam[tb],
+            rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
+        add_to_ends(out, out, out, la, lb, sa, sb, ta, tb, pl, pss, d_ta, d_tb)
+        add_hinge_grads(g1, h, pl, g_ha, g_hb, g_kl, g_ks, g_kt)
+        g2[a] -= d_t0a
+        g2[b] -= d_t0b
 
 
 # The hinges of a rectangular grid (``sheet_kernels.grid_layout``: no wraps) in column form:
@@ -860,18 +926,24 @@ def sheet_uniform_adjoint(q, lam, out, p, nc, sgx, sgy, acc_x, acc_y, acc_t0, r)
 
 @jit
 def sheet_tangent(q, args, dq, d1, d2, out):
-    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""
+    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions); indices
+    as ``sheet_adjoint``'s."""
     ha, hb, hax, hprm, theta0 = args[0], args[1], args[2], args[3], args[4]
     n = theta0.shape[0]
     for k in range(out.shape[0]):
         out[k] = 0.0
+    cs = np.empty(n)
+    sn = np.empty(n)
+    unit_angles(q, theta0, cs, sn)
+    hf, df = hprm.ravel(), d1.ravel()
     for h in range(ha.shape[0]):
-        a = ha[h]
-        b = hb[h]
-        la, lb, sa_, sb_ = _sheet_dofs(hax[h], n, a, b)
-        pa, pb = theta0[a] + q[2 * n + a], theta0[b] + q[2 * n + b]
-        hinge_tangent(q, dq, d1, h, hprm, la, lb, sa_, sb_, 2 * n + a, 2 * n + b, math.cos(pa), math.sin(pa),
-                      math.cos(pb), math.sin(pb), d2[a], d2[b], out)
+        a, b, la, lb, sa, sb, ta, tb = _sheet_dofs(ha, hb, hax, n, h)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        drest, dhA, dhB, _, dkl, dks, dkt = hinge_row(df, h)
+        d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
+            q[lb] - q[la], q[sb] - q[sa], q[ta] + q[tb], dq[lb] - dq[la], dq[sb] - dq[sa], dq[ta], dq[tb], d2[a], d2[b],
+            rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB, dkl, dks, dkt, cs[a], sn[a], cs[b], sn[b])
+        add_to_ends(out, out, out, la, lb, sa, sb, ta, tb, d_fl, d_fs, d_ga, d_gb)
 
 
 # ---------------------------------------------------------------- chains of masses
@@ -1052,37 +1124,53 @@ def loaded_chain_tangent(q, args, dq, d1, d2, out):
     loads_tangent(args[1], d2, 3 * n, out)
 
 
-# Rotating triangles: the squares' hinge in each hinge's frame (``kernels_extra.to_hinge_frame``).
+# Rotating triangles: the squares' hinge in each hinge's frame (``kernels_extra.triangle_frame``).
 
 
 @jit
 def triangle_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0)."""
-    n = args.theta0.shape[0]
+    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0).
+
+    One loop over the hinges: q and λ into the hinge's frame (``kernels_extra.triangle_frame``),
+    ``hinge_second`` on scalars, its products back (``from_frame``); fields as views, unit
+    indices unsigned (no negative-index wraparound).
+    """
+    ha, hb, ec, es, hprm, theta0 = args[0], args[1], args[2], args[3], args[4], args[5]
+    n = theta0.shape[0]
     cs, sn = np.empty(n), np.empty(n)
-    unit_angles(q, args.theta0, cs, sn)
-    ql, ll, ol = np.empty(6), np.empty(6), np.empty(6)
-    for h in range(args.hinge_a.shape[0]):
-        a, b, c, s = to_hinge_frame(q, lam, args, h, ql, ll, ol)
-        ga, gb = hinge_adjoint(ql, ll, ol, g1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, cs[a], sn[a], cs[b], sn[b])
-        from_hinge_frame(ol, n, a, b, c, s, out)
-        g2[a] -= ga
-        g2[b] -= gb
+    unit_angles(q, theta0, cs, sn)
+    (u, v, t), (lu, lv, lt), (ou, ov, ot) = fields(q, n), fields(lam, n), fields(out, n)
+    hf = hprm.ravel()
+    for h in range(ha.shape[0]):
+        a, b, c, s, dlq, dsq, dll, dsl = triangle_frame(ha, hb, ec, es, u, v, lu, lv, h)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
+            dlq, dsq, t[a] + t[b], dll, dsl, lt[a], lt[b], rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
+        from_frame(ou, ov, ot, a, b, c, s, pl, pss, d_ta, d_tb)
+        add_hinge_grads(g1, h, pl, g_ha, g_hb, g_kl, g_ks, g_kt)
+        g2[a] -= d_t0a
+        g2[b] -= d_t0b
 
 
 @jit
 def triangle_tangent(q, args, dq, d1, d2, out):
     """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""
-    n = args.theta0.shape[0]
+    ha, hb, ec, es, hprm, theta0 = args[0], args[1], args[2], args[3], args[4], args[5]
+    n = theta0.shape[0]
     for k in range(out.shape[0]):
         out[k] = 0.0
     cs, sn = np.empty(n), np.empty(n)
-    unit_angles(q, args.theta0, cs, sn)
-    ql, dl, ol = np.empty(6), np.empty(6), np.empty(6)
-    for h in range(args.hinge_a.shape[0]):
-        a, b, c, s = to_hinge_frame(q, dq, args, h, ql, dl, ol)
-        hinge_tangent(ql, dl, d1, h, args.hinge_prm, 0, 1, 2, 3, 4, 5, cs[a], sn[a], cs[b], sn[b], d2[a], d2[b], ol)
-        from_hinge_frame(ol, n, a, b, c, s, out)
+    unit_angles(q, theta0, cs, sn)
+    (u, v, t), (du, dv, dt), (ou, ov, ot) = fields(q, n), fields(dq, n), fields(out, n)
+    hf, df = hprm.ravel(), d1.ravel()
+    for h in range(ha.shape[0]):
+        a, b, c, s, dlq, dsq, ddl, dds = triangle_frame(ha, hb, ec, es, u, v, du, dv, h)
+        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
+        drest, dhA, dhB, _, dkl, dks, dkt = hinge_row(df, h)
+        d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
+            dlq, dsq, t[a] + t[b], ddl, dds, dt[a], dt[b], d2[a], d2[b], rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB,
+            dkl, dks, dkt, cs[a], sn[a], cs[b], sn[b])
+        from_frame(ou, ov, ot, a, b, c, s, d_fl, d_fs, d_ga, d_gb)
 
 
 # ---------------------------------------------------------------- dispatch

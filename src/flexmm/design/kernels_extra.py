@@ -9,7 +9,7 @@ tangent kernels (``kernels.model_adjoint``/``model_tangent``) of:
 - the loaded rotating-squares chain (``LoadedChainArgs``, ``models.predeform``): the chain's
   kernels plus constant loads;
 - rotating triangles (``TriangleArgs``): the squares' hinge law in each hinge's own frame
-  (``to_hinge_frame``, ``from_hinge_frame``);
+  (``triangle_frame``, ``from_frame``);
 - independent harmonic oscillators (``HarmonicArgs``: ``harmonic_adjoint``, here in full).
 
 Each element's second derivatives are the directional derivative of its gradient (forward
@@ -65,38 +65,44 @@ def loads_tangent(loads, d, off, out):
 
 
 @jit
-def _joint_second(q, n, joints, j):
-    """DOFs a, b of joint j, V''(ψ) and ∂V'/∂(k, β, ψ*) of its law V'(ψ) = k ψ (ψ − βψ*)(ψ − ψ*)."""
-    ja, jb, jp = joints
-    a = 2 * n + ja[j]
-    b = 2 * n + jb[j]
-    k, beta, ps = jp[j, 0], jp[j, 1], jp[j, 2]
-    psi = q[a] + q[b]
+def _joint_second(t, jp, ja, jb, j):
+    """Units a, b of joint j (unsigned), V''(ψ) and ∂V'/∂(k, β, ψ*) of its law
+    V'(ψ) = k ψ (ψ − βψ*)(ψ − ψ*) at ψ = t[a] + t[b] (t: the rotations; jp: the (k, β, ψ*) rows
+    flattened)."""
+    a = np.uint64(ja[j])
+    b = np.uint64(jb[j])
+    psi = t[a] + t[b]
+    k, beta, ps = jp[3 * j], jp[3 * j + 1], jp[3 * j + 2]
     u = psi - beta * ps
     w = psi - ps
-    v2 = k * (u * w + psi * w + psi * u)
-    return a, b, v2, psi * u * w, -k * psi * ps * w, -k * psi * (beta * w + u)
+    return a, b, k * (u * w + psi * w + psi * u), psi * u * w, -k * psi * ps * w, -k * psi * (beta * w + u)
 
 
 @jit
 def joints_adjoint(q, n, joints, lam, out, g, off):
-    for j in range(joints[0].shape[0]):
-        a, b, v2, dk, db, dps = _joint_second(q, n, joints, j)
-        lp = lam[a] + lam[b]
-        out[a] -= v2 * lp
-        out[b] -= v2 * lp
-        g[off + 3 * j] -= dk * lp
-        g[off + 3 * j + 1] -= db * lp
-        g[off + 3 * j + 2] -= dps * lp
+    """ψ = θ_a + θ_b: (∂F/∂θ)ᵀλ = −V''(ψ) (λ_a + λ_b) at both units, −∂V'/∂p (λ_a + λ_b) into g."""
+    ja, jb, jp, gj = joints[0], joints[1], joints[2].ravel(), g[off:]
+    t, lt, ot = q[2 * n : 3 * n], lam[2 * n : 3 * n], out[2 * n : 3 * n]
+    for j in range(ja.shape[0]):
+        a, b, v2, dk, db, dps = _joint_second(t, jp, ja, jb, j)
+        lp = lt[a] + lt[b]
+        ot[a] -= v2 * lp
+        ot[b] -= v2 * lp
+        gj[3 * j] -= dk * lp
+        gj[3 * j + 1] -= db * lp
+        gj[3 * j + 2] -= dps * lp
 
 
 @jit
 def joints_tangent(q, n, joints, dq, d, off, out):
-    for j in range(joints[0].shape[0]):
-        a, b, v2, dk, db, dps = _joint_second(q, n, joints, j)
-        dv = v2 * (dq[a] + dq[b]) + dk * d[off + 3 * j] + db * d[off + 3 * j + 1] + dps * d[off + 3 * j + 2]
-        out[a] -= dv
-        out[b] -= dv
+    """−(V''(ψ) (δθ_a + δθ_b) + ∂V'/∂p · δp) added at both units (δp: d[off:], the joints' rows)."""
+    ja, jb, jp, dj = joints[0], joints[1], joints[2].ravel(), d[off:]
+    t, dt, ot = q[2 * n : 3 * n], dq[2 * n : 3 * n], out[2 * n : 3 * n]
+    for j in range(ja.shape[0]):
+        a, b, v2, dk, db, dps = _joint_second(t, jp, ja, jb, j)
+        dv = v2 * (dt[a] + dt[b]) + dk * dj[3 * j] + db * dj[3 * j + 1] + dps * dj[3 * j + 2]
+        ot[a] -= dv
+        ot[b] -= dv
 
 
 # ---------------------------------------------------------------- point dipoles
@@ -339,21 +345,20 @@ def loaded_chain_unpack(args: LoadedChainArgs, t1: np.ndarray, t2: np.ndarray) -
 # ---------------------------------------------------------------- rotating triangles
 #
 # A triangle hinge is the squares' hinge in its own frame: d_l = e·Δx, d_s = n·Δx (e = (c, s)
-# the hinge axis, n = (−s, c), Δx = x_B − x_A). Its energy is Ẽ(L q) with L linear (local
-# coordinates (0, d_l, 0, d_s, θ_A, θ_B) of ``hinge_adjoint``'s DOFs 0..5), so the Hessian-vector
-# product is Lᵀ ∇²Ẽ (L λ): the local product of ``hinge_adjoint`` rotated back.
+# the hinge axis, n = (−s, c), Δx = x_B − x_A). Its energy is Ẽ(L q) with L linear (q to the
+# local coordinates (d_l, d_s, θ_A, θ_B): ``to_frame``), so the Hessian-vector product is
+# Lᵀ ∇²Ẽ (L λ): ``kernels.hinge_second`` on the local coordinates of q and λ, rotated back
+# (``from_frame``).
 
 
 @jit
-def _to_frame(x, n, a, b, c, s, loc):
-    dx = x[b] - x[a]
-    dy = x[n + b] - x[n + a]
-    loc[0] = 0.0
-    loc[1] = c * dx + s * dy
-    loc[2] = 0.0
-    loc[3] = c * dy - s * dx
-    loc[4] = x[2 * n + a]
-    loc[5] = x[2 * n + b]
+def to_frame(xu, xv, a, b, c, s):
+    """(e·Δx, n·Δx) across a triangle hinge from unit a to b with axis e = (c, s), n = (−s, c):
+    Δx = (xu[b] − xu[a], xv[b] − xv[a]) the relative displacement of q, λ or δq (xu, xv: its
+    x and y fields, (N,)), along and across the hinge."""
+    dx = xu[b] - xu[a]
+    dy = xv[b] - xv[a]
+    return c * dx + s * dy, c * dy - s * dx
 
 
 @jit
@@ -367,28 +372,44 @@ def unit_angles(q, theta0, cs, sn):
 
 
 @jit
-def to_hinge_frame(q, x, args, h, ql, xl, ol):
-    """Triangle hinge h in its frame: ql = L q, xl = L x (x: λ or δq), ol zeroed; returns its
-    triangles a, b and axis (c, s)."""
-    a = args.hinge_a[h]
-    b = args.hinge_b[h]
-    c, s = args.axis_cos[h], args.axis_sin[h]
-    n = args.theta0.shape[0]
-    _to_frame(q, n, a, b, c, s, ql)
-    _to_frame(x, n, a, b, c, s, xl)
-    ol[:] = 0.0
-    return a, b, c, s
+def triangle_frame(ha, hb, ec, es, u, v, xu, xv, h):
+    """Triangle hinge h: its units a, b (unsigned), axis (c, s), and the relative displacements
+    along and across it of q (fields u, v) and of x (λ or δq: xu, xv) (``to_frame``)."""
+    a = np.uint64(ha[h])
+    b = np.uint64(hb[h])
+    c, s = ec[h], es[h]
+    dlq, dsq = to_frame(u, v, a, b, c, s)
+    dlx, dsx = to_frame(xu, xv, a, b, c, s)
+    return a, b, c, s, dlq, dsq, dlx, dsx
 
 
 @jit
-def from_hinge_frame(loc, n, a, b, c, s, out):
-    """Add Lᵀ loc to ``out`` (loc[0] = −loc[1], loc[2] = −loc[3]: the A ends)."""
-    out[a] += c * loc[0] - s * loc[2]
-    out[b] += c * loc[1] - s * loc[3]
-    out[n + a] += s * loc[0] + c * loc[2]
-    out[n + b] += s * loc[1] + c * loc[3]
-    out[2 * n + a] += loc[4]
-    out[2 * n + b] += loc[5]
+def add_to_ends(o_l, o_s, o_t, la, lb, sa, sb, ta, tb, fl, fs, ga, gb):
+    """A hinge's derivatives (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, on its units'
+    DOFs: +fl at o_l[la], −fl at o_l[lb], +fs at o_s[sa], −fs at o_s[sb], −ga at o_t[ta], −gb at
+    o_t[tb] (d_l = x_B − x_A along the axis, d_s across; the sheet's hinges pass ``out`` thrice
+    with DOF indices, the triangles' the fields with unit indices: ``from_frame``)."""
+    o_l[la] += fl
+    o_l[lb] -= fl
+    o_s[sa] += fs
+    o_s[sb] -= fs
+    o_t[ta] -= ga
+    o_t[tb] -= gb
+
+
+@jit
+def from_frame(ou, ov, ot, a, b, c, s, fl, fs, ga, gb):
+    """Add Lᵀ(−fl, −fs, −ga, −gb) to the output's fields ou, ov, ot (x, y, θ; (N,)): a
+    hinge-frame derivative (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, taken back
+    to the units — +(c fl − s fs, s fl + c fs) at unit a, the opposite at b, −ga, −gb at
+    their rotations (the force's pattern, ``triangle_kernels``)."""
+    add_to_ends(ou, ov, ot, a, b, a, b, a, b, c * fl - s * fs, s * fl + c * fs, ga, gb)
+
+
+@jit
+def fields(x, n):
+    """The three fields (u, v, θ) of a sheet's or triangles' state-like vector x (3N) as views."""
+    return x[:n], x[n : 2 * n], x[2 * n : 3 * n]
 
 
 # ---------------------------------------------------------------- harmonic oscillators
