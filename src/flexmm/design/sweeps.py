@@ -308,8 +308,10 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, SA, h, k0, nsteps, str
     k0. Parameter adjoints accumulate; the integrator factors' in the folded form of the module
     docstring (GK, GV; the caller adds the initial state's products). A chain's column form
     without velocity terms takes each state's force again (its replay, ``chain_replay``, keeps
-    none); with them it reads the kept force as the other forms do.
+    none); with them it reads the kept force as the other forms do. Subnormal numbers are
+    flushed to zero during the sweep, as in ``chain_uniform_reverse``.
     """
+    csr = flush_subnormals()
     n = lq.shape[0]
     dg = np.empty(4)
     ddg = np.empty(4)
@@ -347,6 +349,8 @@ def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, SA, h, k0, nsteps, str
             lv[k] = pre[k] * x
             lf[k] = kick[k] * x
         _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+    if csr >= 0:
+        swap_mxcsr(csr)
 
 
 @jit
