@@ -494,9 +494,19 @@ class Trajectory:
         rec, (CQ, CV, CF, CT, seg) = self._split_run(raw, 1 if keep_all else segment, True, FS if keep_all else None)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         GE, GG = np.zeros((kicks.size, n)), np.zeros((kicks.size, n))
-        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
+        uni = self._split_uniform(raw, form) if ns else None
+        if uni is None:
+            adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
+
+            def reverse(SQ, SV, SF, ST, k0, m):
+                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
+        else:
+            uadj = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, gdrv)
+
+            def reverse(SQ, SV, SF, ST, k0, m):
+                splitting.reverse_uniform(terms, uni, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *uadj)
         if keep_all:
-            splitting.reverse(args, terms, *method, CQ, CV, CF, CT, FS, self.h, 0, N, *adjoints)
+            reverse(CQ, CV, CF, CT, 0, N)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")
             none, no_record = np.empty(0, np.int64), np.empty((1, 0))
@@ -505,13 +515,31 @@ class Trajectory:
                 # the segment's replay: its forward run from the checkpoint, every state kept
                 splitting.forward(args, terms, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h, m,
                                   1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record, FS)
-                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
+                reverse(SQ, SV, SF, ST, k0, m)
         self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         g_minv, g_damp = splitting.kick_factor_gradients(kicks, raw.minv, raw.damp, self.h, GE, GG)
         grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)
         if explicit is not None:
             grad = grad.axpy(1.0, explicit)
         return float(value), grad, rec
+
+    def _split_uniform(self, raw: Raw, form: tuple) -> tuple | None:
+        """The ``uni`` argument of ``splitting.reverse_uniform`` (the column form's accumulators,
+        which ``_reverse_start`` adds to the tables) for a uniform chain or grid sheet without
+        contacts, or None (``uniform_sweeps=False``: None)."""
+        if not self.uniform_sweeps or self.terms.con_ij.shape[0]:
+            return None
+        e1, e2 = np.zeros(0), np.zeros((0, 0))
+        if form[0] == sweeps.FORM_CHAIN:
+            u = chain_uniform(form[3])
+            if u is None:
+                return None
+            return (splitting.UNI_CHAIN, 0, u, e1, e1, form[5], e2, e1, np.zeros((N_V, raw.t2.shape[0] + 1)))
+        if form[0] == sweeps.FORM_GRID and (p := sheet_uniform(raw.t1, raw.t2)) is not None:
+            nc = form[1]
+            return (splitting.UNI_SHEET, nc, p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(), form[5], form[6],
+                    form[7], sheet_uniform_scratch(raw.t2.shape[0], nc))
+        return None
 
     def _split_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
         args, terms, (kicks, drifts, E, G, fsal) = self._split_bind(raw)

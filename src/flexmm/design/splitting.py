@@ -41,14 +41,18 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, chain_uniform_gather, chain_uniform_hinges, chain_uniform_sites,
+                                   sheet_uniform_adjoint)
 from flexmm.design.sweeps import (
     _checkpoint,
     _force_adjoint,
     _force_tangent,
     _inject,
     _record,
+    flush_subnormals,
+    swap_mxcsr,
 )
-from flexmm.design.terms import prescribed_adjoint, prescribed_tangent
+from flexmm.design.terms import drive_force_adjoint, prescribed_adjoint, prescribed_tangent
 from flexmm.integrators import composition
 from flexmm.integrators import splitting as engine
 from flexmm.integrators.common import apply_prescribed, position_forces
@@ -209,6 +213,15 @@ def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, 
 
 
 @jit
+def _any(x):
+    """Whether any entry of x is nonzero."""
+    for k in range(x.shape[0]):
+        if x[k] != 0.0:
+            return True
+    return False
+
+
+@jit
 def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
             dRf, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
@@ -235,7 +248,7 @@ def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, n
     read = FS.shape[1] > 0
     for j in range(nsteps, 0, -1):
         t1 = ST[j]
-        if not fsal:  # the recorded force F(q_j, t_j)
+        if not fsal and _any(lf):  # the recorded force F(q_j, t_j), where its adjoint is nonzero
             _force_adjoint(args, terms, SQ[j], t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
             lf[:] = 0.0
         prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
@@ -269,6 +282,134 @@ def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, n
                 lk[:] = 0.0
         lf[:] = lk  # kick-first: the adjoint of the force at the step's start; drift-first: 0
         _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+
+
+# ---------------------------------------------------------------- uniform chains and grid sheets
+#
+# The reverse sweep of a uniform chain (``kernels.chain_uniform``) or uniform grid sheet
+# (``kernels.sheet_uniform``): ``reverse``'s recursion with the force adjoint at each stage
+# from the shared law as scalars (``kernels.chain_uniform_hinges``/``_gather``,
+# ``sheet_uniform_adjoint``: the kernels of velocity Verlet's uniform sweeps), the step's stage
+# states recomputed in place (no copies of the kept forces), and each drift's and kick's
+# adjoint in one pass.
+
+#: ``uniform``'s kind: a uniform chain, a uniform grid sheet
+UNI_CHAIN, UNI_SHEET = 1, 2
+
+
+@jit
+def _stage_adjoint(terms, uni, q, t, lam, lq, gdrv, dg, ddg):
+    """λq += (∂F/∂q)ᵀλ at a stage (q, t) of a uniform chain or sheet: the model's part from its
+    shared law (parameter adjoints into ``uni``'s accumulators), the applied forces' to gdrv.
+    ``uni`` = (kind, n_cols, law, x signs, y signs, accumulator, accumulator, accumulator,
+    scratch): UNI_CHAIN (·, ·, ``chain_uniform``'s u, ·, ·, the column accumulator (N_CA, n), ·,
+    ·, scratch (N_V, n + 1)), UNI_SHEET (``sheet_uniform_adjoint``'s nc, p, sgx, sgy, acc_x,
+    acc_y, acc_t0, r)."""
+    if uni[0] == UNI_CHAIN:
+        u, acc, r = uni[2], uni[5], uni[8]
+        n = r.shape[1] - 1
+        cs, sn = r[V_COS, :n], r[V_SIN, :n]
+        chain_uniform_sites(q[n:], u[U_TH0], cs, sn)
+        chain_uniform_hinges(q, lam, cs, sn, r, acc, u)
+        chain_uniform_gather(q, lam, lq, cs, sn, r, acc, u)
+    else:
+        sheet_uniform_adjoint(q, lam, lq, uni[2], uni[1], uni[3], uni[4], uni[5], uni[6], uni[7], uni[8])
+    if terms.drv_dof.shape[0]:
+        drive_force_adjoint(t, lam, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
+
+
+@jit
+def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS, TS):
+    """The stages of the step from (q0, v0, f0) at t, as ``split_step`` computes them (the same
+    operations, so the same bits), reading the kept stage forces FS (stage forces, ndof): the
+    velocity entering each kick s ≥ 1 (VB[s]; kick 0's is v0) and each stage's position and
+    time (QS[s], TS[s]: the force f_{s+1} = F(QS[s], TS[s])), up to the last kick."""
+    n = q0.shape[0]
+    M = drifts.shape[0]
+    ts = t
+    for s in range(M if fsal else M - 1):
+        src = v0 if s == 0 else VB[s]
+        qs = q0 if s == 0 else QS[s - 1]
+        dst, qd = VB[s + 1], QS[s]
+        c = drifts[s] * h
+        if kicks[s] != 0.0:
+            fk = f0 if s == 0 else FS[s - 1]
+            e, g = E[s], G[s]
+            for k in range(n):
+                x = e[k] * src[k] + g[k] * fk[k]
+                dst[k] = x
+                qd[k] = qs[k] + c * x
+        else:
+            for k in range(n):
+                x = src[k]
+                dst[k] = x
+                qd[k] = qs[k] + c * x
+        ts += c
+        apply_prescribed(qd, dst, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+        TS[s] = ts
+
+
+@jit
+def _kick_drift_adjoint(lv, lq, lk, c, e, g, vb, fk, ge, gg):
+    """Reverse of kick s and drift s in one pass: x = λv + a_s h λq, then ∂J/∂e_s += x v_s,
+    ∂J/∂g_s += x f_s, λf_s = g_s x, λv = e_s x (v_s, f_s: the velocity and force entering the kick)."""
+    for k in range(lv.shape[0]):
+        x = lv[k] + c * lq[k]
+        ge[k] += x * vb[k]
+        gg[k] += x * fk[k]
+        lk[k] = g[k] * x
+        lv[k] = e[k] * x
+
+
+@jit
+def reverse_uniform(terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
+                    dRf, lq, lv, lf, GE, GG, gdrv):
+    """``reverse`` of a uniform chain or grid sheet (``_stage_adjoint``'s ``uni``; the same
+    arguments where they exist, the stage forces FS kept). A drift-first method's recorded force
+    is reversed only where its adjoint is nonzero (at the records). Subnormals are flushed to
+    zero during the sweep as ``sweeps.chain_uniform_reverse``."""
+    csr = flush_subnormals()
+    n = lq.shape[0]
+    M = drifts.shape[0]
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    dg = np.empty(4)
+    ddg = np.empty(4)
+    VB = np.empty((M + 1, n))
+    QS = np.empty((M, n))
+    TS = np.empty(M)
+    lk = np.zeros(n)
+    for j in range(nsteps, 0, -1):
+        t1 = ST[j]
+        FSj = FS[j - 1]
+        if not fsal and _any(lf):  # the recorded force F(q_j, t_j)
+            _stage_adjoint(terms, uni, SQ[j], t1, lf, lq, gdrv, dg, ddg)
+            lf[:] = 0.0
+        prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
+        _stage_states(terms, kicks, drifts, E, G, fsal, SQ[j - 1], SV[j - 1], SF[j - 1], FSj, ST[j - 1], h, VB, QS, TS)
+        if fsal:  # the last kick: its force is the one carried to the next step
+            e, g, vb, fk, ge, gg = E[M], G[M], VB[M], FSj[M - 1], GE[M], GG[M]
+            for k in range(n):
+                x = lv[k]
+                ge[k] += x * vb[k]
+                gg[k] += x * fk[k]
+                lk[k] = lf[k] + g[k] * x
+                lv[k] = e[k] * x
+        for s in range(M - 1, -1, -1):
+            if s < M - 1 or fsal:  # the force f_{s+1} = F(QS[s], TS[s]) after drift s
+                _stage_adjoint(terms, uni, QS[s], TS[s], lk, lq, gdrv, dg, ddg)
+                prescribed_adjoint(TS[s], lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
+            c = drifts[s] * h
+            if kicks[s] != 0.0:
+                _kick_drift_adjoint(lv, lq, lk, c, E[s], G[s], SV[j - 1] if s == 0 else VB[s],
+                                    SF[j - 1] if s == 0 else FSj[s - 1], GE[s], GG[s])
+            else:
+                for k in range(n):
+                    lv[k] += c * lq[k]
+        if fsal:  # the adjoint of the force at the step's start
+            lf[:] = lk
+        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+    if csr >= 0:
+        swap_mxcsr(csr)
 
 
 @jit
