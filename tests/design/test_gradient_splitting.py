@@ -21,12 +21,14 @@ import yaml
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
+from flexmm.design import splitting
 from flexmm.design.fit import load_fit, solve
 from flexmm.design.gradient import GradientError, Trajectory, trajectory_of
 from flexmm.design.optimize import check_gradient, load_design
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.common import total_force
 from flexmm.integrators.stepper import make_stepper
+from flexmm.models.hinge import H_KT
 
 from . import test_fit
 from .test_design import SCENE as DESIGN_SCENE
@@ -108,6 +110,47 @@ def test_kept_stage_forces_give_the_recomputed_gradient(integrator):
         assert value == v_ref
         for (k, a), (_, b) in zip(grad.items(), ref.items()):
             np.testing.assert_array_equal(a, b, err_msg=k)
+
+
+def _uniform_problem(name: str):
+    """A test scene whose chain or grid sheet is uniform; ``sheet-shaker``: the sheet under an
+    applied force on its free left edge instead of a prescribed tilt."""
+    if name != "sheet-shaker":
+        return _problem(name)
+    data = {"name": "grad"} | copy.deepcopy(SCENES["sheet-tilted-pulse-damped"])
+    data["lattice"]["left"] = "free"
+    data["excitation"] = {"kind": "shaker", "end": "left", "amplitude_n": 5.0, "frequency_hz": 2000.0,
+                          "ramp_cycles": 1.0}
+    return build_problem(scene_from_dict(data))
+
+
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("graded", [False, True])
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "sheet-tilted-pulse-damped",
+                                  "sheet-shaker"])
+def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, monkeypatch):
+    """A uniform chain or grid sheet takes the reverse sweep with the uniform kernels per stage
+    (``splitting.reverse_uniform``), a graded one (k_θ varied per hinge) the column forms': either
+    gives the general sweeps' gradient (the model's own adjoint kernel) to rounding, damped, under a
+    prescribed displacement or an applied force, every state kept or checkpointed, the objective
+    entering every 3 steps (drift-first PEFRL reverses its recorded force there)."""
+    traj, raw = trajectory_of(_uniform_problem(name), nsteps=60, stride=3, integrator=integrator)
+    raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
+    if graded:
+        raw.t1[:, H_KT] *= np.linspace(0.8, 1.2, raw.t1.shape[0])
+    assert (traj._split_uniform(raw, traj.form(raw)) is None) == graded
+    calls = []
+    uniform = splitting.reverse_uniform
+    monkeypatch.setattr(splitting, "reverse_uniform", lambda *a: calls.append(1) or uniform(*a))
+    objective = _objective((traj.n_samples, traj.obs.size), seed=4)
+    refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
+    for segment in (None, 11):
+        _, grad, _ = traj.gradient(raw, objective, segment=segment)
+        for other in refs:
+            _, ref, _ = other.gradient(raw, objective, segment=segment)
+            for (k, a), (_, b) in zip(grad.items(), ref.items()):
+                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
+    assert bool(calls) != graded
 
 
 @pytest.mark.parametrize(("name", "integrator"), [(n, i) for i in ADJOINTS for n in ("chain-displacement-damped",
