@@ -130,7 +130,7 @@ def _uniform_problem(name: str):
                                   "sheet-shaker"])
 def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, monkeypatch):
     """A uniform chain or grid sheet takes the reverse sweep with the uniform kernels per stage
-    (``splitting.reverse_uniform``), a graded one (k_θ varied per hinge) the column forms': either
+    (``splitting._stage_adjoint``'s ``uni``), a graded one (k_θ varied per hinge) the column forms': either
     gives the general sweeps' gradient (the model's own adjoint kernel) to rounding, damped, under a
     prescribed displacement or an applied force, every state kept or checkpointed, the objective
     entering every 3 steps (drift-first PEFRL reverses its recorded force there)."""
@@ -138,10 +138,9 @@ def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, m
     raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
     if graded:
         raw.t1[:, H_KT] *= np.linspace(0.8, 1.2, raw.t1.shape[0])
-    assert (traj._split_uniform(raw, traj.form(raw)) is None) == graded
-    calls = []
-    uniform = splitting.reverse_uniform
-    monkeypatch.setattr(splitting, "reverse_uniform", lambda *a: calls.append(1) or uniform(*a))
+    kinds = []
+    reverse = splitting.reverse
+    monkeypatch.setattr(splitting, "reverse", lambda *a: kinds.append(a[2][0]) or reverse(*a))
     objective = _objective((traj.n_samples, traj.obs.size), seed=4)
     refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
     for segment in (None, 11):
@@ -150,7 +149,8 @@ def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, m
             _, ref, _ = other.gradient(raw, objective, segment=segment)
             for (k, a), (_, b) in zip(grad.items(), ref.items()):
                 np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
-    assert bool(calls) != graded
+    uniform = splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN
+    assert set(kinds) == {splitting.UNI_NONE} | ({splitting.UNI_NONE} if graded else {uniform})
 
 
 @pytest.mark.parametrize(("name", "integrator"), [(n, i) for i in ADJOINTS for n in ("chain-displacement-damped",

@@ -454,25 +454,42 @@ class Trajectory:
 
     # -- the splittings (``design.splitting``) ---------------------------------------------
     def _split_bind(self, raw: Raw) -> tuple:
-        """The arrays a splitting sweep takes: args, terms and (kicks, drifts, E, G, fsal)."""
+        """The arrays a splitting sweep takes: args, terms, ``uni`` (``_split_uniform``), (kicks,
+        drifts, E, G, fsal), and the run's ``form``."""
         args = with_tables(self.args, raw.t1, raw.t2)
         terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
         kicks, drifts, fsal = self._split
         E, G = splitting.kick_factors(kicks, raw.minv, raw.damp, self.h)
-        return args, terms, (kicks, drifts, E, G, fsal)
+        form = self.form(raw)
+        return args, terms, self._split_uniform(raw, form), (kicks, drifts, E, G, fsal), form
 
-    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False,
-                   FS: np.ndarray | None = None) -> tuple[Records, tuple]:
+    def _split_uniform(self, raw: Raw, form: tuple) -> tuple:
+        """The ``uni`` argument of the splitting sweeps (``splitting._stage_adjoint``): a uniform
+        chain's or grid sheet's law (without contacts; the column form's accumulators, which
+        ``_reverse_start`` adds to the tables), else UNI_NONE (also with ``uniform_sweeps=False``)."""
+        e1, e2 = np.zeros(0), np.zeros((0, 0))
+        if self.uniform_sweeps and self.terms.con_ij.shape[0] == 0:
+            if form[0] == sweeps.FORM_CHAIN and (u := chain_uniform(form[3])) is not None:
+                return (splitting.UNI_CHAIN, form[1], u, e1, e1, form[5], e2, e1, np.zeros((N_V, raw.t2.shape[0] + 1)))
+            if form[0] == sweeps.FORM_GRID and (p := sheet_uniform(raw.t1, raw.t2)) is not None:
+                nc = form[1]
+                return (splitting.UNI_SHEET, nc, p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(), form[5], form[6],
+                        form[7], sheet_uniform_scratch(raw.t2.shape[0], nc))
+        return (splitting.UNI_NONE, 0, e1, e1, e1, e2, e2, e1, e2)
+
+    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False, FS: np.ndarray | None = None,
+                   bound: tuple | None = None) -> tuple[Records, tuple]:
         """``run`` of a splitting; ``FS`` (nsteps, stage forces, ndof): keep every step's stage
-        forces there (``splitting.forward``; with ``segment`` = 1)."""
-        args, terms, method = self._split_bind(raw)
+        forces there (``splitting.forward``; with ``segment`` = 1); ``bound``: ``_split_bind``'s."""
+        args, terms, uni, method, _ = bound or self._split_bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
         CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1, "checkpoints" if scratch else "")
         rec = self._records()
-        splitting.forward(args, terms, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride, self.obs,
-                          CQ, CV, CF, CT, rec.q, rec.v, rec.f, np.empty((1, 0, q.size)) if FS is None else FS)
+        splitting.forward(args, terms, uni, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride,
+                          self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f,
+                          np.empty((1, 0, q.size)) if FS is None else FS)
         return rec, (CQ, CV, CF, CT, seg)
 
     def _split_gradient(self, raw: Raw, objective: Objective, segment: int | None, memory_mb: float,
@@ -481,41 +498,32 @@ class Trajectory:
         The replay (or the forward run that keeps every state) also keeps each step's stage
         forces for the reverse sweep, which then evaluates none; the memory of a step counts
         them. ``stages`` = False: the reverse sweep recomputes them (the same bits, one more
-        forward run)."""
+        forward run). A uniform chain or grid sheet takes the uniform kernels (``uni``)."""
         n, N = raw.q0.size, self.nsteps
-        args, terms, method = self._split_bind(raw)
+        bound = self._split_bind(raw)
+        args, terms, uni, method, form = bound
         kicks, drifts, _, _, fsal = method
-        form = self.form(raw)
         ns = splitting.n_stage_forces(drifts, fsal) if stages else 0
         keep_all = segment is None and (N + 1) * ((3 + ns) * n + 1) * 8 <= memory_mb * 1e6
         if not keep_all and segment is None:  # a segment's replayed states and stage forces in cache
             segment = _chain_segment(N, n, (3 + ns) * n * 8, memory_mb)
         FS = self._scratch_array("stages", (N if keep_all else segment, ns, n)) if ns else np.empty((1, 0, n))
-        rec, (CQ, CV, CF, CT, seg) = self._split_run(raw, 1 if keep_all else segment, True, FS if keep_all else None)
+        rec, (CQ, CV, CF, CT, seg) = self._split_run(raw, 1 if keep_all else segment, True, FS if keep_all else None,
+                                                     bound)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         GE, GG = np.zeros((kicks.size, n)), np.zeros((kicks.size, n))
-        uni = self._split_uniform(raw, form) if ns else None
-        if uni is None:
-            adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
-
-            def reverse(SQ, SV, SF, ST, k0, m):
-                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
-        else:
-            uadj = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, gdrv)
-
-            def reverse(SQ, SV, SF, ST, k0, m):
-                splitting.reverse_uniform(terms, uni, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *uadj)
+        adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
         if keep_all:
-            reverse(CQ, CV, CF, CT, 0, N)
+            splitting.reverse(args, terms, uni, *method, CQ, CV, CF, CT, FS, self.h, 0, N, *adjoints)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")
             none, no_record = np.empty(0, np.int64), np.empty((1, 0))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
                 # the segment's replay: its forward run from the checkpoint, every state kept
-                splitting.forward(args, terms, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h, m,
-                                  1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record, FS)
-                reverse(SQ, SV, SF, ST, k0, m)
+                splitting.forward(args, terms, uni, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h,
+                                  m, 1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record, FS)
+                splitting.reverse(args, terms, uni, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
         self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         g_minv, g_damp = splitting.kick_factor_gradients(kicks, raw.minv, raw.damp, self.h, GE, GG)
         grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)
@@ -523,26 +531,8 @@ class Trajectory:
             grad = grad.axpy(1.0, explicit)
         return float(value), grad, rec
 
-    def _split_uniform(self, raw: Raw, form: tuple) -> tuple | None:
-        """The ``uni`` argument of ``splitting.reverse_uniform`` (the column form's accumulators,
-        which ``_reverse_start`` adds to the tables) for a uniform chain or grid sheet without
-        contacts, or None (``uniform_sweeps=False``: None)."""
-        if not self.uniform_sweeps or self.terms.con_ij.shape[0]:
-            return None
-        e1, e2 = np.zeros(0), np.zeros((0, 0))
-        if form[0] == sweeps.FORM_CHAIN:
-            u = chain_uniform(form[3])
-            if u is None:
-                return None
-            return (splitting.UNI_CHAIN, 0, u, e1, e1, form[5], e2, e1, np.zeros((N_V, raw.t2.shape[0] + 1)))
-        if form[0] == sweeps.FORM_GRID and (p := sheet_uniform(raw.t1, raw.t2)) is not None:
-            nc = form[1]
-            return (splitting.UNI_SHEET, nc, p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(), form[5], form[6],
-                    form[7], sheet_uniform_scratch(raw.t2.shape[0], nc))
-        return None
-
     def _split_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
-        args, terms, (kicks, drifts, E, G, fsal) = self._split_bind(raw)
+        args, terms, uni, (kicks, drifts, E, G, fsal), _ = self._split_bind(raw)
         nd, n = len(directions), raw.q0.size
         dminv, ddamp = _stack(raw, directions, "minv"), _stack(raw, directions, "damp")
         de_m, de_c, dg_m, dg_c = splitting.kick_factor_partials(kicks, raw.minv, raw.damp, self.h)
@@ -552,7 +542,7 @@ class Trajectory:
         shape = (nd, self.n_samples, self.obs.size)
         TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
-        splitting.tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, self.t0, self.h, self.nsteps,
+        splitting.tangent(args, terms, uni, kicks, drifts, E, G, DE, DG, fsal, q, v, f, self.t0, self.h, self.nsteps,
                           self.stride, self.obs, *(_stack(raw, directions, k) for k in ("t1", "t2", "con", "drv")),
                           _stack(raw, directions, "q0"), _stack(raw, directions, "v0"), rec.q, rec.v, rec.f,
                           TQ, TV, TF)

@@ -41,8 +41,8 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, chain_uniform_gather, chain_uniform_hinges, chain_uniform_sites,
-                                   sheet_uniform_adjoint)
+from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, chain_uniform_force, chain_uniform_gather, chain_uniform_hinges,
+                                   chain_uniform_sites, sheet_uniform_adjoint)
 from flexmm.design.sweeps import (
     _checkpoint,
     _force_adjoint,
@@ -113,15 +113,37 @@ def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.
 
 
 # ---------------------------------------------------------------- the sweeps
+#
+# The model part of a stage's force and of its adjoint is the model's own kernel
+# (``model_force``; ``sweeps._force_adjoint`` with the run's ``form``) or, for a uniform chain
+# or uniform grid sheet (``uni``, built by ``gradient.Trajectory._split_uniform``), the kernels
+# of velocity Verlet's uniform sweeps with the shared law as scalars: the chain's force from
+# ``kernels.chain_uniform_force`` (the model's bits), the adjoint from
+# ``kernels.chain_uniform_hinges``/``_gather`` or ``sheet_uniform_adjoint``.
+
+#: ``uni``'s kind: the model's own kernels, a uniform chain, a uniform grid sheet
+UNI_NONE, UNI_CHAIN, UNI_SHEET = 0, 1, 2
 
 
 @jit
-def _stage_force(args, terms, q, v, t, f):
+def _total_force(args, terms, uni, q, t, f):
+    """The position-dependent total force at (q, t) into f: the model's (a uniform chain's from
+    its law, the same bits), contacts, applied forces."""
+    if uni[0] == UNI_CHAIN:
+        r = uni[8]
+        n = r.shape[1] - 1
+        chain_uniform_force(q, uni[2], uni[1] != 0, r[V_COS, :n], r[V_SIN, :n], r, f)
+    else:
+        model_force(q, args, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                    terms.drv_prm)
+
+
+@jit
+def _stage_force(args, terms, uni, q, v, t, f):
     """Prescribe the driven DOFs at t, then the position-dependent total force (as the engine)."""
-    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    apply_prescribed(q, v, t, dd, dm, ds, dp)
-    model_force(q, args, f)
-    position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    _total_force(args, terms, uni, q, t, f)
 
 
 def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
@@ -131,62 +153,55 @@ def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
 
 
 @jit
-def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, store, VB, FK, QS, TS, stages, FS):
-    """One step in place (the module docstring); returns t + h. With ``store``: the velocity and
-    force entering each kick (rows of VB, FK) and each stage's position and time (QS, TS).
-    ``stages``: 0 evaluates the stage forces, 1 also saves them (rows of FS), 2 reads them from FS
-    instead (the values a step with 1 saved: the same bits)."""
+def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
+    """One step in place (the module docstring; each kick and its drift in one pass, the
+    engine's operations); returns t + h. The stage forces go to the rows of FS (stage forces,
+    ndof: kept for the reverse sweep, the carried force copied to f) if it has rows, else to f."""
     n = q.shape[0]
     M = drifts.shape[0]
+    keep = FS.shape[0] > 0
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     ts = t
+    fk = f
     for s in range(M):
-        if kicks[s] != 0.0:
-            if store:
-                VB[s, :] = v
-                FK[s, :] = f
-            for k in range(n):
-                v[k] = E[s, k] * v[k] + G[s, k] * f[k]
         c = drifts[s] * h
-        for k in range(n):
-            q[k] += c * v[k]
+        if kicks[s] != 0.0:
+            e, g = E[s], G[s]
+            for k in range(n):
+                x = e[k] * v[k] + g[k] * fk[k]
+                v[k] = x
+                q[k] += c * x
+        else:
+            for k in range(n):
+                q[k] += c * v[k]
         ts += c
         if s == M - 1 and not fsal:
             break
-        if stages == 2:
-            apply_prescribed(q, v, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
-            f[:] = FS[s]
-        else:
-            _stage_force(args, terms, q, v, ts, f)
-            if stages == 1:
-                FS[s, :] = f
-        if store:
-            QS[s, :] = q
-            TS[s] = ts
+        fk = FS[s] if keep else f
+        _stage_force(args, terms, uni, q, v, ts, fk)
     if fsal:
-        if store:
-            VB[M, :] = v
-            FK[M, :] = f
+        e, g = E[M], G[M]
         for k in range(n):
-            v[k] = E[M, k] * v[k] + G[M, k] * f[k]
+            v[k] = e[k] * v[k] + g[k] * fk[k]
+        if keep:
+            f[:] = fk
     t1 = t + h
-    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    apply_prescribed(q, v, t1, dd, dm, ds, dp)
     return t1
 
 
 @jit
-def _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
+def _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
     """Record (q, v, F(q, t))[obs]: a drift-first method evaluates the force here (into fr)."""
     if fsal:
         _record(q, v, f, obs, Rq, Rv, Rf, j)
     else:
-        model_force(q, args, fr)
-        position_forces(q, t, fr, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
-                        terms.drv_prm)
+        _total_force(args, terms, uni, q, t, fr)
         _record(q, v, fr, obs, Rq, Rv, Rf, j)
 
 
 @jit
-def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
+def forward(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
             Rq, Rv, Rf, FS):
     """Run ``nsteps`` from (q, v, f, t) (f: the force at the start) in place; checkpoint every
     ``seg`` steps, record every ``stride`` steps (as ``sweeps.forward``); returns t. With
@@ -195,8 +210,6 @@ def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, 
     none are kept."""
     n = q.shape[0]
     save = FS.shape[1] > 0
-    e2 = np.empty((0, n))
-    e1 = np.empty(0)
     fr = np.empty(n)
     for k in range(nsteps + 1):
         if k % seg == 0:
@@ -205,123 +218,16 @@ def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, 
             if k == 0:  # the caller's f is the force at the start
                 _record(q, v, f, obs, Rq, Rv, Rf, 0)
             else:
-                _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
+                _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            t = split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, False, e2, e2, e2, e1,
-                           1 if save else 0, FS[k if save else 0])
+            t = split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS[k if save else 0])
     return t
-
-
-@jit
-def _any(x):
-    """Whether any entry of x is nonzero."""
-    for k in range(x.shape[0]):
-        if x[k] != 0.0:
-            return True
-    return False
-
-
-@jit
-def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
-            dRf, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
-    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
-    FS rows 0..nsteps − 1: the stage forces the replay kept, or no columns: recomputed here).
-
-    (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (its records included)
-    and leave as those at step k0 (records included); lf is the adjoint of the force carried
-    into the next step (kick-first) or of the recorded force only (drift-first). The adjoints
-    of the parameters, of the kick factors (GE, GG: (M + 1, ndof)) accumulate.
-    """
-    n = lq.shape[0]
-    M = drifts.shape[0]
-    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    dg = np.empty(4)
-    ddg = np.empty(4)
-    VB = np.empty((M + 1, n))
-    FK = np.empty((M + 1, n))
-    QS = np.empty((M, n))
-    TS = np.empty(M)
-    q = np.empty(n)
-    v = np.empty(n)
-    f = np.empty(n)
-    lk = np.empty(n)  # the adjoint of the force of the kick being reversed
-    read = FS.shape[1] > 0
-    for j in range(nsteps, 0, -1):
-        t1 = ST[j]
-        if not fsal and _any(lf):  # the recorded force F(q_j, t_j), where its adjoint is nonzero
-            _force_adjoint(args, terms, SQ[j], t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
-            lf[:] = 0.0
-        prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
-        q[:] = SQ[j - 1]
-        v[:] = SV[j - 1]
-        f[:] = SF[j - 1]
-        split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, ST[j - 1], h, True, VB, FK, QS, TS,
-                   2 if read else 0, FS[j - 1 if read else 0])
-        if fsal:  # the last kick: its force is the one carried to the next step
-            for k in range(n):
-                x = lv[k]
-                GE[M, k] += x * VB[M, k]
-                GG[M, k] += x * FK[M, k]
-                lk[k] = lf[k] + G[M, k] * x
-                lv[k] = E[M, k] * x
-        for s in range(M - 1, -1, -1):
-            if s < M - 1 or fsal:  # the force f_{s+1} = F(QS[s], TS[s]) after drift s
-                _force_adjoint(args, terms, QS[s], TS[s], lk, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
-                prescribed_adjoint(TS[s], lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
-            c = drifts[s] * h
-            for k in range(n):
-                lv[k] += c * lq[k]
-            if kicks[s] != 0.0:
-                for k in range(n):
-                    x = lv[k]
-                    GE[s, k] += x * VB[s, k]
-                    GG[s, k] += x * FK[s, k]
-                    lk[k] = G[s, k] * x
-                    lv[k] = E[s, k] * x
-            else:
-                lk[:] = 0.0
-        lf[:] = lk  # kick-first: the adjoint of the force at the step's start; drift-first: 0
-        _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
-
-
-# ---------------------------------------------------------------- uniform chains and grid sheets
-#
-# The reverse sweep of a uniform chain (``kernels.chain_uniform``) or uniform grid sheet
-# (``kernels.sheet_uniform``): ``reverse``'s recursion with the force adjoint at each stage
-# from the shared law as scalars (``kernels.chain_uniform_hinges``/``_gather``,
-# ``sheet_uniform_adjoint``: the kernels of velocity Verlet's uniform sweeps), the step's stage
-# states recomputed in place (no copies of the kept forces), and each drift's and kick's
-# adjoint in one pass.
-
-#: ``uniform``'s kind: a uniform chain, a uniform grid sheet
-UNI_CHAIN, UNI_SHEET = 1, 2
-
-
-@jit
-def _stage_adjoint(terms, uni, q, t, lam, lq, gdrv, dg, ddg):
-    """λq += (∂F/∂q)ᵀλ at a stage (q, t) of a uniform chain or sheet: the model's part from its
-    shared law (parameter adjoints into ``uni``'s accumulators), the applied forces' to gdrv.
-    ``uni`` = (kind, n_cols, law, x signs, y signs, accumulator, accumulator, accumulator,
-    scratch): UNI_CHAIN (·, ·, ``chain_uniform``'s u, ·, ·, the column accumulator (N_CA, n), ·,
-    ·, scratch (N_V, n + 1)), UNI_SHEET (``sheet_uniform_adjoint``'s nc, p, sgx, sgy, acc_x,
-    acc_y, acc_t0, r)."""
-    if uni[0] == UNI_CHAIN:
-        u, acc, r = uni[2], uni[5], uni[8]
-        n = r.shape[1] - 1
-        cs, sn = r[V_COS, :n], r[V_SIN, :n]
-        chain_uniform_sites(q[n:], u[U_TH0], cs, sn)
-        chain_uniform_hinges(q, lam, cs, sn, r, acc, u)
-        chain_uniform_gather(q, lam, lq, cs, sn, r, acc, u)
-    else:
-        sheet_uniform_adjoint(q, lam, lq, uni[2], uni[1], uni[3], uni[4], uni[5], uni[6], uni[7], uni[8])
-    if terms.drv_dof.shape[0]:
-        drive_force_adjoint(t, lam, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
 @jit
 def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS, TS):
     """The stages of the step from (q0, v0, f0) at t, as ``split_step`` computes them (the same
-    operations, so the same bits), reading the kept stage forces FS (stage forces, ndof): the
+    operations, so the same bits), reading its stage forces FS (stage forces, ndof): the
     velocity entering each kick s ≥ 1 (VB[s]; kick 0's is v0) and each stage's position and
     time (QS[s], TS[s]: the force f_{s+1} = F(QS[s], TS[s])), up to the last kick."""
     n = q0.shape[0]
@@ -350,6 +256,32 @@ def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS
 
 
 @jit
+def _stage_adjoint(args, terms, uni, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form):
+    """λq += (∂F/∂q)ᵀλ at a stage (q, t), parameter adjoints: ``sweeps._force_adjoint`` with
+    ``form``, or for a uniform chain or sheet the model's part from its shared law (into
+    ``uni``'s accumulators) and the applied forces'.
+
+    ``uni`` = (kind, n, law, x signs, y signs, accumulator, accumulator, accumulator, scratch):
+    UNI_CHAIN (·, lateral stretch?, ``chain_uniform``'s u, ·, ·, the column accumulator
+    (N_CA, n), ·, ·, scratch (N_V, n + 1)), UNI_SHEET (``sheet_uniform_adjoint``'s nc, p, sgx,
+    sgy, acc_x, acc_y, acc_t0, r); UNI_NONE: the rest unused."""
+    if uni[0] == UNI_NONE:
+        _force_adjoint(args, terms, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+        return
+    if uni[0] == UNI_CHAIN:
+        u, acc, r = uni[2], uni[5], uni[8]
+        n = r.shape[1] - 1
+        cs, sn = r[V_COS, :n], r[V_SIN, :n]
+        chain_uniform_sites(q[n:], u[U_TH0], cs, sn)
+        chain_uniform_hinges(q, lam, cs, sn, r, acc, u)
+        chain_uniform_gather(q, lam, lq, cs, sn, r, acc, u)
+    else:
+        sheet_uniform_adjoint(q, lam, lq, uni[2], uni[1], uni[3], uni[4], uni[5], uni[6], uni[7], uni[8])
+    if terms.drv_dof.shape[0]:
+        drive_force_adjoint(t, lam, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
+
+
+@jit
 def _kick_drift_adjoint(lv, lq, lk, c, e, g, vb, fk, ge, gg):
     """Reverse of kick s and drift s in one pass: x = λv + a_s h λq, then ∂J/∂e_s += x v_s,
     ∂J/∂g_s += x f_s, λf_s = g_s x, λv = e_s x (v_s, f_s: the velocity and force entering the kick)."""
@@ -362,12 +294,28 @@ def _kick_drift_adjoint(lv, lq, lk, c, e, g, vb, fk, ge, gg):
 
 
 @jit
-def reverse_uniform(terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
-                    dRf, lq, lv, lf, GE, GG, gdrv):
-    """``reverse`` of a uniform chain or grid sheet (``_stage_adjoint``'s ``uni``; the same
-    arguments where they exist, the stage forces FS kept). A drift-first method's recorded force
-    is reversed only where its adjoint is nonzero (at the records). Subnormals are flushed to
-    zero during the sweep as ``sweeps.chain_uniform_reverse``."""
+def _any(x):
+    """Whether any entry of x is nonzero."""
+    for k in range(x.shape[0]):
+        if x[k] != 0.0:
+            return True
+    return False
+
+
+@jit
+def reverse(args, terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
+            dRf, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
+    """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
+    FS rows 0..nsteps − 1: the stage forces the replay kept, or no columns: recomputed here,
+    one more forward step).
+
+    (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (its records included)
+    and leave as those at step k0 (records included); lf is the adjoint of the force carried
+    into the next step (kick-first) or of the recorded force only (drift-first: reversed only
+    where nonzero, at the records). The adjoints of the parameters, of the kick factors (GE, GG:
+    (M + 1, ndof)) accumulate. Subnormals are flushed to zero during the sweep as
+    ``sweeps.chain_uniform_reverse`` (only entries below 2.2e-308 change).
+    """
     csr = flush_subnormals()
     n = lq.shape[0]
     M = drifts.shape[0]
@@ -377,12 +325,22 @@ def reverse_uniform(terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h
     VB = np.empty((M + 1, n))
     QS = np.empty((M, n))
     TS = np.empty(M)
-    lk = np.zeros(n)
+    lk = np.zeros(n)  # the adjoint of the force of the kick being reversed
+    read = FS.shape[1] > 0
+    stages = np.empty((0 if read else (M if fsal else M - 1), n))
+    q = np.empty(0 if read else n)
+    v = np.empty(0 if read else n)
     for j in range(nsteps, 0, -1):
         t1 = ST[j]
-        FSj = FS[j - 1]
+        if read:
+            FSj = FS[j - 1]
+        else:  # the step's stage forces again
+            q[:] = SQ[j - 1]
+            v[:] = SV[j - 1]
+            split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, SF[j - 1].copy(), ST[j - 1], h, stages)
+            FSj = stages
         if not fsal and _any(lf):  # the recorded force F(q_j, t_j)
-            _stage_adjoint(terms, uni, SQ[j], t1, lf, lq, gdrv, dg, ddg)
+            _stage_adjoint(args, terms, uni, SQ[j], t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form)
             lf[:] = 0.0
         prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
         _stage_states(terms, kicks, drifts, E, G, fsal, SQ[j - 1], SV[j - 1], SF[j - 1], FSj, ST[j - 1], h, VB, QS, TS)
@@ -396,7 +354,7 @@ def reverse_uniform(terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h
                 lv[k] = e[k] * x
         for s in range(M - 1, -1, -1):
             if s < M - 1 or fsal:  # the force f_{s+1} = F(QS[s], TS[s]) after drift s
-                _stage_adjoint(terms, uni, QS[s], TS[s], lk, lq, gdrv, dg, ddg)
+                _stage_adjoint(args, terms, uni, QS[s], TS[s], lk, lq, g1, g2, gcon, gdrv, dg, ddg, form)
                 prescribed_adjoint(TS[s], lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
             c = drifts[s] * h
             if kicks[s] != 0.0:
@@ -438,7 +396,7 @@ def _kick_tangent(s, E, G, DE, DG, q, v, f, dv, df):
 
 
 @jit
-def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nsteps, stride, obs,
+def tangent(args, terms, uni, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nsteps, stride, obs,
             D1, D2, DCON, DDRV, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF):
     """Forward run with tangents along several directions (index m of every D*), as
     ``sweeps.tangent``; DE, DG (dirs, M + 1, ndof) are the directions of the kick factors.
@@ -454,7 +412,7 @@ def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nstep
     fr = np.empty(n)
     dfr = np.zeros((nd, n))
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    _stage_force(args, terms, q, v, t, f)
+    _stage_force(args, terms, uni, q, v, t, f)
     _prescribed_tangents(t, dq, dv, terms, DDRV, dg, ddg)
     _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, df, dg, ddg)
     for k in range(nsteps + 1):
@@ -465,7 +423,7 @@ def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nstep
                 for m in range(nd):
                     _record(dq[m], dv[m], df[m], obs, TQ[m], TV[m], TF[m], j)
             else:
-                _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j)
+                _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j)
                 _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, dfr, dg, ddg)
                 for m in range(nd):
                     _record(dq[m], dv[m], dfr[m], obs, TQ[m], TV[m], TF[m], j)
@@ -484,7 +442,7 @@ def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nstep
             ts += c
             if s == M - 1 and not fsal:
                 break
-            _stage_force(args, terms, q, v, ts, f)
+            _stage_force(args, terms, uni, q, v, ts, f)
             _prescribed_tangents(ts, dq, dv, terms, DDRV, dg, ddg)
             _forces_tangent(args, terms, q, ts, dq, D1, D2, DCON, DDRV, df, dg, ddg)
         if fsal:
