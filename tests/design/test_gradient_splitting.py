@@ -82,6 +82,23 @@ def test_forward_sweep_is_the_engine_run(name, integrator):
         np.testing.assert_allclose(rec.f[j], f, rtol=0, atol=1e-12 * np.abs(f).max())
 
 
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("name", ["chain-force-shaker", "sheet-tilted-pulse-damped"])
+def test_uniform_forces_give_the_engine_run_bit_for_bit(name, integrator):
+    """A uniform chain's or grid sheet's stage forces from its shared law (``splitting.Uniform``:
+    ``kernels.chain_uniform_force``, the sheet's grid path with the law as scalars) are the
+    model's: the forward sweep is the Stepper's run bit for bit."""
+    problem = _problem(name)
+    traj, raw = trajectory_of(problem, nsteps=120, stride=40, integrator=integrator)
+    assert traj._split_bind(raw)[2].kind == (splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN)
+    rec, _ = traj.run(raw)
+    stepper = make_stepper(problem, integrator, h=traj.h)
+    for j in range(1, 4):
+        stepper.advance(40)
+        np.testing.assert_array_equal(rec.q[j], stepper.q)
+        np.testing.assert_array_equal(rec.v[j], stepper.v)
+
+
 @pytest.mark.parametrize("integrator", ADJOINTS)
 def test_checkpointing_does_not_change_the_gradient(integrator):
     traj, raw = trajectory_of(_problem("chain-force-shaker"), nsteps=96, stride=4, integrator=integrator)
@@ -140,7 +157,7 @@ def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, m
         raw.t1[:, H_KT] *= np.linspace(0.8, 1.2, raw.t1.shape[0])
     kinds = []
     reverse = splitting.reverse
-    monkeypatch.setattr(splitting, "reverse", lambda *a: kinds.append(a[2][0]) or reverse(*a))
+    monkeypatch.setattr(splitting, "reverse", lambda *a: kinds.append(a[2].kind) or reverse(*a))
     objective = _objective((traj.n_samples, traj.obs.size), seed=4)
     refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
     for segment in (None, 11):

@@ -35,6 +35,7 @@ from flexmm.errors import FlexmmError
 from flexmm.integrators import verlet_chain
 from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms, has_velocity_terms
 from flexmm.models.hinge import H_SIGN, S_KG
+from flexmm.models.sheet_kernels import grid_scratch
 
 
 #: a run whose states fit in this many MB keeps them all (no replay); larger runs checkpoint
@@ -463,19 +464,22 @@ class Trajectory:
         form = self.form(raw)
         return args, terms, self._split_uniform(raw, form), (kicks, drifts, E, G, fsal), form
 
-    def _split_uniform(self, raw: Raw, form: tuple) -> tuple:
-        """The ``uni`` argument of the splitting sweeps (``splitting._stage_adjoint``): a uniform
-        chain's or grid sheet's law (without contacts; the column form's accumulators, which
+    def _split_uniform(self, raw: Raw, form: tuple) -> splitting.Uniform:
+        """The ``uni`` argument of the splitting sweeps (``splitting.Uniform``): a uniform chain's
+        or grid sheet's law (without contacts; the column form's accumulators, which
         ``_reverse_start`` adds to the tables), else UNI_NONE (also with ``uniform_sweeps=False``)."""
         e1, e2 = np.zeros(0), np.zeros((0, 0))
         if self.uniform_sweeps and self.terms.con_ij.shape[0] == 0:
+            n = raw.t2.shape[0]
             if form[0] == sweeps.FORM_CHAIN and (u := chain_uniform(form[3])) is not None:
-                return (splitting.UNI_CHAIN, form[1], u, e1, e1, form[5], e2, e1, np.zeros((N_V, raw.t2.shape[0] + 1)))
+                return splitting.Uniform(splitting.UNI_CHAIN, form[1], u, e1, e1, form[5], e2, e1,
+                                         np.zeros((N_V, n + 1)), e2, e2, e1)
             if form[0] == sweeps.FORM_GRID and (p := sheet_uniform(raw.t1, raw.t2)) is not None:
                 nc = form[1]
-                return (splitting.UNI_SHEET, nc, p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(), form[5], form[6],
-                        form[7], sheet_uniform_scratch(raw.t2.shape[0], nc))
-        return (splitting.UNI_NONE, 0, e1, e1, e1, e2, e2, e1, e2)
+                return splitting.Uniform(splitting.UNI_SHEET, nc, p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(),
+                                         form[5], form[6], form[7], sheet_uniform_scratch(n, nc),
+                                         grid_scratch(n)[0], raw.t1, raw.t2)
+        return splitting.Uniform(splitting.UNI_NONE, 0, e1, e1, e1, e2, e2, e1, e2, e2, e2, e1)
 
     def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False, FS: np.ndarray | None = None,
                    bound: tuple | None = None) -> tuple[Records, tuple]:

@@ -38,11 +38,13 @@ most of it is the transposes (the reverse sweep alone ×2.7–3.5).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from flexmm._jit import jit
-from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, chain_uniform_force, chain_uniform_gather, chain_uniform_hinges,
-                                   chain_uniform_sites, sheet_uniform_adjoint)
+from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, W_COS, W_SIN, chain_uniform_force, chain_uniform_gather,
+                                   chain_uniform_hinges, chain_uniform_sites, sheet_uniform_adjoint)
 from flexmm.design.sweeps import (
     _checkpoint,
     _force_adjoint,
@@ -57,6 +59,7 @@ from flexmm.integrators import composition
 from flexmm.integrators import splitting as engine
 from flexmm.integrators.common import apply_prescribed, position_forces
 from flexmm.models.kernels import model_force
+from flexmm.models.sheet_kernels import grid_x, grid_y, sheet_angles
 
 #: (kicks, drifts) of the engine's splittings (``integrators.INTEGRATORS``); one kick more than drifts
 SPLITTINGS = {
@@ -121,18 +124,62 @@ def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.
 # ``kernels.chain_uniform_force`` (the model's bits), the adjoint from
 # ``kernels.chain_uniform_hinges``/``_gather`` or ``sheet_uniform_adjoint``.
 
-#: ``uni``'s kind: the model's own kernels, a uniform chain, a uniform grid sheet
+#: ``Uniform.kind``: the model's own kernels, a uniform chain, a uniform grid sheet
 UNI_NONE, UNI_CHAIN, UNI_SHEET = 0, 1, 2
+
+
+class Uniform(NamedTuple):
+    """What the sweeps read of a uniform chain or grid sheet (``gradient.Trajectory._split_uniform``;
+    kind UNI_NONE: nothing, every array empty)."""
+
+    #: UNI_NONE, UNI_CHAIN, UNI_SHEET
+    kind: int
+    #: a chain's lateral stretch (k_g ≠ 0: 1), a sheet's number of columns
+    flag: int
+    #: the shared law: ``kernels.chain_uniform``'s u, ``kernels.sheet_uniform``'s p
+    law: np.ndarray
+    #: a sheet's shear signs of its x hinges (n − 1, site-indexed, 0 at the rows' ends) and y hinges (n − n_cols)
+    sgx: np.ndarray
+    sgy: np.ndarray
+    #: the parameter-adjoint accumulators of the run's column form: a chain's (N_CA, n) (``acc``);
+    #: a sheet's x and y families' and θ0's (``acc``, ``acc_y``, ``acc_t0``)
+    acc: np.ndarray
+    acc_y: np.ndarray
+    acc_t0: np.ndarray
+    #: scratch of the adjoint (and of a chain's force): (N_V, n + 1), a sheet's ``sheet_uniform_scratch``
+    r: np.ndarray
+    #: a sheet's force scratch (``sheet_kernels.grid_scratch``'s w), hinge table, θ0 per unit
+    w: np.ndarray
+    hprm: np.ndarray
+    theta0: np.ndarray
+
+
+@jit
+def _uniform_sheet_force(q, uni, f):
+    """A uniform grid sheet's model force: ``sheet_kernels.sheet_force``'s grid path with the
+    shared law as scalars and the shear signs (as the engine's fused sheet kernel: the same
+    operations, the same bits)."""
+    n, nc, p, w = uni.theta0.shape[0], uni.flag, uni.law, uni.w
+    cs, sn = uni.r[W_COS, :n], uni.r[W_SIN, :n]
+    sheet_angles(q, uni.theta0, cs, sn)
+    law = (p[0], p[1], p[2], p[3], p[4], p[5])
+    none = uni.law[:0]
+    grid_x(q, cs, sn, uni.hprm, f, n, nc, w, none, none, 0, -1, (0.0, 0.0, 0.0, 0.0), law, uni.sgx)
+    nb = w.shape[1] - 1
+    for s0 in range(0, n - nc, nb):  # the y hinges (no wraps: ``kernels.sheet_grid``)
+        grid_y(q, cs, sn, uni.hprm, f, n, nc, 0, s0, min(nb, n - nc - s0), w, law, uni.sgy)
 
 
 @jit
 def _total_force(args, terms, uni, q, t, f):
-    """The position-dependent total force at (q, t) into f: the model's (a uniform chain's from
-    its law, the same bits), contacts, applied forces."""
-    if uni[0] == UNI_CHAIN:
-        r = uni[8]
+    """The position-dependent total force at (q, t) into f: the model's (a uniform chain's or
+    sheet's from its law, the same bits), contacts, applied forces."""
+    if uni.kind == UNI_CHAIN:
+        r = uni.r
         n = r.shape[1] - 1
-        chain_uniform_force(q, uni[2], uni[1] != 0, r[V_COS, :n], r[V_SIN, :n], r, f)
+        chain_uniform_force(q, uni.law, uni.flag != 0, r[V_COS, :n], r[V_SIN, :n], r, f)
+    elif uni.kind == UNI_SHEET:
+        _uniform_sheet_force(q, uni, f)
     else:
         model_force(q, args, f)
     position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
@@ -258,25 +305,20 @@ def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS
 @jit
 def _stage_adjoint(args, terms, uni, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form):
     """λq += (∂F/∂q)ᵀλ at a stage (q, t), parameter adjoints: ``sweeps._force_adjoint`` with
-    ``form``, or for a uniform chain or sheet the model's part from its shared law (into
-    ``uni``'s accumulators) and the applied forces'.
-
-    ``uni`` = (kind, n, law, x signs, y signs, accumulator, accumulator, accumulator, scratch):
-    UNI_CHAIN (·, lateral stretch?, ``chain_uniform``'s u, ·, ·, the column accumulator
-    (N_CA, n), ·, ·, scratch (N_V, n + 1)), UNI_SHEET (``sheet_uniform_adjoint``'s nc, p, sgx,
-    sgy, acc_x, acc_y, acc_t0, r); UNI_NONE: the rest unused."""
-    if uni[0] == UNI_NONE:
+    ``form``, or for a uniform chain or sheet (``Uniform``) the model's part from its shared law
+    (into the column form's accumulators) and the applied forces'."""
+    if uni.kind == UNI_NONE:
         _force_adjoint(args, terms, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
         return
-    if uni[0] == UNI_CHAIN:
-        u, acc, r = uni[2], uni[5], uni[8]
+    if uni.kind == UNI_CHAIN:
+        u, acc, r = uni.law, uni.acc, uni.r
         n = r.shape[1] - 1
         cs, sn = r[V_COS, :n], r[V_SIN, :n]
         chain_uniform_sites(q[n:], u[U_TH0], cs, sn)
         chain_uniform_hinges(q, lam, cs, sn, r, acc, u)
         chain_uniform_gather(q, lam, lq, cs, sn, r, acc, u)
     else:
-        sheet_uniform_adjoint(q, lam, lq, uni[2], uni[1], uni[3], uni[4], uni[5], uni[6], uni[7], uni[8])
+        sheet_uniform_adjoint(q, lam, lq, uni.law, uni.flag, uni.sgx, uni.sgy, uni.acc, uni.acc_y, uni.acc_t0, uni.r)
     if terms.drv_dof.shape[0]:
         drive_force_adjoint(t, lam, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
