@@ -129,11 +129,20 @@ def test_kept_stage_forces_give_the_recomputed_gradient(integrator):
             np.testing.assert_array_equal(a, b, err_msg=k)
 
 
+#: scenes with every DOF free, whose kick factors are scalars per field (``splitting.field_factors``)
+FREE = ("chain-shaker-free", "sheet-shaker")
+
+
 def _uniform_problem(name: str):
-    """A test scene whose chain or grid sheet is uniform; ``sheet-shaker``: the sheet under an
-    applied force on its free left edge instead of a prescribed tilt."""
-    if name != "sheet-shaker":
+    """A test scene whose chain or grid sheet is uniform; ``chain-shaker-free``: the shaken chain
+    with its right end free; ``sheet-shaker``: the sheet under an applied force on its free left
+    edge instead of a prescribed tilt."""
+    if name not in FREE:
         return _problem(name)
+    if name == "chain-shaker-free":
+        data = {"name": "grad"} | copy.deepcopy(SCENES["chain-force-shaker"])
+        data["lattice"]["right"] = "free"
+        return build_problem(scene_from_dict(data))
     data = {"name": "grad"} | copy.deepcopy(SCENES["sheet-tilted-pulse-damped"])
     data["lattice"]["left"] = "free"
     data["excitation"] = {"kind": "shaker", "end": "left", "amplitude_n": 5.0, "frequency_hz": 2000.0,
@@ -143,18 +152,21 @@ def _uniform_problem(name: str):
 
 @pytest.mark.parametrize("integrator", SPLITTINGS)
 @pytest.mark.parametrize("graded", [False, True])
-@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "sheet-tilted-pulse-damped",
-                                  "sheet-shaker"])
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "chain-shaker-free",
+                                  "sheet-tilted-pulse-damped", "sheet-shaker"])
 def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, monkeypatch):
     """A uniform chain or grid sheet takes the reverse sweep with the uniform kernels per stage
-    (``splitting._stage_adjoint``'s ``uni``), a graded one (k_θ varied per hinge) the column forms': either
-    gives the general sweeps' gradient (the model's own adjoint kernel) to rounding, damped, under a
-    prescribed displacement or an applied force, every state kept or checkpointed, the objective
+    (``splitting.Uniform``), a graded one (k_θ varied per hinge) the column forms': either gives the
+    general sweeps' gradient (the model's own adjoint kernel, kick factors per DOF) to rounding,
+    damped, under a prescribed displacement or an applied force, with a held end (kick factors per
+    DOF) or all DOFs free (scalars per field), every state kept or checkpointed, the objective
     entering every 3 steps (drift-first PEFRL reverses its recorded force there)."""
     traj, raw = trajectory_of(_uniform_problem(name), nsteps=60, stride=3, integrator=integrator)
     raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
     if graded:
         raw.t1[:, H_KT] *= np.linspace(0.8, 1.2, raw.t1.shape[0])
+    E = traj._split_bind(raw)[3][2]
+    assert E.shape[1] == ((2 if name.startswith("chain") else 3) if name in FREE else raw.q0.size)
     kinds = []
     reverse = splitting.reverse
     monkeypatch.setattr(splitting, "reverse", lambda *a: kinds.append(a[2].kind) or reverse(*a))

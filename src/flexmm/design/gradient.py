@@ -454,15 +454,19 @@ class Trajectory:
             sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
 
     # -- the splittings (``design.splitting``) ---------------------------------------------
-    def _split_bind(self, raw: Raw) -> tuple:
+    def _split_bind(self, raw: Raw, per_field: bool = True) -> tuple:
         """The arrays a splitting sweep takes: args, terms, ``uni`` (``_split_uniform``), (kicks,
-        drifts, E, G, fsal), and the run's ``form``."""
+        drifts, E, G, fsal) and the run's ``form``; ``per_field``: the kick factors as scalars per
+        field where they are (``splitting.field_factors``), else per DOF."""
         args = with_tables(self.args, raw.t1, raw.t2)
         terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
         kicks, drifts, fsal = self._split
         E, G = splitting.kick_factors(kicks, raw.minv, raw.damp, self.h)
         form = self.form(raw)
-        return args, terms, self._split_uniform(raw, form), (kicks, drifts, E, G, fsal), form
+        uni = self._split_uniform(raw, form)
+        if per_field:
+            E, G = splitting.field_factors(E, G, {sweeps.FORM_CHAIN: 2, sweeps.FORM_GRID: 3}.get(form[0], 1))
+        return args, terms, uni, (kicks, drifts, E, G, fsal), form
 
     def _split_uniform(self, raw: Raw, form: tuple) -> splitting.Uniform:
         """The ``uni`` argument of the splitting sweeps (``splitting.Uniform``): a uniform chain's
@@ -536,7 +540,7 @@ class Trajectory:
         return float(value), grad, rec
 
     def _split_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
-        args, terms, uni, (kicks, drifts, E, G, fsal), _ = self._split_bind(raw)
+        args, terms, uni, (kicks, drifts, E, G, fsal), _ = self._split_bind(raw, per_field=False)
         nd, n = len(directions), raw.q0.size
         dminv, ddamp = _stack(raw, directions, "minv"), _stack(raw, directions, "damp")
         de_m, de_c, dg_m, dg_c = splitting.kick_factor_partials(kicks, raw.minv, raw.damp, self.h)

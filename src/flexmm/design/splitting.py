@@ -58,6 +58,7 @@ from flexmm.design.terms import drive_force_adjoint, prescribed_adjoint, prescri
 from flexmm.integrators import composition
 from flexmm.integrators import splitting as engine
 from flexmm.integrators.common import apply_prescribed, position_forces
+from flexmm.models.hinge import param
 from flexmm.models.kernels import model_force
 from flexmm.models.sheet_kernels import grid_x, grid_y, sheet_angles
 
@@ -95,6 +96,16 @@ def kick_factors(kicks: np.ndarray, minv: np.ndarray, damp: np.ndarray, h: float
     for s, b in enumerate(kicks):
         if b != 0.0:
             E[s], G[s] = engine._kick_factors(minv, damp, float(b) * h)
+    return E, G
+
+
+def field_factors(E: np.ndarray, G: np.ndarray, nf: int) -> tuple[np.ndarray, np.ndarray]:
+    """E, G as (M + 1, nf) scalars per field if every kick's factors are constant on each of the
+    ``nf`` equal fields of DOFs (a chain's u, θ; a sheet's u, v, θ; one field otherwise), so the
+    sweeps stream no factors; else unchanged (per DOF: a held DOF's m⁻¹ = 0, graded masses)."""
+    m = E.shape[1] // nf
+    if m > 1 and all(np.all(X[:, i * m : (i + 1) * m] == X[:, i * m : i * m + 1]) for X in (E, G) for i in range(nf)):
+        return np.ascontiguousarray(E[:, ::m]), np.ascontiguousarray(G[:, ::m])
     return E, G
 
 
@@ -200,6 +211,41 @@ def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
 
 
 @jit
+def _kick_field(e, g, v, f, c, q, vout, qout):
+    """One field of a kick and its drift: v' = e v + g f, q' = q + c v' into vout, qout, or in
+    place if they are empty (then no drift if q is empty too: a separate loop each, as a loop
+    that reads and writes the same array through two names does not vectorise); e, g scalars or
+    columns (``hinge.param``)."""
+    if vout.shape[0]:
+        for k in range(v.shape[0]):
+            x = param(e, k) * v[k] + param(g, k) * f[k]
+            vout[k] = x
+            qout[k] = q[k] + c * x
+    elif q.shape[0]:
+        for k in range(v.shape[0]):
+            x = param(e, k) * v[k] + param(g, k) * f[k]
+            v[k] = x
+            q[k] += c * x
+    else:
+        for k in range(v.shape[0]):
+            v[k] = param(e, k) * v[k] + param(g, k) * f[k]
+
+
+@jit
+def _kick(E, G, s, v, f, c, q, vout, qout):
+    """Kick s and its drift (``_kick_field``) on each field; E, G per field ((M + 1, nf), nf
+    fewer than the DOFs: ``field_factors``) or per DOF."""
+    n = v.shape[0]
+    if E.shape[1] < n:
+        m = n // E.shape[1]
+        for i in range(E.shape[1]):
+            a, b = i * m, (i + 1) * m
+            _kick_field(E[s, i], G[s, i], v[a:b], f[a:b], c, q[a:b], vout[a:b], qout[a:b])
+    else:
+        _kick_field(E[s], G[s], v, f, c, q, vout, qout)
+
+
+@jit
 def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
     """One step in place (the module docstring; each kick and its drift in one pass, the
     engine's operations); returns t + h. The stage forces go to the rows of FS (stage forces,
@@ -213,11 +259,7 @@ def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
     for s in range(M):
         c = drifts[s] * h
         if kicks[s] != 0.0:
-            e, g = E[s], G[s]
-            for k in range(n):
-                x = e[k] * v[k] + g[k] * fk[k]
-                v[k] = x
-                q[k] += c * x
+            _kick(E, G, s, v, fk, c, q, q[:0], q[:0])
         else:
             for k in range(n):
                 q[k] += c * v[k]
@@ -227,9 +269,7 @@ def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
         fk = FS[s] if keep else f
         _stage_force(args, terms, uni, q, v, ts, fk)
     if fsal:
-        e, g = E[M], G[M]
-        for k in range(n):
-            v[k] = e[k] * v[k] + g[k] * fk[k]
+        _kick(E, G, M, v, fk, 0.0, q[:0], q[:0], q[:0])
         if keep:
             f[:] = fk
     t1 = t + h
@@ -286,12 +326,7 @@ def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS
         dst, qd = VB[s + 1], QS[s]
         c = drifts[s] * h
         if kicks[s] != 0.0:
-            fk = f0 if s == 0 else FS[s - 1]
-            e, g = E[s], G[s]
-            for k in range(n):
-                x = e[k] * src[k] + g[k] * fk[k]
-                dst[k] = x
-                qd[k] = qs[k] + c * x
+            _kick(E, G, s, src, f0 if s == 0 else FS[s - 1], c, qs, dst, qd)
         else:
             for k in range(n):
                 x = src[k]
@@ -324,15 +359,38 @@ def _stage_adjoint(args, terms, uni, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg,
 
 
 @jit
-def _kick_drift_adjoint(lv, lq, lk, c, e, g, vb, fk, ge, gg):
-    """Reverse of kick s and drift s in one pass: x = λv + a_s h λq, then ∂J/∂e_s += x v_s,
-    ∂J/∂g_s += x f_s, λf_s = g_s x, λv = e_s x (v_s, f_s: the velocity and force entering the kick)."""
-    for k in range(lv.shape[0]):
-        x = lv[k] + c * lq[k]
-        ge[k] += x * vb[k]
-        gg[k] += x * fk[k]
-        lk[k] = g[k] * x
-        lv[k] = e[k] * x
+def _kick_adjoint_field(e, g, c, lv, lq, lf, lk, vb, fk, ge, gg):
+    """One field of the reverse of a kick and its drift: x = λv + c λq, then ∂J/∂e += x v,
+    ∂J/∂g += x f (v, f: the velocity and force entering the kick), λf = g x (+ lf unless empty:
+    the last kick's force is also the one carried), λv = e x."""
+    if lf.shape[0]:
+        for k in range(lv.shape[0]):
+            x = lv[k] + c * lq[k]
+            ge[k] += x * vb[k]
+            gg[k] += x * fk[k]
+            lk[k] = lf[k] + param(g, k) * x
+            lv[k] = param(e, k) * x
+    else:
+        for k in range(lv.shape[0]):
+            x = lv[k] + c * lq[k]
+            ge[k] += x * vb[k]
+            gg[k] += x * fk[k]
+            lk[k] = param(g, k) * x
+            lv[k] = param(e, k) * x
+
+
+@jit
+def _kick_adjoint(E, G, s, c, lv, lq, lf, lk, vb, fk, ge, gg):
+    """``_kick_adjoint_field`` of kick s (and drift s, c = a_s h) on each field (E, G as ``_kick``)."""
+    n = lv.shape[0]
+    if E.shape[1] < n:
+        m = n // E.shape[1]
+        for i in range(E.shape[1]):
+            a, b = i * m, (i + 1) * m
+            _kick_adjoint_field(E[s, i], G[s, i], c, lv[a:b], lq[a:b], lf[a:b], lk[a:b], vb[a:b], fk[a:b], ge[a:b],
+                                gg[a:b])
+    else:
+        _kick_adjoint_field(E[s], G[s], c, lv, lq, lf, lk, vb, fk, ge, gg)
 
 
 @jit
@@ -387,21 +445,15 @@ def reverse(args, terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, 
         prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
         _stage_states(terms, kicks, drifts, E, G, fsal, SQ[j - 1], SV[j - 1], SF[j - 1], FSj, ST[j - 1], h, VB, QS, TS)
         if fsal:  # the last kick: its force is the one carried to the next step
-            e, g, vb, fk, ge, gg = E[M], G[M], VB[M], FSj[M - 1], GE[M], GG[M]
-            for k in range(n):
-                x = lv[k]
-                ge[k] += x * vb[k]
-                gg[k] += x * fk[k]
-                lk[k] = lf[k] + g[k] * x
-                lv[k] = e[k] * x
+            _kick_adjoint(E, G, M, 0.0, lv, lq, lf, lk, VB[M], FSj[M - 1], GE[M], GG[M])
         for s in range(M - 1, -1, -1):
             if s < M - 1 or fsal:  # the force f_{s+1} = F(QS[s], TS[s]) after drift s
                 _stage_adjoint(args, terms, uni, QS[s], TS[s], lk, lq, g1, g2, gcon, gdrv, dg, ddg, form)
                 prescribed_adjoint(TS[s], lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
             c = drifts[s] * h
             if kicks[s] != 0.0:
-                _kick_drift_adjoint(lv, lq, lk, c, E[s], G[s], SV[j - 1] if s == 0 else VB[s],
-                                    SF[j - 1] if s == 0 else FSj[s - 1], GE[s], GG[s])
+                _kick_adjoint(E, G, s, c, lv, lq, lq[:0], lk, SV[j - 1] if s == 0 else VB[s],
+                              SF[j - 1] if s == 0 else FSj[s - 1], GE[s], GG[s])
             else:
                 for k in range(n):
                     lv[k] += c * lq[k]
