@@ -33,7 +33,7 @@ from flexmm.models.hinge import H_KT
 from . import test_fit
 from .test_design import SCENE as DESIGN_SCENE
 from .test_design import TERMS, VARIABLES
-from .test_gradient import SCENES, _central, _directions, _objective, _problem
+from .test_gradient import SCENES, _assert_same_gradients, _central, _directions, _objective, _problem
 
 SPLITTINGS = ("pefrl", "blanes_moan6")
 #: the methods with an adjoint besides velocity Verlet
@@ -172,12 +172,7 @@ def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, m
     monkeypatch.setattr(splitting, "reverse", lambda *a: kinds.append(a[2].kind) or reverse(*a))
     objective = _objective((traj.n_samples, traj.obs.size), seed=4)
     refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
-    for segment in (None, 11):
-        _, grad, _ = traj.gradient(raw, objective, segment=segment)
-        for other in refs:
-            _, ref, _ = other.gradient(raw, objective, segment=segment)
-            for (k, a), (_, b) in zip(grad.items(), ref.items()):
-                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(initial=0.0), err_msg=k)
+    _assert_same_gradients(traj, refs, raw, objective)
     uniform = splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN
     assert set(kinds) == {splitting.UNI_NONE} | ({splitting.UNI_NONE} if graded else {uniform})
 

@@ -21,19 +21,32 @@ force it records, F(q_n, t_n), is one more evaluation at each recorded step, dif
 
 ``reverse`` is the exact transpose of this step: it redoes the step's kicks and drifts from the
 state at its start (q, v, f, t), reading the stage forces the replay kept (``forward``'s FS, one
-row per force evaluation: PEFRL 4, BM6 11 a step) instead of evaluating them (the same bits; with
-none kept it evaluates them, one more forward step), the stage positions, velocities and forces
-in (M + 1) × ndof scratch, and runs back through them — kick: λf_s += g_s λv, λv ← e_s λv,
-with ∂J/∂e_s += λv ⊙ v, ∂J/∂g_s += λv ⊙ f_s accumulated per kick (``GE``, ``GG``; the caller
-maps them to m⁻¹ and γ, ``kick_factor_gradients``); drift: λv += a_s h λq; force:
-λq += (∂F/∂q)ᵀλf, parameters (``sweeps._force_adjoint``); prescription: the adjoints of the
-overwritten q_D, v_D go to the drive parameters. ``tangent`` is the forward (tangent-linear)
-counterpart. Velocity-dependent external terms (dashpots, friction: the engine integrates the
-kick with them by an RK4 flow) are not differentiated (``gradient.Trajectory`` refuses them).
+row per force evaluation: PEFRL 4, BM6 11 a step, written there straight by the force) instead
+of evaluating them (the same bits; with none kept it evaluates them, one more forward step), the
+stage positions and the velocities entering the kicks in (2M + 1) × ndof scratch, and runs back
+through them — kick and drift in one pass: x = λv + a_s h λq, ∂J/∂e_s += x ⊙ v, ∂J/∂g_s += x ⊙
+f_s accumulated per kick (``GE``, ``GG``; the caller maps them to m⁻¹ and γ,
+``kick_factor_gradients``), λf_s = g_s x, λv = e_s x; force: λq += (∂F/∂q)ᵀλf, parameters;
+prescription: the adjoints of the overwritten q_D, v_D go to the drive parameters. A
+drift-first method's recorded force is reversed only where its adjoint is nonzero (at the
+records). The kick factors are scalars per field where they are (``field_factors``: no factor
+rows streamed). ``tangent`` is the forward (tangent-linear) counterpart. Velocity-dependent
+external terms (dashpots, friction: the engine integrates the kick with them by an RK4 flow)
+are not differentiated (``gradient.Trajectory`` refuses them).
 
-Cost of a gradient on a 1000-unit chain × 1000 steps (docs/design.md): ×4.6–4.8 the engine's
-forward run with PEFRL, ×3.8–4.1 with BM6 (×5.2 and ×4.6–4.7 re-evaluating the stage forces);
-most of it is the transposes (the reverse sweep alone ×2.7–3.5).
+The model part of a stage's force and of its adjoint is the model's own (``model_force``;
+``sweeps._force_adjoint`` with the run's column form) or, for a uniform chain or grid sheet
+(``Uniform``), the shared law as scalars, with the kernels of velocity Verlet's uniform sweeps:
+forces by ``kernels.chain_uniform_force`` or the sheet's grid path (``sheet_kernels.grid_x``,
+``grid_y``; the model's bits, so still the engine's run), adjoints by
+``kernels.chain_uniform_hinges``/``_gather`` or ``kernels.sheet_uniform_adjoint``.
+
+Cost of a gradient (``python benchmarks/run.py gradient_splitting``: 1000-unit chain × 1000
+steps, 40 × 20 sheet × 300 steps, lightly damped, every state kept; multiples of the engine's
+run of the same integrator, min/median, load 1): PEFRL chain ×2.2/×2.0–2.2, BM6 chain
+×2.2–2.3/×2.2, PEFRL sheet ×2.2–2.3/×2.2–2.8, BM6 sheet ×2.0–2.3/×2.1–2.3 (before the uniform
+path ×3.5–4.5); the forward run keeping states and stage forces ×0.8–1.0 (the uniform forces
+are cheaper than the engine's model force), the reverse sweep ×1.0–1.3.
 """
 
 from __future__ import annotations
@@ -128,12 +141,8 @@ def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.
 
 # ---------------------------------------------------------------- the sweeps
 #
-# The model part of a stage's force and of its adjoint is the model's own kernel
-# (``model_force``; ``sweeps._force_adjoint`` with the run's ``form``) or, for a uniform chain
-# or uniform grid sheet (``uni``, built by ``gradient.Trajectory._split_uniform``), the kernels
-# of velocity Verlet's uniform sweeps with the shared law as scalars: the chain's force from
-# ``kernels.chain_uniform_force`` (the model's bits), the adjoint from
-# ``kernels.chain_uniform_hinges``/``_gather`` or ``sheet_uniform_adjoint``.
+# Every sweep takes ``uni`` (``Uniform``, built by ``gradient.Trajectory._split_uniform``): the
+# model's own kernels, or a uniform chain's or grid sheet's shared law (the module docstring).
 
 #: ``Uniform.kind``: the model's own kernels, a uniform chain, a uniform grid sheet
 UNI_NONE, UNI_CHAIN, UNI_SHEET = 0, 1, 2
