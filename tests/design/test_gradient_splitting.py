@@ -21,17 +21,19 @@ import yaml
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
+from flexmm.design import splitting
 from flexmm.design.fit import load_fit, solve
 from flexmm.design.gradient import GradientError, Trajectory, trajectory_of
 from flexmm.design.optimize import check_gradient, load_design
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.common import total_force
 from flexmm.integrators.stepper import make_stepper
+from flexmm.models.hinge import H_KT
 
 from . import test_fit
 from .test_design import SCENE as DESIGN_SCENE
 from .test_design import TERMS, VARIABLES
-from .test_gradient import SCENES, _central, _directions, _objective, _problem
+from .test_gradient import SCENES, _assert_same_gradients, _central, _directions, _objective, _problem
 
 SPLITTINGS = ("pefrl", "blanes_moan6")
 #: the methods with an adjoint besides velocity Verlet
@@ -80,6 +82,23 @@ def test_forward_sweep_is_the_engine_run(name, integrator):
         np.testing.assert_allclose(rec.f[j], f, rtol=0, atol=1e-12 * np.abs(f).max())
 
 
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("name", ["chain-force-shaker", "sheet-tilted-pulse-damped"])
+def test_uniform_forces_give_the_engine_run_bit_for_bit(name, integrator):
+    """A uniform chain's or grid sheet's stage forces from its shared law (``splitting.Uniform``:
+    ``kernels.chain_uniform_force``, the sheet's grid path with the law as scalars) are the
+    model's: the forward sweep is the Stepper's run bit for bit."""
+    problem = _problem(name)
+    traj, raw = trajectory_of(problem, nsteps=120, stride=40, integrator=integrator)
+    assert traj._split_bind(raw)[2].kind == (splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN)
+    rec, _ = traj.run(raw)
+    stepper = make_stepper(problem, integrator, h=traj.h)
+    for j in range(1, 4):
+        stepper.advance(40)
+        np.testing.assert_array_equal(rec.q[j], stepper.q)
+        np.testing.assert_array_equal(rec.v[j], stepper.v)
+
+
 @pytest.mark.parametrize("integrator", ADJOINTS)
 def test_checkpointing_does_not_change_the_gradient(integrator):
     traj, raw = trajectory_of(_problem("chain-force-shaker"), nsteps=96, stride=4, integrator=integrator)
@@ -94,8 +113,10 @@ def test_checkpointing_does_not_change_the_gradient(integrator):
 @pytest.mark.parametrize("integrator", SPLITTINGS)
 def test_kept_stage_forces_give_the_recomputed_gradient(integrator):
     """The reverse sweep reading the stage forces the replay kept gives the same bits as
-    recomputing each step's stages (prescribed displacement, damping; all kept and segments)."""
+    recomputing each step's stages (prescribed displacement, damping; all kept and segments; the
+    general reverse sweep, which takes either)."""
     traj, raw = trajectory_of(_problem("chain-displacement-damped"), nsteps=60, stride=4, integrator=integrator)
+    traj = dataclasses.replace(traj, uniform_sweeps=False)
     objective = _objective((traj.n_samples, traj.obs.size))
     kicks, drifts, fsal = traj._split
     stages = drifts.size if fsal else drifts.size - 1
@@ -106,6 +127,54 @@ def test_kept_stage_forces_give_the_recomputed_gradient(integrator):
         assert value == v_ref
         for (k, a), (_, b) in zip(grad.items(), ref.items()):
             np.testing.assert_array_equal(a, b, err_msg=k)
+
+
+#: scenes with every DOF free, whose kick factors are scalars per field (``splitting.field_factors``)
+FREE = ("chain-shaker-free", "sheet-shaker")
+
+
+def _uniform_problem(name: str):
+    """A test scene whose chain or grid sheet is uniform; ``chain-shaker-free``: the shaken chain
+    with its right end free; ``sheet-shaker``: the sheet under an applied force on its free left
+    edge instead of a prescribed tilt."""
+    if name not in FREE:
+        return _problem(name)
+    if name == "chain-shaker-free":
+        data = {"name": "grad"} | copy.deepcopy(SCENES["chain-force-shaker"])
+        data["lattice"]["right"] = "free"
+        return build_problem(scene_from_dict(data))
+    data = {"name": "grad"} | copy.deepcopy(SCENES["sheet-tilted-pulse-damped"])
+    data["lattice"]["left"] = "free"
+    data["excitation"] = {"kind": "shaker", "end": "left", "amplitude_n": 5.0, "frequency_hz": 2000.0,
+                          "ramp_cycles": 1.0}
+    return build_problem(scene_from_dict(data))
+
+
+@pytest.mark.parametrize("integrator", SPLITTINGS)
+@pytest.mark.parametrize("graded", [False, True])
+@pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "chain-shaker-free",
+                                  "sheet-tilted-pulse-damped", "sheet-shaker"])
+def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, monkeypatch):
+    """A uniform chain or grid sheet takes the reverse sweep with the uniform kernels per stage
+    (``splitting.Uniform``), a graded one (k_θ varied per hinge) the column forms': either gives the
+    general sweeps' gradient (the model's own adjoint kernel, kick factors per DOF) to rounding,
+    damped, under a prescribed displacement or an applied force, with a held end (kick factors per
+    DOF) or all DOFs free (scalars per field), every state kept or checkpointed, the objective
+    entering every 3 steps (drift-first PEFRL reverses its recorded force there)."""
+    traj, raw = trajectory_of(_uniform_problem(name), nsteps=60, stride=3, integrator=integrator)
+    raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
+    if graded:
+        raw.t1[:, H_KT] *= np.linspace(0.8, 1.2, raw.t1.shape[0])
+    E = traj._split_bind(raw)[3][2]
+    assert E.shape[1] == ((2 if name.startswith("chain") else 3) if name in FREE else raw.q0.size)
+    kinds = []
+    reverse = splitting.reverse
+    monkeypatch.setattr(splitting, "reverse", lambda *a: kinds.append(a[2].kind) or reverse(*a))
+    objective = _objective((traj.n_samples, traj.obs.size), seed=4)
+    refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
+    _assert_same_gradients(traj, refs, raw, objective)
+    uniform = splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN
+    assert set(kinds) == {splitting.UNI_NONE} | ({splitting.UNI_NONE} if graded else {uniform})
 
 
 @pytest.mark.parametrize(("name", "integrator"), [(n, i) for i in ADJOINTS for n in ("chain-displacement-damped",

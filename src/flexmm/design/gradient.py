@@ -36,6 +36,7 @@ from flexmm.integrators import verlet_chain
 from flexmm.integrators.common import ACC_HEADER, MODE_FRICTION, Terms, has_velocity_terms
 from flexmm.models.hinge import H_SIGN, S_KG
 from flexmm.models.loads import LoadedChainArgs
+from flexmm.models.sheet_kernels import grid_scratch
 
 
 #: a run whose states fit in this many MB keeps them all (no replay); larger runs checkpoint
@@ -187,9 +188,9 @@ class Trajectory:
     t0: float = 0.0
     #: run the column sweeps where they apply (``columns``); False: the general sweeps always
     column_sweeps: bool = True
-    #: a uniform chain's or grid sheet's reverse sweep with scalar parameters
-    #: (``sweeps.chain_uniform_reverse``, ``sheet_uniform_reverse``) where it applies; False: the
-    #: column sweeps' (for comparisons)
+    #: a uniform chain's or grid sheet's sweeps with scalar parameters (``sweeps.chain_uniform_*``,
+    #: ``sheet_uniform_reverse``, a uniform chain's reverse step in every sweep, the splittings'
+    #: uniform path ``splitting.Uniform``) where they apply; False: the column sweeps' (for comparisons)
     uniform_sweeps: bool = True
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
@@ -490,26 +491,52 @@ class Trajectory:
             sheet_grid_add(form[5], form[6], form[7], g1, g2, form[1], self._grid[1])
 
     # -- the splittings (``design.splitting``) ---------------------------------------------
-    def _split_bind(self, raw: Raw) -> tuple:
-        """The arrays a splitting sweep takes: args, terms and (kicks, drifts, E, G, fsal)."""
+    def _split_bind(self, raw: Raw, per_field: bool = True) -> tuple:
+        """The arrays a splitting sweep takes: args, terms, ``uni`` (``_split_uniform``), (kicks,
+        drifts, E, G, fsal) and the run's ``form``; ``per_field``: the kick factors as scalars per
+        field where they are (``splitting.field_factors``), else per DOF."""
         args = with_tables(self.args, raw.t1, raw.t2)
         terms = self.terms._replace(con_prm=raw.con, drv_prm=raw.drv)
         kicks, drifts, fsal = self._split
         E, G = splitting.kick_factors(kicks, raw.minv, raw.damp, self.h)
-        return args, terms, (kicks, drifts, E, G, fsal)
+        form = self.form(raw)
+        uni = self._split_uniform(raw, form)
+        if per_field:
+            E, G = splitting.field_factors(E, G, {sweeps.FORM_CHAIN: 2, sweeps.FORM_GRID: 3}.get(form[0], 1))
+        return args, terms, uni, (kicks, drifts, E, G, fsal), form
 
-    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False,
-                   FS: np.ndarray | None = None) -> tuple[Records, tuple]:
+    def _split_uniform(self, raw: Raw, form: tuple) -> splitting.Uniform:
+        """The ``uni`` argument of the splitting sweeps (``splitting.Uniform``): a uniform chain's
+        or grid sheet's law (without contacts or constant loads; the column form's accumulators,
+        which ``_reverse_start`` adds to the tables), else UNI_NONE (also with
+        ``uniform_sweeps=False``; a loaded uniform chain's reverse step still takes the fused
+        kernels, through ``form``)."""
+        e1, e2 = np.zeros(0), np.zeros((0, 0))
+        if self.uniform_sweeps and self.terms.con_ij.shape[0] == 0:
+            n = raw.t2.shape[0]
+            if form[0] == sweeps.FORM_CHAIN and form[2].size and form[10].size == 0:  # (form[2]: the uniform law)
+                return splitting.Uniform(splitting.UNI_CHAIN, form[1], form[2], e1, e1, form[5], e2, e1,
+                                         np.zeros((N_V, self._nchain + 1)), e2, e2, e1)
+            if form[0] == sweeps.FORM_GRID and (p := sheet_uniform(raw.t1, raw.t2)) is not None:
+                nc = form[1]
+                return splitting.Uniform(splitting.UNI_SHEET, nc, p, form[3][H_SIGN].copy(), form[4][H_SIGN].copy(),
+                                         form[5], form[6], form[7], sheet_uniform_scratch(n, nc),
+                                         grid_scratch(n)[0], raw.t1, raw.t2)
+        return splitting.Uniform(splitting.UNI_NONE, 0, e1, e1, e1, e2, e2, e1, e2, e2, e2, e1)
+
+    def _split_run(self, raw: Raw, segment: int | None, scratch: bool = False, FS: np.ndarray | None = None,
+                   bound: tuple | None = None) -> tuple[Records, tuple]:
         """``run`` of a splitting; ``FS`` (nsteps, stage forces, ndof): keep every step's stage
-        forces there (``splitting.forward``; with ``segment`` = 1)."""
-        args, terms, method = self._split_bind(raw)
+        forces there (``splitting.forward``; with ``segment`` = 1); ``bound``: ``_split_bind``'s."""
+        args, terms, uni, method, _ = bound or self._split_bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)
         sweeps.initial_force(args, terms, q, v, f, self.t0)
         seg = segment or max(1, math.isqrt(max(self.nsteps, 1)))
         CQ, CV, CF, CT = self._buffers(q.size, self.nsteps // seg + 1, "checkpoints" if scratch else "")
         rec = self._records()
-        splitting.forward(args, terms, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride, self.obs,
-                          CQ, CV, CF, CT, rec.q, rec.v, rec.f, np.empty((1, 0, q.size)) if FS is None else FS)
+        splitting.forward(args, terms, uni, *method, q, v, f, self.t0, self.h, self.nsteps, seg, self.stride,
+                          self.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f,
+                          np.empty((1, 0, q.size)) if FS is None else FS)
         return rec, (CQ, CV, CF, CT, seg)
 
     def _split_gradient(self, raw: Raw, objective: Objective, segment: int | None, memory_mb: float,
@@ -518,31 +545,32 @@ class Trajectory:
         The replay (or the forward run that keeps every state) also keeps each step's stage
         forces for the reverse sweep, which then evaluates none; the memory of a step counts
         them. ``stages`` = False: the reverse sweep recomputes them (the same bits, one more
-        forward run)."""
+        forward run). A uniform chain or grid sheet takes the uniform kernels (``uni``)."""
         n, N = raw.q0.size, self.nsteps
-        args, terms, method = self._split_bind(raw)
+        bound = self._split_bind(raw)
+        args, terms, uni, method, form = bound
         kicks, drifts, _, _, fsal = method
-        form = self.form(raw)
         ns = splitting.n_stage_forces(drifts, fsal) if stages else 0
         keep_all = segment is None and (N + 1) * ((3 + ns) * n + 1) * 8 <= memory_mb * 1e6
         if not keep_all and segment is None:  # a segment's replayed states and stage forces in cache
             segment = _chain_segment(N, n, (3 + ns) * n * 8, memory_mb)
         FS = self._scratch_array("stages", (N if keep_all else segment, ns, n)) if ns else np.empty((1, 0, n))
-        rec, (CQ, CV, CF, CT, seg) = self._split_run(raw, 1 if keep_all else segment, True, FS if keep_all else None)
+        rec, (CQ, CV, CF, CT, seg) = self._split_run(raw, 1 if keep_all else segment, True, FS if keep_all else None,
+                                                     bound)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         GE, GG = np.zeros((kicks.size, n)), np.zeros((kicks.size, n))
         adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form)
         if keep_all:
-            splitting.reverse(args, terms, *method, CQ, CV, CF, CT, FS, self.h, 0, N, *adjoints)
+            splitting.reverse(args, terms, uni, *method, CQ, CV, CF, CT, FS, self.h, 0, N, *adjoints)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")
             none, no_record = np.empty(0, np.int64), np.empty((1, 0))
             for c in range((N - 1) // seg if N else -1, -1, -1):
                 k0, m = c * seg, min(seg, N - c * seg)
                 # the segment's replay: its forward run from the checkpoint, every state kept
-                splitting.forward(args, terms, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h, m,
-                                  1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record, FS)
-                splitting.reverse(args, terms, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
+                splitting.forward(args, terms, uni, *method, CQ[c].copy(), CV[c].copy(), CF[c].copy(), CT[c], self.h,
+                                  m, 1, m + 1, none, SQ, SV, SF, ST, no_record, no_record, no_record, FS)
+                splitting.reverse(args, terms, uni, *method, SQ, SV, SF, ST, FS, self.h, k0, m, *adjoints)
         self._reverse_start(raw, args, terms, lq, lv, lf, g1, g2, gcon, gdrv, gdash, form)
         g_minv, g_damp = splitting.kick_factor_gradients(kicks, raw.minv, raw.damp, self.h, GE, GG)
         grad = Raw(g1, g2, g_minv, g_damp, gcon, gdrv, lq, lv, gdash)
@@ -551,7 +579,7 @@ class Trajectory:
         return float(value), grad, rec
 
     def _split_sensitivities(self, raw: Raw, directions: list[Raw]) -> tuple[Records, list[Records]]:
-        args, terms, (kicks, drifts, E, G, fsal) = self._split_bind(raw)
+        args, terms, uni, (kicks, drifts, E, G, fsal), _ = self._split_bind(raw, per_field=False)
         nd, n = len(directions), raw.q0.size
         dminv, ddamp = _stack(raw, directions, "minv"), _stack(raw, directions, "damp")
         de_m, de_c, dg_m, dg_c = splitting.kick_factor_partials(kicks, raw.minv, raw.damp, self.h)
@@ -561,7 +589,7 @@ class Trajectory:
         shape = (nd, self.n_samples, self.obs.size)
         TQ, TV, TF = np.empty(shape), np.empty(shape), np.empty(shape)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty(n)
-        splitting.tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, self.t0, self.h, self.nsteps,
+        splitting.tangent(args, terms, uni, kicks, drifts, E, G, DE, DG, fsal, q, v, f, self.t0, self.h, self.nsteps,
                           self.stride, self.obs, *(_stack(raw, directions, k) for k in ("t1", "t2", "con", "drv")),
                           _stack(raw, directions, "q0"), _stack(raw, directions, "v0"), rec.q, rec.v, rec.f,
                           TQ, TV, TF)

@@ -21,38 +21,59 @@ force it records, F(q_n, t_n), is one more evaluation at each recorded step, dif
 
 ``reverse`` is the exact transpose of this step: it redoes the step's kicks and drifts from the
 state at its start (q, v, f, t), reading the stage forces the replay kept (``forward``'s FS, one
-row per force evaluation: PEFRL 4, BM6 11 a step) instead of evaluating them (the same bits; with
-none kept it evaluates them, one more forward step), the stage positions, velocities and forces
-in (M + 1) × ndof scratch, and runs back through them — kick: λf_s += g_s λv, λv ← e_s λv,
-with ∂J/∂e_s += λv ⊙ v, ∂J/∂g_s += λv ⊙ f_s accumulated per kick (``GE``, ``GG``; the caller
-maps them to m⁻¹ and γ, ``kick_factor_gradients``); drift: λv += a_s h λq; force:
-λq += (∂F/∂q)ᵀλf, parameters (``sweeps._force_adjoint``); prescription: the adjoints of the
-overwritten q_D, v_D go to the drive parameters. ``tangent`` is the forward (tangent-linear)
-counterpart. Velocity-dependent external terms (dashpots, friction: the engine integrates the
-kick with them by an RK4 flow) are not differentiated (``gradient.Trajectory`` refuses them).
+row per force evaluation: PEFRL 4, BM6 11 a step, written there straight by the force) instead
+of evaluating them (the same bits; with none kept it evaluates them, one more forward step), the
+stage positions and the velocities entering the kicks in (2M + 1) × ndof scratch, and runs back
+through them — kick and drift in one pass: x = λv + a_s h λq, ∂J/∂e_s += x ⊙ v, ∂J/∂g_s += x ⊙
+f_s accumulated per kick (``GE``, ``GG``; the caller maps them to m⁻¹ and γ,
+``kick_factor_gradients``), λf_s = g_s x, λv = e_s x; force: λq += (∂F/∂q)ᵀλf, parameters;
+prescription: the adjoints of the overwritten q_D, v_D go to the drive parameters. A
+drift-first method's recorded force is reversed only where its adjoint is nonzero (at the
+records). The kick factors are scalars per field where they are (``field_factors``: no factor
+rows streamed). ``tangent`` is the forward (tangent-linear) counterpart. Velocity-dependent
+external terms (dashpots, friction: the engine integrates the kick with them by an RK4 flow)
+are not differentiated (``gradient.Trajectory`` refuses them).
 
-Cost of a gradient on a 1000-unit chain × 1000 steps (docs/design.md): ×4.6–4.8 the engine's
-forward run with PEFRL, ×3.8–4.1 with BM6 (×5.2 and ×4.6–4.7 re-evaluating the stage forces);
-most of it is the transposes (the reverse sweep alone ×2.7–3.5).
+The model part of a stage's force and of its adjoint is the model's own (``model_force``;
+``sweeps._force_adjoint`` with the run's column form) or, for a uniform chain or grid sheet
+(``Uniform``), the shared law as scalars, with the kernels of velocity Verlet's uniform sweeps:
+forces by ``kernels.chain_uniform_force`` or the sheet's grid path (``sheet_kernels.grid_x``,
+``grid_y``; the model's bits, so still the engine's run), adjoints by
+``kernels.chain_uniform_hinges``/``_gather`` or ``kernels.sheet_uniform_adjoint``.
+
+Cost of a gradient (``python benchmarks/run.py gradient_splitting``: 1000-unit chain × 1000
+steps, 40 × 20 sheet × 300 steps, lightly damped, every state kept; multiples of the engine's
+run of the same integrator, min/median, load 1): PEFRL chain ×2.2/×2.0–2.2, BM6 chain
+×2.2–2.3/×2.2, PEFRL sheet ×2.2–2.3/×2.2–2.8, BM6 sheet ×2.0–2.3/×2.1–2.3 (before the uniform
+path ×3.5–4.5); the forward run keeping states and stage forces ×0.8–1.0 (the uniform forces
+are cheaper than the engine's model force), the reverse sweep ×1.0–1.3.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, W_COS, W_SIN, chain_uniform_force, chain_uniform_gather,
+                                   chain_uniform_hinges, chain_uniform_sites, sheet_uniform_adjoint)
 from flexmm.design.sweeps import (
     _checkpoint,
     _force_adjoint,
     _force_tangent,
     _inject,
     _record,
+    flush_subnormals,
+    swap_mxcsr,
 )
-from flexmm.design.terms import prescribed_adjoint, prescribed_tangent
+from flexmm.design.terms import drive_force_adjoint, prescribed_adjoint, prescribed_tangent
 from flexmm.integrators import composition
 from flexmm.integrators import splitting as engine
 from flexmm.integrators.common import apply_prescribed, position_forces
+from flexmm.models.hinge import param
 from flexmm.models.kernels import model_force
+from flexmm.models.sheet_kernels import grid_x, grid_y, sheet_angles
 
 #: (kicks, drifts) of the engine's splittings (``integrators.INTEGRATORS``); one kick more than drifts
 SPLITTINGS = {
@@ -91,6 +112,16 @@ def kick_factors(kicks: np.ndarray, minv: np.ndarray, damp: np.ndarray, h: float
     return E, G
 
 
+def field_factors(E: np.ndarray, G: np.ndarray, nf: int) -> tuple[np.ndarray, np.ndarray]:
+    """E, G as (M + 1, nf) scalars per field if every kick's factors are constant on each of the
+    ``nf`` equal fields of DOFs (a chain's u, θ; a sheet's u, v, θ; one field otherwise), so the
+    sweeps stream no factors; else unchanged (per DOF: a held DOF's m⁻¹ = 0, graded masses)."""
+    m = E.shape[1] // nf
+    if m > 1 and all(np.all(X[:, i * m : (i + 1) * m] == X[:, i * m : i * m + 1]) for X in (E, G) for i in range(nf)):
+        return np.ascontiguousarray(E[:, ::m]), np.ascontiguousarray(G[:, ::m])
+    return E, G
+
+
 def kick_factor_partials(kicks: np.ndarray, minv: np.ndarray, damp: np.ndarray, h: float) -> tuple:
     """∂e_s/∂m⁻¹, ∂e_s/∂γ', ∂g_s/∂m⁻¹, ∂g_s/∂γ' per kick and DOF ((M + 1, ndof) each), γ' the
     on-site damping coefficient (the raw ``damp``; the rate is γ = γ' m⁻¹)."""
@@ -109,15 +140,77 @@ def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.
 
 
 # ---------------------------------------------------------------- the sweeps
+#
+# Every sweep takes ``uni`` (``Uniform``, built by ``gradient.Trajectory._split_uniform``): the
+# model's own kernels, or a uniform chain's or grid sheet's shared law (the module docstring).
+
+#: ``Uniform.kind``: the model's own kernels, a uniform chain, a uniform grid sheet
+UNI_NONE, UNI_CHAIN, UNI_SHEET = 0, 1, 2
+
+
+class Uniform(NamedTuple):
+    """What the sweeps read of a uniform chain or grid sheet (``gradient.Trajectory._split_uniform``;
+    kind UNI_NONE: nothing, every array empty)."""
+
+    #: UNI_NONE, UNI_CHAIN, UNI_SHEET
+    kind: int
+    #: a chain's lateral stretch (k_g ≠ 0: 1), a sheet's number of columns
+    flag: int
+    #: the shared law: ``kernels.chain_uniform``'s u, ``kernels.sheet_uniform``'s p
+    law: np.ndarray
+    #: a sheet's shear signs of its x hinges (n − 1, site-indexed, 0 at the rows' ends) and y hinges (n − n_cols)
+    sgx: np.ndarray
+    sgy: np.ndarray
+    #: the parameter-adjoint accumulators of the run's column form: a chain's (N_CA, n) (``acc``);
+    #: a sheet's x and y families' and θ0's (``acc``, ``acc_y``, ``acc_t0``)
+    acc: np.ndarray
+    acc_y: np.ndarray
+    acc_t0: np.ndarray
+    #: scratch of the adjoint (and of a chain's force): (N_V, n + 1), a sheet's ``sheet_uniform_scratch``
+    r: np.ndarray
+    #: a sheet's force scratch (``sheet_kernels.grid_scratch``'s w), hinge table, θ0 per unit
+    w: np.ndarray
+    hprm: np.ndarray
+    theta0: np.ndarray
 
 
 @jit
-def _stage_force(args, terms, q, v, t, f):
+def _uniform_sheet_force(q, uni, f):
+    """A uniform grid sheet's model force: ``sheet_kernels.sheet_force``'s grid path with the
+    shared law as scalars and the shear signs (as the engine's fused sheet kernel: the same
+    operations, the same bits)."""
+    n, nc, p, w = uni.theta0.shape[0], uni.flag, uni.law, uni.w
+    cs, sn = uni.r[W_COS, :n], uni.r[W_SIN, :n]
+    sheet_angles(q, uni.theta0, cs, sn)
+    law = (p[0], p[1], p[2], p[3], p[4], p[5])
+    none = uni.law[:0]
+    grid_x(q, cs, sn, uni.hprm, f, n, nc, w, none, none, 0, -1, (0.0, 0.0, 0.0, 0.0), law, uni.sgx)
+    nb = w.shape[1] - 1
+    for s0 in range(0, n - nc, nb):  # the y hinges (no wraps: ``kernels.sheet_grid``)
+        grid_y(q, cs, sn, uni.hprm, f, n, nc, 0, s0, min(nb, n - nc - s0), w, law, uni.sgy)
+
+
+@jit
+def _total_force(args, terms, uni, q, t, f):
+    """The position-dependent total force at (q, t) into f: the model's (a uniform chain's or
+    sheet's from its law, the same bits), contacts, applied forces."""
+    if uni.kind == UNI_CHAIN:
+        r = uni.r
+        n = r.shape[1] - 1
+        chain_uniform_force(q, uni.law, uni.flag != 0, r[V_COS, :n], r[V_SIN, :n], r, f)
+    elif uni.kind == UNI_SHEET:
+        _uniform_sheet_force(q, uni, f)
+    else:
+        model_force(q, args, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                    terms.drv_prm)
+
+
+@jit
+def _stage_force(args, terms, uni, q, v, t, f):
     """Prescribe the driven DOFs at t, then the position-dependent total force (as the engine)."""
-    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    apply_prescribed(q, v, t, dd, dm, ds, dp)
-    model_force(q, args, f)
-    position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, ds, dp)
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    _total_force(args, terms, uni, q, t, f)
 
 
 def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
@@ -127,62 +220,84 @@ def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
 
 
 @jit
-def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, store, VB, FK, QS, TS, stages, FS):
-    """One step in place (the module docstring); returns t + h. With ``store``: the velocity and
-    force entering each kick (rows of VB, FK) and each stage's position and time (QS, TS).
-    ``stages``: 0 evaluates the stage forces, 1 also saves them (rows of FS), 2 reads them from FS
-    instead (the values a step with 1 saved: the same bits)."""
+def _kick_field(e, g, v, f, c, q, vout, qout):
+    """One field of a kick and its drift: v' = e v + g f, q' = q + c v' into vout, qout, or in
+    place if they are empty (then no drift if q is empty too: a separate loop each, as a loop
+    that reads and writes the same array through two names does not vectorise); e, g scalars or
+    columns (``hinge.param``)."""
+    if vout.shape[0]:
+        for k in range(v.shape[0]):
+            x = param(e, k) * v[k] + param(g, k) * f[k]
+            vout[k] = x
+            qout[k] = q[k] + c * x
+    elif q.shape[0]:
+        for k in range(v.shape[0]):
+            x = param(e, k) * v[k] + param(g, k) * f[k]
+            v[k] = x
+            q[k] += c * x
+    else:
+        for k in range(v.shape[0]):
+            v[k] = param(e, k) * v[k] + param(g, k) * f[k]
+
+
+@jit
+def _kick(E, G, s, v, f, c, q, vout, qout):
+    """Kick s and its drift (``_kick_field``) on each field; E, G per field ((M + 1, nf), nf
+    fewer than the DOFs: ``field_factors``) or per DOF."""
+    n = v.shape[0]
+    if E.shape[1] < n:
+        m = n // E.shape[1]
+        for i in range(E.shape[1]):
+            a, b = i * m, (i + 1) * m
+            _kick_field(E[s, i], G[s, i], v[a:b], f[a:b], c, q[a:b], vout[a:b], qout[a:b])
+    else:
+        _kick_field(E[s], G[s], v, f, c, q, vout, qout)
+
+
+@jit
+def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
+    """One step in place (the module docstring; each kick and its drift in one pass, the
+    engine's operations); returns t + h. The stage forces go to the rows of FS (stage forces,
+    ndof: kept for the reverse sweep, the carried force copied to f) if it has rows, else to f."""
     n = q.shape[0]
     M = drifts.shape[0]
+    keep = FS.shape[0] > 0
+    dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     ts = t
+    fk = f
     for s in range(M):
-        if kicks[s] != 0.0:
-            if store:
-                VB[s, :] = v
-                FK[s, :] = f
-            for k in range(n):
-                v[k] = E[s, k] * v[k] + G[s, k] * f[k]
         c = drifts[s] * h
-        for k in range(n):
-            q[k] += c * v[k]
+        if kicks[s] != 0.0:
+            _kick(E, G, s, v, fk, c, q, q[:0], q[:0])
+        else:
+            for k in range(n):
+                q[k] += c * v[k]
         ts += c
         if s == M - 1 and not fsal:
             break
-        if stages == 2:
-            apply_prescribed(q, v, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
-            f[:] = FS[s]
-        else:
-            _stage_force(args, terms, q, v, ts, f)
-            if stages == 1:
-                FS[s, :] = f
-        if store:
-            QS[s, :] = q
-            TS[s] = ts
+        fk = FS[s] if keep else f
+        _stage_force(args, terms, uni, q, v, ts, fk)
     if fsal:
-        if store:
-            VB[M, :] = v
-            FK[M, :] = f
-        for k in range(n):
-            v[k] = E[M, k] * v[k] + G[M, k] * f[k]
+        _kick(E, G, M, v, fk, 0.0, q[:0], q[:0], q[:0])
+        if keep:
+            f[:] = fk
     t1 = t + h
-    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    apply_prescribed(q, v, t1, dd, dm, ds, dp)
     return t1
 
 
 @jit
-def _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
+def _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
     """Record (q, v, F(q, t))[obs]: a drift-first method evaluates the force here (into fr)."""
     if fsal:
         _record(q, v, f, obs, Rq, Rv, Rf, j)
     else:
-        model_force(q, args, fr)
-        position_forces(q, t, fr, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
-                        terms.drv_prm)
+        _total_force(args, terms, uni, q, t, fr)
         _record(q, v, fr, obs, Rq, Rv, Rf, j)
 
 
 @jit
-def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
+def forward(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
             Rq, Rv, Rf, FS):
     """Run ``nsteps`` from (q, v, f, t) (f: the force at the start) in place; checkpoint every
     ``seg`` steps, record every ``stride`` steps (as ``sweeps.forward``); returns t. With
@@ -191,8 +306,6 @@ def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, 
     none are kept."""
     n = q.shape[0]
     save = FS.shape[1] > 0
-    e2 = np.empty((0, n))
-    e1 = np.empty(0)
     fr = np.empty(n)
     for k in range(nsteps + 1):
         if k % seg == 0:
@@ -201,74 +314,163 @@ def forward(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, 
             if k == 0:  # the caller's f is the force at the start
                 _record(q, v, f, obs, Rq, Rv, Rf, 0)
             else:
-                _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
+                _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            t = split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, h, False, e2, e2, e2, e1,
-                           1 if save else 0, FS[k if save else 0])
+            t = split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS[k if save else 0])
     return t
 
 
 @jit
-def reverse(args, terms, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
+def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS, TS):
+    """The stages of the step from (q0, v0, f0) at t, as ``split_step`` computes them (the same
+    operations, so the same bits), reading its stage forces FS (stage forces, ndof): the
+    velocity entering each kick s ≥ 1 (VB[s]; kick 0's is v0) and each stage's position and
+    time (QS[s], TS[s]: the force f_{s+1} = F(QS[s], TS[s])), up to the last kick."""
+    n = q0.shape[0]
+    M = drifts.shape[0]
+    ts = t
+    for s in range(M if fsal else M - 1):
+        src = v0 if s == 0 else VB[s]
+        qs = q0 if s == 0 else QS[s - 1]
+        dst, qd = VB[s + 1], QS[s]
+        c = drifts[s] * h
+        if kicks[s] != 0.0:
+            _kick(E, G, s, src, f0 if s == 0 else FS[s - 1], c, qs, dst, qd)
+        else:
+            for k in range(n):
+                x = src[k]
+                dst[k] = x
+                qd[k] = qs[k] + c * x
+        ts += c
+        apply_prescribed(qd, dst, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+        TS[s] = ts
+
+
+@jit
+def _stage_adjoint(args, terms, uni, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form):
+    """λq += (∂F/∂q)ᵀλ at a stage (q, t), parameter adjoints: ``sweeps._force_adjoint`` with
+    ``form``, or for a uniform chain or sheet (``Uniform``) the model's part from its shared law
+    (into the column form's accumulators) and the applied forces'."""
+    if uni.kind == UNI_NONE:
+        _force_adjoint(args, terms, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+        return
+    if uni.kind == UNI_CHAIN:
+        u, acc, r = uni.law, uni.acc, uni.r
+        n = r.shape[1] - 1
+        cs, sn = r[V_COS, :n], r[V_SIN, :n]
+        chain_uniform_sites(q[n:], u[U_TH0], cs, sn)
+        chain_uniform_hinges(q, lam, cs, sn, r, acc, u)
+        chain_uniform_gather(q, lam, lq, cs, sn, r, acc, u)
+    else:
+        sheet_uniform_adjoint(q, lam, lq, uni.law, uni.flag, uni.sgx, uni.sgy, uni.acc, uni.acc_y, uni.acc_t0, uni.r)
+    if terms.drv_dof.shape[0]:
+        drive_force_adjoint(t, lam, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
+
+
+@jit
+def _kick_adjoint_field(e, g, c, lv, lq, lf, lk, vb, fk, ge, gg):
+    """One field of the reverse of a kick and its drift: x = λv + c λq, then ∂J/∂e += x v,
+    ∂J/∂g += x f (v, f: the velocity and force entering the kick), λf = g x (+ lf unless empty:
+    the last kick's force is also the one carried), λv = e x."""
+    if lf.shape[0]:
+        for k in range(lv.shape[0]):
+            x = lv[k] + c * lq[k]
+            ge[k] += x * vb[k]
+            gg[k] += x * fk[k]
+            lk[k] = lf[k] + param(g, k) * x
+            lv[k] = param(e, k) * x
+    else:
+        for k in range(lv.shape[0]):
+            x = lv[k] + c * lq[k]
+            ge[k] += x * vb[k]
+            gg[k] += x * fk[k]
+            lk[k] = param(g, k) * x
+            lv[k] = param(e, k) * x
+
+
+@jit
+def _kick_adjoint(E, G, s, c, lv, lq, lf, lk, vb, fk, ge, gg):
+    """``_kick_adjoint_field`` of kick s (and drift s, c = a_s h) on each field (E, G as ``_kick``)."""
+    n = lv.shape[0]
+    if E.shape[1] < n:
+        m = n // E.shape[1]
+        for i in range(E.shape[1]):
+            a, b = i * m, (i + 1) * m
+            _kick_adjoint_field(E[s, i], G[s, i], c, lv[a:b], lq[a:b], lf[a:b], lk[a:b], vb[a:b], fk[a:b], ge[a:b],
+                                gg[a:b])
+    else:
+        _kick_adjoint_field(E[s], G[s], c, lv, lq, lf, lk, vb, fk, ge, gg)
+
+
+@jit
+def _any(x):
+    """Whether any entry of x is nonzero."""
+    for k in range(x.shape[0]):
+        if x[k] != 0.0:
+            return True
+    return False
+
+
+@jit
+def reverse(args, terms, uni, kicks, drifts, E, G, fsal, SQ, SV, SF, ST, FS, h, k0, nsteps, stride, obs, dRq, dRv,
             dRf, lq, lv, lf, GE, GG, g1, g2, gcon, gdrv, form):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
-    FS rows 0..nsteps − 1: the stage forces the replay kept, or no columns: recomputed here).
+    FS rows 0..nsteps − 1: the stage forces the replay kept, or no columns: recomputed here,
+    one more forward step).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (its records included)
     and leave as those at step k0 (records included); lf is the adjoint of the force carried
-    into the next step (kick-first) or of the recorded force only (drift-first). The adjoints
-    of the parameters, of the kick factors (GE, GG: (M + 1, ndof)) accumulate.
+    into the next step (kick-first) or of the recorded force only (drift-first: reversed only
+    where nonzero, at the records). The adjoints of the parameters, of the kick factors (GE, GG:
+    (M + 1, ndof)) accumulate. Subnormals are flushed to zero during the sweep as
+    ``sweeps.chain_uniform_reverse`` (only entries below 2.2e-308 change).
     """
+    csr = flush_subnormals()
     n = lq.shape[0]
     M = drifts.shape[0]
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     dg = np.empty(4)
     ddg = np.empty(4)
     VB = np.empty((M + 1, n))
-    FK = np.empty((M + 1, n))
     QS = np.empty((M, n))
     TS = np.empty(M)
-    q = np.empty(n)
-    v = np.empty(n)
-    f = np.empty(n)
-    lk = np.empty(n)  # the adjoint of the force of the kick being reversed
+    lk = np.zeros(n)  # the adjoint of the force of the kick being reversed
     read = FS.shape[1] > 0
+    stages = np.empty((0 if read else (M if fsal else M - 1), n))
+    q = np.empty(0 if read else n)
+    v = np.empty(0 if read else n)
     for j in range(nsteps, 0, -1):
         t1 = ST[j]
-        if not fsal:  # the recorded force F(q_j, t_j)
-            _force_adjoint(args, terms, SQ[j], t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+        if read:
+            FSj = FS[j - 1]
+        else:  # the step's stage forces again
+            q[:] = SQ[j - 1]
+            v[:] = SV[j - 1]
+            split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, SF[j - 1].copy(), ST[j - 1], h, stages)
+            FSj = stages
+        if not fsal and _any(lf):  # the recorded force F(q_j, t_j)
+            _stage_adjoint(args, terms, uni, SQ[j], t1, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form)
             lf[:] = 0.0
         prescribed_adjoint(t1, lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
-        q[:] = SQ[j - 1]
-        v[:] = SV[j - 1]
-        f[:] = SF[j - 1]
-        split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, ST[j - 1], h, True, VB, FK, QS, TS,
-                   2 if read else 0, FS[j - 1 if read else 0])
+        _stage_states(terms, kicks, drifts, E, G, fsal, SQ[j - 1], SV[j - 1], SF[j - 1], FSj, ST[j - 1], h, VB, QS, TS)
         if fsal:  # the last kick: its force is the one carried to the next step
-            for k in range(n):
-                x = lv[k]
-                GE[M, k] += x * VB[M, k]
-                GG[M, k] += x * FK[M, k]
-                lk[k] = lf[k] + G[M, k] * x
-                lv[k] = E[M, k] * x
+            _kick_adjoint(E, G, M, 0.0, lv, lq, lf, lk, VB[M], FSj[M - 1], GE[M], GG[M])
         for s in range(M - 1, -1, -1):
             if s < M - 1 or fsal:  # the force f_{s+1} = F(QS[s], TS[s]) after drift s
-                _force_adjoint(args, terms, QS[s], TS[s], lk, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+                _stage_adjoint(args, terms, uni, QS[s], TS[s], lk, lq, g1, g2, gcon, gdrv, dg, ddg, form)
                 prescribed_adjoint(TS[s], lq, lv, dd, dm, ds, dp, gdrv, dg, ddg)
             c = drifts[s] * h
-            for k in range(n):
-                lv[k] += c * lq[k]
             if kicks[s] != 0.0:
-                for k in range(n):
-                    x = lv[k]
-                    GE[s, k] += x * VB[s, k]
-                    GG[s, k] += x * FK[s, k]
-                    lk[k] = G[s, k] * x
-                    lv[k] = E[s, k] * x
+                _kick_adjoint(E, G, s, c, lv, lq, lq[:0], lk, SV[j - 1] if s == 0 else VB[s],
+                              SF[j - 1] if s == 0 else FSj[s - 1], GE[s], GG[s])
             else:
-                lk[:] = 0.0
-        lf[:] = lk  # kick-first: the adjoint of the force at the step's start; drift-first: 0
+                for k in range(n):
+                    lv[k] += c * lq[k]
+        if fsal:  # the adjoint of the force at the step's start
+            lf[:] = lk
         _inject(k0 + j - 1, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+    if csr >= 0:
+        swap_mxcsr(csr)
 
 
 @jit
@@ -297,7 +499,7 @@ def _kick_tangent(s, E, G, DE, DG, q, v, f, dv, df):
 
 
 @jit
-def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nsteps, stride, obs,
+def tangent(args, terms, uni, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nsteps, stride, obs,
             D1, D2, DCON, DDRV, DQ0, DV0, Rq, Rv, Rf, TQ, TV, TF):
     """Forward run with tangents along several directions (index m of every D*), as
     ``sweeps.tangent``; DE, DG (dirs, M + 1, ndof) are the directions of the kick factors.
@@ -313,7 +515,7 @@ def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nstep
     fr = np.empty(n)
     dfr = np.zeros((nd, n))
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-    _stage_force(args, terms, q, v, t, f)
+    _stage_force(args, terms, uni, q, v, t, f)
     _prescribed_tangents(t, dq, dv, terms, DDRV, dg, ddg)
     _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, df, dg, ddg)
     for k in range(nsteps + 1):
@@ -324,7 +526,7 @@ def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nstep
                 for m in range(nd):
                     _record(dq[m], dv[m], df[m], obs, TQ[m], TV[m], TF[m], j)
             else:
-                _record_state(args, terms, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j)
+                _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j)
                 _forces_tangent(args, terms, q, t, dq, D1, D2, DCON, DDRV, dfr, dg, ddg)
                 for m in range(nd):
                     _record(dq[m], dv[m], dfr[m], obs, TQ[m], TV[m], TF[m], j)
@@ -343,7 +545,7 @@ def tangent(args, terms, kicks, drifts, E, G, DE, DG, fsal, q, v, f, t, h, nstep
             ts += c
             if s == M - 1 and not fsal:
                 break
-            _stage_force(args, terms, q, v, ts, f)
+            _stage_force(args, terms, uni, q, v, ts, f)
             _prescribed_tangents(ts, dq, dv, terms, DDRV, dg, ddg)
             _forces_tangent(args, terms, q, ts, dq, D1, D2, DCON, DDRV, df, dg, ddg)
         if fsal:
