@@ -46,7 +46,8 @@ VELOCITY_NAMES = ["chain-dashpots-damped", "mass-friction-dashpots", "sheet-dash
 
 
 @pytest.mark.parametrize(("name", "integrator"), [(n, i) for i in ADJOINTS for n in NAMES]
-                         + [(n, "implicit_midpoint") for n in VELOCITY_NAMES])
+                         + [(n, "implicit_midpoint") for n in VELOCITY_NAMES]
+                         + [("chain-loaded-pull", i) for i in ADJOINTS] + [("chain-striker", "pefrl")])
 def test_adjoint_matches_central_differences(name, integrator):
     problem = _problem(name)
     traj, raw = trajectory_of(problem, nsteps=120, stride=5, integrator=integrator)
