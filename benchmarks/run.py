@@ -847,7 +847,7 @@ def _interleaved(first, second, repeats: int) -> tuple[list, list, list, list]:
     return wall[0], wall[1], cpu[0], cpu[1]
 
 
-def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
+def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
              repeats: int = 5, compare_old: bool = True) -> list[dict]:
     """Cost of an exact gradient (flexmm.design: forward run with checkpoints, replay and reverse
     sweep) as a multiple of one forward run of the engine (the Stepper's velocity Verlet — the
@@ -863,7 +863,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
     """
     import tracemalloc
 
-    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, _chain_segment, raw_of
+    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, _chain_segment, _tile_segment, raw_of
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
@@ -889,9 +889,13 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         columns = traj.columns(raw)
         uniform = (columns and traj._uniform(traj._columns(raw)[0], kick, pre, post) is not None
                    or traj._sheet_uniform(raw, traj.form(raw), kick, pre, post) is not None)
+        tiled = kind == "chain" and uniform and traj._tiled(traj.form(raw))
+        whole = dataclasses.replace(traj, tiles=False)
         if compare_old and (kind == "chain" or uniform):
             runners.append(lambda: old.gradient(raw, objective))
-        for t in (traj, old):
+        if compare_old and tiled:
+            runners.append(lambda: whole.gradient(raw, objective))
+        for t in (traj, old, whole):
             small = dataclasses.replace(t, nsteps=4, stride=4)
             small.gradient(raw, objective)  # compile
             small.gradient(raw, objective, segment=2)
@@ -908,6 +912,10 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
         # the chain-column replay keeps (q, v) only; a uniform chain's also f and cos/sin of θ0+θ
         per_state = (4 if uniform and columns else 3 if not columns else 2) * n * 8
         seg = _chain_segment(steps, n, per_state, MEMORY_MB) if columns else max(1, math.isqrt(steps))
+        if tiled:  # checkpoints every TILE_STEPS steps; one window's states at a time
+            seg = _tile_segment(steps, n, MEMORY_MB)
+            length = traj._windows(seg)[1]
+            per_state = 4 * 2 * length * 8
         if keep_all:
             stored = (steps + 1) * 3 * n * 8
         else:
@@ -920,7 +928,8 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
                "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu)),
                "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]]
                + (" (uniform)" if uniform else ""),
-               "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps",
+               "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps"
+               + (f", replayed in windows of {traj._windows(seg)[1]} sites" if tiled else ""),
                "stored_MB": stored / 1e6, "traced_peak_MB": peak / 1e6,
                "all_states_MB": (steps + 1) * 3 * n * 8 / 1e6}
         print(f"  gradient, {label} x {steps} steps ({row['sweeps']} sweeps): forward {row['forward_min_s']:.3g} s, "
@@ -928,6 +937,13 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (100, 1_000_000)), sheets=(
               f"median; CPU x{row['cpu_ratio_min']:.2f} min, x{row['cpu_ratio_median']:.2f} median; target <= 4; "
               f"load {row['load']:.1f}); {row['mode']}: {row['stored_MB']:.1f} MB, traced peak "
               f"{row['traced_peak_MB']:.1f} MB (all states would be {row['all_states_MB']:.0f} MB)")
+        if tiled and compare_old:
+            wh, wh_cpu = walls[3], cpus[3]
+            row.update(whole_chain_min_s=min(wh), whole_chain_ratio_median=float(np.median(wh) / np.median(fwd)),
+                       whole_chain_cpu_ratio_median=float(np.median(wh_cpu) / np.median(fwd_cpu)))
+            print(f"    the same sweeps over the whole chain each step (no windows), interleaved: gradient {min(wh):.3g} s "
+                  f"(wall x{row['whole_chain_ratio_median']:.2f} median; CPU x{row['whole_chain_cpu_ratio_median']:.2f} "
+                  "median)")
         if len(runners) > 2:
             prev, prev_cpu = walls[2], cpus[2]
             row.update(previous_min_s=min(prev), previous_median_s=float(np.median(prev)),

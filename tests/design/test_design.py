@@ -287,6 +287,7 @@ def test_spline2d_field_is_a_tensor_product_within_its_values_and_sets_each_hing
     assert len(design.scene_data(design.x0)["lattice"]["variation"]) == 60  # one defect per unit
 
 
+@pytest.mark.slow
 def test_energy_share_gradient_and_reused_jacobian(tmp_path):
     """energy + energy_share of a box against its band, w.r.t. a 2D stiffness field: adjoint vs central
     differences; at a second design the Jacobian of the first is reused (the map is affine) and

@@ -22,8 +22,9 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.design import sweeps
-from flexmm.design.gradient import (ENGINE_MIN_STEPS, ENGINE_SITES, MEMORY_MB, SEGMENT_MB, GradientError, Trajectory,
-                                    _chain_segment, raw_of, trajectory_of)
+from flexmm.design.gradient import (ENGINE_MIN_STEPS, ENGINE_SITES, MEMORY_MB, SEGMENT_MB, TILE_SITES, TILE_STEPS,
+                                    GradientError, Trajectory,
+                                    _chain_segment, _tile_segment, raw_of, trajectory_of)
 from flexmm.design.kernels import N_R, N_V, chain_columns, chain_force_columns
 from flexmm.design.sweeps import FORM_CHAIN, FORM_TABLES
 from flexmm.integrators.common import MODE_FRICTION, SHAPES
@@ -215,7 +216,8 @@ def _central(traj, raw, arr, base, d, objective):
     return 0.5 * (est[k] + est[k + 1])
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "mass-friction-dashpots" else n
+                                  for n in sorted(SCENES)])
 def test_adjoint_matches_central_differences(name):
     problem = _problem(name)
     traj, raw = trajectory_of(problem, nsteps=200, stride=5)
@@ -269,7 +271,8 @@ def test_column_force_is_the_chain_force():
 
 
 @pytest.mark.parametrize("name", ["chain-displacement-damped", "chain-force-shaker", "sheet-tilted-pulse-damped",
-                                  "chain-dashpots-damped", "chain-loaded-pull", "chain-striker"])
+                                  "chain-dashpots-damped", pytest.param("chain-loaded-pull", marks=pytest.mark.slow),
+                                  "chain-striker"])
 def test_column_sweeps_match_the_general_sweeps(name):
     """Same records bit for bit, same gradient to rounding, checkpointed or not (chains: the
     column sweeps, uniform or not — with dashpots the general run and the column reverse step,
@@ -350,6 +353,43 @@ def test_uniform_sheet_sweeps_match_the_general_sweeps(excitation):
     _assert_same_gradients(traj, refs, raw, objective)
 
 
+@pytest.mark.parametrize("name", ["chain-force-shaker", "chain-displacement-damped"])
+def test_tiled_sweeps_are_the_whole_chain_sweeps(name, monkeypatch):
+    """A long uniform chain's segments replayed and swept back window by window
+    (``sweeps.chain_uniform_tiles``; here 60 units in windows of 8 interior sites) give the whole
+    chain's gradient bit for bit — moving everywhere from the start, driven (an applied force; a
+    prescribed displacement, with a fixed end: factors per DOF), damped, every third step
+    observed at a scattered half of the DOFs. With halos one site a step (half the needed
+    width) the windows' ends reach their interiors and the gradient differs."""
+    import flexmm.design.gradient as gradient
+
+    data = {"name": "grad"} | copy.deepcopy(SCENES[name])
+    data["lattice"]["n_units"] = 60
+    problem = build_problem(scene_from_dict(data))
+    obs = np.random.default_rng(3).permutation(problem.system.ndof)[: problem.system.ndof // 2]
+    traj, raw = trajectory_of(problem, nsteps=60, stride=3, obs=obs)
+    raw.v0[:] = np.random.default_rng(5).normal(scale=0.02, size=raw.v0.size)
+    monkeypatch.setattr(gradient, "TILE_MIN_SITES", 1)
+    monkeypatch.setattr(gradient, "TILE_SITES", 8)
+    calls = []
+    tiles = sweeps.chain_uniform_tiles
+    monkeypatch.setattr(sweeps, "chain_uniform_tiles", lambda *a: calls.append(a[9]) or tiles(*a))
+    whole = dataclasses.replace(traj, tiles=False)
+    objective = _objective((traj.n_samples, traj.obs.size), seed=8)
+    for segment in (5, 7):
+        value, grad, _ = traj.gradient(raw, objective, segment=segment)
+        assert calls[-1] == 0 and len(calls) == math.ceil(60 / segment)
+        calls.clear()
+        ref_value, ref, _ = whole.gradient(raw, objective, segment=segment)
+        assert value == ref_value
+        for (k, a), (_, b) in zip(grad.items(), ref.items()):
+            np.testing.assert_array_equal(a, b, err_msg=k)
+    assert np.any(grad.drv != 0.0)
+    monkeypatch.setattr(sweeps, "tile_halo", lambda steps: steps)
+    _, short, _ = traj.gradient(raw, objective, segment=7)
+    assert not all(np.array_equal(a, b) for (_, a), (_, b) in zip(short.items(), ref.items()))
+
+
 def _assert_same_gradients(traj, refs, raw, objective):
     """traj's gradient equals each of refs' to rounding, checkpointed (segments of 11) or not."""
     for segment in (None, 11):
@@ -405,6 +445,24 @@ def test_chain_segment_fits_the_cache_with_bounded_memory(nsteps, ndof, state):
     assert checkpoints_mb <= MEMORY_MB * 1.01 or seg == math.isqrt(nsteps)
     if not fits:  # too long for the cache only where the floors hold it
         assert seg in (math.isqrt(nsteps), ENGINE_MIN_STEPS) or checkpoints_mb >= 0.99 * MEMORY_MB
+
+
+@pytest.mark.parametrize("nsteps,ndof", [(1000, 20_000), (10, 20_000), (10**6, 20_000), (10**7, 200_000)])
+def test_tile_segment_is_bounded_in_memory(nsteps, ndof):
+    """A tiled chain's segment: TILE_STEPS steps (at most the run), longer only where the
+    checkpoints would pass the memory budget (a 10⁷-step run of 10⁵ units stays bounded); its
+    windows hold their halos."""
+    seg = _tile_segment(nsteps, ndof, MEMORY_MB)
+    assert 1 <= seg <= nsteps
+    assert (nsteps // seg + 1) * 3 * ndof * 8 <= MEMORY_MB * 1e6
+    assert seg == min(nsteps, TILE_STEPS) or seg > TILE_STEPS
+    windows = sweeps.tile_windows(ndof // 2, TILE_SITES, sweeps.tile_halo(seg))
+    a, b, a0 = windows.T
+    length = min(ndof // 2, TILE_SITES + 2 * sweeps.tile_halo(seg))
+    assert a[0] == 0 and b[-1] == ndof // 2 and np.all(a[1:] == b[:-1])  # the interiors tile the chain
+    assert np.all((a0 >= 0) & (a0 + length <= ndof // 2))
+    halo = sweeps.tile_halo(seg)
+    assert np.all((a - a0 >= halo) | (a0 == 0)) and np.all((a0 + length - b >= halo) | (a0 + length == ndof // 2))
 
 
 @pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-striker", "chain-dashpots-damped",

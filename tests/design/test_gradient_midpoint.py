@@ -20,7 +20,9 @@ from .test_gradient import _objective, _problem
 MIDPOINT = "implicit_midpoint"
 
 
-@pytest.mark.parametrize("name", ["chain-displacement-damped", "mass-friction-dashpots", "sheet-tilted-pulse-damped"])
+@pytest.mark.parametrize("name", ["chain-displacement-damped",
+                                  pytest.param("mass-friction-dashpots", marks=pytest.mark.slow),
+                                  pytest.param("sheet-tilted-pulse-damped", marks=pytest.mark.slow)])
 def test_forward_sweep_is_the_engines_rule_solved_to_rounding(name):
     """The differentiated run is the Stepper's implicit-midpoint run up to the engine's adaptive
     Newton tolerance (it differs by ~1e-7 relative here), its steps solve the engine's midpoint

@@ -45,9 +45,19 @@ NAMES = ["chain-displacement-damped", "chain-force-shaker", "chain-gaussian-rota
 VELOCITY_NAMES = ["chain-dashpots-damped", "mass-friction-dashpots", "sheet-dashpots"]
 
 
-@pytest.mark.parametrize(("name", "integrator"), [(n, i) for i in ADJOINTS for n in NAMES]
-                         + [(n, "implicit_midpoint") for n in VELOCITY_NAMES]
-                         + [("chain-loaded-pull", i) for i in ADJOINTS] + [("chain-striker", "pefrl")])
+#: the default run's cases: each method on a chain, each model kind and drive kind once, velocity
+#: terms once; every other pair of scene and method is ``slow`` (compiling their kernels is most
+#: of their cost)
+DEFAULT_FD = {("chain-displacement-damped", "pefrl"), ("chain-force-shaker", "blanes_moan6"),
+              ("chain-gaussian-rotation", "implicit_midpoint"), ("chain-displacement-damped", "implicit_midpoint"),
+              ("mass-striker", "pefrl"), ("sheet-tilted-pulse-damped", "blanes_moan6"),
+              ("chain-dashpots-damped", "implicit_midpoint")}
+FD_CASES = ([(n, i) for i in ADJOINTS for n in NAMES] + [(n, "implicit_midpoint") for n in VELOCITY_NAMES]
+            + [("chain-loaded-pull", i) for i in ADJOINTS] + [("chain-striker", "pefrl")])
+
+
+@pytest.mark.parametrize(("name", "integrator"), [c if c in DEFAULT_FD else pytest.param(*c, marks=pytest.mark.slow)
+                                                  for c in FD_CASES])
 def test_adjoint_matches_central_differences(name, integrator):
     problem = _problem(name)
     traj, raw = trajectory_of(problem, nsteps=120, stride=5, integrator=integrator)

@@ -17,6 +17,7 @@ STRUCK = ["excitation.velocity_m_s=10", "excitation.angular_velocity_rad_s=1000"
           "solver.duration_s=0.1", f"solver.accuracy={DEFAULT_ACCURACY}"]
 
 
+@pytest.mark.slow
 def test_error_control_on_a_strongly_struck_chain_meets_its_target() -> None:
     """The held-out case: the old default's rotation amplitude is far off; the default target is met."""
     old = build_problem(load_scene("configs/b_lego_amplitude_gap.yaml", STRUCK + ["solver.accuracy=null"]))

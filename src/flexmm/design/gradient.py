@@ -52,6 +52,12 @@ ENGINE_MIN_STEPS = 8
 #: (they are read back by the reverse sweep from cache, not memory), down to ``ENGINE_MIN_STEPS``
 #: steps and as long as the checkpoints stay within the memory budget
 SEGMENT_MB = 8.0
+#: a uniform chain of this many sites or more (without contacts or loads) replays and sweeps back
+#: each segment of ``TILE_STEPS`` steps in windows of ``TILE_SITES`` sites plus halos
+#: (``sweeps.chain_uniform_tiles``): longer segments than the whole chain's states in cache allow
+TILE_MIN_SITES = 8192
+TILE_SITES = 2048
+TILE_STEPS = 32
 
 
 class GradientError(FlexmmError):
@@ -195,6 +201,9 @@ class Trajectory:
     #: the forward run by the engine's fused chain kernel where it gives the same bits and is
     #: faster (``_engine_run``); False: ``sweeps.chain_forward`` always
     engine_forward: bool = True
+    #: a long uniform chain's replay and reverse sweep window by window (``sweeps.chain_uniform_tiles``)
+    #: where they apply (``_tiled``); False: over the whole chain each step
+    tiles: bool = True
     #: the time stepper (``DIFFERENTIABLE``): velocity Verlet, a splitting (``design.splitting``) or the
     #: implicit midpoint rule (``design.midpoint``)
     integrator: str = "velocity_verlet"
@@ -265,6 +274,20 @@ class Trajectory:
         if u is None:
             return None
         return u, _field_factors(kick, pre, post, 2)
+
+    def _tiled(self, form: tuple) -> bool:
+        """Whether a uniform chain's segments replay and sweep back window by window
+        (``sweeps.chain_uniform_tiles``): a chain of ``TILE_MIN_SITES`` sites or more, without
+        contacts or constant loads."""
+        return (self.tiles and self._nchain >= TILE_MIN_SITES and self.terms.con_ij.shape[0] == 0
+                and form[10].size == 0)
+
+    def _windows(self, seg: int) -> tuple[np.ndarray, int]:
+        """The tiles of a chain's sites for segments of ``seg`` steps (``sweeps.tile_windows``)
+        and their windows' length."""
+        halo = sweeps.tile_halo(seg)
+        windows = sweeps.tile_windows(self._nchain, TILE_SITES, halo)
+        return windows, min(self._nchain, TILE_SITES + 2 * halo)
 
     def _sheet_uniform(self, raw: Raw, form: tuple, kick, pre, post) -> tuple | None:
         """(shared law, x and y shear signs, integrator factors) of a uniform grid sheet's reverse
@@ -404,14 +427,25 @@ class Trajectory:
         per_state = 4 if self._vdep else 3  # q, v, f (and f_a)
         keep_all = segment is None and (N + 1) * (per_state * n + 1) * 8 <= budget * 1e6
         uniform = self._uniform(form[3], kick, pre, post) if column_run else None
-        if column_run and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
+        tiled = not keep_all and uniform is not None and self._tiled(form)
+        if tiled and segment is None:
+            segment = _tile_segment(N, n, memory_mb)
+        elif column_run and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
             segment = _chain_segment(N, n, (4 if uniform is not None else 2) * n * 8, memory_mb)
         rec, (CQ, CV, CF, CT, seg), CA = self._run(raw, 1 if keep_all else segment, scratch=True)
         value, explicit, (dq, dv, df), (lq, lv, lf), (g1, g2, gcon, gdrv, gdash) = self._seed(rec, raw, objective)
         lw = np.zeros(n)
         GK, GV = np.zeros(n), np.zeros(n)
         adjoints = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form)
-        if uniform is not None:
+        if tiled:
+            u, fac = uniform
+            windows, length = self._windows(seg)
+            ostart, oloc, ocol = sweeps.tile_observed(self.obs, n // 2, windows, length)
+            SQ, SV, SF, ST = self._buffers(2 * length, seg + 1, "window")
+            SC = self._scratch_array("window.cos/sin", (seg + 1, 2, length))
+            tiles = (windows, length, ostart, oloc, ocol, self.stride, dq, dv, df, lq, lv, lf, lw, GK, GV, gcon, gdrv,
+                     form[5], form[12], SQ, SV, SF, ST, SC, np.empty((N_V, length + 1)))
+        elif uniform is not None:
             u, fac = uniform
             ur = np.empty((N_V, n // 2 + 1))
             urev = (self.stride, self.obs, dq, dv, df, lq, lv, lf, lw, GK, GV, gcon, gdrv, form[5], ur, form[10],
@@ -433,6 +467,10 @@ class Trajectory:
                 sweeps.reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, SA, self.h, k0, m, *adjoints)
         if keep_all:  # every state was kept by the forward run
             reverse(CQ, CV, CF, CT, CA, 0, N)
+        elif tiled:
+            for c in range((N - 1) // seg if N else -1, -1, -1):
+                sweeps.chain_uniform_tiles(u, form[1] != 0, fac, terms, CQ[c], CV[c], CF[c], CT[c], self.h, c * seg,
+                                           min(seg, N - c * seg), *tiles)
         else:
             SQ, SV, SF, ST = self._buffers(n, seg + 1, "segment")  # SF unused by the chain columns
             SA = self._scratch_array("segment.fa", (seg + 1 if self._vdep else 0, n))
@@ -715,6 +753,16 @@ def _chain_segment(nsteps: int, ndof: int, state_bytes: int, memory_mb: float) -
     fit = max(ENGINE_MIN_STEPS, int(SEGMENT_MB * 1e6 // state_bytes))
     bounded = -(-(nsteps + 1) * 3 * ndof * 8 // int(memory_mb * 1e6))  # ceil: checkpoints within the budget
     return min(seg, max(fit, bounded))
+
+
+def _tile_segment(nsteps: int, ndof: int, memory_mb: float) -> int:
+    """A tiled chain's checkpoint segment: ``TILE_STEPS`` steps (a window's halo grows with it;
+    fewer checkpoints cut the forward run's time blocks less often), at most the run, but not
+    fewer than keeps the checkpoints within ``memory_mb``."""
+    seg = max(1, min(nsteps, TILE_STEPS))
+    rows = int(memory_mb * 1e6 // (3 * ndof * 8))  # checkpoints (q, v, f) the budget holds
+    bounded = -(-nsteps // (rows - 1)) if rows > 1 else nsteps  # nsteps // seg + 1 <= rows
+    return max(seg, bounded)
 
 
 def _field_factors(kick, pre, post, nf: int) -> tuple:

@@ -48,9 +48,9 @@ import platform
 import numpy as np
 from llvmlite import ir
 from numba.core import cgutils, types
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
-from flexmm._jit import fma, jit
+from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit
 from flexmm.design.kernels import (
     N_R,
     U_TH0,
@@ -80,8 +80,8 @@ from flexmm.design.terms import (
     velocity_tangent,
     waveform_dprm,
 )
-from flexmm.integrators.common import (apply_prescribed, has_velocity_terms, position_forces, total_force,
-                                       velocity_forces)
+from flexmm.integrators.common import (Terms, apply_prescribed, has_velocity_terms, position_forces,
+                                       total_force, velocity_forces)
 from flexmm.models.hinge import param
 from flexmm.models.kernels import model_force
 from flexmm.models.loads import load_terms
@@ -257,13 +257,17 @@ def _force_adjoint(args, terms, q, t, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form,
 
 
 @jit
-def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf):
+def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf, col=None):
+    """At a recorded step k, the objective's adjoints of the records added to the observed DOFs'
+    (λq, λv, λf); ``col``: the record column of each entry of ``obs`` (None: entry i is column i;
+    a spatial tile's observed DOFs, ``chain_uniform_tiles``)."""
     if k % stride == 0:
         j = k // stride
         for i in range(obs.shape[0]):
-            lq[obs[i]] += dRq[j, i]
-            lv[obs[i]] += dRv[j, i]
-            lf[obs[i]] += dRf[j, i]
+            c = i if col is None else col[i]
+            lq[obs[i]] += dRq[j, c]
+            lv[obs[i]] += dRv[j, c]
+            lf[obs[i]] += dRf[j, c]
 
 
 @jit
@@ -700,7 +704,8 @@ def _uniform_open(lq, lv, lf, lw, v, f, GK, GV, fac, nf, h, close):
 
 
 @jit
-def _uniform_close(terms, fac, nf, t1, h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv, dg, ddg):
+def _uniform_close(terms, fac, nf, t1, h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv, dg, ddg,
+                   col=None):
     """The end of a uniform reverse step: the drives' adjoints, then, unless the objective
     enters before the next step's factor pass (which then folds the close in: returns True),
     the close on each field and the objective's injection."""
@@ -715,13 +720,13 @@ def _uniform_close(terms, fac, nf, t1, h, j, k0, stride, obs, dRq, dRv, dRf, lq,
         for c in range(nf):
             a, b = c * n, (c + 1) * n
             _uniform_update(lq[a:b], lv[a:b], lf[a:b], lw[a:b], fac[c], fac[2 * nf + c], h)
-        _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf)
+        _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf, col)
     return pending
 
 
 @jit
 def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
-                          lq, lv, lf, lw, GK, GV, gcon, gdrv, acc, r, ldof, gload):
+                          lq, lv, lf, lw, GK, GV, gcon, gdrv, acc, r, ldof, gload, col=None):
     """``reverse`` of a uniform chain (the same arguments where they exist; ``u``: its
     parameters, ``fac`` = (K_u, K_θ, S_u, S_θ, P_u, P_θ) scalars or per-field columns, acc the
     column accumulator (N_CA, n), r scratch (N_V, n + 1), SF, SC the replay's forces and
@@ -730,7 +735,8 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stri
     sites (unless kept); per field, the integrator factors' products (with the close of the step
     before, unless the objective enters between them), ∂J/∂K from the kept force, applied
     forces included (``_field_open``); the hinges (Hessian and parameter products); the sites
-    (gathering, site parameters). Contacts, loads and drives as ``reverse``.
+    (gathering, site parameters). Contacts, loads and drives as ``reverse``; ``col``: as
+    ``_inject``'s.
 
     Subnormal numbers are flushed to zero during the sweep (x86: MXCSR FTZ/DAZ, restored at the
     end): the adjoint of a long damped run decays through the subnormal range (below 2.2e-308),
@@ -755,12 +761,157 @@ def chain_uniform_reverse(terms, u, fac, SQ, SV, SF, ST, SC, h, k0, nsteps, stri
         for k in range(ldof.shape[0]):
             gload[k] += lf[ldof[k]]
         pending = _uniform_close(terms, fac, 2, ST[j], h, j, k0, stride, obs, dRq, dRv, dRf, lq, lv, lf, lw, gdrv,
-                                 dg, ddg)
+                                 dg, ddg, col)
     if csr >= 0:
         swap_mxcsr(csr)
 
 
-# ---------------------------------------------------------------- uniform grid sheets
+# ---------------------------------------------------------------- uniform chains in spatial tiles
+#
+# On a long uniform chain a segment's replayed states (64 B a unit-step: q, v, f, cos/sin) are
+# more than the cache holds well, and the segment is cut short to keep them there (12 steps at
+# 10 000 units, 8 at 16 000), which stops the forward run's time blocks often.
+# ``chain_uniform_tiles`` runs a segment's replay and reverse sweep one window of sites at a time instead, so segments
+# can be longer and a window's states (~4.6 MB for 2180 sites × 33 states) stay in cache: the
+# window's checkpoint and adjoints are copied out, replayed and swept back by the same kernels
+# as the whole chain (``chain_uniform_replay``, ``chain_uniform_reverse``), and its interior
+# written back. A window's ends act as the chain's ends, which is wrong unless they are; the
+# error travels one site per step in each sweep (a step's force and adjoint reach the next
+# site), so a window takes ``tile_halo(T)`` sites on each side of its interior for a T-step
+# segment, and its interior gets the whole chain's bits. Adjoints of the state are written to a
+# second set of arrays (the neighbours' windows read the old ones), accumulators (∂J/∂K, ∂J/∂P,
+# the parameter columns, the drives) are copied out and back, so each entry is summed in the same
+# order as by the whole chain.
+
+
+def tile_halo(steps: int) -> int:
+    """Sites on each side of a window so that its interior is exact after a segment of ``steps``
+    steps replayed and swept back: one site a step in each sweep, and one more for the hinge
+    that joins the interior's last site to the next."""
+    return 2 * steps + 2
+
+
+def tile_windows(n: int, width: int, halo: int) -> np.ndarray:
+    """(tiles, 3) int64: the interior [a, b) and window start a0 of each tile of a chain of n
+    sites, interiors ``width`` sites (the last one shorter), windows of one length L = min(n,
+    width + 2 halo), held inside the chain (so an end tile's window has its halo on one side,
+    twice as wide)."""
+    a = np.arange(0, n, width, dtype=np.int64)
+    b = np.minimum(a + width, n)
+    length = min(n, width + 2 * halo)
+    a0 = np.clip(a - halo, 0, n - length)
+    return np.stack([a, b, a0], axis=1)
+
+
+def tile_observed(obs: np.ndarray, n: int, windows: np.ndarray, length: int) -> tuple:
+    """The observed DOFs of every tile's window (``length`` sites from a0; DOF d of the chain is
+    site d mod n of field d // n): (start, local DOF, record column) int64 arrays, tile t's
+    entries at start[t]:start[t + 1], local DOFs numbered as the window's (u..., θ...)."""
+    field, site = np.divmod(np.asarray(obs, np.int64), n)
+    starts, loc, col = [0], [], []
+    for a0 in windows[:, 2]:
+        inside = np.flatnonzero((site >= a0) & (site < a0 + length))
+        loc.append(field[inside] * length + site[inside] - a0)
+        col.append(inside)
+        starts.append(starts[-1] + inside.size)
+    return (np.array(starts, np.int64), np.concatenate(loc).astype(np.int64),
+            np.concatenate(col).astype(np.int64))
+
+
+@jit
+def _window(x, a0, length, out):
+    """The window of ``length`` sites from a0 of a chain's per-DOF array x (u..., θ...) into out."""
+    n = x.shape[0] // 2
+    out[:length] = x[a0 : a0 + length]
+    out[length:] = x[n + a0 : n + a0 + length]
+
+
+@jit
+def _interior(x, out, a, b, a0, length):
+    """Sites [a, b) of a window (from a0, ``length`` sites) written back to the chain's array out."""
+    n = out.shape[0] // 2
+    out[a:b] = x[a - a0 : b - a0]
+    out[n + a : n + b] = x[length + a - a0 : length + b - a0]
+
+
+def _cut(fac, a0, length):
+    """The integrator factors of a window: themselves if scalars, else each column's sites."""
+    return fac
+
+
+if not NO_JIT:
+
+    @overload(_cut, jit_options=JIT_OPTIONS)
+    def _cut_overload(fac, a0, length):
+        if isinstance(fac[0], types.Float):
+            return lambda fac, a0, length: fac
+        return lambda fac, a0, length: (fac[0][a0 : a0 + length], fac[1][a0 : a0 + length],
+                                        fac[2][a0 : a0 + length], fac[3][a0 : a0 + length],
+                                        fac[4][a0 : a0 + length], fac[5][a0 : a0 + length])
+
+
+@jit
+def _window_drives(terms, n, a0, length):
+    """The drives of a window's DOFs, numbered as the window's, and their rows in ``terms``."""
+    dd = terms.drv_dof
+    rows = np.empty(dd.shape[0], np.int64)
+    m = 0
+    for d in range(dd.shape[0]):
+        site = dd[d] % n
+        if a0 <= site < a0 + length:
+            rows[m] = d
+            m += 1
+    rows = rows[:m]
+    dof = np.empty(m, np.int64)
+    for k in range(m):
+        dof[k] = (dd[rows[k]] // n) * length + dd[rows[k]] % n - a0
+    local = Terms(terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c, dof, terms.drv_mode[rows],
+                  terms.drv_shape[rows], terms.drv_prm[rows])
+    return local, rows
+
+
+@jit
+def chain_uniform_tiles(u, with_kg, fac, terms, q0, v0, f0, t0, h, k0, nsteps, windows, length, ostart, oloc, ocol,
+                        stride, dRq, dRv, dRf, lq, lv, lf, lw, GK, GV, gcon, gdrv, acc, gload, SQ, SV, SF, ST, SC, r):
+    """One segment's replay (from its checkpoint q0, v0, f0, t0) and reverse sweep of a uniform
+    chain without contacts or loads, tile by tile (``windows``: ``tile_windows``; ``length``
+    sites a window; ``ostart``, ``oloc``, ``ocol``: ``tile_observed``); the other arguments as
+    ``chain_uniform_reverse``'s (gcon, gload untouched: no contacts, no loads), SQ, SV, SF,
+    ST, SC, r a window's (2 × length DOFs)."""
+    n = q0.shape[0] // 2
+    m = 2 * length
+    wq, wv, wf = np.empty(m), np.empty(m), np.empty(m)
+    lq1, lv1, lf1, lw1 = np.empty_like(lq), np.empty_like(lv), np.empty_like(lf), np.empty_like(lw)
+    wlq, wlv, wlf, wlw, wgk, wgv = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    wacc = np.empty((acc.shape[0], length))
+    no_dof = np.empty(0, np.int64)
+    no_val = np.empty(0)
+    for t in range(windows.shape[0]):
+        a, b, a0 = windows[t, 0], windows[t, 1], windows[t, 2]
+        local, rows = _window_drives(terms, n, a0, length)
+        wfac = _cut(fac, a0, length)
+        _window(q0, a0, length, wq)
+        _window(v0, a0, length, wv)
+        _window(f0, a0, length, wf)
+        chain_uniform_replay(u, with_kg, no_dof, no_val, wfac, local, wq, wv, wf, t0, h, nsteps, SQ, SV, SF, ST, SC, r)
+        for x, w in ((lq, wlq), (lv, wlv), (lf, wlf), (lw, wlw), (GK, wgk), (GV, wgv)):
+            _window(x, a0, length, w)
+        wacc[:, :] = acc[:, a0 : a0 + length]
+        wdrv = gdrv[rows].copy()
+        o0, o1 = ostart[t], ostart[t + 1]
+        chain_uniform_reverse(local, u, wfac, SQ, SV, SF, ST, SC, h, k0, nsteps, stride, oloc[o0:o1], dRq, dRv, dRf,
+                              wlq, wlv, wlf, wlw, wgk, wgv, gcon, wdrv, wacc, r, no_dof, gload, ocol[o0:o1])
+        for x, w in ((wlq, lq1), (wlv, lv1), (wlf, lf1), (wlw, lw1), (wgk, GK), (wgv, GV)):
+            _interior(x, w, a, b, a0, length)
+        acc[:, a:b] = wacc[:, a - a0 : b - a0]
+        for k in range(rows.shape[0]):
+            if a <= terms.drv_dof[rows[k]] % n < b:
+                gdrv[rows[k]] = wdrv[k]
+    lq[:] = lq1
+    lv[:] = lv1
+    lf[:] = lf1
+    lw[:] = lw1
+
 #
 # The reverse sweep of a uniform grid sheet (``kernels.sheet_uniform``): ``reverse``'s steps
 # (no contacts, no velocity terms) with the model part from the shared law
