@@ -836,7 +836,9 @@ def _interior(x, out, a, b, a0, length):
 
 def _cut(fac, a0, length):
     """The integrator factors of a window: themselves if scalars, else each column's sites."""
-    return fac
+    if isinstance(fac[0], float):
+        return fac
+    return tuple(x[a0 : a0 + length] for x in fac)
 
 
 if not NO_JIT:
