@@ -216,7 +216,8 @@ def _central(traj, raw, arr, base, d, objective):
     return 0.5 * (est[k] + est[k + 1])
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n == "mass-friction-dashpots" else n
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow)
+                                  if n in ("mass-friction-dashpots", "linkage-deploy-damped") else n
                                   for n in sorted(SCENES)])
 def test_adjoint_matches_central_differences(name):
     problem = _problem(name)
