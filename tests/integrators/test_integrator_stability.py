@@ -37,7 +37,13 @@ def dp5_amplification(y: float) -> float:
     return float(abs(1.0 + 1j * y * b @ np.linalg.solve(np.eye(7) - 1j * y * a, np.ones(7))))
 
 
-@pytest.mark.parametrize("name", FIXED_STEP)
+#: measured in the default run: one of each kind of method (second-order, fourth-order splitting,
+#: Runge–Kutta); the others (each a long bisection of runs) are ``slow``
+MEASURED_BY_DEFAULT = ("velocity_verlet", "pefrl", "rk4")
+
+
+@pytest.mark.parametrize("name", [n if n in MEASURED_BY_DEFAULT else pytest.param(n, marks=pytest.mark.slow)
+                                  for n in FIXED_STEP])
 def test_measured_limit_matches_prediction(name, linear_chain) -> None:
     problem, q0, v0 = linear_chain
     predicted = INTEGRATORS[name].stability_limit / problem.omega_max
