@@ -847,7 +847,7 @@ def _interleaved(first, second, repeats: int) -> tuple[list, list, list, list]:
     return wall[0], wall[1], cpu[0], cpu[1]
 
 
-def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (100, 1_000_000)), sheets=((40, 20, 3_000),),
+def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 500), (100, 1_000_000)), sheets=((40, 20, 3_000),),
              repeats: int = 5, compare_old: bool = True) -> list[dict]:
     """Cost of an exact gradient (flexmm.design: forward run with checkpoints, replay and reverse
     sweep) as a multiple of one forward run of the engine (the Stepper's velocity Verlet — the
