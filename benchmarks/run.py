@@ -886,7 +886,7 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 5
         columns = traj.columns(raw)
         uniform = (columns and traj._uniform(traj._columns(raw)[0], kick, pre, post) is not None
                    or traj._sheet_uniform(raw, traj.form(raw), kick, pre, post) is not None)
-        tiled = kind == "chain" and uniform and traj._tiled(traj.form(raw))
+        tiled = kind == "chain" and uniform and traj._tiled(traj.form(raw), _tile_segment(steps, system.ndof, MEMORY_MB))
         whole = dataclasses.replace(traj, tiles=False)
         if compare_old and (kind == "chain" or uniform):
             runners.append(lambda: old.gradient(raw, objective))

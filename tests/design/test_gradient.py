@@ -357,7 +357,7 @@ def test_uniform_sheet_sweeps_match_the_general_sweeps(excitation):
 @pytest.mark.parametrize("name", ["chain-force-shaker", "chain-displacement-damped"])
 def test_tiled_sweeps_are_the_whole_chain_sweeps(name, monkeypatch):
     """A long uniform chain's segments replayed and swept back window by window
-    (``sweeps.chain_uniform_tiles``; here 60 units in windows of 8 interior sites) give the whole
+    (``sweeps.chain_uniform_tiles``; here 200 units in windows of 64 interior sites) give the whole
     chain's gradient bit for bit — moving everywhere from the start, driven (an applied force; a
     prescribed displacement, with a fixed end: factors per DOF), damped, every third step
     observed at a scattered half of the DOFs. With halos one site a step (half the needed
@@ -365,13 +365,13 @@ def test_tiled_sweeps_are_the_whole_chain_sweeps(name, monkeypatch):
     import flexmm.design.gradient as gradient
 
     data = {"name": "grad"} | copy.deepcopy(SCENES[name])
-    data["lattice"]["n_units"] = 60
+    data["lattice"]["n_units"] = 200
     problem = build_problem(scene_from_dict(data))
     obs = np.random.default_rng(3).permutation(problem.system.ndof)[: problem.system.ndof // 2]
     traj, raw = trajectory_of(problem, nsteps=60, stride=3, obs=obs)
     raw.v0[:] = np.random.default_rng(5).normal(scale=0.02, size=raw.v0.size)
     monkeypatch.setattr(gradient, "TILE_MIN_SITES", 1)
-    monkeypatch.setattr(gradient, "TILE_SITES", 8)
+    monkeypatch.setattr(gradient, "TILE_SITES", 64)
     calls = []
     tiles = sweeps.chain_uniform_tiles
     monkeypatch.setattr(sweeps, "chain_uniform_tiles", lambda *a: calls.append(a[9]) or tiles(*a))
@@ -379,7 +379,7 @@ def test_tiled_sweeps_are_the_whole_chain_sweeps(name, monkeypatch):
     objective = _objective((traj.n_samples, traj.obs.size), seed=8)
     for segment in (5, 7):
         value, grad, _ = traj.gradient(raw, objective, segment=segment)
-        assert calls[-1] == 0 and len(calls) == math.ceil(60 / segment)
+        assert calls[-1] == 0 and len(calls) == math.ceil(60 / segment)  # 60 steps
         calls.clear()
         ref_value, ref, _ = whole.gradient(raw, objective, segment=segment)
         assert value == ref_value
@@ -389,6 +389,9 @@ def test_tiled_sweeps_are_the_whole_chain_sweeps(name, monkeypatch):
     monkeypatch.setattr(sweeps, "tile_halo", lambda steps: steps)
     _, short, _ = traj.gradient(raw, objective, segment=7)
     assert not all(np.array_equal(a, b) for (_, a), (_, b) in zip(short.items(), ref.items()))
+    calls.clear()
+    traj.gradient(raw, objective, segment=30)  # halos wider than half a window: the whole chain's sweeps
+    assert not calls
 
 
 def _assert_same_gradients(traj, refs, raw, objective):

@@ -275,12 +275,14 @@ class Trajectory:
             return None
         return u, _field_factors(kick, pre, post, 2)
 
-    def _tiled(self, form: tuple) -> bool:
-        """Whether a uniform chain's segments replay and sweep back window by window
-        (``sweeps.chain_uniform_tiles``): a chain of ``TILE_MIN_SITES`` sites or more, without
-        contacts or constant loads."""
+    def _tiled(self, form: tuple, seg: int) -> bool:
+        """Whether a uniform chain's segments of ``seg`` steps replay and sweep back window by
+        window (``sweeps.chain_uniform_tiles``): a chain of ``TILE_MIN_SITES`` sites or more,
+        without contacts or constant loads, and segments short enough that a window's halos
+        (``sweeps.tile_halo``) add at most half its interior (a longer segment — asked for, or
+        forced by the memory budget — runs over the whole chain)."""
         return (self.tiles and self._nchain >= TILE_MIN_SITES and self.terms.con_ij.shape[0] == 0
-                and form[10].size == 0)
+                and form[10].size == 0 and 4 * sweeps.tile_halo(seg) <= TILE_SITES)
 
     def _windows(self, seg: int) -> tuple[np.ndarray, int]:
         """The tiles of a chain's sites for segments of ``seg`` steps (``sweeps.tile_windows``)
@@ -427,7 +429,7 @@ class Trajectory:
         per_state = 4 if self._vdep else 3  # q, v, f (and f_a)
         keep_all = segment is None and (N + 1) * (per_state * n + 1) * 8 <= budget * 1e6
         uniform = self._uniform(form[3], kick, pre, post) if column_run else None
-        tiled = not keep_all and uniform is not None and self._tiled(form)
+        tiled = not keep_all and uniform is not None and self._tiled(form, segment or _tile_segment(N, n, memory_mb))
         if tiled and segment is None:
             segment = _tile_segment(N, n, memory_mb)
         elif column_run and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
