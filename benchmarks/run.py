@@ -883,16 +883,16 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 5
         old = dataclasses.replace(traj, uniform_sweeps=False, engine_forward=False)
         runners = [_from_start(st, steps), lambda: traj.gradient(raw, objective)]
         kick, pre, post = traj.bind(raw)[2:]
-        columns = traj.columns(raw)
-        uniform = (columns and traj._uniform(traj._columns(raw)[0], kick, pre, post) is not None
-                   or traj._sheet_uniform(raw, traj.form(raw), kick, pre, post) is not None)
-        tiled = kind == "chain" and uniform and traj._tiled(traj.form(raw), _tile_segment(steps, system.ndof, MEMORY_MB))
+        columns, form = traj.columns(raw), traj.form(raw)
+        uniform = (columns and traj._uniform(form, kick, pre, post) is not None
+                   or traj._sheet_uniform(raw, form, kick, pre, post) is not None)
+        tiled = kind == "chain" and uniform and traj._tiled(form, _tile_segment(steps, system.ndof, MEMORY_MB))
         whole = dataclasses.replace(traj, tiles=False)
         if compare_old and (kind == "chain" or uniform):
             runners.append(lambda: old.gradient(raw, objective))
         if compare_old and tiled:
             runners.append(lambda: whole.gradient(raw, objective))
-        for t in (traj, old, whole):
+        for t in (traj, old) + ((whole,) if tiled else ()):
             small = dataclasses.replace(t, nsteps=4, stride=4)
             small.gradient(raw, objective)  # compile
             small.gradient(raw, objective, segment=2)
@@ -923,10 +923,10 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 5
                "ratio_min": min(grad) / min(fwd), "ratio_median": float(np.median(grad) / np.median(fwd)),
                "cpu_ratio_min": min(grad_cpu) / min(fwd_cpu),
                "cpu_ratio_median": float(np.median(grad_cpu) / np.median(fwd_cpu)),
-               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[traj.form(raw)[0]]
+               "sweeps": ("model's adjoint", "grid sheet columns", "chain columns")[form[0]]
                + (" (uniform)" if uniform else ""),
                "mode": "all states kept" if keep_all else f"checkpoints every {seg} steps"
-               + (f", replayed in windows of {traj._windows(seg)[1]} sites" if tiled else ""),
+               + (f", replayed in windows of {length} sites" if tiled else ""),
                "stored_MB": stored / 1e6, "traced_peak_MB": peak / 1e6,
                "all_states_MB": (steps + 1) * 3 * n * 8 / 1e6}
         print(f"  gradient, {label} x {steps} steps ({row['sweeps']} sweeps): forward {row['forward_min_s']:.3g} s, "

@@ -306,7 +306,7 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
         problem = build_problem(scene_from_dict(data))
     traj, raw = trajectory_of(problem, nsteps=120, stride=3)
     args, terms, kick, pre, post = traj.bind(raw)
-    u, fac = traj._uniform(traj._columns(raw)[0], kick, pre, post)
+    u, fac = traj._uniform(traj.form(raw), kick, pre, post)
     assert all(isinstance(x, float) for x in fac) == free
     states = []
     loads = traj._columns(raw)[2:]

@@ -266,14 +266,14 @@ class Trajectory:
             ldof, lval = np.zeros(0, np.int64), np.zeros(0)
         return chain_columns(raw.t1, sprm), bool(np.any(sprm[:, S_KG] != 0.0)), ldof, lval
 
-    def _uniform(self, cols: np.ndarray, kick, pre, post) -> tuple | None:
+    def _uniform(self, form: tuple, kick, pre, post) -> tuple | None:
         """(parameters, integrator factors) of the uniform chain's reverse sweep, or None: the
-        factors (K_u, K_θ, S_u, S_θ, P_u, P_θ) as scalars if constant on each field, else as
-        per-field columns. Not with velocity terms, nor with DOFs past the chain's (a striker's)."""
-        u = chain_uniform(cols) if self.uniform_sweeps and not self._vdep and kick.size == 2 * self._nchain else None
-        if u is None:
+        uniform law ``form`` found (``form``, slot 2) and the factors (K_u, K_θ, S_u, S_θ, P_u, P_θ)
+        as scalars if constant on each field, else as per-field columns. Not with velocity terms,
+        nor with DOFs past the chain's (a striker's)."""
+        if not (form[0] == sweeps.FORM_CHAIN and form[2].size and not self._vdep and kick.size == 2 * self._nchain):
             return None
-        return u, _field_factors(kick, pre, post, 2)
+        return form[2], _field_factors(kick, pre, post, 2)
 
     def _tiled(self, form: tuple, seg: int) -> bool:
         """Whether a uniform chain's segments of ``seg`` steps replay and sweep back window by
@@ -428,10 +428,11 @@ class Trajectory:
         budget = min(memory_mb, CACHE_MB) if column_run else memory_mb
         per_state = 4 if self._vdep else 3  # q, v, f (and f_a)
         keep_all = segment is None and (N + 1) * (per_state * n + 1) * 8 <= budget * 1e6
-        uniform = self._uniform(form[3], kick, pre, post) if column_run else None
-        tiled = not keep_all and uniform is not None and self._tiled(form, segment or _tile_segment(N, n, memory_mb))
-        if tiled and segment is None:
-            segment = _tile_segment(N, n, memory_mb)
+        uniform = self._uniform(form, kick, pre, post) if column_run else None
+        tile_seg = segment or _tile_segment(N, n, memory_mb)
+        tiled = not keep_all and uniform is not None and self._tiled(form, tile_seg)
+        if tiled:
+            segment = tile_seg
         elif column_run and not keep_all and segment is None:  # a replayed segment's states (q, v; f, cos/sin)
             segment = _chain_segment(N, n, (4 if uniform is not None else 2) * n * 8, memory_mb)
         rec, (CQ, CV, CF, CT, seg), CA = self._run(raw, 1 if keep_all else segment, scratch=True)

@@ -899,7 +899,7 @@ def chain_uniform_tiles(u, with_kg, fac, terms, q0, v0, f0, t0, h, k0, nsteps, w
         for x, w in ((lq, wlq), (lv, wlv), (lf, wlf), (lw, wlw), (GK, wgk), (GV, wgv)):
             _window(x, a0, length, w)
         wacc[:, :] = acc[:, a0 : a0 + length]
-        wdrv = gdrv[rows].copy()
+        wdrv = gdrv[rows]  # a copy (indexed by an array)
         o0, o1 = ostart[t], ostart[t + 1]
         chain_uniform_reverse(local, u, wfac, SQ, SV, SF, ST, SC, h, k0, nsteps, stride, oloc[o0:o1], dRq, dRv, dRf,
                               wlq, wlv, wlf, wlw, wgk, wgv, gcon, wdrv, wacc, r, no_dof, gload, ocol[o0:o1])
