@@ -247,7 +247,9 @@ def test_random_signals_during_reruns_many_seeds(tmp_path, seed) -> None:
 def test_a_sweep_stopped_at_a_random_moment_resumes_to_a_true_summary(tmp_path, sig) -> None:
     import random
 
-    from flexmm.sweep.store import dataset_status
+    import numpy as np
+
+    from flexmm.sweep.store import SweepStore
 
     sweep = tmp_path / "sw"
     vary = ["--vary", "excitation.velocity_m_s=0.5:3:6", "--set", "solver.duration_s=2", "--workers", "2",
@@ -256,18 +258,16 @@ def test_a_sweep_stopped_at_a_random_moment_resumes_to_a_true_summary(tmp_path, 
     time.sleep(random.Random(int(sig)).uniform(3.0, 6.0))
     proc.send_signal(sig)
     proc.communicate(timeout=120)
-    done_before = {d.name: (d / "done.json").stat().st_mtime for d in (sweep / "points").glob("*")
-                   if (d / "done.json").exists()}
+    store = SweepStore(sweep)
+    before = store.status() if store.exists() else np.zeros(6, np.uint8)
+    done_before = np.array(store.read()["observables"]) if store.exists() else None
     res = flexmm("sweep", DEMO, "--out", sweep, *vary)
     assert res.returncode == 0, res.stderr
     assert "6 finished" in res.stderr and "0 failed" in res.stderr and (sweep / "sweep.nc").exists()
-    points = list((sweep / "points").glob("*"))
-    assert len(points) == 6
-    for d in points:
-        assert (d / "done.json").exists() and not (d / "error.json").exists()
-        assert dataset_status(d / "dataset.nc") == "finished"
-        if d.name in done_before:  # finished before the stop: not run again
-            assert (d / "done.json").stat().st_mtime == done_before[d.name]
+    assert (store.status() == 1).all()  # every point finished, exactly once in the store
+    assert f" {int((before == 1).sum())} already done)" in res.stderr  # finished before the stop: not run again
+    if done_before is not None:  # and their observables untouched
+        np.testing.assert_array_equal(np.array(store.read()["observables"])[before == 1], done_before[before == 1])
 
 
 def test_progress_lines_outside_a_terminal(tmp_path, monkeypatch) -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
@@ -11,11 +10,12 @@ import textwrap
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import default_sigint
 
 from flexmm.sweep import load_sweep, run_sweep
-from flexmm.sweep.store import FINISHED, SweepStore, dataset_status
+from flexmm.sweep.store import CODE, FINISHED, SweepStore, dataset_status
 
 REPO = Path(__file__).resolve().parents[2]
 LEGO = REPO / "configs" / "lego_vector_soliton.yaml"
@@ -31,6 +31,7 @@ SPEC = f"""\
       solver.duration_s: 0.3
       solver.dt_fraction: 0.5
       output.n_frames: 61
+    keep: all
     vary:
       grid:
         excitation.amplitude_rad: {{start: 0.3, stop: 0.65, num: {N_POINTS}}}
@@ -46,8 +47,14 @@ def start(spec_path: Path, sweep_dir: Path) -> subprocess.Popen:
                             preexec_fn=default_sigint)
 
 
+def finished_indices(sweep_dir: Path) -> set[int]:
+    """Points whose status byte says finished (none before the store is laid out)."""
+    status = SweepStore(sweep_dir).status()
+    return {int(i) for i in np.flatnonzero(status == CODE[FINISHED])}
+
+
 def n_done(sweep_dir: Path) -> int:
-    return len(list((sweep_dir / "points").glob("*/done.json")))
+    return len(finished_indices(sweep_dir))
 
 
 def kill_after(proc: subprocess.Popen, sweep_dir: Path, n: int, sig: int) -> str:
@@ -66,19 +73,18 @@ def finished_files(store: SweepStore, hashes) -> dict[str, int]:
 
 
 def check_nothing_looks_finished_but_is_not(store: SweepStore, points) -> set[str]:
-    """Every done.json sits next to a dataset with status 'finished'; returns the finished hashes."""
-    finished = set()
+    """Every point the status array calls finished has its observables in the store and its kept
+    dataset with status 'finished'; returns the finished hashes."""
+    done = finished_indices(store.root)
+    observables = store.read()["observables"]
     for p in points:
-        d = store.point_dir(p.hash)
-        if (d / "done.json").exists():
-            assert dataset_status(d / "dataset.nc") == FINISHED
-            assert "observables" in json.loads((d / "done.json").read_text())
-            assert store.state(p.hash) == FINISHED
-            finished.add(p.hash)
+        if p.flat in done:
+            assert dataset_status(store.point_dir(p.hash) / "dataset.nc") == FINISHED
+            assert np.isfinite(observables[p.flat]).any()
         else:
-            assert store.state(p.hash) != FINISHED
+            assert np.isnan(observables[p.flat]).all()  # nothing half-published
     assert not store.result_path.exists()  # no combined dataset for an incomplete sweep
-    return finished
+    return {p.hash for p in points if p.flat in done}
 
 
 def test_killed_sweep_resumes_without_losing_or_recomputing_points(tmp_path):
@@ -115,7 +121,7 @@ def test_killed_sweep_resumes_without_losing_or_recomputing_points(tmp_path):
     assert report.ok and report.n_cached == len(second)
     assert report.n_run == N_POINTS - len(second)
     assert finished_files(store, second) == mtimes
-    assert all(store.state(p.hash) == FINISHED for p in points)
+    assert finished_indices(d) == set(range(N_POINTS))
     assert store.result_path.exists()
     assert not [p for p in d.rglob("*") if p.name.endswith(".tmp")]
 

@@ -28,6 +28,7 @@ TINY = f"""\
       solver.duration_s: 0.06
       solver.dt_fraction: 0.5
       output.n_frames: 61
+    keep: all
     vary:
       grid:
         excitation.amplitude_rad: [0.3, 0.45, 0.6]
@@ -41,16 +42,18 @@ def tiny_spec(tmp_path: Path, text: str = TINY):
 
 
 def snapshot(sweep_dir: Path) -> dict[str, float]:
-    """mtime of every file under points/ (what a recomputation would touch)."""
+    """mtime of every file under points/ and store/ (what a recomputation would touch)."""
     return {str(p.relative_to(sweep_dir)): p.stat().st_mtime_ns
-            for p in (sweep_dir / "points").rglob("*") if p.is_file()}
+            for sub in ("points", "store") for p in (sweep_dir / sub).rglob("*") if p.is_file()}
 
 
 @pytest.fixture(scope="module")
 def local_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("local")
     spec = tiny_spec(tmp)
-    report = run_sweep(spec, tmp / "sweep", workers=1)
+    outcomes = []
+    report = run_sweep(spec, tmp / "sweep", workers=1, on_outcome=outcomes.append)
+    report.outcomes = outcomes
     return spec, tmp / "sweep", report
 
 
@@ -84,12 +87,13 @@ def test_local_sweep_runs_every_point_and_combines(local_run):
     np.testing.assert_allclose(ds["speed"], ds["speed_theory"], rtol=0.25)
     np.testing.assert_allclose(ds["amplitude"], ds["amplitude_rad"], rtol=0.05)
     store = SweepStore(d)
-    for p in spec.points():
+    assert sorted(o["index"] for o in report.outcomes) == [0, 1, 2]
+    assert all(o["numba_threads"] == 1 and o["kept"] for o in report.outcomes)
+    for p in spec.points():  # keep: all -> every point's run directory, sharded by hash prefix
         pd = store.point_dir(p.hash)
-        assert pd.name == p.hash
+        assert pd.name == p.hash and pd.parent.name == p.hash[:2]
+        assert ds["run"].values[p.index] == f"points/{p.hash[:2]}/{p.hash}"
         assert dataset_status(pd / "dataset.nc") == "finished"
-        done = json.loads((pd / "done.json").read_text())
-        assert done["config_sha256"] == p.hash and done["numba_threads"] == 1
         # the point's config as declared (the run's own config is the planned one: its dt chosen)
         assert open_run(pd).attrs["plan_source_config_sha256"] == p.hash
 
@@ -112,7 +116,7 @@ def test_same_sweep_on_a_dask_local_cluster_gives_the_same_results(local_run, tm
     a = xr.load_dataset(d_local / "sweep.nc", engine="h5netcdf")
     b = xr.load_dataset(tmp_path / "dask" / "sweep.nc", engine="h5netcdf")
     for p in spec.points():  # the integration is bit-for-bit the same
-        ra, rb = open_run(d_local / "points" / p.hash), open_run(tmp_path / "dask" / "points" / p.hash)
+        ra, rb = open_run(SweepStore(d_local).point_dir(p.hash)), open_run(SweepStore(tmp_path / "dask").point_dir(p.hash))
         np.testing.assert_array_equal(ra["theta"].values, rb["theta"].values)
     when = {"history": ""}  # the only attribute that differs: when each file was written
     xr.testing.assert_identical(a[["status", "run"]].assign_attrs(when), b[["status", "run"]].assign_attrs(when))
@@ -139,19 +143,17 @@ def test_failed_points_are_recorded_and_retried_only_on_request(tmp_path, in_pro
     report = run_sweep(spec, d, **opts)
     assert not report.ok and report.n_finished == 1 and report.n_failed == 1
     bad = [p for p in spec.points() if p.params["solver.dt_s"] == 1e-3][0]
-    err = json.loads((d / "points" / bad.hash / "error.json").read_text())
-    assert "UnstableStepError" in err["reason"] and "stable limit" in err["reason"]
     ds = xr.load_dataset(d / "sweep.nc", engine="h5netcdf")
     assert list(ds["status"].values) == ["finished", "failed"]
-    assert "UnstableStepError" in str(ds["note"].values[1])
+    assert "UnstableStepError" in str(ds["note"].values[1]) and "stable limit" in str(ds["note"].values[1])
     before = snapshot(d)
     again = run_sweep(spec, d, **opts)
     assert again.n_run == 0 and again.n_skipped_failed == 1 and snapshot(d) == before
     retried = run_sweep(spec, d, retry_failed=True, **opts)
     assert retried.n_run == 1 and retried.n_failed == 1
     after = snapshot(d)
-    good = [k for k in before if not k.startswith(f"points/{bad.hash}")]
-    assert all(after[k] == before[k] for k in good)
+    good = [k for k in before if k.startswith("points/") and bad.hash not in k]
+    assert good and all(after[k] == before[k] for k in good)
 
 
 def test_reanalyse_measures_again_without_rerunning(local_run):
@@ -159,11 +161,10 @@ def test_reanalyse_measures_again_without_rerunning(local_run):
 
     spec, d, _ = local_run
     datasets = {k: v for k, v in snapshot(d).items() if k.endswith("dataset.nc")}
-    before = {p.hash: json.loads((d / "points" / p.hash / "done.json").read_text()) for p in spec.points()}
+    before = np.array(SweepStore(d).read()["observables"])
     assert reanalyse(prepare(spec, d)) == 3
-    after = {p.hash: json.loads((d / "points" / p.hash / "done.json").read_text()) for p in spec.points()}
     assert {k: v for k, v in snapshot(d).items() if k.endswith("dataset.nc")} == datasets
-    assert all(after[h]["observables"] == before[h]["observables"] for h in before)
+    np.testing.assert_array_equal(np.array(SweepStore(d).read()["observables"]), before)
 
 
 def test_plot_sweep_writes_a_png(local_run, tmp_path):

@@ -178,7 +178,7 @@ def test_spec_structure_errors(tmp_path):
     msgs = issues(exc)
     assert [i.line for i in exc.value.issues] == [1, 2, 5, 6], msgs  # all of them, in the file's order
     assert any(m.startswith(f"{path}:1: base:") and "cannot read file" in m for m in msgs)
-    assert f"{path}:2: colour: unknown key; expected one of: analysis, base, description, name, set, vary" in msgs
+    assert f"{path}:2: colour: unknown key; expected one of: analysis, base, description, keep, name, set, vary" in msgs
     assert any(m.startswith(f"{path}:5: vary.grid.excitation.velocity_m_s:")
                and "expected: num, which a range also needs (or explicit values: [...])" in m for m in msgs)
     assert (f"{path}:6: analysis.feild: unknown key; did you mean 'field'? expected one of: "

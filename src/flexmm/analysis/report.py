@@ -91,9 +91,12 @@ def run_status(path: str | Path) -> tuple[str, str]:
     return as_str(status), as_str(reason)
 
 
-def open_dataset(path: str | Path):
+def open_dataset(path):
+    """A run's dataset, loaded: from a run directory or .nc file, or a loaded Dataset as it is."""
     import xarray as xr
 
+    if isinstance(path, xr.Dataset):
+        return path
     nc = dataset_path(path)
     try:
         return xr.load_dataset(nc, engine="h5netcdf")
@@ -133,10 +136,11 @@ def default_field_for(kind: str, ds, ctx=None) -> str | None:
     return None
 
 
-def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = "auto",
+def analyze_run(path, *, field_spec: str | None = None, kind: str = "auto",
                 row: int | None = None, threshold_fraction: float = 0.25,
                 jump: float | None = None) -> RunAnalysis:
-    """Measure one run. Raises RunNotFound, FieldError, PulseNotFound, FrontNotFound, NotDriven."""
+    """Measure one run (a run directory, its .nc file, or its dataset already loaded).
+    Raises RunNotFound, FieldError, PulseNotFound, FrontNotFound, NotDriven."""
     if kind not in KINDS:
         raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
     ds = open_dataset(path)
@@ -144,7 +148,8 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     ctx.ds = ds = from_rest(ds, rest_fields(ctx))  # measure what moves on the rest state (dataset only)
     kind = choose_kind(ctx) if kind == "auto" else kind
     view = field_view(ds, field_spec or default_field_for(kind, ds, ctx), row=row)
-    out = RunAnalysis(Path(path), kind, ctx, view, energy=energy_budget(ds))
+    where = Path(path) if isinstance(path, (str, Path)) else Path(path.encoding.get("source", ""))
+    out = RunAnalysis(where, kind, ctx, view, energy=energy_budget(ds))
     if kind == "pulse":
         pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
         t_end, line = float(view.time[-1]), (float(view.x.min()), float(view.x.max()))
@@ -170,7 +175,7 @@ def analyze_run(path: str | Path, *, field_spec: str | None = None, kind: str = 
     return out
 
 
-def analyze_with(path: str | Path, options: AnalysisOptions) -> RunAnalysis:
+def analyze_with(path, options: AnalysisOptions) -> RunAnalysis:
     """``analyze_run`` with the options of ``flexmm analyze`` or a sweep's ``analysis:`` block."""
     return analyze_run(path, field_spec=options.field, kind=options.kind, row=options.row,
                        threshold_fraction=options.threshold_fraction, jump=options.jump)

@@ -80,6 +80,8 @@ def sweep(
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the points with their state; run nothing."),
     reanalyse: bool = typer.Option(False, "--reanalyse", help="Measure finished points again (no re-run)."),
     plot: str = typer.Option(None, "--plot", help="Also plot the finished sweep to this PNG."),
+    keep: str = typer.Option(None, "--keep", help="Points that keep their full run directory: all, none "
+                             "or 'every N' (default: the spec's keep:, else none)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths written (sweep dataset, figure)."),
 ) -> None:
     """Run every point of a sweep (skipping finished ones) and combine them into SWEEP_DIR/sweep.nc."""
@@ -91,18 +93,25 @@ def sweep(
     if scheduler and local_dask:
         raise error("give --scheduler or --local-dask, not both")
     sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
+    if keep is not None:
+        import dataclasses
+        import re
+
+        from flexmm.config.sweep import KEEP_PATTERN
+
+        if not re.match(KEEP_PATTERN, keep):
+            raise error(f"--keep {keep!r}: expected all, none or 'every N' (N ≥ 1)")
+        sw = dataclasses.replace(sw, keep=keep)
     base = sw.base_scene()
     sweep_dir = check_output_dir(Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name)
     with exclusive(Path(sweep_dir) / ".sweep.lock", f"sweep directory {sweep_dir}"):  # one sweep per directory
         plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
         say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
-        n_distinct = len(plan.states)
         say(f"sweep {sw.name}: {sw.n_points} points ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
             f"{plan.count('finished')} finished, {plan.count('failed')} failed before, {len(plan.tasks)} to run"
-            + (f" ({n_distinct} distinct configs)" if n_distinct != sw.n_points else "") + f" -> {sweep_dir}")
+            + f" -> {sweep_dir}")
         if dry_run:
-            for p in plan.points:
-                typer.echo(f"{p.hash[:12]}  {plan.states[p.hash]:8s}  {p.label}")
+            _list_points(plan)
             return
         if reanalyse:
             say(f"re-measured {measure_again(plan)} finished points")
@@ -139,12 +148,32 @@ def sweep(
             raise typer.Exit(EXIT_FAILED_RUN)
 
 
-def _list_failed(plan) -> None:
-    shown = set()
-    for p in plan.points:
-        if p.hash in shown or plan.store.state(p.hash) != "failed":
-            continue
-        shown.add(p.hash)
-        reason = plan.store.read(p.hash, "error.json").get("reason", "")
-        typer.echo(f"failed: {p.label}: {reason} ({plan.store.point_dir(p.hash)}/error.json)", err=True)
+def _list_points(plan) -> None:
+    """One line per point: its number, state and varied values (nothing validated: fast)."""
+    import sys
+
+    from flexmm.sweep.spec import label
+
+    out, spec = sys.stdout, plan.spec
+    width = len(str(spec.n_points - 1))
+    for i in range(spec.n_points):
+        out.write(f"{i:>{width}}  {plan.state(i):8s}  {label(spec.params_at(i))}\n")
+    out.flush()
+
+
+def _list_failed(plan, limit: int = 20) -> None:
+    from flexmm.sweep.spec import label
+
+    notes = plan.store.read()["note"]
+    import numpy as np
+
+    from flexmm.sweep.store import CODE
+
+    failed = [int(i) for i in np.flatnonzero(plan.status == CODE["failed"])]
+    for i in failed[:limit]:
+        reason = notes[i].decode(errors="ignore")
+        typer.echo(f"failed: point {i}: {label(plan.spec.params_at(i))}: {reason}", err=True)
+    if len(failed) > limit:
+        typer.echo(f"... and {len(failed) - limit} more failed points (status and note in {plan.store.result_path})",
+                   err=True)
     typer.echo("rerun with --retry-failed to run failed points again", err=True)

@@ -35,6 +35,13 @@ from flexmm.config.loader import parse_overrides
 Scale = Literal["linear", "log"]
 INLINE_FORMS = "start:stop:num, log:start:stop:num or a,b,c"
 _NAME = r"^[A-Za-z0-9_.-]+$"
+#: ``keep:`` of a sweep: all, none or every N (points 0, N, 2N, ... in C order keep their dataset)
+KEEP_PATTERN = r"^(all|none|every [1-9][0-9]*)$"
+
+
+def keep_every(keep: str) -> int:
+    """The stride of a ``keep:`` value: 1 for all, 0 for none, N for 'every N'."""
+    return {"all": 1, "none": 0}.get(keep) if keep in ("all", "none") else int(keep.split()[1])
 
 
 def _number(value: Any) -> int | float:
@@ -169,6 +176,8 @@ class SweepFile(Strict):
     set: dict[str, Any] = Field(default_factory=dict, description="fixed overrides, dotted.path: value (as --set)")
     vary: Vary
     analysis: AnalysisOptions = Field(default_factory=AnalysisOptions, description="how each point is measured")
+    keep: str = Field("none", pattern=KEEP_PATTERN,
+                      description="which points keep their full run directory: all, none or 'every N'")
 
     _set_paths = field_validator("set")(_check_paths)
 

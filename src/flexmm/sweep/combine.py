@@ -4,8 +4,9 @@ Grid sweeps give one dimension per varied parameter (an N-D array of points); zi
 ``point`` dimension with the parameters as coordinates. Per point: the observables of
 ``flexmm.sweep.observe`` (``speed``, ``speed_stderr``, ``amplitude``, ``width``,
 ``n_sites_fitted``, ``speed_theory``, ``transmission``; NaN where not measured), ``status``
-(finished / failed / pending), ``note`` (why a value is missing) and ``run`` (the point's run
-directory, relative to the sweep directory). Attributes: the spec, the base config, what was
+(finished / failed / pending), ``note`` (why a value is missing) and ``run`` (a kept point's run
+directory relative to the sweep directory, '' for the others). Everything is read from the
+sweep's store (``flexmm.sweep.store``), not from per-point files. Attributes: the spec, the base config, what was
 measured on which field, and theory reference values (``theory_*``). Written to
 SWEEP_DIR/sweep.nc atomically.
 """
@@ -22,7 +23,7 @@ import numpy as np
 from flexmm.io.cf import units_from_name, write_netcdf
 from flexmm.sweep.observe import OBSERVABLES
 from flexmm.sweep.spec import SweepSpec, spec_summary
-from flexmm.sweep.store import DONE, ERROR, FAILED, FINISHED, SweepStore
+from flexmm.sweep.store import CODE, FINISHED, LABELS, STATES
 
 
 def parameter_units(path: str) -> str:
@@ -36,30 +37,16 @@ def dim_names(spec: SweepSpec) -> list[str]:
     return [s if last.count(s) == 1 else a.path.replace(".", "_") for s, a in zip(last, spec.axes)]
 
 
-def _records(plan) -> dict[str, dict]:
-    """Per distinct point: state, observables (finished) or reason (failed)."""
-    store: SweepStore = plan.store
-    out = {}
-    for p in plan.points:
-        if p.hash in out:
-            continue
-        state = store.state(p.hash)
-        rec = {"status": state, "obs": {}, "note": ""}
-        if state == FINISHED:
-            info = store.read(p.hash, DONE)
-            rec["obs"] = info.get("observables", {})
-            rec["note"] = rec["obs"].get("note", "")
-        elif state == FAILED:
-            rec["note"] = store.read(p.hash, ERROR).get("reason", "failed")
-        out[p.hash] = rec
-    return out
-
-
-def fingerprint(plan, records: dict) -> str:
+def fingerprint(plan, arrays: dict) -> str:
     """Hash of everything the combined dataset is made from."""
-    payload = json.dumps([spec_summary(plan.spec), [(p.hash, p.index) for p in plan.points], records],
-                         sort_keys=True, default=str)
-    return hashlib.sha256(payload.encode()).hexdigest()
+    h = hashlib.sha256(json.dumps(spec_summary(plan.spec), sort_keys=True, default=str).encode())
+    for name in sorted(arrays):
+        h.update(np.ascontiguousarray(arrays[name]).tobytes())
+    return h.hexdigest()
+
+
+def _decode(a: np.ndarray) -> np.ndarray:
+    return np.char.decode(np.asarray(a), "utf-8", errors="ignore")
 
 
 def combine(plan):
@@ -73,21 +60,23 @@ def combine(plan):
 
     spec = plan.spec
     shape = spec.shape
-    records = _records(plan)
-    values = {k: np.full(shape, np.nan) for k in OBSERVABLES}
-    status = np.full(shape, "pending", dtype=object)
-    note = np.full(shape, "", dtype=object)
-    run = np.full(shape, "", dtype=object)
+    arrays = plan.store.read()
+    code = np.asarray(arrays["status"])
+    status = np.asarray(STATES, dtype=object)[code].reshape(shape)
+    note = _decode(arrays["note"]).reshape(shape)
+    values = {k: np.array(arrays["observables"][:, j]).reshape(shape) for j, k in enumerate(OBSERVABLES)}
+    run = np.full(spec.n_points, "", dtype=object)
+    for i in np.flatnonzero(code == CODE[FINISHED]):
+        if spec.keeps(int(i)):
+            run[i] = str(plan.store.point_dir(spec.point_at(int(i)).hash).relative_to(plan.store.root))
+    run = run.reshape(shape)
     units = {}
-    for p in plan.points:
-        rec = records[p.hash]
-        status[p.index], note[p.index] = rec["status"], rec["note"]
-        run[p.index] = f"points/{p.hash}"
-        for k in OBSERVABLES:
-            values[k][p.index] = float(rec["obs"].get(k, np.nan))
-        for key in ("amplitude_units", "field", "kind"):
-            if rec["obs"].get(key):
-                units[key] = rec["obs"][key]
+    done = np.flatnonzero(code == CODE[FINISHED])
+    labels = _decode(arrays["label"][done]) if len(done) else np.zeros((0, len(LABELS)), str)
+    for j, key in enumerate(LABELS):
+        found = [v for v in labels[:, j] if v]
+        if found:
+            units[key] = str(found[0])
     names = dim_names(spec)
     dims = names if spec.mode == "grid" else ["point"]
     coords = {}
@@ -122,7 +111,7 @@ def combine(plan):
         "n_finished": counts["finished"],
         "n_failed": counts["failed"],
         "n_pending": counts["pending"],
-        "fingerprint": fingerprint(plan, records),
+        "fingerprint": fingerprint(plan, arrays),
         **reference_lines(resolved_config(base_scene)),
     }
     ds = xr.Dataset({k: xr.Variable(*v) for k, v in data.items()},
@@ -135,7 +124,7 @@ def write_combined(plan) -> Path:
     import xarray as xr
 
     path = plan.store.result_path
-    fp = fingerprint(plan, _records(plan))
+    fp = fingerprint(plan, plan.store.read())
     history = None  # the commands that wrote the sweep.nc this one replaces (CF history)
     if path.exists():
         try:

@@ -1,16 +1,19 @@
 """Run the pending points of a sweep on local processes or a Dask cluster, resumably.
 
-``prepare`` validates every point and reads the sweep directory's state; ``execute`` runs what is
-pending (failed points only with ``retry_failed``) in batches of several points per task:
+``prepare`` validates the spec once (``SweepSpec.check``) and reads the sweep's status array;
+points are built and validated by the workers as they run them (an invalid one is recorded as
+failed with the reason), so planning costs the same for 10 points as for 10⁶. ``execute`` lays
+out the store (``flexmm.sweep.store``) and runs what is pending (failed points only with
+``retry_failed``) in batches of several points per task:
 
 - locally: ``concurrent.futures.ProcessPoolExecutor`` (spawned processes, one per core by
-  default, numba and BLAS pinned to one thread each);
+  default, numba and BLAS pinned to one thread each; the spec is sent once per process);
 - ``scheduler="tcp://host:8786"``: an existing ``dask.distributed`` scheduler (workers need
-  flexmm installed and the sweep directory on a shared filesystem);
+  flexmm installed and the sweep directory on a shared filesystem; the spec is scattered once);
 - ``local_dask=True``: a ``distributed.LocalCluster`` started for the sweep.
 
-Ctrl-C stops the workers' current points (their partial files are removed), cancels the rest
-and returns with ``interrupted=True``; every point finished so far stays finished.
+Ctrl-C stops the workers' current points (they stay pending), cancels the rest and returns with
+``interrupted=True``; every point finished so far stays finished.
 """
 
 from __future__ import annotations
@@ -23,13 +26,14 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
+
+import numpy as np
 
 from flexmm.errors import UsageError
-from flexmm.io.provenance import resolved_config
-from flexmm.sweep.spec import Point, SweepSpec, spec_summary
-from flexmm.sweep.store import FAILED, FINISHED, PENDING, SweepStore, write_json_atomic
-from flexmm.sweep.worker import INTERRUPTED, ONE_THREAD, Task, init_worker, run_batch
+from flexmm.sweep.spec import SweepSpec, spec_summary
+from flexmm.sweep.store import CODE, FAILED, FINISHED, PENDING, SweepStore, spec_fingerprint, write_json_atomic
+from flexmm.sweep.worker import INTERRUPTED, ONE_THREAD, Batch, init_worker, run_batch
 
 MAX_BATCH = 8
 BATCHES_PER_WORKER = 3
@@ -43,21 +47,27 @@ SCHEDULER_TIMEOUT_S = 10.0
 
 @dataclass
 class SweepPlan:
-    """A validated sweep, its directory, and the state of each distinct point when planned."""
+    """A checked sweep, its directory, the status of every point when planned, what to run."""
 
     spec: SweepSpec
     store: SweepStore
-    points: list[Point]
-    states: dict[str, str]
-    tasks: list[Task]
+    status: np.ndarray  # status byte per point (flexmm.sweep.store.STATES)
+    tasks: np.ndarray  # numbers of the points to run
     retry_failed: bool = False
 
     @property
     def n_points(self) -> int:
-        return len(self.points)
+        return self.spec.n_points
 
     def count(self, state: str) -> int:
-        return sum(1 for s in self.states.values() if s == state)
+        return int(np.count_nonzero(self.status == CODE[state]))
+
+    def state(self, index: int) -> str:
+        return (PENDING, FINISHED, FAILED)[int(self.status[index])]
+
+    @property
+    def fingerprint(self) -> str:
+        return spec_fingerprint(spec_summary(self.spec), self.spec.base_data)
 
 
 @dataclass
@@ -112,44 +122,47 @@ def default_workers() -> int:
 
 
 def prepare(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = False) -> SweepPlan:
-    """Validate all points (ConfigError if any is invalid) and list the tasks to run."""
-    points = spec.points()
+    """Check the spec (ConfigError with every problem found up front) and read the sweep's
+    status array (a store of another spec is refused); nothing is written."""
+    spec.check()
     store = SweepStore(sweep_dir)
-    states, tasks = {}, []
-    analysis = spec.analysis.model_dump(exclude_defaults=True)  # plain data for the workers
-    for p in points:
-        if p.hash in states:
-            continue
-        states[p.hash] = store.state(p.hash)
-        if states[p.hash] == PENDING or (states[p.hash] == FAILED and retry_failed):
-            tasks.append(Task(p.hash, resolved_config(p.scene), str(store.point_dir(p.hash).resolve()),
-                              _plain_params(p.params), analysis))
-    return SweepPlan(spec, store, points, states, tasks, retry_failed)
+    plan = SweepPlan(spec, store, np.zeros(spec.n_points, np.uint8), np.zeros(0, np.int64), retry_failed)
+    if store.exists():
+        store.check(plan.fingerprint, spec.n_points)
+        plan.status = store.status()
+    todo = plan.status == CODE[PENDING]
+    if retry_failed:
+        todo |= plan.status == CODE[FAILED]
+    plan.tasks = np.flatnonzero(todo)
+    return plan
 
 
-def _plain_params(params: dict) -> dict:
-    return {k: (v.item() if hasattr(v, "item") else v) for k, v in params.items()}
+def batch_size_for(n_tasks: int, n_workers: int, batch_size: int = 0) -> int:
+    """Points per task: the given size, or about BATCHES_PER_WORKER tasks per worker (≤ MAX_BATCH)."""
+    return batch_size or min(MAX_BATCH, max(1, math.ceil(n_tasks / (BATCHES_PER_WORKER * n_workers))))
 
 
-def batches(tasks: list[Task], n_workers: int, batch_size: int = 0) -> list[list[Task]]:
-    """Split tasks into batches: given size, or about BATCHES_PER_WORKER per worker (≤ MAX_BATCH)."""
-    if not tasks:
-        return []
-    size = batch_size or min(MAX_BATCH, max(1, math.ceil(len(tasks) / (BATCHES_PER_WORKER * n_workers))))
-    return [tasks[i : i + size] for i in range(0, len(tasks), size)]
+def batches(tasks: np.ndarray, root: str, size: int) -> Iterator[Batch]:
+    """The tasks in consecutive batches of ``size`` points (made as they are submitted)."""
+    for i in range(0, len(tasks), size):
+        yield Batch(tuple(int(k) for k in tasks[i : i + size]), root)
 
 
 def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler: str | None = None,
             local_dask: bool = False, dask_processes: bool = True,
             on_outcome: OnOutcome | None = None) -> SweepReport:
-    """Run the plan's tasks; the report counts every distinct point's state afterwards."""
+    """Run the plan's tasks; the report counts every point's state afterwards."""
+    from flexmm.sweep.observe import OBSERVABLES
+
     t0 = time.perf_counter()
-    plan.store.root.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(plan.store.root / "spec.json", spec_summary(plan.spec))
-    report = SweepReport(plan.store.root, len(plan.states), plan.count(FINISHED),
+    store = plan.store
+    store.root.mkdir(parents=True, exist_ok=True)
+    store.create_or_check(plan.fingerprint, plan.n_points, list(OBSERVABLES), plan.spec.name)
+    write_json_atomic(store.root / "spec.json", spec_summary(plan.spec))
+    report = SweepReport(store.root, plan.n_points, plan.count(FINISHED),
                          0 if plan.retry_failed else plan.count(FAILED))
-    if plan.tasks:
-        plan.store.result_path.unlink(missing_ok=True)  # sweep.nc exists only after a complete run
+    if len(plan.tasks):
+        store.result_path.unlink(missing_ok=True)  # sweep.nc exists only after a complete run
     n_workers = workers or default_workers()
     seen: list[Outcome] = []
 
@@ -158,44 +171,44 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
         if on_outcome:
             on_outcome(o)
 
-    if plan.tasks:
+    if len(plan.tasks):
+        size = batch_size_for(len(plan.tasks), n_workers, batch_size)
+        work = batches(plan.tasks, str(store.root.resolve()), size)
+        n_batches = math.ceil(len(plan.tasks) / size)
         if scheduler or local_dask:
             report.backend = f"dask {scheduler}" if scheduler else "dask LocalCluster"
-            report.interrupted = _run_dask(plan.tasks, scheduler, n_workers, batch_size, dask_processes,
+            report.interrupted = _run_dask(plan.spec, work, scheduler, n_workers, dask_processes,
                                            record, report.errors)
         else:
-            report.backend = f"local processes ({min(n_workers, len(batches(plan.tasks, n_workers, batch_size)))})"
-            report.interrupted = _run_local(plan.tasks, n_workers, batch_size, record, report.errors)
+            report.backend = f"local processes ({min(n_workers, n_batches)})"
+            report.interrupted = _run_local(plan.spec, work, min(n_workers, n_batches), record, report.errors)
     report.interrupted |= any(o["status"] == INTERRUPTED for o in seen)
     report.n_run = sum(1 for o in seen if o["status"] != INTERRUPTED)
-    final = {h: plan.store.state(h) for h in plan.states}
-    report.n_finished = sum(s == FINISHED for s in final.values())
-    report.n_failed = sum(s == FAILED for s in final.values())
-    report.n_pending = sum(s == PENDING for s in final.values())
+    plan.status = store.status()
+    report.n_finished, report.n_failed, report.n_pending = (plan.count(s) for s in (FINISHED, FAILED, PENDING))
     report.wall_s = time.perf_counter() - t0
     return report
 
 
-def _run_local(tasks, n_workers, batch_size, record: OnOutcome, errors: list[str]) -> bool:
+def _run_local(spec, work: Iterator[Batch], n_workers, record: OnOutcome, errors: list[str]) -> bool:
     """Keep one batch per worker in flight (nothing queued behind them, so Ctrl-C stops promptly)."""
     import multiprocessing
     from concurrent.futures.process import BrokenProcessPool
 
-    work = batches(tasks, n_workers, batch_size)
-    n = max(1, min(n_workers, len(work)))
+    n = max(1, n_workers)
     ex = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
-                             initializer=init_worker)
-    todo = list(reversed(work))
+                             initializer=init_worker, initargs=(spec,))
     in_flight: dict = {}
+    nxt = [next(work, None)]
 
     def submit_next() -> None:
-        if todo:
+        if nxt[0] is not None:
             try:
-                in_flight[ex.submit(run_batch, todo[-1])] = todo[-1]
-                todo.pop()
+                in_flight[ex.submit(run_batch, nxt[0])] = nxt[0]
+                nxt[0] = next(work, None)
             except BrokenProcessPool as exc:
-                errors.append(f"worker pool broken ({exc}); {sum(map(len, todo))} point(s) left pending")
-                todo.clear()
+                errors.append(f"worker pool broken ({exc}); the points not run are left pending")
+                nxt[0] = None
 
     interrupted = False
     try:
@@ -240,7 +253,8 @@ def _collect(fut, batch, record: OnOutcome, errors: list[str]) -> None:
         record(o)
 
 
-def _run_dask(tasks, scheduler, n_workers, batch_size, processes, record: OnOutcome, errors: list[str]) -> bool:
+def _run_dask(spec, work: Iterator[Batch], scheduler, n_workers, processes, record: OnOutcome,
+              errors: list[str]) -> bool:
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
@@ -253,16 +267,16 @@ def _run_dask(tasks, scheduler, n_workers, batch_size, processes, record: OnOutc
         except (OSError, TimeoutError) as exc:
             raise UsageError(f"cannot reach the Dask scheduler at {scheduler} within "
                              f"{SCHEDULER_TIMEOUT_S:g} s ({type(exc).__name__}: {exc})") from None
-        n = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
     else:
         with one_thread_environment():  # inherited by the worker processes spawned here
             cluster = LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=processes,
                                    dashboard_address=None)
         client = Client(cluster)
-        n = n_workers
-    work = batches(tasks, n, batch_size)
-    futures = [client.submit(run_batch, b, pure=False) for b in work]
-    by_key = {f.key: b for f, b in zip(futures, work)}
+    shared = client.scatter(spec, broadcast=True)  # the spec once per worker, not once per task
+    by_key, futures = {}, []
+    for b in work:
+        futures.append(client.submit(run_batch, b, shared, pure=False))
+        by_key[futures[-1].key] = b
     interrupted = False
     try:
         for fut in as_completed(futures):
@@ -298,24 +312,19 @@ def run_sweep(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = Fa
 
 
 def reanalyse(plan: SweepPlan, on_outcome: OnOutcome | None = None) -> int:
-    """Measure every finished point again (after the analysis changed); returns how many.
-
-    Only done.json is rewritten (atomically, observables replaced); no point is re-run.
-    """
-    from flexmm.sweep.observe import observe_run
-    from flexmm.sweep.store import DATASET, DONE
+    """Measure every finished point that kept its dataset again (after the analysis changed);
+    returns how many. Only the store's observables are rewritten; no point is re-run."""
+    from flexmm.sweep.worker import measure
 
     n = 0
-    for h, state in plan.states.items():
-        if plan.store.state(h) != FINISHED:
+    plan.status = plan.store.status() if plan.store.exists() else plan.status
+    for i in np.flatnonzero(plan.status == CODE[FINISHED]):
+        if not plan.spec.keeps(int(i)):
             continue
-        info = plan.store.read(h, DONE)
-        try:
-            info["observables"] = observe_run(plan.store.point_dir(h) / DATASET, plan.spec.analysis)
-        except Exception as exc:  # noqa: BLE001 - as in the worker: a note, not a crash
-            info["observables"] = {"note": f"analysis error: {type(exc).__name__}: {exc}"}
-        write_json_atomic(plan.store.point_dir(h) / DONE, info)
+        d = plan.store.point_dir(plan.spec.point_at(int(i)).hash)
+        values, labels, note = measure(d / "dataset.nc", plan.spec.analysis)
+        plan.store.write_point(int(i), FINISHED, values, note, labels)
         n += 1
         if on_outcome:
-            on_outcome(info)
+            on_outcome({"index": int(i), "status": FINISHED, "params": plan.spec.params_at(int(i))})
     return n

@@ -60,7 +60,7 @@ def observe_run(path: str | Path, options=None) -> dict:
     ds = open_run(path)
     ctx = RunContext.from_dataset(ds)
     kind = choose_kind(ctx) if opts.kind == "auto" else opts.kind
-    return _full(path, kind, opts)
+    return _full(ds, kind, opts)  # the dataset read once
 
 
 def _speed_theory(ctx, units: str, amplitude: float) -> float:
@@ -69,14 +69,14 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
     return float(speed_at(ctx.config, units, [amplitude])[0])
 
 
-def _full(path, kind: str, opts) -> dict:
+def _full(ds, kind: str, opts) -> dict:
     from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound
     from flexmm.analysis.oblique import NoWaveGroups
     from flexmm.analysis.report import analyze_with
     from flexmm.analysis.summary import principal
 
     try:
-        a = analyze_with(path, opts.model_copy(update={"kind": kind}))
+        a = analyze_with(ds, opts.model_copy(update={"kind": kind}))
     except (PulseNotFound, FrontNotFound, NotDriven, NoWaveGroups, FieldError) as exc:
         return _nan_result(kind, opts.field or "", "", f"no {kind}: {exc}")
     out = _nan_result(a.kind, a.view.spec, a.view.units, "")

@@ -31,7 +31,7 @@ sweep file's line (or the ``--vary`` argument) that produced it.
 from __future__ import annotations
 
 import copy
-import itertools
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -49,7 +49,7 @@ from flexmm.config.loader import (
     validate,
 )
 from flexmm.config.scene import Scene
-from flexmm.config.sweep import INLINE_FORMS, SweepFile, Vary, VaryValues
+from flexmm.config.sweep import INLINE_FORMS, SweepFile, Vary, VaryValues, keep_every
 from flexmm.io.provenance import config_hash
 
 
@@ -74,11 +74,24 @@ class Point:
     index: tuple[int, ...]
     params: dict[str, Any]
     scene: Scene
-    hash: str
+    flat: int = 0
+
+    @functools.cached_property
+    def hash(self) -> str:
+        """sha256 of the point's resolved scene (``flexmm.io.provenance.config_hash``)."""
+        return config_hash(self.scene)
 
     @property
     def label(self) -> str:
-        return ", ".join(f"{k}={v}" for k, v in self.params.items())
+        return label(self.params)
+
+
+def label(params: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in params.items())
+
+
+#: up-front check: at most this many values of each axis are validated before anything runs
+CHECK_VALUES_PER_AXIS = 256
 
 
 @dataclass(frozen=True)
@@ -95,6 +108,7 @@ class SweepSpec:
     fixed: tuple = ()
     description: str = ""
     analysis: AnalysisOptions = field(default_factory=AnalysisOptions)
+    keep: str = "none"
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -119,44 +133,86 @@ class SweepSpec:
             lines[keys] = origin
         return data, lines
 
-    def _indices(self):
+    @functools.cached_property
+    def _fixed_base(self) -> tuple[dict, dict]:
+        """The base with the fixed overrides, computed once per spec object (per worker)."""
+        return self._with_fixed()
+
+    def index_of(self, flat: int) -> tuple[int, ...]:
+        """The point's index in the sweep's shape (C order) from its number."""
         if self.mode == "zip":
-            return [(i,) for i in range(self.shape[0])]
-        return list(itertools.product(*(range(n) for n in self.shape)))
+            return (flat,)
+        out = []
+        for n in reversed(self.shape):
+            flat, k = divmod(flat, n)
+            out.append(k)
+        return tuple(reversed(out))
+
+    def params_at(self, flat: int) -> dict[str, Any]:
+        """The varied values of point number ``flat`` (nothing validated)."""
+        index = self.index_of(flat)
+        return {a.path: a.values[index[0] if self.mode == "zip" else index[k]] for k, a in enumerate(self.axes)}
+
+    def point_at(self, flat: int) -> Point:
+        """Point number ``flat`` (C order over ``shape``), validated: ConfigError if its values
+        make an invalid scene (reported at the sweep file's lines that produced them)."""
+        base, base_lines = self._fixed_base
+        params = self.params_at(flat)
+        data, lines = copy.deepcopy(base), dict(base_lines)
+        for axis in self.axes:
+            val = params[axis.path]
+            apply_overrides(data, [(axis.keys, val, f"{axis.path}={val!r}")], lines, self.base_source)
+            lines[axis.keys] = axis.origin
+        scene = scene_from_dict(data, lines=lines, source=self.base_source)
+        return Point(self.index_of(flat), params, scene, flat)
+
+    def keeps(self, flat: int) -> bool:
+        """Whether point number ``flat`` keeps its full run directory (``keep:``)."""
+        every = keep_every(self.keep)
+        return every > 0 and flat % every == 0
+
+    def check(self) -> None:
+        """The up-front validation of a sweep: the base with the fixed overrides, and each of
+        the first CHECK_VALUES_PER_AXIS values of every axis (the other axes at their first
+        value). One ConfigError with every problem, grouped, at the lines that produced them;
+        any other point is validated when it is run (an invalid one is recorded as failed)."""
+        if self.mode == "zip":
+            flats = range(min(self.n_points, CHECK_VALUES_PER_AXIS))
+        else:
+            strides = [math.prod(self.shape[k + 1:]) for k in range(len(self.shape))]
+            flats = sorted({i * strides[k] for k, n in enumerate(self.shape)
+                            for i in range(min(n, CHECK_VALUES_PER_AXIS))})
+        self._validate(flats)
 
     def points(self) -> list[Point]:
         """Every point, validated; one ConfigError listing all problems (grouped) if any fail."""
-        base, base_lines = self._with_fixed()
+        return self._validate(range(self.n_points))
+
+    def _validate(self, flats) -> list[Point]:
         out, problems = [], {}
-        indices = self._indices()
-        for index in indices:
-            params, data, lines = {}, copy.deepcopy(base), dict(base_lines)
-            for k, axis in enumerate(self.axes):
-                val = axis.values[index[0] if self.mode == "zip" else index[k]]
-                params[axis.path] = val
-                apply_overrides(data, [(axis.keys, val, f"{axis.path}={val!r}")], lines, self.base_source)
-                lines[axis.keys] = axis.origin
+        for flat in flats:
             try:
-                scene = scene_from_dict(data, lines=lines, source=self.base_source)
+                out.append(self.point_at(flat))
             except ConfigError as exc:
-                label = ", ".join(f"{k}={v!r}" for k, v in params.items())
+                where = ", ".join(f"{k}={v!r}" for k, v in self.params_at(flat).items())
                 for issue in exc.issues:
-                    problems.setdefault((issue.source, issue.line, issue.path, issue.message), []).append(label)
-                continue
-            out.append(Point(index, params, scene, config_hash(scene)))
+                    problems.setdefault((issue.source, issue.line, issue.path, issue.message), []).append(where)
         if problems:
-            raise ConfigError([_grouped_issue(key, labels, len(indices)) for key, labels in problems.items()])
+            raise ConfigError([_grouped_issue(key, labels, len(flats), self.n_points)
+                               for key, labels in problems.items()])
         return out
 
 
-def _grouped_issue(key: tuple, labels: list[str], n_total: int) -> ConfigIssue:
+def _grouped_issue(key: tuple, labels: list[str], n_checked: int, n_total: int) -> ConfigIssue:
     source, line, path, message = key
-    if len(labels) == n_total and n_total > 1:
+    if len(labels) == n_checked == n_total and n_total > 1:
         where = f"at every point ({n_total})"
+    elif len(labels) == n_checked and n_checked > 1:
+        where = f"at every point checked ({n_checked} of {n_total})"
     elif len(labels) == 1:
         where = f"at point {labels[0]}"
     else:
-        where = f"at {len(labels)} of {n_total} points, e.g. {labels[0]}"
+        where = f"at {len(labels)} of {n_checked} points, e.g. {labels[0]}"
     return ConfigIssue(source, line, path, f"{message} [{where}]")
 
 
@@ -228,7 +284,7 @@ def load_sweep(path: str | Path, *, overrides: list[str] | None = None) -> Sweep
     return SweepSpec(
         name=spec.name or Path(path).stem, source=src, base_data=base_data, base_lines=base_lines,
         base_source=base_source, axes=axes, mode=mode, fixed=fixed + _fixed_from_strings(overrides or []),
-        description=spec.description, analysis=spec.analysis,
+        description=spec.description, analysis=spec.analysis, keep=spec.keep,
     )
 
 
@@ -267,4 +323,5 @@ def spec_summary(spec: SweepSpec) -> dict:
         "set": {".".join(k): v for k, v, _, _ in spec.fixed},
         "vary": {a.path: {"values": list(a.values), "scale": a.scale} for a in spec.axes},
         "analysis": spec.analysis.model_dump(exclude_defaults=True),
+        "keep": spec.keep,
     }

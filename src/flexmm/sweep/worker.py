@@ -1,5 +1,13 @@
 """What a worker (local process or Dask worker) does: run a batch of points, one by one.
 
+A batch is a list of point numbers; the worker builds and validates each point from the sweep
+spec it holds (``SweepSpec.point_at``: the spec is sent once per worker process, and the base
+with its fixed overrides is computed once per process), runs it, measures it and publishes its
+observables and status into the sweep's store (``flexmm.sweep.store``). A point whose values are
+invalid, or whose run fails, is recorded as failed with the reason. Points that the spec keeps
+(``keep:``) are run into their sharded run directory; the others into a scratch directory of the
+worker that is emptied after they are measured.
+
 Kept import-light at module level so a freshly spawned process can pin numba and BLAS to
 one thread (``init_worker``) before numpy or numba are loaded.
 """
@@ -7,35 +15,40 @@ one thread (``init_worker``) before numpy or numba are loaded.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
-import traceback
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-
-from flexmm.sweep.store import DATASET, DONE, ERROR, FAILED, FINISHED, POINT, clean_point, write_json_atomic
 
 INTERRUPTED = "interrupted"
 ONE_THREAD = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+FINISHED, FAILED = "finished", "failed"
+
+#: the spec of the sweep this process works for (set by ``init_worker`` in a local pool)
+_SPEC = None
 
 
 @dataclass(frozen=True)
-class Task:
-    """One point to compute: the resolved config (plain data), its hash and its directory."""
+class Batch:
+    """Points to compute (their numbers in the sweep) and the sweep directory they go to."""
 
-    config_hash: str
-    config: dict
-    directory: str
-    params: dict
-    analysis: dict = field(default_factory=dict)
+    indices: tuple[int, ...]
+    root: str
+
+    def __len__(self) -> int:
+        return len(self.indices)
 
 
-def init_worker() -> None:
-    """Process initialiser: one numba/BLAS thread; Ctrl-C is only honoured inside a batch; the
-    worker dies with the sweep that spawned it (``die_with_parent``)."""
+def init_worker(spec=None) -> None:
+    """Process initialiser: the sweep's spec; one numba/BLAS thread; Ctrl-C is only honoured
+    inside a batch; the worker dies with the sweep that spawned it (``die_with_parent``)."""
+    global _SPEC
+    _SPEC = spec
     pin_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent()
@@ -101,75 +114,101 @@ def _one_thread() -> None:
         numba.set_num_threads(1)
 
 
-def run_batch(tasks: list[Task]) -> list[dict]:
+def run_batch(batch: Batch, spec=None) -> list[dict]:
     """Run points in order; stop at the first interruption. Returns one outcome per point tried."""
+    from flexmm.sweep.store import SweepStore
+
+    spec = spec if spec is not None else _SPEC
     main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGINT, signal.default_int_handler) if main else None
     outcomes = []
+    store = SweepStore(batch.root)
+    scratch = Path(tempfile.mkdtemp(prefix="flexmm-point-", dir=_scratch_root()))
     try:
         _one_thread()
-        for task in tasks:
-            outcomes.append(run_point(task))
+        for i in batch.indices:
+            outcomes.append(run_point(spec, i, store, scratch))
             if outcomes[-1]["status"] == INTERRUPTED:
                 break
     except KeyboardInterrupt:
         pass
     finally:
+        shutil.rmtree(scratch, ignore_errors=True)
         if main:
             signal.signal(signal.SIGINT, old)
     return outcomes
 
 
-def run_point(task: Task) -> dict:
-    """Integrate one point, analyse it, and publish done.json (or error.json) last.
+def _scratch_root() -> str | None:
+    """Memory-backed /dev/shm for the runs of points that are not kept, if there is one."""
+    shm = Path("/dev/shm")
+    return str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
 
-    Ctrl-C at any moment before the marker is published removes the point's files (it is
-    pending again); the marker itself is written with SIGINT blocked, so it is all or nothing.
+
+def run_point(spec, index: int, store, scratch: Path) -> dict:
+    """Validate, integrate and measure point ``index``; publish it in the store (status last).
+
+    Ctrl-C at any moment before the status byte is written leaves the point pending (a kept
+    point's partial run goes to ``<dir>.interrupted``); the store write itself runs with SIGINT
+    blocked, so it is all or nothing.
     """
-    d = Path(task.directory)
-    d.mkdir(parents=True, exist_ok=True)
-    clean_point(d)
     t0 = time.perf_counter()
-    outcome = {"config_sha256": task.config_hash, "params": task.params, "pid": os.getpid()}
-    published = None
+    outcome = {"index": index, "params": _plain_params(spec.params_at(index)), "pid": os.getpid()}
     try:
-        write_json_atomic(d / POINT, {"config_sha256": task.config_hash, "params": task.params})
-        marker, info = _compute(task, d, outcome)
+        info, values, labels = _compute(spec, index, store, scratch, outcome)
         info["wall_s"] = time.perf_counter() - t0
-        with _sigint_blocked():
-            if marker is not None:
-                (d / (ERROR if marker == DONE else DONE)).unlink(missing_ok=True)  # never both
-                write_json_atomic(d / marker, info)
-            published = info
+        if info["status"] != INTERRUPTED:
+            with _sigint_blocked():
+                store.write_point(index, info["status"], values, info.get("reason") or "", labels)
     except KeyboardInterrupt:
-        if published is not None and published["status"] != INTERRUPTED:  # delivered after publishing
-            return published
-        with _sigint_blocked():
-            clean_point(d)
         return {**outcome, "status": INTERRUPTED, "reason": "interrupted"}
-    if marker is None:
-        with _sigint_blocked():
-            clean_point(d)
+    finally:
+        for p in scratch.iterdir():
+            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
     return info
 
 
-def _compute(task: Task, d: Path, outcome: dict) -> tuple[str | None, dict]:
-    """Run and analyse; (marker to publish or None if interrupted, what it records)."""
+def _plain_params(params: dict) -> dict:
+    return {k: (v.item() if hasattr(v, "item") else v) for k, v in params.items()}
+
+
+def _compute(spec, index: int, store, scratch: Path, outcome: dict):
+    """(what the outcome records, observables row or None, labels) of one point."""
+    from flexmm.config.loader import ConfigError
+
     try:
-        result = _run(task, d)
+        point = spec.point_at(index)
+    except ConfigError as exc:
+        return {**outcome, "status": FAILED, "reason": f"invalid point: {exc}"}, None, ("", "", "")
+    keep = spec.keeps(index)
+    d = store.point_dir(point.hash) if keep else scratch / "run"
+    try:
+        from flexmm.api import run_scene
+
+        result = run_scene(point.scene, run_dir=d, atomic=keep)
     except Exception as exc:  # noqa: BLE001 - any error of a point is recorded, not raised
-        return ERROR, {**outcome, "status": FAILED, "reason": f"{type(exc).__name__}: {exc}",
-                       "traceback": traceback.format_exc()}
+        return {**outcome, "status": FAILED, "reason": f"{type(exc).__name__}: {exc}"}, None, ("", "", "")
     if result.status == INTERRUPTED:
-        return None, {**outcome, "status": INTERRUPTED, "reason": result.reason}
+        return {**outcome, "status": INTERRUPTED, "reason": result.reason}, None, ("", "", "")
     info = {**outcome, "status": result.status, "reason": result.reason, "n_steps": result.n_steps,
             "dt_s": result.dt_s, "compile_s": result.compile_s, "run_wall_s": result.wall_s,
-            "numba_threads": _numba_threads()}
+            "numba_threads": _numba_threads(), "kept": keep}
     if result.status != FINISHED:
-        return ERROR, info
-    info["observables"] = _observe(d / DATASET, task.analysis)
-    info["finished_at"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-    return DONE, info
+        return {**info, "status": FAILED}, None, ("", "", "")
+    values, labels, note = measure(result.path, spec.analysis)
+    return {**info, "reason": note}, values, labels
+
+
+def measure(path: Path, options) -> tuple[list[float], tuple[str, str, str], str]:
+    """(observables in ``OBSERVABLES`` order, (kind, field, amplitude units), note) of a run."""
+    from flexmm.sweep.observe import OBSERVABLES, observe_run
+
+    try:
+        obs = observe_run(path, options)
+    except Exception as exc:  # noqa: BLE001 - the run finished; the note says why it was not measured
+        obs = {"note": f"analysis error: {type(exc).__name__}: {exc}"}
+    values = [float(obs.get(k, float("nan"))) for k in OBSERVABLES]
+    return values, tuple(str(obs.get(k, "") or "") for k in ("kind", "field", "amplitude_units")), obs.get("note", "")
 
 
 @contextmanager
@@ -191,24 +230,4 @@ def _numba_threads() -> int:
     return int(numba.get_num_threads())
 
 
-def _run(task: Task, d: Path):
-    from flexmm.api import run_scene
-    from flexmm.config import scene_from_dict
-    from flexmm.io.provenance import config_hash
-
-    scene = scene_from_dict(task.config, source=f"sweep point {task.config_hash[:12]}")
-    if config_hash(scene) != task.config_hash:
-        raise RuntimeError("config hash changed on the worker (flexmm versions differ?)")
-    return run_scene(scene, run_dir=d, atomic=False)  # the point's markers publish it (module docstring)
-
-
-def _observe(path: Path, options: dict) -> dict:
-    from flexmm.sweep.observe import observe_run
-
-    try:
-        return observe_run(path, options)
-    except Exception as exc:  # noqa: BLE001 - the run finished; the analysis note says why not measured
-        return {"note": f"analysis error: {type(exc).__name__}: {exc}"}
-
-
-__all__ = ["Task", "init_worker", "run_batch", "run_point", "DONE", "ERROR"]
+__all__ = ["Batch", "init_worker", "measure", "run_batch", "run_point"]
