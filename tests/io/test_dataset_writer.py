@@ -43,3 +43,23 @@ def test_more_frames_than_declared_is_an_error(tmp_path) -> None:
         w.append(1.0, {"u": [2.0]}, {})
         w.flush()
     w.abort()
+
+
+def test_quick_reader_gives_the_dataset_open_run_gives(tmp_path) -> None:
+    """``load_run_quickly`` (h5py alone, what a sweep's points are measured from) reads a real run
+    as the same Dataset as ``open_run`` (h5netcdf through xarray): values, dims, coords, attrs."""
+    import xarray as xr
+
+    from flexmm.api import run_scene
+    from flexmm.config import load_scene
+    from flexmm.io.run_dataset import load_run_quickly
+    from pathlib import Path
+
+    demo = Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml"
+    # as many frames as sites: the dimensions are told apart by name, not by length
+    scene = load_scene(demo, ["lattice.n_units=20", "solver.duration_s=0.002", "output.n_frames=20"])
+    path = run_scene(scene, run_dir=tmp_path / "r").path
+    a, b = open_run(path), load_run_quickly(path)
+    xr.testing.assert_identical(a, b)
+    assert list(a.coords) == list(b.coords) and a["u"].dims == b["u"].dims == ("time", "site")
+    assert all(type(a.attrs[k]) is type(b.attrs[k]) for k in a.attrs)

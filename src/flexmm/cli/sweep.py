@@ -150,15 +150,19 @@ def sweep(
 
 def _list_points(plan) -> None:
     """One line per point: its number, state and varied values (nothing validated: fast)."""
+    import itertools
     import sys
 
-    from flexmm.sweep.spec import label
-
-    out, spec = sys.stdout, plan.spec
+    spec = plan.spec
+    words = [[f"{a.path}={v}" for v in a.values] for a in spec.axes]  # each value formatted once
+    combos = zip(*words) if spec.mode == "zip" else itertools.product(*words)  # C order, as point_at
+    states = ("pending ", "finished", "failed  ")
     width = len(str(spec.n_points - 1))
-    for i in range(spec.n_points):
-        out.write(f"{i:>{width}}  {plan.state(i):8s}  {label(spec.params_at(i))}\n")
-    out.flush()
+    status = plan.status.tolist()
+    write = sys.stdout.write
+    for i, combo in enumerate(combos):
+        write(f"{i:>{width}}  {states[status[i]]}  {', '.join(combo)}\n")
+    sys.stdout.flush()
 
 
 def _list_failed(plan, limit: int = 20) -> None:

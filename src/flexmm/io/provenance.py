@@ -51,7 +51,10 @@ def git_commit() -> str:
         return "unknown"
 
 
+@lru_cache(maxsize=1)
 def library_versions() -> str:
+    """The versions of the libraries a run depends on (read once per process: a sweep worker
+    writes hundreds of points a minute)."""
     parts = [f"python={platform.python_version()}"]
     for lib in LIBRARIES:
         try:

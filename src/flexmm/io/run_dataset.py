@@ -194,3 +194,44 @@ def open_run(path: str | Path):
     if p.is_dir():
         p = p / "dataset.nc"
     return xr.load_dataset(p, engine="h5netcdf")
+
+
+#: HDF5 / netCDF-4 bookkeeping attributes that xarray does not show
+_HIDDEN_ATTRS = frozenset({"CLASS", "NAME", "REFERENCE_LIST", "DIMENSION_LIST", "_Netcdf4Dimid",
+                           "_Netcdf4Coordinates", "_nc3_strict", "_NCProperties"})
+
+
+def _attr_value(v):
+    """As h5netcdf and xarray give it: bytes decoded, a one-element array as its element."""
+    if not np.isscalar(v) and len(v) == 1:
+        v = v[0]
+    return v.decode() if isinstance(v, bytes) else v
+
+
+def load_run_quickly(path: str | Path):
+    """``open_run`` for a dataset this module's ``DatasetWriter`` wrote, read with h5py alone.
+
+    The file is flat (numeric variables, dimensions named by their ``_Netcdf4Dimid``), so the
+    variables, their dimensions and attributes are read directly and then CF-decoded by xarray
+    (``xr.decode_cf``): the same Dataset as ``open_run``, about ten times faster for a small run
+    (what a sweep's points are). Anything else (groups, strings) is read by ``open_run``.
+    """
+    import h5py
+    import xarray as xr
+
+    p = Path(path)
+    if p.is_dir():
+        p = p / "dataset.nc"
+    with h5py.File(p, "r") as f:
+        items = dict(f.items())
+        if any(not isinstance(d, h5py.Dataset) or d.dtype.kind not in "fiub" for d in items.values()):
+            return open_run(p)
+        names = {int(d.attrs["_Netcdf4Dimid"]): n for n, d in items.items() if d.attrs.get("CLASS") == b"DIMENSION_SCALE"}
+        variables = {}
+        for name, d in items.items():
+            ids = d.attrs.get("_Netcdf4Coordinates")
+            dims = tuple(names[int(i)] for i in ids) if ids is not None else (name,)
+            attrs = {k: _attr_value(v) for k, v in d.attrs.items() if k not in _HIDDEN_ATTRS}
+            variables[name] = xr.Variable(dims, d[()], attrs)
+        attrs = {k: _attr_value(v) for k, v in f.attrs.items() if k not in _HIDDEN_ATTRS}
+    return xr.decode_cf(xr.Dataset(variables, attrs=attrs))

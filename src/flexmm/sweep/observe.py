@@ -54,10 +54,10 @@ def observe_run(path: str | Path, options=None) -> dict:
     from flexmm.analysis.theory_comparison import RunContext
     from flexmm.analysis.report import choose_kind
     from flexmm.config.analysis import AnalysisOptions
-    from flexmm.io.run_dataset import open_run
+    from flexmm.io.run_dataset import load_run_quickly
 
     opts = options if isinstance(options, AnalysisOptions) else AnalysisOptions.model_validate(options or {})
-    ds = open_run(path)
+    ds = load_run_quickly(path)  # the same Dataset as open_run, read faster
     ctx = RunContext.from_dataset(ds)
     kind = choose_kind(ctx) if opts.kind == "auto" else opts.kind
     return _full(ds, kind, opts)  # the dataset read once
