@@ -663,13 +663,13 @@ def sweep_overhead(points: tuple[int, int] = (2, 10), repeats: int = 3) -> dict:
         for n in points:
             d = Path(tempfile.mkdtemp(prefix="flexmm-bench-sweep-"))
             cmd = [FLEXMM, "sweep", str(LEGO), "--vary", f"excitation.velocity_m_s=0.5:3:{n}", "--out", str(d),
-                   "--workers", "1", "--quiet"]
+                   "--workers", "1", "--quiet", "--keep", "all"]  # kept runs: their integration time is read back
             wall, _, code = _timed(cmd)
             if code != 0:
                 raise RuntimeError(f"sweep failed ({code}): {' '.join(cmd)}")
             walls[n].append(wall)
             if n == points[-1]:
-                for ds_path in d.glob("points/*/dataset.nc"):
+                for ds_path in d.glob("points/*/*/dataset.nc"):
                     with xr.open_dataset(ds_path) as ds:
                         integ.append(float(ds.attrs["wall_time_s"]))
             subprocess.run(["rm", "-rf", str(d)], check=False)
@@ -684,6 +684,107 @@ def sweep_overhead(points: tuple[int, int] = (2, 10), repeats: int = 3) -> dict:
           f"integration {mean_integ:.3f} s: overhead {row['overhead_per_point_s']:.3f} s per point (load {row['load']:.2f})")
     return row
 
+
+
+#: the tiny scene of the sweep-scale benchmark: a 20-unit LEGO chain, 2 ms (about 1 ms of integration)
+TINY_SWEEP = ["--set", "lattice.n_units=20", "--set", "solver.duration_s=0.002"]
+
+
+def _child(cmd: list[str]) -> tuple[float, float, int]:
+    """(wall s, peak resident MB, exit code) of one subprocess, its output discarded."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return time.perf_counter() - t0, usage.ru_maxrss / 1024, proc.returncode
+
+
+def _grid_spec(path: Path, n_points: int) -> Path:
+    """A sweep file of n_points (a grid of n/1000 x 1000, or n x 1) on the tiny scene."""
+    inner = 1000 if n_points >= 1000 else n_points
+    path.write_text(
+        f"base: {LEGO}\n"
+        "set: {lattice.n_units: 20, solver.duration_s: 0.002}\n"
+        "vary:\n  grid:\n"
+        f"    excitation.velocity_m_s: {{start: 0.5, stop: 3, num: {n_points // inner}}}\n"
+        f"    excitation.angular_velocity_rad_s: {{start: 10, stop: 300, num: {inner}}}\n")
+    return path
+
+
+def sweep_scale(plan_sizes=(10_000, 100_000, 1_000_000), n_points: int = 10_000, workers: int = 2,
+                resume_points: int = 100_000) -> dict:
+    """Sweeps that outgrow one machine (issue 34): planning, points/s, bytes per point, resume.
+
+    - planning: ``flexmm sweep SPEC --dry-run`` (the spec checked, every point listed with its
+      state) of grids of ``plan_sizes`` points: wall time and peak memory of the process
+      (targets: 10⁶ points in ≤ 10 s and ≤ 200 MB);
+    - points/s: ``flexmm sweep`` of ``n_points`` points of the tiny scene on ``workers`` local
+      processes (whole command: start-up, workers, the combined sweep.nc), and the marginal rate
+      from a run of n_points/10 (start-up taken out); target ≥ 50 points/s on 2 cores;
+    - bytes per point of the store (file sizes, and blocks allocated), target ≤ 2 KB;
+    - resume: the same command again (nothing to run) and ``prepare`` on a store of
+      ``resume_points`` points (read the status array, list what is pending), target ≤ 2 s.
+    """
+    import shutil
+    import tempfile
+
+    root = Path(tempfile.mkdtemp(prefix="flexmm-bench-sweepscale-"))
+    out: dict = {"load_before": os.getloadavg()[0], "planning": [], "workers": workers}
+    try:
+        for n in plan_sizes:
+            spec = _grid_spec(root / f"plan{n}.yaml", n)
+            wall, mb, code = _child([FLEXMM, "sweep", str(spec), "--out", str(root / f"plan{n}"), "--dry-run"])
+            out["planning"].append({"points": n, "wall_s": wall, "peak_mb": mb, "exit": code})
+            print(f"plan + dry-run of {n:>9,d} points: {wall:6.2f} s, peak {mb:6.1f} MB (exit {code}, "
+                  f"load {os.getloadavg()[0]:.2f})")
+        rates = {}
+        for n in (max(2, n_points // 10), n_points):
+            d = root / f"run{n}"
+            cmd = [FLEXMM, "sweep", str(LEGO), *TINY_SWEEP, "--vary", f"excitation.velocity_m_s=0.5:3:{n}",
+                   "--out", str(d), "--workers", str(workers), "--quiet"]
+            wall, mb, code = _child(cmd)
+            rates[n] = wall
+            print(f"sweep of {n:>6,d} tiny points on {workers} workers: {wall:7.2f} s, {n / wall:6.1f} points/s "
+                  f"(exit {code}, load {os.getloadavg()[0]:.2f})")
+        few, many = sorted(rates)
+        out["sweep"] = {"points": many, "wall_s": rates[many], "points_per_s": many / rates[many],
+                        "marginal_points_per_s": (many - few) / max(1e-9, rates[many] - rates[few])}
+        print(f"marginal rate (start-up taken out): {out['sweep']['marginal_points_per_s']:.1f} points/s")
+        store = root / f"run{many}" / "store"
+        files = [p for p in store.iterdir() if p.is_file()]
+        out["bytes_per_point"] = sum(p.stat().st_size for p in files) / many
+        out["allocated_bytes_per_point"] = sum(p.stat().st_blocks * 512 for p in files) / many
+        print(f"store: {out['bytes_per_point']:.0f} bytes per point ({out['allocated_bytes_per_point']:.0f} allocated)")
+        wall, _, code = _child(cmd)
+        out["rerun_s"] = wall
+        print(f"the same sweep again (all finished): {wall:.2f} s (exit {code})")
+        out["resume_prepare_s"] = _resume_prepare(root, resume_points)
+        print(f"resume of a {resume_points:,d}-point store (prepare: check, read the status array): "
+              f"{out['resume_prepare_s']:.2f} s")
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    out["load_after"] = os.getloadavg()[0]
+    return out
+
+
+def _resume_prepare(root: Path, n: int) -> float:
+    """Seconds ``prepare`` takes on a laid-out store of n points, 90 % finished."""
+    from flexmm.sweep import load_sweep
+    from flexmm.sweep.execute import prepare
+    from flexmm.sweep.observe import OBSERVABLES
+
+    spec = load_sweep(_grid_spec(root / "resume.yaml", n))
+    plan = prepare(spec, root / "resume")
+    plan.store.create_or_check(plan.fingerprint, n, list(OBSERVABLES), spec.name)
+    status = np.lib.format.open_memmap(plan.store.dir / "status.npy", mode="r+")
+    status[: n - n // 10] = 1
+    status.flush()
+    del status
+    t0 = time.perf_counter()
+    again = prepare(spec, root / "resume")
+    wall = time.perf_counter() - t0
+    assert len(again.tasks) == n // 10
+    return wall
 
 
 def render(repeats: int = 3, n_frames: int = 400) -> list[dict]:
@@ -1235,7 +1336,7 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
     return rows
 
 
-SECTIONS = {"startup": startup, "sweep": sweep_overhead, "throughput": throughput, "bandwidth": bandwidth,
+SECTIONS = {"startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
