@@ -37,7 +37,8 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
-              analysis: str | None = None, force_limits: bool = False, atomic: bool = True) -> RunResult:
+              analysis: str | None = None, force_limits: bool = False, atomic: bool = True,
+              in_memory: bool = False) -> RunResult:
     """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
     ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
@@ -48,7 +49,9 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     and never replaces a finished result. ``result.path`` is the committed dataset. A run of
     more steps than FLEXMM_MAX_STEPS is refused (``plan.cost.ResourceError``) unless
     ``force_limits``. ``atomic=False`` writes straight into ``run_dir`` for a caller that owns
-    the directory and publishes its own markers (sweep points).
+    the directory and publishes its own markers (sweep points). ``in_memory`` keeps the dataset
+    in ``result.dataset`` instead of writing dataset.nc (a sweep point measured and dropped; a
+    continuum-only run still writes its file).
     """
     from flexmm.continuum_run import run_continuum
     from flexmm.plan import make_plan
@@ -66,11 +69,11 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
             result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),
-                                 on_finish=accuracy_check(plan, problem))
+                                 on_finish=accuracy_check(plan, problem), in_memory=in_memory)
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
         where = rd.commit(result.status)
-    result.path = where / "dataset.nc"
+    result.path = None if result.dataset is not None else where / "dataset.nc"
     return result
 
 

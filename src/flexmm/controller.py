@@ -11,7 +11,7 @@ import signal
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -19,7 +19,7 @@ from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
-from flexmm.io.run_dataset import DatasetWriter, add_state, estimate_bytes
+from flexmm.io.run_dataset import DatasetWriter, MemoryWriter, add_state, estimate_bytes
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
@@ -57,6 +57,8 @@ class RunResult:
     n_units: int = 0
     #: the run's error estimate and target (dataset attrs ``accuracy_*``), empty without one
     accuracy: dict = field(default_factory=dict)
+    #: the run's dataset (xarray) when it was kept in memory instead of written (``in_memory``)
+    dataset: Any = None
 
     @property
     def accuracy_missed(self) -> bool:
@@ -205,7 +207,7 @@ class _StepFollower:
 class _Observer:
     """Turns the nondimensional state into SI frames for the writer."""
 
-    def __init__(self, problem: Problem, writer_path: Path, n_frames: int | None = None):
+    def __init__(self, problem: Problem, writer_path: Path, n_frames: int | None = None, writer=None):
         sys_, out = problem.system, problem.scene.output
         self.sys = sys_
         self.sites = np.arange(0, sys_.n_sites, out.site_stride)
@@ -238,7 +240,7 @@ class _Observer:
                   for k, v in sys_.site_coords.items()}
         add_state(sys_, self.sites, site_vars, coords)  # rest and initial state: analysis never rebuilds the model
         self.site_vars, self.time_vars = site_vars, time_vars
-        self.writer = DatasetWriter(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames)
+        self.writer = (writer or DatasetWriter)(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames)
         self.sc = sc
 
     def frame(self, st: Stepper) -> None:
@@ -279,12 +281,13 @@ def _progress(total: int, enabled: bool):
 def run_problem(
     problem: Problem, run_dir: Path, *, progress: bool = False,
     log: Callable[[str], None] | None = None, extra_attrs: dict | None = None,
-    on_finish: Callable | None = None,
+    on_finish: Callable | None = None, in_memory: bool = False,
 ) -> RunResult:
     """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up.
 
     ``on_finish(q, v, h, say, t) -> dict`` (if given) sees the final state of a finished run
-    and returns extra attrs (used by flexmm.plan for its accuracy check).
+    and returns extra attrs (used by flexmm.plan for its accuracy check). ``in_memory``: no
+    dataset file; ``result.dataset`` holds what it would have held (``io.run_dataset.MemoryWriter``).
     """
     scene, s = problem.scene, problem.system
     spec = INTEGRATORS[scene.solver.integrator]
@@ -309,7 +312,7 @@ def run_problem(
     for note in plan.notes:
         say(note)
     n_frames = len(chunks) + 1
-    obs = _Observer(problem, run_dir / "dataset.nc", n_frames)
+    obs = _Observer(problem, run_dir / "dataset.nc", n_frames, MemoryWriter if in_memory else None)
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
     steps = (f"adaptive steps (rtol {scene.solver.rtol or DEFAULT_RTOL:g})" if spec.adaptive
              else f"{sum(chunks)} steps of {h * sc.time_s:.4g} s")
@@ -417,4 +420,5 @@ def run_problem(
     return RunResult(status, reason, path, n_steps, obs.writer.n_written, t * sc.time_s, h * sc.time_s,
                      problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites,
                      accuracy={k: v for k, v in attrs.items() if k.startswith("accuracy_")
-                               and "accuracy_estimate" in attrs})
+                               and "accuracy_estimate" in attrs},
+                     dataset=getattr(obs.writer, "dataset", None))

@@ -63,3 +63,33 @@ def test_quick_reader_gives_the_dataset_open_run_gives(tmp_path) -> None:
     xr.testing.assert_identical(a, b)
     assert list(a.coords) == list(b.coords) and a["u"].dims == b["u"].dims == ("time", "site")
     assert all(type(a.attrs[k]) is type(b.attrs[k]) for k in a.attrs)
+
+
+def test_a_run_kept_in_memory_is_the_dataset_its_file_would_hold(tmp_path) -> None:
+    """``run_scene(in_memory=True)`` (a sweep point that is measured and dropped) writes no
+    dataset.nc, and its ``result.dataset`` is what reading the written file gives: values,
+    dimensions, coordinates, attributes and their types (all but the wall-clock ones)."""
+    import xarray as xr
+
+    from flexmm.api import run_scene
+    from flexmm.config import load_scene
+    from flexmm.io.run_dataset import load_run_quickly
+    from pathlib import Path
+
+    demo = Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml"
+    scene = load_scene(demo, ["lattice.n_units=20", "solver.duration_s=0.002", "output.n_frames=20"])
+    on_disk = load_run_quickly(run_scene(scene, run_dir=tmp_path / "file").path)
+    result = run_scene(scene, run_dir=tmp_path / "mem", in_memory=True, atomic=False)
+    assert result.path is None and not (tmp_path / "mem" / "dataset.nc").exists()
+    mem = result.dataset
+    clock = [k for k in on_disk.attrs if k.endswith(("wall_s", "_time_s", "check_s")) or k in ("history", "log", "plan")]
+    assert "wall_time_s" in clock and "history" in clock
+    a, b = on_disk.copy(), mem.copy()
+    for ds in (a, b):
+        for k in clock:
+            ds.attrs.pop(k)
+    xr.testing.assert_identical(a, b)
+    assert set(on_disk.attrs) == set(mem.attrs)
+    assert all(type(a.attrs[k]) is type(b.attrs[k]) for k in a.attrs)
+    assert all(a[k].dtype == b[k].dtype and type(a[k].attrs.get("units")) is type(b[k].attrs.get("units"))
+               for k in a.variables)

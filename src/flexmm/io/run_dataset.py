@@ -235,3 +235,77 @@ def load_run_quickly(path: str | Path):
             variables[name] = xr.Variable(dims, d[()], attrs)
         attrs = {k: _attr_value(v) for k, v in f.attrs.items() if k not in _HIDDEN_ATTRS}
     return xr.decode_cf(xr.Dataset(variables, attrs=attrs))
+
+
+class MemoryWriter:
+    """``DatasetWriter``'s interface, keeping the run in memory: ``close`` makes ``dataset``, the
+    Dataset ``load_run_quickly`` would read back from the file ``DatasetWriter`` writes (same
+    variables, dimensions, attributes and their types), and writes nothing.
+
+    For runs that are measured and dropped (the points of a sweep that are not kept): no file to
+    lay out, write and read back. ``path`` is where the file would have gone (it does not exist).
+    """
+
+    def __init__(self, path: Path, n_site: int, site_vars: dict, time_vars: dict, site_coords: dict,
+                 n_frames: int | None = None):
+        self.path, self.n_site, self.n_frames = Path(path), n_site, n_frames
+        self.site_vars, self.time_vars, self.site_coords = site_vars, time_vars, site_coords
+        self.frames: list[tuple[float, dict, dict]] = []
+        self.n_written = 0
+        self.t_written: float | None = None
+        self.dataset = None
+
+    def append(self, t: float, site_values: dict, time_values: dict) -> None:
+        if self.n_frames is not None and len(self.frames) >= self.n_frames:
+            raise ValueError(f"more frames than the {self.n_frames} declared")
+        self.frames.append((t, {k: np.array(v, float) for k, v in site_values.items()}, dict(time_values)))
+        self.n_written, self.t_written = len(self.frames), t
+
+    def flush(self) -> None:
+        pass
+
+    def close(self, attrs: dict) -> Path:
+        import xarray as xr
+
+        n, frames = self.n_written, self.frames
+        variables = {"time": (("time",), np.array([f[0] for f in frames], float).reshape(n),
+                              variable_attrs("time", {"units": "s", "long_name": "time"})),
+                     "site": (("site",), np.arange(self.n_site, dtype=np.int64),
+                              variable_attrs("site", {"units": "1", "long_name": "site index"}))}
+        for name, (values, units, long_name, *extra) in self.site_coords.items():
+            variables[name] = (("site",), np.asarray(values), _attrs(name, units, long_name, extra))
+        coord_names = " ".join(self.site_coords)
+        for name, (units, long_name, *extra) in self.site_vars.items():
+            data = np.array([f[1][name] for f in frames], float).reshape(n, self.n_site)
+            a = _attrs(name, units, long_name, extra)
+            variables[name] = (("time", "site"), data, {**a, "coordinates": coord_names} if coord_names else a)
+        for name, (units, long_name, *extra) in self.time_vars.items():
+            variables[name] = (("time",), np.array([f[2][name] for f in frames], float).reshape(n),
+                               _attrs(name, units, long_name, extra))
+        glob = {**global_attrs(), **{k: v for k, v in attrs.items() if v is not None}, "n_frames_written": n}
+        stored = _as_stored({"": glob, **{k: v[2] for k, v in variables.items()}})
+        ds = xr.Dataset({k: xr.Variable(dims, data, stored[k]) for k, (dims, data, _) in variables.items()},
+                        attrs=stored[""])
+        self.dataset = xr.decode_cf(ds)
+        self.frames = []
+        return self.path
+
+    def abort(self) -> None:
+        self.frames = []
+
+
+def _as_stored(groups: dict[str, dict]) -> dict[str, dict]:
+    """Attributes as a netCDF file gives them back: written into an HDF5 file held in memory
+    (never on disk) and read as ``load_run_quickly`` reads them (types included)."""
+    import io
+
+    import h5py
+
+    with h5py.File(io.BytesIO(), "w") as f:
+        out = {}
+        for name, attrs in groups.items():
+            node = f if name == "" else f.create_group(name)
+            for k, v in attrs.items():
+                node.attrs[k] = v
+            out[name] = {k: _attr_value(v) for k, v in node.attrs.items()}
+    return out

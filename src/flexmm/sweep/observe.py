@@ -46,8 +46,9 @@ def _nan_result(kind: str, field: str, units: str, note: str) -> dict:
             "amplitude_units": units, "note": note}
 
 
-def observe_run(path: str | Path, options=None) -> dict:
-    """Observables of the run at ``path`` (run directory) as plain floats plus kind/field/note.
+def observe_run(path, options=None) -> dict:
+    """Observables of the run at ``path`` (run directory, or its dataset already in memory) as
+    plain floats plus kind/field/note.
 
     ``options``: an ``AnalysisOptions``, or its fields as a dict (what a sweep task carries).
     """
@@ -57,7 +58,9 @@ def observe_run(path: str | Path, options=None) -> dict:
     from flexmm.io.run_dataset import load_run_quickly
 
     opts = options if isinstance(options, AnalysisOptions) else AnalysisOptions.model_validate(options or {})
-    ds = load_run_quickly(path)  # the same Dataset as open_run, read faster
+    import xarray as xr
+
+    ds = path if isinstance(path, xr.Dataset) else load_run_quickly(path)  # as open_run, read faster
     ctx = RunContext.from_dataset(ds)
     kind = choose_kind(ctx) if opts.kind == "auto" else opts.kind
     return _full(ds, kind, opts)  # the dataset read once

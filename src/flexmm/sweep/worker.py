@@ -185,7 +185,7 @@ def _compute(spec, index: int, store, scratch: Path, outcome: dict):
     try:
         from flexmm.api import run_scene
 
-        result = run_scene(point.scene, run_dir=d, atomic=keep)
+        result = run_scene(point.scene, run_dir=d, atomic=keep, in_memory=not keep)  # dropped: no file
     except Exception as exc:  # noqa: BLE001 - any error of a point is recorded, not raised
         return {**outcome, "status": FAILED, "reason": f"{type(exc).__name__}: {exc}"}, None, ("", "", "")
     if result.status == INTERRUPTED:
@@ -195,12 +195,13 @@ def _compute(spec, index: int, store, scratch: Path, outcome: dict):
             "numba_threads": _numba_threads(), "kept": keep}
     if result.status != FINISHED:
         return {**info, "status": FAILED}, None, ("", "", "")
-    values, labels, note = measure(result.path, spec.analysis)
+    values, labels, note = measure(result.path if result.dataset is None else result.dataset, spec.analysis)
     return {**info, "reason": note}, values, labels
 
 
-def measure(path: Path, options) -> tuple[list[float], tuple[str, str, str], str]:
-    """(observables in ``OBSERVABLES`` order, (kind, field, amplitude units), note) of a run."""
+def measure(path, options) -> tuple[list[float], tuple[str, str, str], str]:
+    """(observables in ``OBSERVABLES`` order, (kind, field, amplitude units), note) of a run
+    (its directory, dataset file, or dataset in memory)."""
     from flexmm.sweep.observe import OBSERVABLES, observe_run
 
     try:
