@@ -335,6 +335,56 @@ def sheet_throughput(sizes=SHEET_SIZES, repeats: int = 7) -> list[dict]:
     return out
 
 
+def network(sizes=((100, 100), (316, 316)), methods=("velocity_verlet", "pefrl"), repeats: int = 7) -> list[dict]:
+    """The generic ligament kernel (``models.ligaments`` through the rigid_network kind) against the
+    rotating-squares sheet's own kernels on the same geometry (θ0 = 0.2, a random state), one
+    thread, each method's stepper for both models made once and advanced alternately (interleaved;
+    the order flips each repeat): M unit-steps/s min and median and the network's share."""
+    from flexmm.config import scene_from_dict
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.integrators.common import empty_terms
+    from flexmm.integrators.stepper import Stepper
+    from flexmm.models import MODELS
+
+    law = {"a_m": 0.01, "theta0_rad": 0.2, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
+           "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0}
+    out = []
+    for rows, cols in sizes:
+        steppers = {}
+        for kind in ("rotating_squares_sheet", "rigid_network"):
+            lat = scene_from_dict({"name": "b", "lattice": {"kind": kind, "n_rows": rows, "n_cols": cols, **law},
+                                   "solver": {"duration_s": 1.0}}).lattice
+            system = MODELS[kind].build(lat)
+            system.q0[:] = 0.01 * np.random.default_rng(0).standard_normal(system.ndof)
+            steppers[kind] = system
+        n = rows * cols
+        steps = max(10, int(2e6 / n))
+        for method in methods:
+            sts = {k: Stepper(INTEGRATORS[method], s, empty_terms(), np.zeros(s.ndof), 0.05, threads=1, check_energy=False)
+                   for k, s in steppers.items()}
+            walls = {k: [] for k in sts}
+            for st in sts.values():
+                st.warm_up()
+            for r in range(repeats):
+                for k in (list(sts) if r % 2 == 0 else list(sts)[::-1]):
+                    w0 = sts[k].wall_s
+                    sts[k].advance(steps)
+                    walls[k].append(sts[k].wall_s - w0)
+            rate = {k: steps * n / np.array(w) / 1e6 for k, w in walls.items()}
+            row = {"rows": rows, "cols": cols, "method": method, "steps": steps,
+                   **{f"{k}_M_unit_steps_per_s": float(v.max()) for k, v in rate.items()},
+                   **{f"{k}_median": float(np.median(v)) for k, v in rate.items()},
+                   "network_share_of_sheet": float(np.median(rate["rigid_network"] / rate["rotating_squares_sheet"])),
+                   "kernels": {k: st.kernel.__name__ for k, st in sts.items()}}
+            print(f"network {rows}x{cols} {method}: sheet {row['rotating_squares_sheet_M_unit_steps_per_s']:.1f} "
+                  f"(median {row['rotating_squares_sheet_median']:.1f}), network "
+                  f"{row['rigid_network_M_unit_steps_per_s']:.1f} (median {row['rigid_network_median']:.1f}) "
+                  f"M unit-steps/s; network/sheet {row['network_share_of_sheet']:.2f} (median of paired repeats) "
+                  f"[{row['kernels']['rotating_squares_sheet']} vs {row['kernels']['rigid_network']}] ({_load()})")
+            out.append(row)
+    return out
+
+
 def roofline(sizes=(1_000, 10_000, 100_000, 1_000_000, 10_000_000), sheet_sizes=SHEET_SIZES,
              repeats: int = 5) -> list[dict]:
     """Bytes and flops per unit-step, achieved GB/s and GFLOP/s, against the triad bandwidth of
@@ -1341,7 +1391,7 @@ SECTIONS = {"startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_sc
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
             "gradient_midpoint": gradient_midpoint,
-            "gradient_models": gradient_models, "accuracy": accuracy}
+            "gradient_models": gradient_models, "accuracy": accuracy, "network": network}
 
 
 def main(argv: list[str]) -> None:

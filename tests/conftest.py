@@ -54,6 +54,8 @@ def _chain(**changes) -> dict:
 
 _SHEET = LEGO_SHEET
 # rotating triangles (docs/physics.md §1.6): LEGO k_l, a stiffer shear spring (0.1 k_l) to couple the fields
+_NET = {"kind": "rigid_network", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
+        "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0}
 _TRI = {"a_m": 0.02, "k_long_n_per_m": LEGO_PARAMETERS["k_long_n_per_m"], "k_shear_n_per_m": 7169.0,
         "k_rot_n_m_per_rad": 0.05, "mass_kg": LEGO_PARAMETERS["mass_kg"], "inertia_kg_m2": 1.2e-7}
 _MASS = {"spacing_m": 0.01, "mass_kg": 0.01,
@@ -147,6 +149,12 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
             {"kind": "defects", "target": "inertia_kg_m2", "box": [1, 2, 0, 1], "factor": 2.0},
             {"kind": "random", "target": "k_rot_n_m_per_rad", "std": 0.005, "seed": 1}]),
                        "translation_invariant": True},
+    },
+    "rigid_network": {
+        "squares-3x4": {"lattice": dict(_NET, n_rows=3, n_cols=4, theta0_rad=0.2), "translation_invariant": True},
+        "random-quads-fixed-3x3": {"lattice": dict(_NET, pattern="random_quads", vertex_jitter=0.1, seed=4, n_rows=3,
+                                                   n_cols=3, ligament_length_m=0.001, left="fixed"),
+                                   "translation_invariant": True},
     },
     "bistable_linkage": {
         "six-bars": {

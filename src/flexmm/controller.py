@@ -19,7 +19,7 @@ from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
-from flexmm.io.run_dataset import DatasetWriter, MemoryWriter, add_state, estimate_bytes
+from flexmm.io.run_dataset import DatasetWriter, MemoryWriter, add_state, estimate_bytes, shape_variables
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
@@ -240,7 +240,8 @@ class _Observer:
                   for k, v in sys_.site_coords.items()}
         add_state(sys_, self.sites, site_vars, coords)  # rest and initial state: analysis never rebuilds the model
         self.site_vars, self.time_vars = site_vars, time_vars
-        self.writer = (writer or DatasetWriter)(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames)
+        self.writer = (writer or DatasetWriter)(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames,
+                                                shape_variables(sys_.shapes, self.sites, sc.length_m))
         self.sc = sc
 
     def frame(self, st: Stepper) -> None:

@@ -71,3 +71,31 @@ def test_mass_chain_hertz_has_no_tension():
     assert lw.law(lw.HERTZ, 0.2, prm, np.zeros(1)) == (0.0, 0.0)
     e, t = lw.law(lw.HERTZ, 0.0, prm, np.zeros(1))
     assert t == pytest.approx(-3.0 * 0.1**1.5) and e > 0
+
+
+#: parameter columns with a derivative (the table's start and length are indices, not parameters)
+SMOOTH_COLUMNS = {"poly": range(9), "hertz": range(4), "toda": range(3), "dipole": range(4), "table": (0,),
+                  "sine": range(3)}
+
+
+@pytest.mark.parametrize("name", sorted(lw.LAWS))
+def test_law_second_is_the_derivative_of_the_law(name):
+    """``law_second``'s E'' and ∂E'/∂prm against central differences of ``law``'s E' (the one
+    definition both the engine and the gradients use)."""
+    code = lw.LAWS[name].code
+    rows, (lo, hi) = CASES[name]
+    h = 1e-6
+    z = np.linspace(lo, hi, 41) + 1e-3
+    dprm = np.empty(lw.N_LAW_PRM)
+    for prm in rows:
+        tab = TAB if name == "table" else np.zeros(1)
+        for zz in z:
+            d2 = lw.law_second(code, zz, prm, tab, dprm)
+            fd = (lw.law(code, zz + h, prm, tab)[1] - lw.law(code, zz - h, prm, tab)[1]) / (2 * h)
+            assert d2 == pytest.approx(fd, rel=1e-5, abs=1e-6)
+            for c in SMOOTH_COLUMNS[name]:
+                up, dn = prm.copy(), prm.copy()
+                up[c] += h
+                dn[c] -= h
+                fd = (lw.law(code, zz, up, tab)[1] - lw.law(code, zz, dn, tab)[1]) / (2 * h)
+                assert dprm[c] == pytest.approx(fd, rel=1e-5, abs=1e-6), (name, c, zz)

@@ -9,11 +9,12 @@ import numpy as np
 import yaml
 
 from flexmm.config import scene_from_dict
-from flexmm.io.run_dataset import DatasetWriter, add_state
+from flexmm.io.run_dataset import DatasetWriter, add_state, shape_variables
 from flexmm.models import MODELS
 
-#: model kinds flexmm.render does not draw or colour yet (their render tests are skipped)
-NOT_RENDERED = ("rotating_triangles_chain", "rotating_triangles_sheet")
+#: model kinds drawn from the shapes their datasets store (tests/render/test_shapes.py), not by the
+#: squares' and masses' renderers these tests check
+NOT_RENDERED = ("rotating_triangles_chain", "rotating_triangles_sheet", "rigid_network")
 
 
 def scene_of(lattice: dict, name: str = "render_test") -> dict:
@@ -58,7 +59,8 @@ def write_run(run_dir: Path, lattice: dict, system, fields: dict[str, np.ndarray
     if state:
         add_state(system, sites, site_vars, coords)
     run_dir.mkdir(parents=True, exist_ok=True)
-    w = DatasetWriter(run_dir / "dataset.nc", sites.size, site_vars, {}, coords, n_frames=n_frames)
+    w = DatasetWriter(run_dir / "dataset.nc", sites.size, site_vars, {}, coords, n_frames=n_frames,
+                      constants=shape_variables(system.shapes, sites, system.scales.length_m))
     for k, t in enumerate(times):
         w.append(float(t), {name: v[k][sites] for name, v in fields.items()}, {})
     base = {"config": yaml.safe_dump(scene_of(lattice)), "model": system.model, "title": "render_test",

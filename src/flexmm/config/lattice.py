@@ -23,6 +23,7 @@ from flexmm.config.rigid import (
     RotatingSquaresChain,
     RotatingSquaresSheet,
 )
+from flexmm.config.network import RigidNetwork
 from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
 
 #: which layer each hook of a spec belongs to (tests/test_layers.py checks the paths)
@@ -106,6 +107,7 @@ MODELS: dict[str, ModelSpec] = _registry(
               theory="flexmm.analysis.predict_triangles:THEORY"),
     ModelSpec(RotatingTrianglesSheet, "flexmm.models.rotating_triangles:build_sheet", "n_cols",
               theory="flexmm.analysis.predict_triangles:THEORY"),
+    ModelSpec(RigidNetwork, "flexmm.models.network:build", "n_cols"),
 )
 
 #: the ``lattice`` section of a scene: any registered config class, discriminated on ``kind``

@@ -52,7 +52,7 @@ from flexmm.design.kernels_extra import (
     triangle_frame,
     unit_angles,
 )
-from flexmm.models import laws as lw
+from flexmm.models.laws import law_second
 from flexmm.models.harmonic import HarmonicArgs
 from flexmm.models.hinge import (
     H_HALF_A,
@@ -68,7 +68,14 @@ from flexmm.models.hinge import (
     S_THETA0,
     ChainArgs,
     chain_hinge_terms,
+    hinge_products,
+    hinge_second,
+    hinge_tangent_terms,
     param,
+    skew,
+    skew_variation,
+    stretch,
+    stretch_variation,
 )
 from flexmm.models.loads import LoadedChainArgs
 from flexmm.models.mass_kernels import MassArgs
@@ -104,83 +111,10 @@ def _chain_site_terms(q, sprm, lam, out, g2, n, cs, sn):
 
 
 @jit
-def hinge_second(dlq, dsq, ep, dll, dsl, lta, ltb, rest, hA, hB, sig, kl, ks, kt, ca, sa, cb, sb):
-    """One hinge's second derivatives along λ, from scalars (no arrays: it inlines into loops).
-
-    dlq, dsq: the relative displacements of B and A along and across the hinge axis; ep = θ_A + θ_B;
-    dll, dsl: the same differences of λ; lta, ltb: λ at θ_A, θ_B; then the hinge's parameters
-    and cos/sin of φ = θ0 + θ at A and B. With the levers a_s = h_A sin φ_A, a_c = h_A cos φ_A
-    (b_s, b_c at B), the stretch, shear and bend of ``models.hinge``
-
-        el = d_l + r − (a_c + b_c),   es = d_s + σ (b_s − a_s),   ep = θ_A + θ_B,
-
-    their variations along λ δl = λ_l + a_s λ_A + b_s λ_B, δs = λ_s + σ (b_c λ_B − a_c λ_A),
-    δp = λ_A + λ_B, and D = λ·∇E = k_l el δl + k_s es δs + k_θ ep δp: with f_l = k_l el,
-    f_s = σ k_s es, p_l = k_l δl, p_s = σ k_s δs and X_A = p_l + f_s λ_A, Y_A = f_l λ_A − p_s,
-    X_B = p_l − f_s λ_B, Y_B = f_l λ_B + p_s,
-
-        ∂D/∂θ0_A = a_s X_A + a_c Y_A,   ∂D/∂θ_A = ∂D/∂θ0_A + k_θ δp,   ∂D/∂h_A = sin φ_A Y_A − cos φ_A X_A
-
-    (B likewise), ∂D/∂d_l = ∂D/∂r = p_l, ∂D/∂d_s = k_s δs, ∂D/∂k_l = el δl, ∂D/∂k_s = es δs,
-    ∂D/∂k_θ = ep δp. Returns (p_l, k_s δs, ∂D/∂θ_A, ∂D/∂θ_B, ∂D/∂θ0_A, ∂D/∂θ0_B, ∂D/∂h_A,
-    ∂D/∂h_B, ∂D/∂k_l, ∂D/∂k_s, ∂D/∂k_θ): the Hessian-vector and parameter products of the
-    force are these negated.
-    """
-    a_s, a_c, b_s, b_c = hA * sa, hA * ca, hB * sb, hB * cb
-    el = dlq + rest - (a_c + b_c)
-    es = sig * (b_s - a_s) + dsq
-    dl = dll + a_s * lta + b_s * ltb
-    ds = sig * (b_c * ltb - a_c * lta) + dsl
-    dp = lta + ltb
-    kdp = kt * dp
-    pl = kl * dl
-    pss = ks * ds
-    fl = kl * el
-    fs = sig * (ks * es)
-    ps = sig * pss
-    xa = pl + fs * lta
-    ya = fl * lta - ps
-    xb = pl - fs * ltb
-    yb = fl * ltb + ps
-    t0a = hA * (sa * xa + ca * ya)
-    t0b = hB * (sb * xb + cb * yb)
-    return pl, pss, t0a + kdp, t0b + kdp, t0a, t0b, sa * ya - ca * xa, sb * yb - cb * xb, el * dl, es * ds, ep * dp
-
-
-@jit
 def hinge_row(hf, h):
     """(r, h_A, h_B, σ, k_l, k_s, k_θ) of hinge h from the hinge table flattened (``hprm.ravel()``)."""
     p = N_HINGE_PARAMS * h
     return hf[p + H_REST], hf[p + H_HALF_A], hf[p + H_HALF_B], hf[p + H_SIGN], hf[p + H_KL], hf[p + H_KS], hf[p + H_KT]
-
-
-@jit
-def hinge_tangent_terms(dlq, dsq, ep, ddl, dds, dta, dtb, dt0a, dt0b, rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB,
-                        dkl, dks, dkt, ca, sa, cb, sb):
-    """One hinge's tangent from scalars: the variations (d f_l, d f_s, d g_A, d g_B) of its
-    (∂E/∂d_l, ∂E/∂d_s, ∂E/∂θ_A, ∂E/∂θ_B) along δq and δp (the force's tangent is their negation).
-
-    dlq, dsq, ep as ``hinge_second``; ddl, dds: the differences of δq along and across the axis;
-    dta, dtb: δθ_A, δθ_B; dt0a, dt0b: δθ0 of the units; drest … dkt: δ of the hinge's parameters.
-    With δφ = δθ0 + δθ, ∂E/∂θ_A = f_l h_A sin φ_A − σ f_s h_A cos φ_A + f_p (f = k × strain;
-    likewise B with + σ), differentiated factor by factor.
-    """
-    el = dlq + rest - (hA * ca + hB * cb)
-    es = sig * (hB * sb - hA * sa) + dsq
-    dpa = dt0a + dta
-    dpb = dt0b + dtb
-    d_el = ddl + drest - (dhA * ca + dhB * cb) + hA * sa * dpa + hB * sb * dpb
-    d_es = sig * (dhB * sb + hB * cb * dpb - dhA * sa - hA * ca * dpa) + dds
-    d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
-    d_fb = dhB * sb + hB * cb * dpb
-    d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
-    d_gb = dhB * cb - hB * sb * dpb
-    d_fl = dkl * el + kl * d_el
-    d_fs = dks * es + ks * d_es
-    d_fp = dkt * ep + kt * (dta + dtb)
-    fl, fs = kl * el, ks * es
-    return (d_fl, d_fs, d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp,
-            d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp)
 
 
 @jit
@@ -418,8 +352,8 @@ def chain_reverse_hessian(q, cols, lam, r, acc):
     dl_, ds_, dp_ = r[R_DL], r[R_DS], r[R_DP]
     for h in range(n - 1):
         hA, hB, lta, ltb = ha[h], hb[h], lt[h], lt[h + 1]
-        dl_[h] = lu[h + 1] - lu[h] + hA * sn[h] * lta + hB * sn[h + 1] * ltb
-        ds_[h] = sig[h] * (hB * cs[h + 1] * ltb - hA * cs[h] * lta)
+        dl_[h] = stretch_variation(lu[h + 1] - lu[h], hA, sn[h], lta, hB, sn[h + 1], ltb)
+        ds_[h] = sig[h] * skew_variation(hA, cs[h], lta, hB, cs[h + 1], ltb)
         dp_[h] = lta + ltb
     xu, ta_, tb_, kd = r[R_XU, 1:], r[R_TA, 1:], r[R_TB, 1:], r[R_KD, 1:]
     for h in range(n - 1):
@@ -428,8 +362,8 @@ def chain_reverse_hessian(q, cols, lam, r, acc):
         el, es, dl, ds = el_[h], es_[h], dl_[h], ds_[h]
         lta, ltb = lt[h], lt[h + 1]
         xu[h] = k_l * dl
-        ta_[h] = k_l * (hA * sa * dl + el * hA * ca * lta) + k_s * (-sg * hA * ca * ds + es * sg * hA * sa * lta)
-        tb_[h] = k_l * (hB * sb * dl + el * hB * cb * ltb) + k_s * (sg * hB * cb * ds - es * sg * hB * sb * ltb)
+        ta_[h], tb_[h], _, _ = hinge_products(k_l * el, sg * (k_s * es), k_l * dl, sg * (k_s * ds), hA, hB, ca, sa, cb,
+                                              sb, lta, ltb)
         kd[h] = kt[h] * dp_[h]
     a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[CA_REST], acc[CA_HA], acc[CA_HB], acc[CA_KL], acc[CA_KS], acc[CA_KT]
     for h in range(n - 1):
@@ -437,9 +371,11 @@ def chain_reverse_hessian(q, cols, lam, r, acc):
         ca, sa, cb, sb = cs[h], sn[h], cs[h + 1], sn[h + 1]
         el, es, dl, ds = el_[h], es_[h], dl_[h], ds_[h]
         lta, ltb = lt[h], lt[h + 1]
+        _, _, gha, ghb = hinge_products(k_l * el, sg * (k_s * es), k_l * dl, sg * (k_s * ds), ha[h], hb[h], ca, sa, cb,
+                                        sb, lta, ltb)
         a_rest[h] -= k_l * dl
-        a_ha[h] -= k_l * (-ca * dl + el * sa * lta) + k_s * (-sg * sa * ds - es * sg * ca * lta)
-        a_hb[h] -= k_l * (-cb * dl + el * sb * ltb) + k_s * (sg * sb * ds + es * sg * cb * ltb)
+        a_ha[h] -= gha
+        a_hb[h] -= ghb
         a_kl[h] -= el * dl
         a_ks[h] -= es * ds
         a_kt[h] -= (qt[h] + qt[h + 1]) * dp_[h]
@@ -567,21 +503,16 @@ def chain_uniform_hinges(q, lf, cs, sn, r, acc, u):
         qa, qb, lta, ltb = qt[h], qt[h + 1], lt[h], lt[h + 1]
         el, x, e, xs, _, _ = _uniform_hinge_force(qu[h], qu[h + 1], qa, qb, ca, sa, cb, sb, rest, hA, hB, kl, ks,
                                                   kt)
-        dl = fma(hB * sb, ltb, fma(hA * sa, lta, lu[h + 1] - lu[h]))  # δ(stretch), δ(unsigned shear)
-        d = fma(hB * cb, ltb, -(hA * ca) * lta)
+        dl = stretch_variation(lu[h + 1] - lu[h], hA, sa, lta, hB, sb, ltb)
+        d = skew_variation(hA, ca, lta, hB, cb, ltb)  # of the unsigned shear: σ drops out
         p = kl * dl
-        w = fma(e, lta, -ks * d)
-        ua = fma(xs, lta, p)
-        ub = fma(-xs, ltb, p)
-        wb = fma(e, ltb, ks * d)
         dp = lta + ltb
         pl[h] = p
-        ta[h] = hA * fma(sa, ua, ca * w)
-        tb[h] = hB * fma(sb, ub, cb * wb)
+        ta[h], tb[h], gha, ghb = hinge_products(e, xs, p, ks * d, hA, hB, ca, sa, cb, sb, lta, ltb)
         kd[h] = kt * dp
         a_rest[h] -= p
-        a_ha[h] -= fma(sa, w, -ca * ua)
-        a_hb[h] -= fma(sb, wb, -cb * ub)
+        a_ha[h] -= gha
+        a_hb[h] -= ghb
         a_kl[h] = fma(-el, dl, a_kl[h])
         a_ks[h] = fma(-x, d, a_ks[h])
         a_kt[h] = fma(-(qa + qb), dp, a_kt[h])
@@ -728,12 +659,12 @@ def _family(q, lam, cs, sn, pc, off, la0, sa0, n, m, r, acc, out, acc_t0):
     rest, ha, hb, sig, kl, ks, kt = pc[H_REST], pc[H_HALF_A], pc[H_HALF_B], pc[H_SIGN], pc[H_KL], pc[H_KS], pc[H_KT]
     el_, es_, dl_, ds_, dp_ = r[F_EL], r[F_ES], r[F_DL], r[F_DS], r[F_DP]
     for k in range(m):
-        el_[k] = qlb[k] - qla[k] + rest[k] - (ha[k] * ca[k] + hb[k] * cb[k])
-        es_[k] = sig[k] * (hb[k] * sb[k] - ha[k] * sa[k]) + qsb[k] - qsa[k]
+        el_[k] = stretch(qlb[k] - qla[k], rest[k], ha[k], ca[k], hb[k], cb[k])
+        es_[k] = (qsb[k] - qsa[k]) + sig[k] * skew(ha[k], sa[k], hb[k], sb[k])
     for k in range(m):
-        dl_[k] = llb[k] - lla[k] + ha[k] * sa[k] * lta[k] + hb[k] * sb[k] * ltb[k]
+        dl_[k] = stretch_variation(llb[k] - lla[k], ha[k], sa[k], lta[k], hb[k], sb[k], ltb[k])
     for k in range(m):
-        ds_[k] = sig[k] * (hb[k] * cb[k] * ltb[k] - ha[k] * ca[k] * lta[k]) + lsb[k] - lsa[k]
+        ds_[k] = (lsb[k] - lsa[k]) + sig[k] * skew_variation(ha[k], ca[k], lta[k], hb[k], cb[k], ltb[k])
     for k in range(m):
         dp_[k] = lta[k] + ltb[k]
     xl, xs, ta_, tb_, kd = r[F_XL], r[F_XS], r[F_TA], r[F_TB], r[F_KD]
@@ -742,13 +673,9 @@ def _family(q, lam, cs, sn, pc, off, la0, sa0, n, m, r, acc, out, acc_t0):
         xs[k] = ks[k] * ds_[k]
         kd[k] = kt[k] * dp_[k]
     for k in range(m):
-        hA, sg, k_l, k_s, c_a, s_a, l_a = ha[k], sig[k], kl[k], ks[k], ca[k], sa[k], lta[k]
-        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
-        ta_[k] = k_l * (hA * s_a * dl + el * hA * c_a * l_a) + k_s * (-sg * hA * c_a * ds + es * sg * hA * s_a * l_a)
-    for k in range(m):
-        hB, sg, k_l, k_s, c_b, s_b, l_b = hb[k], sig[k], kl[k], ks[k], cb[k], sb[k], ltb[k]
-        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
-        tb_[k] = k_l * (hB * s_b * dl + el * hB * c_b * l_b) + k_s * (sg * hB * c_b * ds - es * sg * hB * s_b * l_b)
+        sg, k_l, k_s = sig[k], kl[k], ks[k]
+        ta_[k], tb_[k], _, _ = hinge_products(k_l * el_[k], sg * (k_s * es_[k]), k_l * dl_[k], sg * (k_s * ds_[k]), ha[k],
+                                              hb[k], ca[k], sa[k], cb[k], sb[k], lta[k], ltb[k])
     a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
     for k in range(m):
         a_rest[k] -= kl[k] * dl_[k]
@@ -757,13 +684,11 @@ def _family(q, lam, cs, sn, pc, off, la0, sa0, n, m, r, acc, out, acc_t0):
     for k in range(m):
         a_kt[k] -= (qta[k] + qtb[k]) * dp_[k]
     for k in range(m):
-        sg, c_a, s_a, l_a = sig[k], ca[k], sa[k], lta[k]
-        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
-        a_ha[k] -= kl[k] * (-c_a * dl + el * s_a * l_a) + ks[k] * (-sg * s_a * ds - es * sg * c_a * l_a)
-    for k in range(m):
-        sg, c_b, s_b, l_b = sig[k], cb[k], sb[k], ltb[k]
-        el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
-        a_hb[k] -= kl[k] * (-c_b * dl + el * s_b * l_b) + ks[k] * (sg * s_b * ds + es * sg * c_b * l_b)
+        sg, k_l, k_s = sig[k], kl[k], ks[k]
+        _, _, gha, ghb = hinge_products(k_l * el_[k], sg * (k_s * es_[k]), k_l * dl_[k], sg * (k_s * ds_[k]), ha[k],
+                                        hb[k], ca[k], sa[k], cb[k], sb[k], lta[k], ltb[k])
+        a_ha[k] -= gha
+        a_hb[k] -= ghb
     ola, olb, osa, osb = out[la0:], out[la0 + off :], out[sa0:], out[sa0 + off :]
     ota, otb = out[2 * n :], out[2 * n + off :]
     t0a, t0b = acc_t0, acc_t0[off:]
@@ -840,23 +765,15 @@ def _uniform_family(qla, qlb, qsa, qsb, qta, qtb, lla, llb, lsa, lsb, lta, ltb, 
     rest, hA, hB, kl, ks, kt = p[0], p[1], p[2], p[3], p[4], p[5]
     for k in range(m):
         c_a, s_a, c_b, s_b, sg, l_a, l_b = ca[k], sa[k], cb[k], sb[k], sig[k], lta[k], ltb[k]
-        el = qlb[k] - qla[k] + rest - (hA * c_a + hB * c_b)
-        es = sg * (hB * s_b - hA * s_a) + (qsb[k] - qsa[k])
-        dl = llb[k] - lla[k] + hA * s_a * l_a + hB * s_b * l_b
-        ds = sg * (hB * c_b * l_b - hA * c_a * l_a) + (lsb[k] - lsa[k])
-        e = kl * el
+        el = stretch(qlb[k] - qla[k], rest, hA, c_a, hB, c_b)
+        es = (qsb[k] - qsa[k]) + sg * skew(hA, s_a, hB, s_b)
+        dl = stretch_variation(llb[k] - lla[k], hA, s_a, l_a, hB, s_b, l_b)
+        ds = (lsb[k] - lsa[k]) + sg * skew_variation(hA, c_a, l_a, hB, c_b, l_b)
         pp = kl * dl
         ss = ks * ds
-        fs = sg * (ks * es)
-        gs = sg * ss
-        wa = e * l_a - gs
-        ua = pp + fs * l_a
-        wb = e * l_b + gs
-        ub = pp - fs * l_b
         P_[k] = pp
         S_[k] = ss
-        TA[k] = hA * (s_a * ua + c_a * wa)
-        TB[k] = hB * (s_b * ub + c_b * wb)
+        TA[k], TB[k], _, _ = hinge_products(kl * el, sg * (ks * es), pp, sg * ss, hA, hB, c_a, s_a, c_b, s_b, l_a, l_b)
         KD[k] = kt * (l_a + l_b)
         el_[k] = el
         es_[k] = es
@@ -867,18 +784,16 @@ def _uniform_family(qla, qlb, qsa, qsb, qta, qtb, lla, llb, lsa, lsb, lta, ltb, 
 @jit
 def _uniform_family_params(qta, qtb, lta, ltb, ca, sa, cb, sb, sig, p, m, el_, es_, dl_, ds_, acc):
     """The family's hinge-parameter adjoints (``FAMILY_COLS`` rows of acc) from its strains."""
-    kl, ks = p[3], p[4]
+    hA, hB, kl, ks = p[1], p[2], p[3], p[4]
     a_rest, a_ha, a_hb, a_kl, a_ks, a_kt = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5]
     for k in range(m):
         c_a, s_a, c_b, s_b, sg, l_a, l_b = ca[k], sa[k], cb[k], sb[k], sig[k], lta[k], ltb[k]
         el, es, dl, ds = el_[k], es_[k], dl_[k], ds_[k]
-        e = kl * el
         pp = kl * dl
-        fs = sg * (ks * es)
-        gs = sg * (ks * ds)
+        _, _, gha, ghb = hinge_products(kl * el, sg * (ks * es), pp, sg * (ks * ds), hA, hB, c_a, s_a, c_b, s_b, l_a, l_b)
         a_rest[k] -= pp
-        a_ha[k] -= s_a * (e * l_a - gs) - c_a * (pp + fs * l_a)
-        a_hb[k] -= s_b * (e * l_b + gs) - c_b * (pp - fs * l_b)
+        a_ha[k] -= gha
+        a_hb[k] -= ghb
         a_kl[k] -= el * dl
         a_ks[k] -= es * ds
         a_kt[k] -= (qta[k] + qtb[k]) * (l_a + l_b)
@@ -947,88 +862,6 @@ def sheet_tangent(q, args, dq, d1, d2, out):
 
 
 # ---------------------------------------------------------------- chains of masses
-
-
-@jit
-def law_second(code, z, prm, tab, dprm):
-    """E''(z) of one law element and ∂E'/∂prm_c into ``dprm`` (N_LAW_PRM,), c = 0 the shift.
-
-    Matches ``laws.law`` branch by branch (same clipping: a clipped dipole gap and a Hertz
-    contact out of touch have zero derivatives).
-    """
-    for c in range(dprm.shape[0]):
-        dprm[c] = 0.0
-    z = z + prm[0]
-    d2 = 0.0
-    if code == lw.POLY:
-        zp = 1.0  # z^(n−1)
-        zq = 0.0  # z^(n−2)
-        for n in range(1, lw.POLY_DEGREE + 1):
-            dprm[n] = n * zp
-            d2 += n * (n - 1) * prm[n] * zq
-            zq = zp
-            zp *= z
-    elif code == lw.HERTZ:
-        delta = prm[3] - z
-        if delta > 0.0:
-            a, p = prm[1], prm[2]
-            dp = delta**p
-            d2 = a * p * delta ** (p - 1.0)
-            dprm[1] = -dp
-            dprm[2] = -a * dp * math.log(delta)
-            dprm[3] = -d2
-    elif code == lw.TODA:
-        a, b = prm[1], prm[2]
-        ex = math.exp(-b * z)
-        d2 = a * b * ex
-        dprm[1] = 1.0 - ex
-        dprm[2] = a * z * ex
-    elif code == lw.DIPOLE:
-        d0 = prm[2]
-        gap = prm[2] + z
-        if gap > lw.DIPOLE_MIN_GAP * d0:
-            c0, p = prm[1], prm[3]
-            gp = gap ** (-p - 1.0)
-            d2 = p * (p + 1.0) * c0 * gp / gap
-            dprm[1] = -p * gp
-            dprm[2] = d2
-            dprm[3] = -c0 * gp * (1.0 - p * math.log(gap))
-        else:  # clipped: E' = −p C (ε d)^(−p−1), constant in z
-            c0, p = prm[1], prm[3]
-            g0 = lw.DIPOLE_MIN_GAP * d0
-            gp = g0 ** (-p - 1.0)
-            dprm[1] = -p * gp
-            dprm[2] = p * (p + 1.0) * c0 * gp / d0
-            dprm[3] = -c0 * gp * (1.0 - p * math.log(g0))
-    elif code == lw.TABLE:
-        d2 = _table_second(z, int(prm[1]), int(prm[2]), tab)
-    else:  # SINE
-        a, k = prm[1], prm[2]
-        kz = k * z
-        d2 = a * k * k * math.cos(kz)
-        dprm[1] = k * math.sin(kz)
-        dprm[2] = a * math.sin(kz) + a * kz * math.cos(kz)
-    if code != lw.DIPOLE or prm[2] + z > lw.DIPOLE_MIN_GAP * prm[2]:
-        dprm[0] = d2
-    return d2
-
-
-@jit
-def _table_second(z, start, n, tab):
-    """d²E/dz² of a tabulated law (the slope of its spline force, linear beyond the knots)."""
-    x0 = tab[start]
-    x1 = tab[start + n - 1]
-    m = n - 1
-    _, c1, c2, c3 = lw.table_columns(start, n)
-    if z <= x0:
-        return tab[c1]
-    if z >= x1:
-        k = m - 1
-        h = x1 - tab[start + k]
-        return tab[c1 + k] + h * (2.0 * tab[c2 + k] + 3.0 * h * tab[c3 + k])
-    lo = lw.table_piece(z, start, n, tab)
-    s = z - tab[start + lo]
-    return tab[c1 + lo] + s * (2.0 * tab[c2 + lo] + 3.0 * s * tab[c3 + lo])
 
 
 @jit

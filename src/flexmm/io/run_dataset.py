@@ -36,14 +36,16 @@ class DatasetWriter:
     """Write (time, site) fields and per-time scalars; call ``close`` to publish the file.
 
     ``site_vars``: name -> (units, long_name[, attrs]); ``time_vars`` likewise; ``site_coords``:
-    name -> (values (n_site,), units, long_name[, attrs]). ``n_frames``: the frames the run will write,
+    name -> (values (n_site,), units, long_name[, attrs]); ``constants``: name -> (dimensions, values,
+    units, long_name) of constant variables on dimensions of their own (the units' shapes:
+    ``shape_variables``). ``n_frames``: the frames the run will write,
     if known: the time dimension is then fixed-size (readers open such files ~2× faster than
     ones with an unlimited dimension, whose size h5netcdf recomputes from every variable); a run
     that stops early is cut to the frames it wrote when it closes.
     """
 
     def __init__(self, path: Path, n_site: int, site_vars: dict, time_vars: dict, site_coords: dict,
-                 n_frames: int | None = None):
+                 n_frames: int | None = None, constants: dict | None = None):
         self.path = Path(path)
         self.tmp = temporary_name(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -64,6 +66,13 @@ class DatasetWriter:
         for name, (values, units, long_name, *extra) in site_coords.items():
             c = self.file.create_variable(name, ("site",), np.asarray(values).dtype, data=values)
             c.attrs.update(_attrs(name, units, long_name, extra))
+        for name, (dims, values, units, long_name) in (constants or {}).items():
+            values = np.asarray(values)
+            for dim, size in zip(dims, values.shape):
+                if dim not in self.file.dimensions:
+                    self.file.dimensions[dim] = size
+            c = self.file.create_variable(name, dims, values.dtype, data=values)
+            c.attrs.update(_attrs(name, units, long_name, []))
         for name, (units, long_name, *extra) in site_vars.items():
             v = self.file.create_variable(name, ("time", "site"), "f8", chunks=(chunk_t, n_site))
             v.attrs.update(_attrs(name, units, long_name, extra))
@@ -126,7 +135,7 @@ class DatasetWriter:
         """Copy the temporary file to ``dst_path`` with only the frames written (an early stop)."""
         n, step = self.n_written, max(1, BUFFER_BYTES // (8 * max(1, self.n_site)))
         with h5netcdf.File(self.tmp, "r") as src, h5netcdf.File(dst_path, "w") as dst:
-            dst.dimensions = {"time": n, "site": self.n_site}
+            dst.dimensions = {**{name: len(dim) for name, dim in src.dimensions.items()}, "time": n}
             dst.attrs.update(dict(src.attrs))
             for name, var in src.variables.items():
                 timed = var.dimensions[:1] == ("time",)
@@ -146,6 +155,32 @@ class DatasetWriter:
         except Exception:  # noqa: BLE001 - best effort on an already failing path
             pass
         self.tmp.unlink(missing_ok=True)
+
+
+#: the variables ``shape_variables`` writes
+SHAPE_VARIABLES = ("unit_centre_x", "unit_centre_y", "unit_vertex_x", "unit_vertex_y", "rotation_sign", "link_site", "link_point_x", "link_point_y")
+
+
+def shape_variables(shapes, sites: np.ndarray, length_m: float) -> dict:
+    """The ``constants`` (``DatasetWriter``) of a model's ``UnitShapes`` on the saved sites:
+    polygons (site, vertex) and rotation signs per saved unit, the joints between saved units."""
+    if shapes is None:
+        return {}
+    index = np.full(shapes.rotation_sign.size, -1, np.int64)  # unit -> its position along ``site``
+    index[sites] = np.arange(sites.size)
+    keep = (index[shapes.links[:, 0]] >= 0) & (index[shapes.links[:, 1]] >= 0)
+    pts = shapes.link_points[keep] * length_m
+    body = "relative to the unit's centre in the reference configuration"
+    return {
+        "unit_centre_x": (("site",), shapes.centres[sites, 0] * length_m, "m", "x of the unit's centre in the reference configuration"),
+        "unit_centre_y": (("site",), shapes.centres[sites, 1] * length_m, "m", "y of the unit's centre in the reference configuration"),
+        "unit_vertex_x": (("site", "vertex"), shapes.vertices[sites, :, 0] * length_m, "m", f"x of the unit's vertices {body}"),
+        "unit_vertex_y": (("site", "vertex"), shapes.vertices[sites, :, 1] * length_m, "m", f"y of the unit's vertices {body}"),
+        "rotation_sign": (("site",), shapes.rotation_sign[sites], "1", "the unit turns by rotation_sign times theta"),
+        "link_site": (("link", "end"), index[shapes.links[keep]], "1", "the two sites a hinge or ligament joins"),
+        "link_point_x": (("link", "end"), pts[..., 0], "m", f"x of a joint's attachment points {body}"),
+        "link_point_y": (("link", "end"), pts[..., 1], "m", f"y of a joint's attachment points {body}"),
+    }
 
 
 def add_state(system, sites: np.ndarray, site_vars: dict, site_coords: dict,
@@ -247,9 +282,10 @@ class MemoryWriter:
     """
 
     def __init__(self, path: Path, n_site: int, site_vars: dict, time_vars: dict, site_coords: dict,
-                 n_frames: int | None = None):
+                 n_frames: int | None = None, constants: dict | None = None):
         self.path, self.n_site, self.n_frames = Path(path), n_site, n_frames
         self.site_vars, self.time_vars, self.site_coords = site_vars, time_vars, site_coords
+        self.constants = constants or {}
         self.frames: list[tuple[float, dict, dict]] = []
         self.n_written = 0
         self.t_written: float | None = None
@@ -274,6 +310,8 @@ class MemoryWriter:
                               variable_attrs("site", {"units": "1", "long_name": "site index"}))}
         for name, (values, units, long_name, *extra) in self.site_coords.items():
             variables[name] = (("site",), np.asarray(values), _attrs(name, units, long_name, extra))
+        for name, (dims, values, units, long_name) in self.constants.items():
+            variables[name] = (dims, np.asarray(values), _attrs(name, units, long_name, []))
         coord_names = " ".join(self.site_coords)
         for name, (units, long_name, *extra) in self.site_vars.items():
             data = np.array([f[1][name] for f in frames], float).reshape(n, self.n_site)

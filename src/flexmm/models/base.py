@@ -59,6 +59,24 @@ class Predeformation:
 
 
 @dataclass(frozen=True)
+class UnitShapes:
+    """What the rigid units look like and where they are joined (nondimensional lengths): stored
+    with a run's dataset, so that ``flexmm render`` draws any model from it without rebuilding it.
+
+    ``centres`` (N, 2): the units' centres in the reference configuration; ``vertices`` (N, V, 2):
+    each unit's polygon there, relative to its centre; ``rotation_sign`` (N,): a unit turns by rotation_sign · θ (−1 on the counter-rotating
+    sublattice of a staggered θ); ``links`` (L, 2) the units each hinge or ligament joins and
+    ``link_points`` (L, 2, 2) its two attachment points relative to those units' centres.
+    """
+
+    centres: np.ndarray
+    vertices: np.ndarray
+    rotation_sign: np.ndarray
+    links: np.ndarray
+    link_points: np.ndarray
+
+
+@dataclass(frozen=True)
 class RotatingSquaresND:
     """Nondimensional parameters of the uniform rotating-squares lattice (docs/physics.md §1.1).
 
@@ -139,6 +157,8 @@ class System:
     """The static equilibrium q0 was relaxed to (``lattice.predeform``); None for a stress-free start."""
     rotating_squares: RotatingSquaresND | None = None
     """Nondimensional rotating-squares parameters (rotating-squares chain and sheet models); else None."""
+    shapes: UnitShapes | None = None
+    """The units' polygons and joints for drawing (models whose render reads them); else None."""
     initial_displacement_m: np.ndarray | None = None
     """(n_sites,) SI displacements of the initial (relaxed) state, folded into the element shifts so
     that q = 0 there (mass models); None for other models."""

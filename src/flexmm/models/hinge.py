@@ -46,6 +46,31 @@ N_W = 9
 
 
 @jit
+def stretch(dl, rest, hA, cA, hB, cB):
+    """Δl = d_l + r − (h_A cos φ_A + h_B cos φ_B), the hinge's stretch (φ = θ0 + θ). The one
+    place this formula is written: the engine, the gradients and the energies call it."""
+    return dl + rest - fma(hA, cA, hB * cB)
+
+
+@jit
+def skew(hA, sA, hB, sB):
+    """x = h_B sin φ_B − h_A sin φ_A, the hinge's shear without d_s and σ: Δs = d_s + σ x."""
+    return fma(hB, sB, -(hA * sA))
+
+
+@jit
+def stretch_variation(ddl, hA, sA, dta, hB, sB, dtb):
+    """δ(Δl) = δd_l + h_A sin φ_A δφ_A + h_B sin φ_B δφ_B, the stretch's first variation."""
+    return fma(hB * sB, dtb, fma(hA * sA, dta, ddl))
+
+
+@jit
+def skew_variation(hA, cA, dta, hB, cB, dtb):
+    """δx = h_B cos φ_B δφ_B − h_A cos φ_A δφ_A, the unsigned shear's first variation."""
+    return fma(hB * cB, dtb, -(hA * cA) * dta)
+
+
+@jit
 def hinge_law(dl, ds, tA, tB, cA, sA, cB, sB, prm):
     """Energy of one hinge and its derivatives.
 
@@ -55,8 +80,8 @@ def hinge_law(dl, ds, tA, tB, cA, sA, cB, sB, prm):
     hA = prm[H_HALF_A]
     hB = prm[H_HALF_B]
     sig = prm[H_SIGN]
-    el = dl + prm[H_REST] - fma(hA, cA, hB * cB)
-    es = ds + sig * fma(hB, sB, -(hA * sA))
+    el = stretch(dl, prm[H_REST], hA, cA, hB, cB)
+    es = ds + sig * skew(hA, sA, hB, sB)
     ep = tA + tB
     fl = prm[H_KL] * el
     fs = prm[H_KS] * es
@@ -75,11 +100,91 @@ def hinge_torques(fl, w, fp, hA, hB, cA, sA, cB, sB):
 
 
 @jit
+def hinge_products(fl, fs, pl, ps, hA, hB, ca, sa, cb, sb, lta, ltb):
+    """The hinge's second-derivative products along λ, from f_l = k_l Δl, f_s = σ k_s Δs and their
+    variations p_l = k_l δl, p_s = σ k_s δs: with X_A = p_l + f_s λ_A, Y_A = f_l λ_A − p_s,
+    X_B = p_l − f_s λ_B, Y_B = f_l λ_B + p_s, returns (h_A (sin φ_A X_A + cos φ_A Y_A),
+    h_B (sin φ_B X_B + cos φ_B Y_B), sin φ_A Y_A − cos φ_A X_A, sin φ_B Y_B − cos φ_B X_B): the
+    derivatives of D = λ·∇E by θ0_A, θ0_B, h_A, h_B (``hinge_second``). Every adjoint loop of
+    the gradients (general, column, uniform and grid forms) calls this one algebra."""
+    xa = fma(fs, lta, pl)
+    ya = fma(fl, lta, -ps)
+    xb = fma(-fs, ltb, pl)
+    yb = fma(fl, ltb, ps)
+    return hA * fma(sa, xa, ca * ya), hB * fma(sb, xb, cb * yb), fma(sa, ya, -ca * xa), fma(sb, yb, -cb * xb)
+
+
+@jit
+def hinge_second(dlq, dsq, ep, dll, dsl, lta, ltb, rest, hA, hB, sig, kl, ks, kt, ca, sa, cb, sb):
+    """One hinge's second derivatives along λ, from scalars (no arrays: it inlines into loops).
+
+    dlq, dsq: the relative displacements of B and A along and across the hinge axis; ep = θ_A + θ_B;
+    dll, dsl: the same differences of λ; lta, ltb: λ at θ_A, θ_B; then the hinge's parameters
+    and cos/sin of φ = θ0 + θ at A and B. With the levers a_s = h_A sin φ_A, a_c = h_A cos φ_A
+    (b_s, b_c at B), the stretch, shear and bend of ``models.hinge``
+
+        el = d_l + r − (a_c + b_c),   es = d_s + σ (b_s − a_s),   ep = θ_A + θ_B,
+
+    their variations along λ δl = λ_l + a_s λ_A + b_s λ_B, δs = λ_s + σ (b_c λ_B − a_c λ_A),
+    δp = λ_A + λ_B, and D = λ·∇E = k_l el δl + k_s es δs + k_θ ep δp: with f_l = k_l el,
+    f_s = σ k_s es, p_l = k_l δl, p_s = σ k_s δs and X_A = p_l + f_s λ_A, Y_A = f_l λ_A − p_s,
+    X_B = p_l − f_s λ_B, Y_B = f_l λ_B + p_s,
+
+        ∂D/∂θ0_A = a_s X_A + a_c Y_A,   ∂D/∂θ_A = ∂D/∂θ0_A + k_θ δp,   ∂D/∂h_A = sin φ_A Y_A − cos φ_A X_A
+
+    (B likewise), ∂D/∂d_l = ∂D/∂r = p_l, ∂D/∂d_s = k_s δs, ∂D/∂k_l = el δl, ∂D/∂k_s = es δs,
+    ∂D/∂k_θ = ep δp. Returns (p_l, k_s δs, ∂D/∂θ_A, ∂D/∂θ_B, ∂D/∂θ0_A, ∂D/∂θ0_B, ∂D/∂h_A,
+    ∂D/∂h_B, ∂D/∂k_l, ∂D/∂k_s, ∂D/∂k_θ): the Hessian-vector and parameter products of the
+    force are these negated.
+    """
+    el = stretch(dlq, rest, hA, ca, hB, cb)
+    es = dsq + sig * skew(hA, sa, hB, sb)
+    dl = stretch_variation(dll, hA, sa, lta, hB, sb, ltb)
+    ds = dsl + sig * skew_variation(hA, ca, lta, hB, cb, ltb)
+    dp = lta + ltb
+    kdp = kt * dp
+    pl = kl * dl
+    pss = ks * ds
+    t0a, t0b, gha, ghb = hinge_products(kl * el, sig * (ks * es), pl, sig * pss, hA, hB, ca, sa, cb, sb, lta, ltb)
+    return pl, pss, t0a + kdp, t0b + kdp, t0a, t0b, gha, ghb, el * dl, es * ds, ep * dp
+
+
+@jit
+def hinge_tangent_terms(dlq, dsq, ep, ddl, dds, dta, dtb, dt0a, dt0b, rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB,
+                        dkl, dks, dkt, ca, sa, cb, sb):
+    """One hinge's tangent from scalars: the variations (d f_l, d f_s, d g_A, d g_B) of its
+    (∂E/∂d_l, ∂E/∂d_s, ∂E/∂θ_A, ∂E/∂θ_B) along δq and δp (the force's tangent is their negation).
+
+    dlq, dsq, ep as ``hinge_second``; ddl, dds: the differences of δq along and across the axis;
+    dta, dtb: δθ_A, δθ_B; dt0a, dt0b: δθ0 of the units; drest … dkt: δ of the hinge's parameters.
+    With δφ = δθ0 + δθ, ∂E/∂θ_A = f_l h_A sin φ_A − σ f_s h_A cos φ_A + f_p (f = k × strain;
+    likewise B with + σ), differentiated factor by factor.
+    """
+    el = stretch(dlq, rest, hA, ca, hB, cb)
+    es = dsq + sig * skew(hA, sa, hB, sb)
+    dpa = dt0a + dta
+    dpb = dt0b + dtb
+    # the strains are linear in (d, r, h): their parameter variations are the strains of (δd, δr, δh)
+    d_el = stretch_variation(stretch(ddl, drest, dhA, ca, dhB, cb), hA, sa, dpa, hB, sb, dpb)
+    d_es = dds + sig * (skew(dhA, sa, dhB, sb) + skew_variation(hA, ca, dpa, hB, cb, dpb))
+    d_fa = dhA * sa + hA * ca * dpa  # d(h_A sin φ_A)
+    d_fb = dhB * sb + hB * cb * dpb
+    d_ga = dhA * ca - hA * sa * dpa  # d(h_A cos φ_A)
+    d_gb = dhB * cb - hB * sb * dpb
+    d_fl = dkl * el + kl * d_el
+    d_fs = dks * es + ks * d_es
+    d_fp = dkt * ep + kt * (dta + dtb)
+    fl, fs = kl * el, ks * es
+    return (d_fl, d_fs, d_fl * hA * sa + fl * d_fa - sig * (d_fs * hA * ca + fs * d_ga) + d_fp,
+            d_fl * hB * sb + fl * d_fb + sig * (d_fs * hB * cb + fs * d_gb) + d_fp)
+
+
+@jit
 def hinge_forces(dl, ds, tA, tB, cA, sA, cB, sB, rest, hA, hB, sig, kl, ks, kt):
     """``hinge_law``'s (∂E/∂d_l, ∂E/∂d_s, ∂E/∂θ_A, ∂E/∂θ_B) from scalar parameters (same
     operations: the same results), for loops that vectorise."""
-    el = dl + rest - fma(hA, cA, hB * cB)
-    es = ds + sig * fma(hB, sB, -(hA * sA))
+    el = stretch(dl, rest, hA, cA, hB, cB)
+    es = ds + sig * skew(hA, sA, hB, sB)
     fl = kl * el
     fs = ks * es
     gA, gB = hinge_torques(fl, fs * sig, kt * (tA + tB), hA, hB, cA, sA, cB, sB)
@@ -93,8 +198,8 @@ def chain_hinge_terms(du, ta, tb, ca, sa, cb, sb, rest, hA, hB, kl, ks, kt):
     sites, then its law's parameters. The shear sign σ = ±1 drops out (σ k_s σ x = k_s x
     exactly), so these are ``hinge_law``'s results for d_s = 0, bit for bit. The design
     sweeps (design/kernels.py) call this too, so their forces have the same bits."""
-    el = du + rest - fma(hA, ca, hB * cb)
-    x = fma(hB, sb, -(hA * sa))
+    el = stretch(du, rest, hA, ca, hB, cb)
+    x = skew(hA, sa, hB, sb)
     fl = kl * el
     xs = ks * x
     ga, gb = hinge_torques(fl, xs, kt * (ta + tb), hA, hB, ca, sa, cb, sb)
@@ -480,8 +585,8 @@ def chain_energy(q, args):
         rest, hA, hB, sig = hprm[a:, H_REST], hprm[a:, H_HALF_A], hprm[a:, H_HALF_B], hprm[a:, H_SIGN]
         kl, ks, kt = hprm[a:, H_KL], hprm[a:, H_KS], hprm[a:, H_KT]
         for i in range(m - 1):
-            el = qu[i + 1] - qu[i] + rest[i] - (hA[i] * bc[i] + hB[i] * bc[i + 1])
-            es = sig[i] * (hB[i] * bs[i + 1] - hA[i] * bs[i])
+            el = stretch(qu[i + 1] - qu[i], rest[i], hA[i], bc[i], hB[i], bc[i + 1])
+            es = sig[i] * skew(hA[i], bs[i], hB[i], bs[i + 1])
             ep = qt[i] + qt[i + 1]
             y[i] = 0.5 * (kl[i] * el * el + ks[i] * es * es + kt[i] * ep * ep)
         total += lane_sum(x, ms) + lane_sum(y, m - 1)

@@ -19,6 +19,7 @@ from numba.extending import overload
 from flexmm._jit import JIT_OPTIONS, NO_JIT
 from flexmm.models.harmonic import HarmonicArgs, harmonic_energy, harmonic_force, harmonic_reference
 from flexmm.models.hinge import ChainArgs, chain_energy, chain_force, chain_force_parallel, chain_reference
+from flexmm.models.ligaments import NetworkArgs, network_energy, network_force, network_reference
 from flexmm.models.mass_kernels import MassArgs, mass_energy, mass_force, mass_reference
 from flexmm.models.loads import (
     LoadedChainArgs,
@@ -52,6 +53,7 @@ KERNELS: dict[type, ModelKernels] = {
     MassArgs: ModelKernels(mass_force, mass_energy, mass_reference),
     HarmonicArgs: ModelKernels(harmonic_force, harmonic_energy, harmonic_reference),
     TriangleArgs: ModelKernels(triangle_force, triangle_energy, triangle_reference),
+    NetworkArgs: ModelKernels(network_force, network_energy, network_reference),
 }
 
 

@@ -1,7 +1,9 @@
 """Scalar energy laws E(z) for bonds and on-site terms of chains of masses (docs/physics.md §2).
 
 One compiled function, ``law(code, z, prm, tab) -> (E, dE/dz)``, evaluates every law with its
-exact derivative. A bond between sites i and j feeds it the elongation z = x_j − x_i + s, an
+exact derivative; ``law_second(code, z, prm, tab, dprm) -> d²E/dz²`` gives its second derivative
+and the derivatives of dE/dz by the row's parameters (what the gradients' adjoint and tangent
+steps need), branch by branch beside it. Tests check both against finite differences of ``law``. A bond between sites i and j feeds it the elongation z = x_j − x_i + s, an
 on-site term the displacement z = x_i + s, where s = ``prm[0]`` is a per-element shift (rest
 offset, prestretch, or the relaxed initial state). The law is lifted over index arrays by the
 model (``flexmm.models.mass_chain``); parameters live in per-element rows of width
@@ -119,6 +121,96 @@ def law(code, z, prm, tab):
     # SINE
     kz = prm[2] * z
     return prm[1] * (1.0 - math.cos(kz)), prm[1] * prm[2] * math.sin(kz)
+
+
+@jit
+def law_second(code, z, prm, tab, dprm):
+    """E''(z) of one law element and ∂E'/∂prm_c into ``dprm`` (N_LAW_PRM,), c = 0 the shift.
+
+    Matches ``laws.law`` branch by branch (same clipping: a clipped dipole gap and a Hertz
+    contact out of touch have zero derivatives).
+    """
+    for c in range(dprm.shape[0]):
+        dprm[c] = 0.0
+    z = z + prm[0]
+    d2 = 0.0
+    if code == POLY:
+        zp = 1.0  # z^(n−1)
+        zq = 0.0  # z^(n−2)
+        for n in range(1, POLY_DEGREE + 1):
+            dprm[n] = n * zp
+            d2 += n * (n - 1) * prm[n] * zq
+            zq = zp
+            zp *= z
+    elif code == HERTZ:
+        delta = prm[3] - z
+        if delta > 0.0:
+            a, p = prm[1], prm[2]
+            dp = delta**p
+            d2 = a * p * delta ** (p - 1.0)
+            dprm[1] = -dp
+            dprm[2] = -a * dp * math.log(delta)
+            dprm[3] = -d2
+    elif code == TODA:
+        a, b = prm[1], prm[2]
+        ex = math.exp(-b * z)
+        d2 = a * b * ex
+        dprm[1] = 1.0 - ex
+        dprm[2] = a * z * ex
+    elif code == DIPOLE:
+        d0 = prm[2]
+        gap = prm[2] + z
+        if gap > DIPOLE_MIN_GAP * d0:
+            c0, p = prm[1], prm[3]
+            gp = gap ** (-p - 1.0)
+            d2 = p * (p + 1.0) * c0 * gp / gap
+            dprm[1] = -p * gp
+            dprm[2] = d2
+            dprm[3] = -c0 * gp * (1.0 - p * math.log(gap))
+        else:  # clipped: E' = −p C (ε d)^(−p−1), constant in z
+            c0, p = prm[1], prm[3]
+            g0 = DIPOLE_MIN_GAP * d0
+            gp = g0 ** (-p - 1.0)
+            dprm[1] = -p * gp
+            dprm[2] = p * (p + 1.0) * c0 * gp / d0
+            dprm[3] = -c0 * gp * (1.0 - p * math.log(g0))
+    elif code == TABLE:
+        d2 = _table_second(z, int(prm[1]), int(prm[2]), tab)
+    else:  # SINE
+        a, k = prm[1], prm[2]
+        kz = k * z
+        d2 = a * k * k * math.cos(kz)
+        dprm[1] = k * math.sin(kz)
+        dprm[2] = a * math.sin(kz) + a * kz * math.cos(kz)
+    if code != DIPOLE or prm[2] + z > DIPOLE_MIN_GAP * prm[2]:
+        dprm[0] = d2
+    return d2
+
+
+@jit
+def _table_second(z, start, n, tab):
+    """d²E/dz² of a tabulated law (the slope of its spline force, linear beyond the knots)."""
+    x0 = tab[start]
+    x1 = tab[start + n - 1]
+    m = n - 1
+    _, c1, c2, c3 = table_columns(start, n)
+    if z <= x0:
+        return tab[c1]
+    if z >= x1:
+        k = m - 1
+        h = x1 - tab[start + k]
+        return tab[c1 + k] + h * (2.0 * tab[c2 + k] + 3.0 * h * tab[c3 + k])
+    lo = table_piece(z, start, n, tab)
+    s = z - tab[start + lo]
+    return tab[c1 + lo] + s * (2.0 * tab[c2 + lo] + 3.0 * s * tab[c3 + lo])
+
+
+@jit
+def energies(code, z, rows, tab, out):
+    """E of law ``code`` at z[m, e] with element e's row (``rows`` (k, N_LAW_PRM)) into out (M, k)."""
+    for m in range(z.shape[0]):
+        for e in range(z.shape[1]):
+            out[m, e] = law(code, z[m, e], rows[e], tab)[0]
 
 
 # ---------------------------------------------------------------- rows and tables

@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
-from flexmm.models.base import FieldSpec, System
+from flexmm.models.base import FieldSpec, System, UnitShapes
 from flexmm.models.rotating_sheet import edge_sites
 from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN, N_HINGE_PARAMS
 from flexmm.models.triangle_kernels import TriangleArgs
@@ -131,7 +131,30 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
         grid_shape=(n_rows, n_cols) if n_rows > 1 else None,
         site_coord_attrs=COORD_ATTRS if n_rows > 1 else {},
         neighbour_pairs=np.stack([args.hinge_a[rows], args.hinge_b[rows]], 1),
+        shapes=shapes(args, sublattice_sign(n_rows, n_cols), np.stack([x, y], 1)),
     )
+
+
+def shapes(args, sigma: np.ndarray, centres: np.ndarray) -> UnitShapes:
+    """The triangles (vertices at 90°, 210°, 330° from the centroid pointing up, 270°, 30°, 150°
+    pointing down, turned by σθ0) and their hinges' points r_A = h_A R(σ_A θ0) e,
+    r_B = −h_B R(σ_B θ0) e (e the hinge axis), as ``triangle_kernels`` places them; a periodic
+    wrap's hinge (its points far apart in the reference configuration) is left out of the drawing."""
+    phi0 = sigma * args.theta0
+    ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad([90.0, 210.0, 330.0])[None, :] + phi0[:, None]
+    vertices = HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
+    e = np.stack([args.axis_cos, args.axis_sin], 1)
+
+    def turned(vec, phi):
+        c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        return np.concatenate([c * vec[:, :1] - s * vec[:, 1:], s * vec[:, :1] + c * vec[:, 1:]], 1)
+
+    ha, hb, hprm = args.hinge_a, args.hinge_b, args.hinge_prm
+    r_a = turned(hprm[:, H_HALF_A, None] * e, phi0[ha])
+    r_b = turned(-hprm[:, H_HALF_B, None] * e, phi0[hb])
+    drawn = np.hypot(*(centres[hb] + r_b - centres[ha] - r_a).T) < 1e-9  # the periodic wraps are not drawn
+    return UnitShapes(centres, vertices, sigma.copy(), np.stack([ha, hb], 1)[drawn],
+                      np.stack([r_a, r_b], 1)[drawn])
 
 
 def build_chain(cfg: RotatingTrianglesChain) -> System:

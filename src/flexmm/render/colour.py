@@ -15,7 +15,7 @@ import numpy as np
 from flexmm.errors import UsageError
 from flexmm.render.masses import onsite_barriers, site_energy_j, well_index
 from flexmm.render.rigid import unit_energy_j
-from flexmm.render.structure import MassStructure, RigidStructure
+from flexmm.render.structure import MassStructure, RigidStructure, ShapeStructure
 
 SPECIAL = ("energy", "well", "none")
 SYMBOLS = {"u": "u", "v": "v", "theta": "θ", "u_dot": "du/dt", "v_dot": "dv/dt", "theta_dot": "dθ/dt"}
@@ -58,6 +58,8 @@ class Colouring:
 
 def default_colour(source, structure) -> str:
     """theta for rotating units, the well for bistable lattices, else the velocity or u."""
+    if isinstance(structure, ShapeStructure):
+        return "theta"
     if isinstance(structure, RigidStructure):
         return "well" if structure.p.joint is not None else "theta"
     if onsite_barriers_present(structure):
@@ -84,6 +86,8 @@ def _field(name: str, source) -> Colouring:
 
 
 def _energy(source, structure) -> Colouring:
+    if isinstance(structure, ShapeStructure):
+        raise UsageError(f"--color energy is not available for {source.model} (colour by a field instead)")
     rates = [r for r in ("u_dot", "v_dot", "theta_dot") if r in source.fields]
     if isinstance(structure, RigidStructure):
         p = structure.p
@@ -112,6 +116,8 @@ def _energy(source, structure) -> Colouring:
 
 
 def _well(source, structure, samples_u: list[np.ndarray] | None) -> Colouring:
+    if isinstance(structure, ShapeStructure):
+        raise UsageError(f"--color well: {source.model} has no multistable elements (use a field)")
     if isinstance(structure, RigidStructure):
         p = structure.p
         if p.joint is None:

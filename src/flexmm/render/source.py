@@ -13,7 +13,7 @@ from typing import Self
 import numpy as np
 
 from flexmm.errors import UsageError
-from flexmm.io.run_dataset import REST_SUFFIX
+from flexmm.io.run_dataset import REST_SUFFIX, SHAPE_VARIABLES
 
 #: bytes of field data read per block of frames
 BLOCK_BYTES = 16 * 2**20
@@ -56,6 +56,8 @@ class RunSource:
         self.fields = [name for name, var in f.variables.items() if var.dimensions == ("time", "site")]
         self.coords = {name: np.asarray(var[...]) for name, var in f.variables.items()
                        if var.dimensions == ("site",) and name != "site"}
+        #: the units' shapes and joints, where the model stores them (io.run_dataset.shape_variables)
+        self.shapes = {name: np.asarray(f.variables[name][...]) for name in SHAPE_VARIABLES if name in f.variables}
         # the rest state of the fields measured from the reference configuration, where it is not
         # zero (a predeformed run); fields measured from the rest state (mass models) need none
         self.rest = {name[: -len(REST_SUFFIX)]: np.asarray(v, float) for name, v in self.coords.items()

@@ -112,6 +112,50 @@ class RigidStructure:
         return self.p.n_lateral
 
 
+class ShapeStructure:
+    """Rigid units drawn from the shapes their dataset stores (any model that stores them): each
+    unit's polygon placed by (u, v) and turned by rotation_sign · θ, each joint a line between its
+    two attachment points."""
+
+    def __init__(self, shapes: dict, sites: np.ndarray, coords: dict, rest: dict, scale: float):
+        self.sites, self.rest, self.scale = sites, rest, scale
+        self.vertices = np.stack([shapes["unit_vertex_x"], shapes["unit_vertex_y"]], -1)  # (n, V, 2)
+        self.sign = np.asarray(shapes.get("rotation_sign", np.ones(sites.size)), float)
+        self.links = np.asarray(shapes.get("link_site", np.zeros((0, 2), np.int64)), np.int64)
+        self.link_points = np.stack([shapes.get("link_point_x", np.zeros((0, 2))),
+                                     shapes.get("link_point_y", np.zeros((0, 2)))], -1)  # (L, 2, 2)
+        self.rest_xy = np.stack([shapes["unit_centre_x"], shapes["unit_centre_y"]], 1)
+        self.col = np.asarray(coords.get("col", sites), np.int64)
+        self.row = np.asarray(coords.get("row", np.zeros(sites.size)), np.int64)
+        self.fields = ["u", "v", "theta"]
+        gaps = np.hypot(*(self.rest_xy[self.links[:, 1]] - self.rest_xy[self.links[:, 0]]).T)
+        self.spacing_m = float(np.median(gaps)) if gaps.size else float(np.ptp(self.vertices[..., 0]))
+
+    def draw(self, frame: dict) -> Drawing:
+        """The units' polygons and the joints' lines at one frame."""
+        n = self.sites.size
+        centres = self.rest_xy.copy()
+        centres[:, 0] += _scaled(frame, self.rest, "u", self.scale, n)
+        centres[:, 1] += _scaled(frame, self.rest, "v", self.scale, n)
+        phi = self.sign * _scaled(frame, self.rest, "theta", self.scale, n)
+        c, s = np.cos(phi), np.sin(phi)
+
+        def placed(unit, body):  # centre + R(φ) body, body (..., 2) for each unit
+            cu, su = c[unit], s[unit]
+            x = cu * body[..., 0] - su * body[..., 1]
+            y = su * body[..., 0] + cu * body[..., 1]
+            return centres[unit] + np.stack([x, y], -1)
+
+        units = np.arange(n)
+        polygons = placed(units[:, None], self.vertices)
+        lines = np.stack([placed(self.links[:, k], self.link_points[:, k]) for k in range(2)], 1)
+        return Drawing(polygons=polygons, lines=lines if lines.size else None)
+
+    def colour_repeats(self) -> int:
+        """No ghost rows."""
+        return 0
+
+
 class MassStructure:
     """Masses as bodies at rest + (initial displacement + u) along their branch, bonds as springs."""
 
@@ -169,6 +213,8 @@ def make_structure(source, lattice, shape: str | None, scale: float):
     kind = lattice.kind
     if "x" not in source.coords:
         raise UsageError(f"{source.path} has no site positions (coordinate 'x'): cannot draw its structure")
+    if source.shapes:
+        return ShapeStructure(source.shapes, source.sites, source.coords, source.rest, scale)
     if kind in RIGID_KINDS:
         shape = shape or DEFAULT_SHAPE[kind]
         return RigidStructure(rigid_params(lattice), source.sites, source.coords, source.rest, shape, scale)
@@ -179,4 +225,4 @@ def make_structure(source, lattice, shape: str | None, scale: float):
     raise UsageError(f"cannot draw model {kind!r}")
 
 
-__all__ = ["Drawing", "MassStructure", "RigidStructure", "make_structure", "springs"]
+__all__ = ["Drawing", "MassStructure", "RigidStructure", "ShapeStructure", "make_structure", "springs"]

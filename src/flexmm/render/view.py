@@ -11,7 +11,7 @@ from flexmm.errors import UsageError
 from flexmm.render.colour import Colouring
 from flexmm.render.figure import bounds
 from flexmm.render.source import RunSource
-from flexmm.render.structure import Drawing, MassStructure, RigidStructure
+from flexmm.render.structure import Drawing, MassStructure, RigidStructure, ShapeStructure
 
 #: rows of the space–time diagram at most
 SPACETIME_ROWS = 600
@@ -35,6 +35,8 @@ class SpaceTime:
 def columns(structure) -> np.ndarray:
     """Column (chain: unit) index of each drawn site, for --sites and the space–time diagram."""
     sites = structure.sites
+    if isinstance(structure, ShapeStructure):
+        return structure.col
     if isinstance(structure, RigidStructure):
         return sites % structure.p.n_cols
     if structure.p.grid_shape is not None:
@@ -45,6 +47,8 @@ def columns(structure) -> np.ndarray:
 def rows(structure) -> np.ndarray:
     """Row index of each drawn site (0 for chains and networks)."""
     sites = structure.sites
+    if isinstance(structure, ShapeStructure):
+        return structure.row
     if isinstance(structure, RigidStructure):
         return sites // structure.p.n_cols
     if structure.p.grid_shape is not None:

@@ -1,0 +1,68 @@
+"""Config block of the general rigid-unit network (docs/physics.md §1.9).
+
+Rigid polygons joined vertex to vertex by ligaments, each with the paper's three linear springs
+(k_l along its axis, k_s across it, k_θ on the relative rotation of the two units). The geometry
+comes from a generator: ``rotating_squares`` (the units of ``rotating_squares_sheet``, any θ0 and
+ligament length, rotations unstaggered) or ``random_quads`` (the same lattice with every vertex of
+every unit moved at random by up to ``vertex_jitter`` of a, seeded: the quads of a disordered sheet).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+from pydantic import Field, model_validator
+
+from flexmm.config.base import EdgeCondition, Finite, NonNegative, Positive, Strict
+
+
+class RigidNetwork(Strict):
+    """Rigid polygons joined by ligaments at their vertices, from a geometry generator; u, v, θ
+    per unit (θ the rotation from the reference geometry, not staggered). Unit = row · n_cols + col."""
+
+    kind: Literal["rigid_network"]
+    #: per-site coordinates of the built model, in state order (models.network.FIELDS)
+    FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
+
+    pattern: Literal["rotating_squares", "random_quads"] = Field(
+        "rotating_squares", description="geometry generator: squares of diagonal a at rest rotations ±θ0 "
+        "(checkerboard), or the same with every vertex moved at random (random_quads)")
+    n_rows: int = Field(ge=1, le=100_000)
+    n_cols: int = Field(ge=2, le=100_000)
+    a_m: Positive = Field(description="vertex-to-vertex size (diagonal) of a unit (m)")
+    theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad), alternating in sign")
+    ligament_length_m: NonNegative = Field(0.0, description="rest length of every ligament (m)")
+    vertex_jitter: NonNegative = Field(
+        0.0, le=0.2, description="random_quads: largest vertex displacement as a fraction of a")
+    seed: int = Field(0, ge=0, description="random_quads: seed of the vertex displacements")
+    k_long_n_per_m: Positive = Field(description="ligament stiffness along its axis k_l (N/m)")
+    k_shear_n_per_m: NonNegative = Field(description="ligament stiffness across its axis k_s (N/m)")
+    k_rot_n_m_per_rad: NonNegative = Field(description="ligament rotational stiffness k_θ (N m/rad)")
+    areal_density_kg_m2: Positive = Field(
+        description="mass per area of the units: each unit's mass and polar inertia follow from its polygon")
+    left: EdgeCondition = "free"
+    right: EdgeCondition = "free"
+    bottom: EdgeCondition = "free"
+    top: EdgeCondition = "free"
+
+    @property
+    def n_sites(self) -> int:
+        return self.n_rows * self.n_cols
+
+    @property
+    def n_units(self) -> int:
+        return self.n_rows * self.n_cols
+
+    def small_copy(self, n: int):
+        """The same network cut to at most about ``n`` units (for cheap estimates; not validated)."""
+        side = max(2, int(n**0.5))
+        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side)})
+
+    @model_validator(mode="after")
+    def _check(self):
+        for a, b in (("left", "right"), ("bottom", "top")):
+            if "periodic" in (getattr(self, a), getattr(self, b)):
+                raise ValueError(f"{a}/{b}: a rigid_network's edges are free or fixed (periodic is not supported yet)")
+        if self.pattern == "rotating_squares" and self.vertex_jitter:
+            raise ValueError("vertex_jitter moves the vertices of random_quads: set pattern: random_quads")
+        return self

@@ -1,0 +1,116 @@
+"""The general rigid-unit ligament law (flexmm.models.ligaments, docs/physics.md §1.9).
+
+Oracles: the numpy reference, finite differences of the energy (force) and of the force
+(Hessian-vector product), zero net force, and the rotating-squares sheet's own kernel — the
+sheet is this law on its hinge points, so the two give the same forces.
+"""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from flexmm.config import scene_from_dict
+from flexmm.models import MODELS
+from flexmm.models import ligaments as lg
+from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN
+
+
+def random_network(rng, n=7, n_lig=15):
+    """Units at random centres with ligaments between random points, axes and stiffnesses."""
+    ua = rng.integers(0, n, n_lig)
+    ub = (ua + rng.integers(1, n, n_lig)) % n
+    lig = np.zeros((n_lig, lg.N_LIGAMENT_PARAMS))
+    lig[:, [lg.L_AX, lg.L_AY, lg.L_BX, lg.L_BY, lg.L_OX, lg.L_OY]] = rng.normal(size=(n_lig, 6))
+    ang = rng.uniform(0, 2 * np.pi, n_lig)
+    lig[:, lg.L_EX], lig[:, lg.L_EY] = np.cos(ang), np.sin(ang)
+    lig[:, [lg.L_KL, lg.L_KS, lg.L_KT]] = rng.uniform(0.2, 2.0, (n_lig, 3))
+    args = lg.NetworkArgs(ua.astype(np.int64), ub.astype(np.int64), lig, np.empty(n), np.empty(n))
+    return args, 0.3 * rng.normal(size=3 * n)
+
+
+def force(q, args):
+    f = np.empty(q.size)
+    lg.network_force(q, args, f)
+    return f
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_network_force_is_minus_the_energy_gradient_and_matches_the_reference(seed):
+    args, q = random_network(np.random.default_rng(seed))
+    f = force(q, args)
+    e_ref, f_ref = lg.network_reference(q, args)
+    assert lg.network_energy(q, args) == pytest.approx(e_ref, rel=1e-13)
+    assert_allclose(f, f_ref, rtol=0, atol=1e-13 * np.abs(f_ref).max())
+    h = 1e-6
+    fd = np.empty_like(q)
+    for k in range(q.size):
+        up, dn = q.copy(), q.copy()
+        up[k] += h
+        dn[k] -= h
+        fd[k] = -(lg.network_energy(up, args) - lg.network_energy(dn, args)) / (2 * h)
+    assert_allclose(f, fd, rtol=0, atol=1e-7 * np.abs(f).max())
+    n = q.size // 3
+    assert abs(f[:n].sum()) < 1e-12 and abs(f[n : 2 * n].sum()) < 1e-12  # internal forces balance
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_network_hessian_vector_product_is_the_force_derivative(seed):
+    rng = np.random.default_rng(seed)
+    args, q = random_network(rng)
+    dq = rng.normal(size=q.size)
+    hv = np.empty_like(q)
+    lg.network_hvp(q, args, dq, hv)
+    h = 1e-6
+    fd = -(force(q + h * dq, args) - force(q - h * dq, args)) / (2 * h)
+    assert_allclose(hv, fd, rtol=0, atol=1e-7 * np.abs(hv).max())
+
+
+def sheet_as_network(system):
+    """The ligament table of a rotating-squares sheet: its hinge points at rest, each hinge's
+    axis, and its rest offset (the rest length along the axis, no shear offset)."""
+    ha, hb, hax, hprm, theta0 = system.args[:5]
+    n = theta0.size
+    # σ_A from the hinge sign (σ_A on x hinges, −σ_A on y hinges); σ_B = −σ_A
+    sig_a = np.where(hax == 0, hprm[:, H_SIGN], -hprm[:, H_SIGN])
+    sigma = np.zeros(n)
+    sigma[ha], sigma[hb] = sig_a, -sig_a
+    phi0 = sigma * theta0  # the units' orientations at rest
+    lig = np.zeros((ha.size, lg.N_LIGAMENT_PARAMS))
+    x = hax == 0
+    hA, hB = hprm[:, H_HALF_A], hprm[:, H_HALF_B]
+    ca, sa, cb, sb = np.cos(phi0[ha]), np.sin(phi0[ha]), np.cos(phi0[hb]), np.sin(phi0[hb])
+    # x hinge: right corner of A, left corner of B; y hinge: top of A, bottom of B
+    lig[:, lg.L_AX], lig[:, lg.L_AY] = np.where(x, hA * ca, -hA * sa), np.where(x, hA * sa, hA * ca)
+    lig[:, lg.L_BX], lig[:, lg.L_BY] = np.where(x, -hB * cb, hB * sb), np.where(x, -hB * sb, -hB * cb)
+    lig[:, lg.L_OX], lig[:, lg.L_OY] = np.where(x, hprm[:, H_REST], 0.0), np.where(x, 0.0, hprm[:, H_REST])
+    lig[:, lg.L_EX], lig[:, lg.L_EY] = np.where(x, 1.0, 0.0), np.where(x, 0.0, 1.0)
+    lig[:, lg.L_KL], lig[:, lg.L_KS], lig[:, lg.L_KT] = hprm[:, H_KL], hprm[:, H_KS], hprm[:, H_KT]
+    return lg.NetworkArgs(ha, hb, lig, np.empty(n), np.empty(n)), sigma
+
+
+@pytest.mark.parametrize("lattice", [
+    {"n_rows": 4, "n_cols": 5, "theta0_rad": 0.25},
+    {"n_rows": 3, "n_cols": 6, "theta0_rad": 0.1, "ligament_length_m": 0.002, "left": "periodic",
+     "right": "periodic"},
+])
+def test_rotating_squares_sheet_is_the_ligament_law_on_its_hinge_points(lattice):
+    """The sheet's kernel and the general law on the sheet's geometry give the same forces (θ of
+    the sheet is staggered: the units' rotations are σθ, their torques σ times the sheet's)."""
+    cfg = {"kind": "rotating_squares_sheet", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
+           "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0, **lattice}
+    scene = scene_from_dict({"name": "t", "lattice": cfg, "solver": {"duration_s": 1e-3}})
+    system = MODELS["rotating_squares_sheet"].build(scene.lattice)
+    net, sigma = sheet_as_network(system)
+    n = sigma.size
+    rng = np.random.default_rng(5)
+    for amplitude in (0.0, 0.05, 0.4):
+        q = amplitude * rng.normal(size=3 * n)
+        f_sheet = np.empty(3 * n)
+        system.force(q, system.args, f_sheet)
+        qn = q.copy()
+        qn[2 * n :] *= sigma
+        f_net = force(qn, net)
+        f_net[2 * n :] *= sigma
+        scale = max(np.abs(f_sheet).max(), 1.0)
+        assert_allclose(f_net, f_sheet, rtol=0, atol=1e-13 * scale)
+        assert lg.network_energy(qn, net) == pytest.approx(system.energy(q, system.args), rel=1e-13, abs=1e-15)
