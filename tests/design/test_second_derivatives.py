@@ -74,6 +74,10 @@ LATTICES |= {
                         "variation": [{"kind": "gradient", "target": "k_rot_n_m_per_rad", "start": 0.4,
                                        "end": 0.8}]},
     "harmonic": None,  # no scene: ``HarmonicArgs`` directly
+    "network-quads": {"kind": "rigid_network", "pattern": "random_quads", "vertex_jitter": 0.1, "seed": 2,
+                      "n_rows": 2, "n_cols": 3, "a_m": 0.01, "theta0_rad": 0.2, "ligament_length_m": 0.001,
+                      "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3, "k_rot_n_m_per_rad": 2e-3,
+                      "areal_density_kg_m2": 20.0},
     # configs/g_magnetic_bistable_unidirectional.yaml's laws (a chain of masses: dipole bonds to
     # first and second neighbours, an asymmetric double well on site)
     "mass-dipole-bistable": {"kind": "mass_chain", "n_units": 7, "spacing_m": 0.02, "mass_kg": 0.005,

@@ -77,6 +77,7 @@ from flexmm.models.hinge import (
     stretch,
     stretch_variation,
 )
+from flexmm.models.ligaments import NetworkArgs, network_adjoint, network_pack, network_tangent, network_unpack
 from flexmm.models.loads import LoadedChainArgs
 from flexmm.models.mass_kernels import MassArgs
 from flexmm.models.sheet_kernels import SheetArgs
@@ -1031,6 +1032,7 @@ ADJOINT_KERNELS: dict[type, AdjointKernels] = {
                                     unpack=loaded_chain_unpack),
     TriangleArgs: AdjointKernels(triangle_adjoint, triangle_tangent, ("hinge_prm", "theta0")),
     HarmonicArgs: AdjointKernels(harmonic_adjoint, harmonic_tangent, pack=harmonic_pack, unpack=harmonic_unpack),
+    NetworkArgs: AdjointKernels(network_adjoint, network_tangent, pack=network_pack, unpack=network_unpack),
 }
 
 

@@ -167,6 +167,108 @@ def network_hvp(q, args, dq, out):
         out[2 * n + a] -= fma(ky, pax, -(kx * pay)) - ta * fma(fx, pax, fy * pay) + kp
 
 
+@jit
+def _strain_variation(q, lam, n, a, b, pax, pay, pbx, pby):
+    """(w_x, w_y, δΔφ): the variation of the gap g and of θ_b − θ_a along λ (δg of ``network_hvp``)."""
+    ta, tb = lam[2 * n + a], lam[2 * n + b]
+    wx = (lam[b] - lam[a]) - (tb * pby - ta * pay)
+    wy = (lam[n + b] - lam[n + a]) + (tb * pbx - ta * pax)
+    return wx, wy, tb - ta
+
+
+@jit
+def network_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ = −∇²E λ added to ``out`` and (∂F/∂p)ᵀλ = −∂(λ·∇E)/∂p to g1 (the ligament table's
+    gradient, (L, N_LIGAMENT_PARAMS); g2 unused). With w = δg along λ, K = k_l e eᵀ + k_s n nᵀ and
+    G = K g: λ·∇E = gᵀK w + k_θ Δφ δΔφ, so ∂/∂o = K w, ∂/∂r_b = R(θ_b)ᵀ (K w − λ_θb J G),
+    ∂/∂r_a = −R(θ_a)ᵀ (K w − λ_θa J G), ∂/∂k_l = (g·e)(w·e), ∂/∂k_s = (g·n)(w·n),
+    ∂/∂k_θ = Δφ δΔφ, and ∂/∂e from e and n = (−e_y, e_x)."""
+    ua, ub, lig, cs, sn = args
+    n = cs.shape[0]
+    hv = np.empty_like(out)
+    network_hvp(q, args, lam, hv)  # also leaves cos/sin of θ in cs, sn
+    for k in range(out.shape[0]):
+        out[k] -= hv[k]
+    for k in range(ua.shape[0]):
+        a = ua[k]
+        b = ub[k]
+        prm = lig[k]
+        gx, gy, pax, pay, pbx, pby, dphi = ligament_gap(q, n, a, b, prm, cs, sn)
+        wx, wy, dl = _strain_variation(q, lam, n, a, b, pax, pay, pbx, pby)
+        _, fx, fy, _ = ligament_law(gx, gy, dphi, prm)
+        kx, ky, _ = ligament_hvp(wx, wy, dl, prm)
+        ex, ey = prm[L_EX], prm[L_EY]
+        ge, gn = gx * ex + gy * ey, gy * ex - gx * ey
+        we, wn = wx * ex + wy * ey, wy * ex - wx * ey
+        kl, ks = prm[L_KL], prm[L_KS]
+        ta, tb = lam[2 * n + a], lam[2 * n + b]
+        # K w − λ_θ J G, J G = (−G_y, G_x), rotated back by R(θ)ᵀ
+        xa, ya = kx + ta * fy, ky - ta * fx
+        xb, yb = kx + tb * fy, ky - tb * fx
+        ca, sa, cb, sb = cs[a], sn[a], cs[b], sn[b]
+        g1[k, L_AX] += ca * xa + sa * ya
+        g1[k, L_AY] += -sa * xa + ca * ya
+        g1[k, L_BX] -= cb * xb + sb * yb
+        g1[k, L_BY] -= -sb * xb + cb * yb
+        g1[k, L_OX] -= kx
+        g1[k, L_OY] -= ky
+        g1[k, L_EX] -= kl * (gx * we + ge * wx) + ks * (gy * wn + gn * wy)
+        g1[k, L_EY] -= kl * (gy * we + ge * wy) - ks * (gx * wn + gn * wx)
+        g1[k, L_KL] -= ge * we
+        g1[k, L_KS] -= gn * wn
+        g1[k, L_KT] -= dphi * dl
+
+
+@jit
+def network_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p) dp into ``out``, dp = d1 the ligament table's direction (d2 unused):
+    −∇²E dq − δ_p(∇E), the parameter variation of the gradient of ``_network`` term by term."""
+    ua, ub, lig, cs, sn = args
+    n = cs.shape[0]
+    network_hvp(q, args, dq, out)  # also leaves cos/sin of θ in cs, sn
+    for k in range(out.shape[0]):
+        out[k] = -out[k]
+    for k in range(ua.shape[0]):
+        a = ua[k]
+        b = ub[k]
+        prm = lig[k]
+        dp = d1[k]
+        gx, gy, pax, pay, pbx, pby, dphi = ligament_gap(q, n, a, b, prm, cs, sn)
+        _, fx, fy, _ = ligament_law(gx, gy, dphi, prm)
+        # δg from the offsets: δo + R(θ_b) δr_b − R(θ_a) δr_a; δp of the rotated offsets
+        dax, day = rotate(cs[a], sn[a], dp[L_AX], dp[L_AY])
+        dbx, dby = rotate(cs[b], sn[b], dp[L_BX], dp[L_BY])
+        dgx, dgy = dp[L_OX] + dbx - dax, dp[L_OY] + dby - day
+        kx, ky, _ = ligament_hvp(dgx, dgy, 0.0, prm)
+        # δK g: from the stiffnesses and the axis (n = (−e_y, e_x))
+        ex, ey, dex, dey = prm[L_EX], prm[L_EY], dp[L_EX], dp[L_EY]
+        ge, gn = gx * ex + gy * ey, gy * ex - gx * ey
+        dge, dgn = gx * dex + gy * dey, gy * dex - gx * dey
+        kl, ks = prm[L_KL], prm[L_KS]
+        el = dp[L_KL] * ge + kl * dge
+        es = dp[L_KS] * gn + ks * dgn
+        dfx = kx + el * ex + kl * ge * dex - (es * ey + ks * gn * dey)
+        dfy = ky + el * ey + kl * ge * dey + (es * ex + ks * gn * dex)
+        dfp = dp[L_KT] * dphi
+        out[a] += dfx
+        out[n + a] += dfy
+        out[b] -= dfx
+        out[n + b] -= dfy
+        # torques: δ(G·J p) = δG·J p + G·J δp
+        out[2 * n + a] += fma(dfy, pax, -(dfx * pay)) + fma(fy, dax, -(fx * day)) + dfp
+        out[2 * n + b] -= fma(dfy, pbx, -(dfx * pby)) + fma(fy, dbx, -(fx * dby)) + dfp
+
+
+def network_pack(args) -> tuple[np.ndarray, np.ndarray]:
+    """The differentiable tables of a network: its ligament table, and no second table."""
+    return args.ligaments, np.zeros(0)
+
+
+def network_unpack(args, t1: np.ndarray, t2: np.ndarray):
+    """``args`` with its ligament table replaced."""
+    return args._replace(ligaments=t1)
+
+
 def network_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
     """Readable numpy version of the network energy and forces (vectorised over ligaments)."""
     ua, ub, lig = args[0], args[1], args[2]

@@ -1,7 +1,8 @@
 """Build a rigid-unit network (docs/physics.md §1.9) from its config: a geometry generator, then
 the units' inertia from their polygons and the ligament table of ``flexmm.models.ligaments``.
 
-Nondimensionalisation: length a, time sqrt(m/k_l) with m the mean unit mass, mass m, so k_l = 1.
+Nondimensionalisation: length a, time sqrt(m/k_l) with m = ρa²/2 the mass of the nominal square of
+diagonal a, mass m, so k_l = 1 (scales that no geometry parameter moves: a design may vary them).
 
 Geometry. Unit (row r, col c), σ = (−1)^(r+c), rest orientation φ = σθ0, centre at
 (c, r)·(a cos θ0 + ℓ); its vertices, counter-clockwise from the right one, are
@@ -100,7 +101,7 @@ def build(cfg: RigidNetwork) -> System:
     vertices = square_vertices(cfg)
     mass_si, centres, inertia_si = polygon_inertia(vertices * a, cfg.areal_density_kg_m2)
     centres = centres / a
-    m = float(mass_si.mean())
+    m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
     ua, ub, lig = ligament_table(vertices, centres, nr, nc, cfg.k_shear_n_per_m / kl,
                                  cfg.k_rot_n_m_per_rad / (kl * a * a))
