@@ -60,3 +60,19 @@ def test_flexmm_run_exits_3_on_an_inaccurate_run(tmp_path, strict) -> None:
     p = subprocess.run(cmd, capture_output=True, text=True)
     assert p.returncode == 3, p.stderr
     assert "status: inaccurate:" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_a_sweep_point_that_ends_inaccurate_is_failed_with_its_reason(tmp_path) -> None:
+    import json
+
+    from flexmm.io.provenance import config_hash, resolved_config
+    from flexmm.sweep.store import ERROR, FAILED, SweepStore
+    from flexmm.sweep.worker import Task, run_point
+
+    sc = scene_from_dict(scene(dt_s=9e-4))
+    store = SweepStore(tmp_path / "sweep")
+    h = config_hash(sc)
+    info = run_point(Task(h, resolved_config(sc), str(store.point_dir(h)), {"solver.dt_s": 9e-4}))
+    assert info["status"] == "inaccurate" and "misses the target" in info["reason"]
+    assert json.loads((store.point_dir(h) / ERROR).read_text())["status"] == "inaccurate"
+    assert store.state(h) == FAILED
