@@ -189,6 +189,23 @@ def friction_power(v, drv_dof, drv_mode, drv_prm):
 
 
 @jit
+def held_dashpot_power(v, dash_ij, dash_c, drv_dof, drv_mode):
+    """Work rate of the prescribed displacements through the dashpots on their DOFs, −f_d·v (the
+    energy they feed the dashpots, which ``damping_power`` counts as dissipated)."""
+    power = 0.0
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_DISPLACEMENT:
+            k = drv_dof[d]
+            for p in range(dash_ij.shape[0]):
+                fd = dash_c[p] * (v[dash_ij[p, 1]] - v[dash_ij[p, 0]])  # on i; −fd on j
+                if dash_ij[p, 0] == k:
+                    power -= fd * v[k]
+                elif dash_ij[p, 1] == k:
+                    power += fd * v[k]
+    return power
+
+
+@jit
 def stage_power(q, f, t, drv_dof, drv_mode, drv_shape, drv_prm):
     """Work rate of the drives that move a potential in time, at a splitting's kick (stage time t,
     ``f`` the force of that stage): −f·ġ on a prescribed DOF, −ġ q for an applied force g (whose

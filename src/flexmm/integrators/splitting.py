@@ -46,6 +46,7 @@ from flexmm.integrators.common import (
     damping_power,
     free_damping,
     friction_power,
+    held_dashpot_power,
     has_velocity_terms,
     position_forces,
     stage_power,
@@ -124,9 +125,13 @@ def _kick(v, f, minv, damp, terms, tau, vdep, damped, factors, work):
 
 @jit
 def _ledger_rates(v, cd, terms, dissipative):
-    """Rates the trapezoid rule integrates over a step: dissipation and the friction's work."""
-    diss = damping_power(v, cd, terms.dash_ij, terms.dash_c) if dissipative else 0.0
-    return diss, friction_power(v, terms.drv_dof, terms.drv_mode, terms.drv_prm)
+    """Rates the trapezoid rule integrates over a step: dissipation, the friction's work and that of
+    the prescribed displacements through dashpots."""
+    if not dissipative:
+        return 0.0, friction_power(v, terms.drv_dof, terms.drv_mode, terms.drv_prm)
+    work = held_dashpot_power(v, terms.dash_ij, terms.dash_c, terms.drv_dof, terms.drv_mode)
+    return (damping_power(v, cd, terms.dash_ij, terms.dash_c),
+            work + friction_power(v, terms.drv_dof, terms.drv_mode, terms.drv_prm))
 
 
 @jit
