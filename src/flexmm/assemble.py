@@ -324,6 +324,23 @@ def damping_arrays(system: System, scene: Scene, terms: dict) -> np.ndarray:
     return damp
 
 
+def overdamping(scene: Scene, system: System, w_max: float) -> list[str]:
+    """A warning when ``damping.viscous.damping_ratio`` damps every wave of the scene more than it
+    says: the ratio is relative to the model's reference frequency ω_ref (docs/physics.md §3), and
+    when ω_ref exceeds the scene's highest frequency ω_max (a sonic-vacuum Hertz chain's ω_ref is
+    its contact stiffness at 100 % strain) each wave has a ratio of at least ζ ω_ref/ω_max."""
+    vis = scene.damping.viscous
+    w_ref = system.omega_ref
+    if vis is None or not vis.damping_ratio or not w_max > 0 or w_ref <= w_max:
+        return []
+    zeta, ts = vis.damping_ratio, system.scales.time_s
+    return [f"WARNING: damping.viscous.damping_ratio = {zeta:g} is relative to the model's reference frequency "
+            f"ω_ref = {w_ref / ts:.4g} rad/s, above the highest frequency of this scene ω_max = {w_max / ts:.4g} rad/s: "
+            f"every wave decays at γ = 2ζω_ref = {2 * zeta * w_ref / ts:.4g} 1/s, a damping ratio of at least "
+            f"{zeta * w_ref / w_max:.3g} for each ({w_ref / w_max:.3g}x the ratio given); give "
+            "damping.viscous.coefficient_n_s_per_m, or a ratio scaled by ω_max/ω_ref"]
+
+
 def absorbing_damping(system: System, layer) -> np.ndarray:
     """Extra per-DOF damping coefficients (nondimensional, (ndof,)) of an absorbing layer.
 
@@ -426,6 +443,7 @@ def _build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> P
                          "Hertz chain); set solver.dt_s")
     # explicit regularised friction: keep h F/(m v_ε) <= 1
     dt, stable, notes = resolve_dt(spec, w_max, scene.solver, sc.time_s, friction_rate)
+    notes = [*notes, *overdamping(scene, system, w_max)]
     duration = scene.solver.duration_s / sc.time_s
     if scene.initial is not None and scene.initial.from_run:  # provenance: the run this one continues
         notes = [*notes, f"initial state: the last frame of {scene.initial.from_run}"]

@@ -27,9 +27,39 @@ from flexmm.units import UNITS
 PROGRESS_EVERY_S = 10.0
 
 
+#: a finished run is 'inaccurate' when its error estimate exceeds this × its target (solver.accuracy)
+INACCURATE_FACTOR = 10.0
+#: ... or, undriven and undamped, when its energy at the end differs from the start by more than this fraction
+ENERGY_LIMIT = 1e-2
+
+
+def inaccuracy(attrs: dict, stepper: Stepper, problem: Problem) -> str | None:
+    """Why a finished run is 'inaccurate' (docs/architecture.md, "Run statuses"), or None: its error
+    estimate misses its target by more than ``INACCURATE_FACTOR``, or it conserves energy (no drive,
+    no damping) and its energy at the end is off by more than ``ENERGY_LIMIT``."""
+    est, target = attrs.get("accuracy_estimate"), attrs.get("accuracy_requested")
+    if est is not None and target and not est <= INACCURATE_FACTOR * target:
+        return (f"the error estimate {est:.3g} misses the target {target:g} by more than {INACCURATE_FACTOR:g}x "
+                f"({est / target:.3g}x): the run is not resolved (smaller solver.dt_s, a higher-order method, or a "
+                "gentler scene)")
+    terms = problem.terms
+    conservative = (terms.drv_dof.size == 0 and terms.dash_ij.shape[0] == 0 and not np.any(problem.damp))
+    energies = stepper.energies() if conservative else None
+    if energies is not None:
+        e0, e = stepper.guard.e0, sum(energies)
+        drift = abs(e - e0) / max(abs(e0), 1e-300)
+        if e0 != 0 and drift > ENERGY_LIMIT:
+            return (f"no drive or damping, yet its energy changed by {100 * drift:.3g} % (E = {e:.4g} from "
+                    f"E0 = {e0:.4g}, nondimensional; at most {100 * ENERGY_LIMIT:g} %): the step does not resolve "
+                    "the motion")
+    return None
+
+
 @dataclass
 class RunResult:
-    """Outcome of a run: status ('finished', 'failed', 'interrupted'), reason, counters."""
+    """Outcome of a run: status ('finished', 'inaccurate', 'failed', 'interrupted'), reason, counters.
+
+    'inaccurate': the run went to its end but misses its accuracy by far (``inaccuracy``)."""
 
     status: str
     reason: str
@@ -384,6 +414,11 @@ def run_problem(
     track.summary()
     if on_finish is not None and status == "finished":
         extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say, t)}
+    if status == "finished":
+        why = inaccuracy(extra_attrs or {}, stepper, problem)
+        if why is not None:
+            status, reason = "inaccurate", why
+            say(f"inaccurate: {why}")
     counters = stepper.ledger.counters()
     solver_attrs = {"threads": threads, "force_evaluations": counters["force_evaluations"]}
     if spec.adaptive:

@@ -4,7 +4,8 @@
 the output changed) and, for its ``solver.accuracy`` (every scene has one unless it sets null),
 runs the pilots of ``flexmm.accuracy`` to choose the integrator and dt — among all methods when
 the scene sets the target, the scene's integrator when it names one, else ``DEFAULT_METHOD`` —
-or, when the scene gives ``solver.dt_s``, honours it and estimates its error. The plan's scene,
+or, when the scene gives ``solver.dt_s``, honours it and estimates its error (with the scene's
+integrator, else ``DEFAULT_METHOD``, which the plan already set: ``plan.planner.method``). The plan's scene,
 steps and choice are updated so the recorded config reproduces the run. The error estimate is
 the pilot's step doubling extrapolated to the duration (``error_check: pilot``, the default for
 the default target, in the plan attrs) or ``accuracy_check(plan, problem)``, the whole run
@@ -18,15 +19,13 @@ import math
 from typing import Callable
 
 from flexmm import accuracy as acc
-from flexmm.assemble import Problem, build_problem
+from flexmm.assemble import Problem, build_problem, overdamping
+from flexmm.config.scene import DEFAULT_METHOD
 from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
 from flexmm.plan.planner import Plan, PlanStep, replace_section
 
 
-#: the method the default accuracy pilots (when the scene names none): fourth order, symplectic,
-#: damping and friction allowed, 4 force evaluations a step — one pilot instead of one per method
-DEFAULT_METHOD = "pefrl"
 
 
 def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
@@ -125,7 +124,8 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "chosen", notes, attrs)]
     plan.scene, plan.choice = planned, choice
     if choice.integrator == scene.solver.integrator:  # same method: the built problem only changes dt
-        problem.scene, problem.dt, problem.notes = planned, choice.dt, []
+        problem.scene, problem.dt = planned, choice.dt
+        problem.notes = overdamping(planned, problem.system, problem.omega_max)  # not the dt it no longer uses
         return problem
     return build_problem(planned, built=plan.built_for(planned))  # another method: its own stable limit
 

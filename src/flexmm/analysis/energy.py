@@ -5,10 +5,12 @@ Reads the per-time variables the controller writes (``kinetic_energy``, ``potent
 E(t) − E(0) − W(t) + D(t) measures the integrator's energy error, relative to the largest energy
 that entered the system (E(0) + max W).
 
-A prescribed-displacement drive (shaker with ``amplitude_m`` or ``amplitude_rad``, ``boundary_displacement``) does
-work that ``applied_work`` does not record; when the config has one and the recorded work is
-zero, the work is inferred from the balance, W = E(t) − E(0) + D(t), ``work_recorded`` is
-False and the balance error is NaN (there is nothing independent left to check).
+The work of a prescribed displacement (shaker with ``amplitude_m`` or ``amplitude_rad``,
+``boundary_displacement``) is recorded in ``applied_work`` and ``kinetic_energy`` leaves out the
+driven units (docs/physics.md §3). Datasets of old runs recorded no such work: when the config
+has one and the recorded work is zero, the work is inferred from the balance,
+W = E(t) − E(0) + D(t), ``work_recorded`` is False and the balance error is NaN (there is
+nothing independent left to check).
 """
 
 from __future__ import annotations

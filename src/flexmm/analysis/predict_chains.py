@@ -40,6 +40,33 @@ def hertz_pulse(p_meas, A: float, m: float, D: float) -> list[Comparison]:
     ]
 
 
+def hertz_precompressed_pulse(p_meas, A: float, m: float, D: float, xi_0: float) -> list[Comparison]:
+    """Nesterenko solitary wave on a chain precompressed to strain ξ0: speed at the measured peak
+    ξm = ξ0 − strain (the strain measured from the rest state)."""
+    xi = -p_meas.amplitude
+    if not xi > 0:
+        raise ValueError("a Hertz solitary wave is compressive")
+    return [Comparison("", "speed", p_meas.speed_m_s, th.nesterenko_precompressed_speed(A, m, D, xi_0, xi_0 + xi),
+                       "m/s", f"precompressed solitary wave, ξ0 = {xi_0:.3g}, ξm/ξ0 = {1 + xi / xi_0:.4g}")]
+
+
+def rest_overlap(ctx, lat) -> float:
+    """Overlap δ0 (m) of a Hertz chain's contacts at rest: ``precompression_m`` less the rest
+    elongation (the median over the saved bonds of the dataset's rest state: a static load
+    compresses the chain, a free chain lets a precompression go). ValueError when the chain may be
+    precompressed and the run's rest state is not at hand."""
+    from flexmm.analysis.rest import rest_fields
+
+    bond = lat.bond
+    rest = rest_fields(ctx) if ctx.ds is not None else None
+    if rest is None or rest.get("u") is None or rest["u"].size < 2:
+        if bond.precompression_m == 0 and lat.static_load_n == 0:
+            return 0.0
+        raise ValueError("the precompression of this Hertz chain needs the run's rest state")
+    z = float(np.median(np.diff(rest["u"]))) / ctx.scene().output.site_stride
+    return max(bond.precompression_m - z, 0.0)
+
+
 def bistable_front(f_meas, alpha: float, beta: float, L: float, k: float, m: float, a: float,
                    eta: float) -> list[Comparison]:
     """Damped bistable front: speed v and 10–90 % width w ln 9 of (L/2)(1 − tanh(x/w))."""
@@ -115,7 +142,10 @@ def pulse(ctx, p_meas) -> list[Comparison]:
         raise ValueError("no solitary-wave relation for this chain or field")
     if bond.law == "polynomial" and bond.k3_n_per_m3 == 0 and bond.k2_n_per_m2 != 0:
         return softening_pulse(p_meas, bond.k1_n_per_m, bond.k2_n_per_m2, m, a)
-    if bond.law == "hertz" and bond.exponent == 1.5 and bond.precompression_m == 0:
+    if bond.law == "hertz" and bond.exponent == 1.5:
+        xi_0 = rest_overlap(ctx, lat) / a
+        if xi_0 > 0:  # a precompressed chain: not the sonic vacuum
+            return hertz_precompressed_pulse(p_meas, bond.stiffness_n_per_m_p, m, a, xi_0)
         return hertz_pulse(p_meas, bond.stiffness_n_per_m_p, m, a)
     if bond.law == "toda":
         return toda_pulse(p_meas, bond.a_n, bond.b_per_m, m, a)

@@ -67,15 +67,15 @@ def dataset_path(path: str | Path) -> Path:
     nc = p / "dataset.nc" if p.is_dir() else p
     if not nc.is_file():
         what = "no dataset.nc in" if p.is_dir() else "no such run directory or file:"
-        partial = [q for q in (p.with_name(f"{p.name}.interrupted"), p.with_name(f"{p.name}.failed"))
+        partial = [q for q in (p.with_name(f"{p.name}.{s}") for s in ("interrupted", "failed", "inaccurate"))
                    if (q / "dataset.nc").is_file()]
-        hint = f" (an unfinished run is in {partial[0]})" if partial else ""
+        hint = f" (an unfinished or inaccurate run is in {partial[0]})" if partial else ""
         raise RunNotFound(f"{what} {p}{hint}")
     return nc
 
 
 def run_status(path: str | Path) -> tuple[str, str]:
-    """(status, reason) a run's dataset records ('finished', 'failed', 'interrupted'); RunNotFound
+    """(status, reason) a run's dataset records ('finished', 'inaccurate', 'failed', 'interrupted'); RunNotFound
     if it cannot be read. Reads the attributes only (fast)."""
     import h5py
 

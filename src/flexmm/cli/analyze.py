@@ -190,8 +190,10 @@ def analyze(
                 console.print(f"[bold red]{r}[/]: {msg}")
                 errors.append({"run": str(r), "error": msg})
                 continue
-            console.print(f"[bold yellow]{r}: PARTIAL[/] {note}: measured on the frames it kept")
-            errors.append({"run": str(r), "error": f"partial: {note}"})
+            label, tail = (("INACCURATE", "measured anyway") if state == "inaccurate"
+                           else ("PARTIAL", "measured on the frames it kept"))
+            console.print(f"[bold yellow]{r}: {label}[/] {note}: {tail}")
+            errors.append({"run": str(r), "error": f"{label.lower()}: {note}"})
         try:
             res = report.analyze_with(r, options)
         except (report.PulseNotFound, report.FrontNotFound, report.NotDriven, report.NoWaveGroups,

@@ -20,7 +20,8 @@ def run(
                                                        "exceeds the memory, output, disk or step limits."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the dataset path (no label)."),
     strict: bool = typer.Option(False, "--strict", help="Exit with status 3 when the run's error estimate "
-                                                         "exceeds its target (solver.accuracy)."),
+                                                         "exceeds its target (solver.accuracy); without it, "
+                                                         "only a miss by over 10x (status inaccurate)."),
     fidelity: str = FidelityOption,
     analysis: str = AnalysisOption,
     from_run: str = typer.Option(None, "--from", help="Continue RUN: start from its last frame "
@@ -64,6 +65,9 @@ def run(
     typer.echo(result.path if quiet else f"dataset: {result.path}")
     if not result.ok:
         typer.echo(f"status: {result.status}: {result.reason}", err=True)
+        if result.status == "inaccurate":  # went to its end, published as <name>.inaccurate
+            _print_error_estimate(result.accuracy, quiet)
+            raise typer.Exit(EXIT_INACCURATE)
         raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
     _print_error_estimate(result.accuracy, quiet)
     if strict and result.accuracy_missed:
@@ -73,7 +77,8 @@ def run(
     _print_summary(result.path, analysis)
 
 
-#: exit status of ``--strict`` when the error estimate exceeds the target
+#: exit status of an 'inaccurate' run (an error estimate over 10x its target, or the energy of a
+#: conservative run off by over 1 %; ``controller.inaccuracy``), and of ``--strict`` on any miss
 EXIT_INACCURATE = 3
 
 

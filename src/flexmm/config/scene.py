@@ -65,6 +65,11 @@ ImperfectionConfig = Annotated[Union[RotationSeed, RandomRotation], Field(discri
 #: reports (``flexmm.accuracy``), well under 0.1 %
 DEFAULT_ACCURACY = 1e-4
 
+#: the method that runs when the scene names none and has an accuracy target (the default): fourth
+#: order, symplectic, damping and friction allowed, 4 force evaluations a step. With
+#: ``accuracy: null`` the field's own default, velocity Verlet, runs (docs/physics.md §3).
+DEFAULT_METHOD = "pefrl"
+
 #: integrators with error control (``IntegratorSpec.adaptive``); they take rtol/atol
 ADAPTIVE_INTEGRATORS = frozenset({"dopri5"})
 
@@ -79,7 +84,8 @@ class Solver(Strict):
 
     integrator: Literal["velocity_verlet", "pefrl", "blanes_moan6", "rk4", "dopri5", "implicit_midpoint"] = Field(
         "velocity_verlet",
-        description="velocity_verlet (default, 2nd order symplectic), pefrl (4th order symplectic), "
+        description="unset: pefrl while solver.accuracy is set (the default; also with an explicit dt_s), "
+        "velocity_verlet with accuracy: null. velocity_verlet (2nd order symplectic), pefrl (4th order symplectic), "
         "blanes_moan6 (6th order symplectic, no velocity-dependent forces), rk4, "
         "dopri5 (adaptive 5(4), error control), implicit_midpoint (A-stable, stiff scenes)",
     )

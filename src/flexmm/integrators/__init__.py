@@ -55,8 +55,8 @@ class IntegratorSpec:
     advance_parallel: Callable | None = None  # same scheme with threaded DOF passes
     state_size: Callable[[int], int] | None = None  # extra accumulator slots for ndof DOFs
     description: str = ""
-    #: order in h of the work and dissipation it accumulates (the energy ledger); a splitting
-    #: accumulates the power of its last stage's force over each drift: first order
+    #: order in h of the work and dissipation it accumulates (the energy ledger): the trapezoid
+    #: rule's 2 for the dissipation (a splitting's drive work is of its own order, ``splitting``)
     ledger_order: int = 2
 
     @property
@@ -86,18 +86,18 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
         name="velocity_verlet", order=2, symplectic=True, stability_limit=2.0,
         velocity_dependent_forces=True, advance=verlet_advance, init=verlet_force,
         force_evals=1.0, advance_parallel=verlet_advance_parallel,
-        description="velocity Verlet, semi-implicit on-site damping (default)",
+        description="velocity Verlet, semi-implicit on-site damping (with solver.accuracy: null)",
     ),
     "pefrl": IntegratorSpec(
         name="pefrl", order=4, symplectic=True, stability_limit=2.9894,
         velocity_dependent_forces=True, advance=pefrl_advance, init=total_force,
-        force_evals=4.0, ledger_order=1,
-        description="4th-order symplectic splitting (Omelyan PEFRL), exact damped kicks",
+        force_evals=4.0,
+        description="4th-order symplectic splitting (Omelyan PEFRL), exact damped kicks (default)",
     ),
     "blanes_moan6": IntegratorSpec(
         name="blanes_moan6", order=6, symplectic=True, stability_limit=3.141436,
         velocity_dependent_forces=False, advance=make_splitting_advance(*composition.blanes_moan_6()),
-        init=total_force, force_evals=11.0, ledger_order=1,
+        init=total_force, force_evals=11.0,
         description="6th-order symplectic RKN splitting (Blanes & Moan 2002, SRKN11b), forces of q only",
     ),
     "rk4": IntegratorSpec(

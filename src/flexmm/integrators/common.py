@@ -178,6 +178,63 @@ def applied_power(v, f, t, drv_dof, drv_mode, drv_shape, drv_prm):
 
 
 @jit
+def friction_power(v, drv_dof, drv_mode, drv_prm):
+    """The ground-friction part of ``applied_power`` (the drives without a potential)."""
+    power = 0.0
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_FRICTION:
+            vel = v[drv_dof[d]]
+            power += _friction(drv_prm[d], vel) * vel
+    return power
+
+
+@jit
+def held_dashpot_power(v, dash_ij, dash_c, drv_dof, drv_mode):
+    """Work rate of the prescribed displacements through the dashpots on their DOFs, −f_d·v (the
+    energy they feed the dashpots, which ``damping_power`` counts as dissipated)."""
+    power = 0.0
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_DISPLACEMENT:
+            k = drv_dof[d]
+            for p in range(dash_ij.shape[0]):
+                fd = dash_c[p] * (v[dash_ij[p, 1]] - v[dash_ij[p, 0]])  # on i; −fd on j
+                if dash_ij[p, 0] == k:
+                    power -= fd * v[k]
+                elif dash_ij[p, 1] == k:
+                    power += fd * v[k]
+    return power
+
+
+@jit
+def stage_power(q, f, t, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Work rate of the drives that move a potential in time, at a splitting's kick (stage time t,
+    ``f`` the force of that stage): −f·ġ on a prescribed DOF, −ġ q for an applied force g (whose
+    potential −g q is not in the system's energy; ``applied_force_energy`` adds the g q boundary
+    terms). Weighted by the kick coefficients this is the momentum of time in the extended phase
+    space, which the splitting integrates to its own order (docs/physics.md §3)."""
+    power = 0.0
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_DISPLACEMENT:
+            _, dg = waveform(drv_shape[d], drv_prm[d], t)
+            power -= f[drv_dof[d]] * dg
+        elif drv_mode[d] == MODE_FORCE:
+            _, dg = waveform(drv_shape[d], drv_prm[d], t)
+            power -= dg * q[drv_dof[d]]
+    return power
+
+
+@jit
+def applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm):
+    """Σ g(t) q over the applied forces: the work ∫ g q̇ dt = [g q] − ∫ ġ q dt (``stage_power``)."""
+    e = 0.0
+    for d in range(drv_dof.shape[0]):
+        if drv_mode[d] == MODE_FORCE:
+            g, _ = waveform(drv_shape[d], drv_prm[d], t)
+            e += g * q[drv_dof[d]]
+    return e
+
+
+@jit
 def external_forces(q, v, t, f, con_ij, con_prm, dash_ij, dash_c, drv_dof, drv_mode, drv_shape, drv_prm):
     """Add contact, dashpot, applied and friction forces to ``f``; return the applied power."""
     position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)

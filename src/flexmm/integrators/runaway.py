@@ -5,8 +5,8 @@ A run is a runaway when its energy exceeds ``RUNAWAY_FACTOR`` × a reference: th
 - the largest |E| seen at frames at least ``RUNAWAY_LAG_STEPS`` steps old (an unstable mode grows
   by ≥ 1.5 per step, so it cannot raise its own threshold when frames are frequent);
 - the drive scale: initial kinetic energy plus (sum of drive amplitudes)² × units — a run that
-  starts at rest and is driven by a prescribed displacement, whose work is not accumulated, has
-  no other energy scale at its first frames — plus the work recorded so far.
+  starts at rest and is driven has no other energy scale at its first frames — plus the work
+  recorded so far.
 
 Its energy ledger does not balance when |E − E0 − W + D| exceeds ``drift_allowance`` of the
 budget |E0| + |W| + D (W the work of drives, prescribed displacements included, accumulated by
@@ -26,8 +26,8 @@ RUNAWAY_FACTOR = 1e4
 RUNAWAY_LAG_STEPS = 100
 PERSIST_CHECKS = 3  # an imbalance fails a run once it lasts this many checks and RUNAWAY_LAG_STEPS steps
 DRIFT_TOL = 0.05
-#: the ledger's error is at most this × (h ω_max / limit)^ledger_order of the budget (PEFRL's
-#: first-order ledger measured 1.2 at half its stable step: a rotational shaker, 0.59)
+#: the ledger's error is at most this × (h ω_max / limit)^ledger_order of the budget (the
+#: dissipation's trapezoid rule; the drives' work is of each method's own order)
 LEDGER_CONSTANT = 2.0  # largest ledger imbalance, as a fraction of the energy budget
 
 

@@ -21,7 +21,11 @@ composition of two exact flows keeps 4th order (splitting the damping off symmet
 the whole step would give 2nd order). Velocity-dependent forces between DOFs (dashpots) and
 ground friction make the frozen-q kick flow coupled; it is then integrated by one RK4 step of
 its own (no extra model-force evaluations, still 4th order). The step is symplectic only
-without damping. The energy ledger uses the trapezoid rule over each step (2nd order).
+without damping. The energy ledger: the work of prescribed displacements and applied forces is
+accumulated at the kicks, from each kick's own stage force (``common.stage_power``: time as a
+coordinate of an extended phase space, whose momentum the splitting integrates like any other,
+to the method's order); the dissipated energy and the friction's work use the trapezoid rule over
+each step (2nd order).
 """
 
 from __future__ import annotations
@@ -37,12 +41,15 @@ from flexmm.integrators.common import (
     ACC_WORK,
     ACC_FEVALS,
     ACC_STEPS,
-    applied_power,
+    applied_force_energy,
     apply_prescribed,
     damping_power,
     free_damping,
+    friction_power,
+    held_dashpot_power,
     has_velocity_terms,
     position_forces,
+    stage_power,
     velocity_forces,
 )
 
@@ -117,9 +124,22 @@ def _kick(v, f, minv, damp, terms, tau, vdep, damped, factors, work):
 
 
 @jit
-def _ledger_rates(v, f, t, cd, terms, dissipative):
-    diss = damping_power(v, cd, terms.dash_ij, terms.dash_c) if dissipative else 0.0
-    return diss, applied_power(v, f, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+def _ledger_rates(v, cd, terms, dissipative):
+    """Rates the trapezoid rule integrates over a step: dissipation, the friction's work and that of
+    the prescribed displacements through dashpots."""
+    if not dissipative:
+        return 0.0, friction_power(v, terms.drv_dof, terms.drv_mode, terms.drv_prm)
+    work = held_dashpot_power(v, terms.dash_ij, terms.dash_c, terms.drv_dof, terms.drv_mode)
+    return (damping_power(v, cd, terms.dash_ij, terms.dash_c),
+            work + friction_power(v, terms.drv_dof, terms.drv_mode, terms.drv_prm))
+
+
+@jit
+def _kick_work(q, f, ts, terms, tau, acc):
+    """Work of the prescribed displacements and applied forces over a kick of size τ whose force
+    ``f`` is that of stage time ``ts`` (``common.stage_power``)."""
+    if terms.drv_dof.shape[0] > 0:
+        acc[ACC_WORK] += tau * stage_power(q, f, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
 
 
 def _kick_slots(kicks: tuple) -> tuple[tuple, tuple]:
@@ -174,15 +194,18 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
             for j in range(NSLOT):
                 factors[j, 0], factors[j, 1] = _kick_factors(minv, damp, VALUES[j] * h)
         work = np.empty((6, n if vdep else 0))
-        d0, p0 = _ledger_rates(v, f, t, cd, terms, dissipative)
+        d0, p0 = _ledger_rates(v, cd, terms, dissipative)
+        acc[ACC_WORK] -= applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
         if FSAL:
             apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
             model_force(q, args, f)
             position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
+        tf = t  # stage time of the force in f
         for _ in range(nsteps):
             ts = t
             for s in range(M):
                 if KICKS[s] != 0.0:
+                    _kick_work(q, f, tf, terms, KICKS[s] * h, acc)
                     _kick(v, f, minv, damp, terms, KICKS[s] * h, vdep, damped, factors[SLOT[s]], work)
                 c = DRIFTS[s] * h
                 for k in range(n):
@@ -193,14 +216,17 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
                 apply_prescribed(q, v, ts, drv_dof, drv_mode, drv_shape, drv_prm)
                 model_force(q, args, f)
                 position_forces(q, ts, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
+                tf = ts
             if FSAL:
+                _kick_work(q, f, tf, terms, KICKS[M] * h, acc)
                 _kick(v, f, minv, damp, terms, KICKS[M] * h, vdep, damped, factors[SLOT[M]], work)
             t += h
             apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-            d1, p1 = _ledger_rates(v, f, t, cd, terms, dissipative)
+            d1, p1 = _ledger_rates(v, cd, terms, dissipative)
             acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
             acc[ACC_WORK] += 0.5 * h * (p0 + p1)
             d0, p0 = d1, p1
+        acc[ACC_WORK] += applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
         if acc.shape[0] > ACC_STEPS:
             acc[ACC_FEVALS] += EVALS * nsteps + (1 if FSAL else 0)
             acc[ACC_STEPS] += nsteps

@@ -96,10 +96,10 @@ class Stepper:
         self._warm = False
         apply_prescribed(self.q, self.v, self.t, *terms.drives)
         spec.init(self.args, self.q, self.v, self.t, self.f, terms)
-        self.last_energies: tuple[float, float] | None = self.energies()  # of the last checked state
         self._held_mass = np.where(system.inv_mass > 0, 0.0, system.mass)
-        e0 = sum(self.last_energies) - 0.5 * float(np.dot(self._held_mass, self.v * self.v))
-        self.guard = RunawayGuard(system, terms, e0, drift_tol)
+        self._held = bool(self._held_mass.any())
+        self.last_energies: tuple[float, float] | None = self.energies()  # of the last checked state
+        self.guard = RunawayGuard(system, terms, sum(self.last_energies), drift_tol)
 
     # -- one call into compiled code -------------------------------------------------------
     def warm_up(self) -> float:
@@ -130,10 +130,16 @@ class Stepper:
         return self.ledger.steps
 
     def energies(self) -> tuple[float, float]:
-        """(kinetic, potential + contact) energy of the current state (nondimensional)."""
+        """(kinetic, potential + contact) energy of the current state (nondimensional).
+
+        The kinetic energy is that of the DOFs that move freely: a prescribed DOF's imposed motion
+        is not the system's energy (its work on the rest is in ``ledger.work``; docs/physics.md §3)."""
         s, terms = self.system, self.terms
         pot = model_energy(self.q, self.args) + contact_energy(self.q, terms.con_ij, terms.con_prm)
-        return s.kinetic_energy(self.v), float(pot)
+        kin = s.kinetic_energy(self.v)
+        if self._held:
+            kin -= 0.5 * float(np.dot(self._held_mass, self.v * self.v))
+        return kin, float(pot)
 
     def failure(self) -> str | None:
         """Why the current state is not trustworthy (non-finite, runaway energy), or None."""
@@ -145,10 +151,7 @@ class Stepper:
             e = sum(self.last_energies)
             if self.guard.runaway(e, self.ledger.work):
                 return "runaway energy"
-            # the ledger is about the DOFs that move freely: a prescribed DOF's imposed motion
-            # is not the system's energy (its work on the rest is in ledger.work)
-            e_free = e - 0.5 * float(np.dot(self._held_mass, self.v * self.v)) if self._held_mass.any() else e
-            why = self.guard.unbalanced(e_free, self.ledger.work, self.ledger.dissipated, self.steps)
+            why = self.guard.unbalanced(e, self.ledger.work, self.ledger.dissipated, self.steps)
             if why is not None:
                 return why
             self.guard.record(self.steps, e)

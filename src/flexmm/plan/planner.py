@@ -220,6 +220,18 @@ def _accuracy(scene):
                                             "before the run (flexmm.prepare)"])
 
 
+def method(scene, cur):
+    """``cur`` with the method that runs set: a scene with an accuracy target that names no integrator
+    runs ``DEFAULT_METHOD`` whether or not it sets ``dt_s`` (halving a default run's step keeps its
+    method); ``accuracy: null`` keeps the field's default (docs/physics.md §3)."""
+    from flexmm.config.scene import DEFAULT_METHOD
+
+    if cur.solver.accuracy is None or "integrator" in scene.solver.model_fields_set \
+            or cur.solver.integrator == DEFAULT_METHOD:
+        return cur
+    return replace_section(cur, "solver", integrator=DEFAULT_METHOD)
+
+
 def make_plan(scene, fidelity: str = "auto", analysis: AnalysisRequest | None = None) -> Plan:
     """Plan a scene (module docstring); PlanError for impossible requests."""
     if fidelity not in FIDELITIES:
@@ -236,6 +248,7 @@ def make_plan(scene, fidelity: str = "auto", analysis: AnalysisRequest | None = 
         return Plan(scene, cur, fidelity, steps, pred, plan_s=time.perf_counter() - t0, built=built)
     cur, st = _output(cur, fidelity, analysis, pred, scene.output.model_fields_set)
     steps.append(st)
+    cur = method(scene, cur)
     if cur.solver.accuracy is not None:
         steps.append(_accuracy(cur))
     plan = Plan(scene, cur, fidelity, steps, pred, None, scene.solver.accuracy, built=built)

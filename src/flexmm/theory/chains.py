@@ -123,6 +123,26 @@ def nesterenko_speed(A: float, m: float, D: float, xi_m: float) -> float:
     return 2 / math.sqrt(5) * math.sqrt(A * D**2.5 / m) * xi_m**0.25
 
 
+def nesterenko_precompressed_speed(A: float, m: float, D: float, xi_0: float, xi_m: float) -> float:
+    """Solitary-wave speed on a chain precompressed to strain xi_0 (> 0), peak strain xi_m > xi_0
+    (Nesterenko; docs/physics.md §2):
+
+        V² = c² [(4/5)(xi_m^(5/2) − xi_0^(5/2)) − 2 xi_0^(3/2)(xi_m − xi_0)] / (xi_m − xi_0)²
+           = c0² (4/15)(3 + 2 xi_r^(5/2) − 5 xi_r)/(xi_r − 1)²,   xi_r = xi_m/xi_0,
+
+    from the long-wave equation of ``nesterenko_profile`` integrated twice with xi → xi_0 far from
+    the wave (c² = A D^(5/2)/m; c0² = (3/2) c² xi_0^(1/2), the sound speed of the compressed chain,
+    reached as xi_r → 1; xi_0 → 0 gives ``nesterenko_speed``).
+    """
+    if not (xi_0 > 0 and xi_m > xi_0):
+        raise ValueError("a precompressed solitary wave needs 0 < xi_0 < xi_m")
+    c2 = A * D**2.5 / m
+    eps = xi_m / xi_0 - 1.0
+    if eps < 1e-3:  # (3 + 2(1+ε)^(5/2) − 5(1+ε)) = (15/4) ε² (1 + ε/6 + O(ε²)): no cancellation
+        return math.sqrt(1.5 * c2 * math.sqrt(xi_0) * (1.0 + eps / 6.0))
+    return math.sqrt(c2 * (0.8 * (xi_m**2.5 - xi_0**2.5) - 2.0 * xi_0**1.5 * (xi_m - xi_0))) / (xi_m - xi_0)
+
+
 def nesterenko_speed_from_force(A: float, m: float, D: float, F_m: float) -> float:
     """Speed from the peak contact force: xi_m = (F_m/A)^(2/3)/D, so V = (2/sqrt5) c (F_m/A)^(1/6) D^(-1/4)."""
     return nesterenko_speed(A, m, D, (F_m / A) ** (2 / 3) / D)

@@ -1,0 +1,78 @@
+"""A run far off its accuracy does not end as 'finished' with exit 0 (docs/architecture.md, "Run statuses").
+
+An undamped, undriven linear chain struck at its end and stepped by velocity Verlet at 0.9 of its
+stable step: stable and symplectic, but unresolved. On the old code it ended 'finished', exit 0,
+with a warning (estimate 0.36 against 1e-4; with accuracy: null its energy grew 19.5 %).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from flexmm.api import run_scene
+from flexmm.config import scene_from_dict
+from flexmm.controller import ENERGY_LIMIT, INACCURATE_FACTOR
+
+
+def scene(**solver) -> dict:
+    return {"name": "coarse",
+            "lattice": {"kind": "mass_chain", "n_units": 40, "spacing_m": 0.01, "mass_kg": 0.01,
+                        "bond": {"law": "linear", "k_n_per_m": 1e4}},  # ω_max = 2000 rad/s: stable below 1 ms
+            "excitation": {"kind": "impact", "end": "left", "velocity_m_s": 2.0},
+            "solver": {"duration_s": 0.02, "integrator": "velocity_verlet", **solver},
+            "output": {"n_frames": 21}}
+
+
+def test_an_estimate_far_over_its_target_is_inaccurate(tmp_path) -> None:
+    res = run_scene(scene_from_dict(scene(dt_s=9e-4)), run_dir=tmp_path / "r")
+    assert res.status == "inaccurate" and "misses the target" in res.reason
+    assert res.accuracy["accuracy_estimate"] > INACCURATE_FACTOR * res.accuracy["accuracy_requested"]
+    assert res.path.parent.name == "r.inaccurate" and not (tmp_path / "r").exists()  # not published as a result
+
+
+def test_a_conservative_run_whose_energy_drifts_is_inaccurate(tmp_path) -> None:
+    import xarray as xr
+
+    res = run_scene(scene_from_dict(scene(dt_s=9e-4, accuracy=None)), run_dir=tmp_path / "r")
+    assert res.status == "inaccurate" and "energy changed" in res.reason
+    with xr.open_dataset(res.path, engine="h5netcdf") as ds:  # the rule, checked on the saved energies
+        e = ds["total_energy"].values
+        assert ds.attrs["status"] == "inaccurate"
+    assert abs(e[-1] - e[0]) > ENERGY_LIMIT * abs(e[0])
+
+
+def test_resolved_runs_of_the_same_chain_finish(tmp_path) -> None:
+    for k, solver in enumerate(({}, {"accuracy": None}, {"dt_s": 2e-5})):
+        res = run_scene(scene_from_dict(scene(**solver)), run_dir=tmp_path / f"r{k}")
+        assert res.status == "finished", (solver, res.reason)
+
+
+@pytest.mark.parametrize("strict", [False, True])
+def test_flexmm_run_exits_3_on_an_inaccurate_run(tmp_path, strict) -> None:
+    import yaml
+
+    cfg = tmp_path / "coarse.yaml"
+    cfg.write_text(yaml.safe_dump(scene(dt_s=9e-4)))
+    cmd = [sys.executable, "-m", "flexmm.cli", "run", str(cfg), "--out", str(tmp_path / "r")] + (["--strict"] * strict)
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    assert p.returncode == 3, p.stderr
+    assert "status: inaccurate:" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_a_sweep_point_that_ends_inaccurate_is_failed_with_its_reason(tmp_path) -> None:
+    import json
+
+    from flexmm.io.provenance import config_hash, resolved_config
+    from flexmm.sweep.store import ERROR, FAILED, SweepStore
+    from flexmm.sweep.worker import Task, run_point
+
+    sc = scene_from_dict(scene(dt_s=9e-4))
+    store = SweepStore(tmp_path / "sweep")
+    h = config_hash(sc)
+    info = run_point(Task(h, resolved_config(sc), str(store.point_dir(h)), {"solver.dt_s": 9e-4}))
+    assert info["status"] == "inaccurate" and "misses the target" in info["reason"]
+    assert json.loads((store.point_dir(h) / ERROR).read_text())["status"] == "inaccurate"
+    assert store.state(h) == FAILED
