@@ -34,6 +34,7 @@ def run(
     """
     from flexmm._signals import exit_status, signal_of, stop_on_signals
     from flexmm.api import run_dir_for, run_scene
+    from flexmm.io.rundir import refuse_inputs_inside
 
     ov = list(overrides or [])
     if force:
@@ -43,6 +44,7 @@ def run(
     analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
     scene = load_or_exit(config, ov)
     run_dir = check_output_dir(run_dir_for(scene, out))
+    refuse_inputs_inside(run_dir, [config])  # a finished run replaces its directory: never the user's input
     log = None if quiet else (lambda m: typer.echo(m, err=True))
     from flexmm.plan.cost import EXACT_SITES, enforce
 
