@@ -70,7 +70,7 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
         where = rd.commit(result.status)
-    result.path = where / "dataset.nc"
+    result.path = where / "dataset.nc" if result.path is not None else None  # None: nothing kept
     return result
 
 

@@ -39,7 +39,7 @@ def formation_pilot(scene, log=None):
     amplitude, placed at the pulse's current position, replaces the rest of the run.
     """
     problem = build_problem(scene)
-    st = make_stepper(problem, check_energy=False)
+    st = make_stepper(problem, check_energy=False).bounded_calls()
     s = st.system
     n, k = s.n_sites, s.field_index("theta") * s.n_sites
     steps = max(1, int(problem.duration / problem.dt / PILOT_CHUNKS))
@@ -60,7 +60,7 @@ def formation_pilot(scene, log=None):
         found.update(amp=amp, pos=pos, sign=float(np.sign(th[pos])))
         return amp is not None or st.t >= 0.5 * problem.duration
 
-    st.run(iter(lambda: steps, None), watch)
+    st.run(iter(lambda: steps, None), watch, reraise=True)  # a signal stops the pilot, never ends it early
     t, n_steps, amp, pos = st.t, st.steps, found.get("amp"), found.get("pos", 0)
     wall = st.wall_s
     if amp is None:

@@ -63,7 +63,8 @@ def run(
             typer.echo(f"interrupted by {signal.Signals(sig).name} before the run started: nothing written",
                        err=True)
             raise typer.Exit(exit_status(sig)) from None
-    typer.echo(result.path if quiet else f"dataset: {result.path}")
+    if result.path is not None:
+        typer.echo(result.path if quiet else f"dataset: {result.path}")
     if not result.ok:
         typer.echo(f"status: {result.status}: {result.reason}", err=True)
         raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
