@@ -276,3 +276,4 @@ def test_a_signal_during_the_accuracy_pilots_stops_the_run(tmp_path, sig, code) 
     assert "Traceback" not in tail
     # nothing published: no result, finished or partial, and no leftovers
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".pilot.lock")) == ["stderr.txt"]
+
