@@ -110,7 +110,7 @@ def integrate(problem, spec, h: float, t_end: float, n_samples: int = 32, checkp
     returns (states, peaks, steps) instead: the states q at those times.
     """
     n_steps = max(1, int(math.ceil(t_end / h - 1e-9)))
-    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False)
+    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False).bounded_calls()
     marks = sorted({*np.linspace(0, n_steps, min(n_samples, n_steps) + 1).round().astype(int)[1:],
                     *(int(round(c * n_steps)) for c in checkpoints)})
     chunks = [k - j for j, k in zip([0, *marks[:-1]], marks) if k > j]
@@ -122,7 +122,7 @@ def integrate(problem, spec, h: float, t_end: float, n_samples: int = 32, checkp
         peaks = np.maximum(peaks, _peaks(s.system, s.q))
         states[int(round(s.t / s.h))] = s.q.copy()
 
-    st.run(chunks, sample)
+    st.run(chunks, sample, reraise=True)  # a signal stops the pilot, never shortens it
     if checkpoints:
         return [states[int(round(c * n_steps))] for c in checkpoints], peaks, n_steps
     return st.q, st.v, peaks, n_steps
@@ -175,7 +175,7 @@ def _sampled(system) -> tuple[np.ndarray, np.ndarray | None]:
 def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
     """Run ``n_steps`` equal steps to ``t_end`` (a multiple of ``n_samples``) and sample every
     ``n_steps/n_samples`` steps (``Trace``: the fields, and the strain where runs report it)."""
-    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False)
+    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False).bounded_calls()
     idx, pairs = _sampled(st.system)
 
     def values(q: np.ndarray) -> np.ndarray:
@@ -190,7 +190,7 @@ def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
         k[0] += 1
         x[k[0]] = np.abs(values(s.q) - x0)
 
-    out = st.run([n_steps // n_samples] * n_samples, sample)
+    out = st.run([n_steps // n_samples] * n_samples, sample, reraise=True)  # a signal stops the pilot
     ok = out.ok and k[0] == n_samples and bool(np.all(np.isfinite(x)))
     return Trace(x, t_end / n_samples, n_steps, ok)
 

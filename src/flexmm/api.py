@@ -73,7 +73,7 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
         where = rd.commit(result.status)
-    result.path = None if result.dataset is not None else where / "dataset.nc"
+    result.path = None if result.dataset is not None or result.path is None else where / "dataset.nc"
     return result
 
 

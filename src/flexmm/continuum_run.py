@@ -8,6 +8,7 @@ has formed, reads the amplitude and places the continuum soliton there.
 
 from __future__ import annotations
 
+import errno
 import time
 from pathlib import Path
 from typing import Callable
@@ -39,7 +40,7 @@ def formation_pilot(scene, log=None):
     amplitude, placed at the pulse's current position, replaces the rest of the run.
     """
     problem = build_problem(scene)
-    st = make_stepper(problem, check_energy=False)
+    st = make_stepper(problem, check_energy=False).bounded_calls()
     s = st.system
     n, k = s.n_sites, s.field_index("theta") * s.n_sites
     steps = max(1, int(problem.duration / problem.dt / PILOT_CHUNKS))
@@ -60,7 +61,7 @@ def formation_pilot(scene, log=None):
         found.update(amp=amp, pos=pos, sign=float(np.sign(th[pos])))
         return amp is not None or st.t >= 0.5 * problem.duration
 
-    st.run(iter(lambda: steps, None), watch)
+    st.run(iter(lambda: steps, None), watch, reraise=True)  # a signal stops the pilot, never ends it early
     t, n_steps, amp, pos = st.t, st.steps, found.get("amp"), found.get("pos", 0)
     wall = st.wall_s
     if amp is None:
@@ -123,7 +124,10 @@ def run_continuum(scene, pred: ContinuumPrediction, run_dir, *, extra_attrs: dic
              "model": system.model, "integrator": "none (continuum)", "status": "finished",
              "status_reason": "", "wall_time_s": wall, "compile_time_s": 0.0, "n_steps": 0,
              "spacing_m": system.spacing_m, "log": "\n".join(lines), **(extra_attrs or {})}
+    writer.flush()  # a full disk here is an error (nothing kept), never a 'finished' file short of frames
     path = writer.close(attrs)
+    if path is None:  # HDF5 could not complete the file: nothing is kept
+        raise OSError(errno.EIO, f"{writer.closed_why}; nothing was kept", str(run_dir))
     n_steps = pilot["n_steps"] if pilot else 0
     return RunResult("finished", "", path, n_steps, times.size, duration, 0.0, 0.0, setup, wall, lines,
                      n_units=system.n_sites)

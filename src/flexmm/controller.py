@@ -15,10 +15,11 @@ from typing import Any, Callable
 
 import numpy as np
 
+from flexmm._signals import signal_of
 from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
-from flexmm.integrators.stepper import DEFAULT_RTOL, Stepper, make_stepper
+from flexmm.integrators.stepper import DEFAULT_RTOL, Outcome, Stepper, make_stepper
 from flexmm.io.run_dataset import DatasetWriter, MemoryWriter, add_state, estimate_bytes, shape_variables
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
@@ -356,9 +357,14 @@ def run_problem(
         f"(stable limit {problem.stable_dt * sc.time_s:.4g} s), {n_frames} frames, ~{size / 2**20:.1f} MiB"
         + (f", {threads} threads" if threads > 1 else ""))
 
-    compile_s = stepper.warm_up()
     track = _StepFollower(problem, spec, stepper, say)
-    obs.frame(stepper)
+    early: Outcome | None = None  # a signal while compiling or writing frame 0: the run stops there
+    try:
+        compile_s = stepper.warm_up()
+        obs.frame(stepper)
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM under _signals.stop_on_signals
+        compile_s = stepper.compile_s
+        early = Outcome("interrupted", signal.Signals(signal_of(exc)).name, stepper.t)
     prog = _progress(len(chunks), progress)
     write_error: list[tuple[float, OSError]] = []
     last_line = [_time.monotonic()]
@@ -382,10 +388,15 @@ def run_problem(
         return False
 
     try:
-        outcome = stepper.run(track.chunks(chunks), on_frame)
+        outcome = early or stepper.run(track.chunks(chunks), on_frame)
     finally:
         if prog:
             prog.stop()
+    if not write_error:
+        try:  # the frames still buffered: a write that fails here is a write failure like any other
+            obs.writer.flush()
+        except OSError as exc:
+            write_error.append(((obs.writer.t_written or 0.0) / sc.time_s, exc))
     status, t = outcome.status, stepper.t
     n_steps = stepper.steps
     reason = ""
@@ -409,7 +420,7 @@ def run_problem(
     wall = stepper.wall_s
     mups = n_steps * s.n_sites / wall / 1e6 if wall > 0 else float("nan")
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
-    if reason:
+    if reason and not write_error:  # what a write failure kept is known once the file is closed
         say(reason)
     track.summary()
     if on_finish is not None and status == "finished":
@@ -453,6 +464,14 @@ def run_problem(
         **(extra_attrs or {}),
     }
     path = obs.writer.close(attrs)
+    if path is None:  # the file could not be completed: say so, never claim frames that are gone
+        status = "failed"
+        head = (f"writing frames failed at t = {write_error[0][0] * sc.time_s:.6g} s" if write_error
+                else f"{reason + '; ' if reason else ''}writing the dataset failed")
+        reason = f"{head} ({obs.writer.closed_why}); nothing was kept"
+        say(reason)
+    elif write_error:
+        say(reason)
     return RunResult(status, reason, path, n_steps, obs.writer.n_written, t * sc.time_s, h * sc.time_s,
                      problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites,
                      accuracy={k: v for k, v in attrs.items() if k.startswith("accuracy_")

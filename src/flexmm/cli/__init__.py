@@ -72,7 +72,16 @@ for _name, _func in (
 
 
 def main() -> None:
-    app()
+    from flexmm.io.run_dataset import leave
+
+    code = 0
+    try:
+        app()
+    except SystemExit as exc:
+        code = exc.code
+        raise
+    finally:
+        leave(code)  # a dataset HDF5 could not write is never closed: exit without its crash
 
 
 __all__ = ["app", "main"]

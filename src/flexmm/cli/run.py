@@ -35,46 +35,53 @@ def run(
     """
     from flexmm._signals import exit_status, signal_of, stop_on_signals
     from flexmm.api import run_dir_for, run_scene
+    from flexmm.io.rundir import refuse_inputs_inside
 
-    ov = list(overrides or [])
-    if force:
-        ov.append("solver.allow_unstable=true")
-    if from_run:
-        ov.append(f"initial.from_run={from_run}")
-    analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
-    scene = load_or_exit(config, ov)
-    run_dir = check_output_dir(run_dir_for(scene, out))
-    log = None if quiet else (lambda m: typer.echo(m, err=True))
-    from flexmm.plan.cost import EXACT_SITES, enforce
-
-    # memory, output and disk before anything is built (steps too for a large lattice, from a small
-    # copy; a small scene's steps are checked once planning has built it)
-    big = scene.lattice.n_sites > EXACT_SITES
-    for line in enforce(scene, run_dir, force, step=big).lines():  # ResourceError unless --force
-        if log and big:
-            log(line)
-    with writing(run_dir), stop_on_signals():
+    ended: list = []  # the run's result once it is published
+    with stop_on_signals():  # SIGTERM like Ctrl-C from here on: reading, planning, the run, the summary
         try:
-            result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
-                               fidelity=fidelity, analysis=analysis, force_limits=force)
-        except KeyboardInterrupt as exc:  # before the time loop started: nothing was written
-            sig = signal_of(exc)
-            typer.echo(f"interrupted by {signal.Signals(sig).name} before the run started: nothing written",
-                       err=True)
-            raise typer.Exit(exit_status(sig)) from None
-    typer.echo(result.path if quiet else f"dataset: {result.path}")
-    if not result.ok:
-        typer.echo(f"status: {result.status}: {result.reason}", err=True)
-        if result.status == "inaccurate":  # went to its end, published as <name>.inaccurate
+            ov = list(overrides or [])
+            if force:
+                ov.append("solver.allow_unstable=true")
+            if from_run:
+                ov.append(f"initial.from_run={from_run}")
+            analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
+            scene = load_or_exit(config, ov)
+            run_dir = check_output_dir(run_dir_for(scene, out))
+            refuse_inputs_inside(run_dir, [config])  # a finished run replaces its directory: never the user's input
+            log = None if quiet else (lambda m: typer.echo(m, err=True))
+            from flexmm.plan.cost import EXACT_SITES, enforce
+
+            # memory, output and disk before anything is built (steps too for a large lattice, from a small
+            # copy; a small scene's steps are checked once planning has built it)
+            big = scene.lattice.n_sites > EXACT_SITES
+            for line in enforce(scene, run_dir, force, step=big).lines():  # ResourceError unless --force
+                if log and big:
+                    log(line)
+            with writing(run_dir):
+                result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
+                                   fidelity=fidelity, analysis=analysis, force_limits=force)
+            ended.append(result)
+            if result.path is not None:
+                typer.echo(result.path if quiet else f"dataset: {result.path}")
+            if not result.ok:
+                typer.echo(f"status: {result.status}: {result.reason}", err=True)
+                if result.status == "inaccurate":  # went to its end, published as <name>.inaccurate
+                    _print_error_estimate(result.accuracy, quiet)
+                    raise typer.Exit(EXIT_INACCURATE)
+                raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
             _print_error_estimate(result.accuracy, quiet)
-            raise typer.Exit(EXIT_INACCURATE)
-        raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
-    _print_error_estimate(result.accuracy, quiet)
-    if strict and result.accuracy_missed:
-        raise typer.Exit(EXIT_INACCURATE)
-    if quiet:
-        return
-    _print_summary(result.path, analysis)
+            if strict and result.accuracy_missed:
+                raise typer.Exit(EXIT_INACCURATE)
+            if quiet:
+                return
+            _print_summary(result.path, analysis)
+        except KeyboardInterrupt as exc:  # outside the time loop (which keeps its frames itself)
+            sig = signal_of(exc)
+            name = signal.Signals(sig).name
+            typer.echo(f"interrupted by {name} after the run ended: its outputs are kept ({ended[0].path})"
+                       if ended else f"interrupted by {name} before the run started: nothing written", err=True)
+            raise typer.Exit(exit_status(sig)) from None
 
 
 #: exit status of an 'inaccurate' run (an error estimate over 10x its target, or the energy of a

@@ -31,6 +31,8 @@ from flexmm.models.kernels import model_energy
 
 #: relative tolerance of adaptive integrators when none is given
 DEFAULT_RTOL = 1e-6
+#: unit-steps per compiled call of a stepper with ``bounded_calls`` (0.02–0.5 s on one core)
+CALL_WORK = 4e6
 
 
 @dataclass(frozen=True)
@@ -94,6 +96,7 @@ class Stepper:
         self.check_energy = check_energy
         self.compile_s = self.wall_s = self.cpu_s = 0.0
         self._warm = False
+        self.max_call_steps: int | None = None  # None: one compiled call per chunk (``bounded_calls``)
         apply_prescribed(self.q, self.v, self.t, *terms.drives)
         spec.init(self.args, self.q, self.v, self.t, self.f, terms)
         self._held_mass = np.where(system.inv_mass > 0, 0.0, system.mass)
@@ -116,12 +119,29 @@ class Stepper:
                            acc)
 
     def advance(self, nsteps: int) -> None:
-        """Advance ``nsteps`` steps of size h (adaptive: to t + nsteps·h) in place."""
+        """Advance ``nsteps`` steps of size h (adaptive: to t + nsteps·h) in place, in calls of at
+        most ``max_call_steps`` steps when that is set (a fixed-step method only)."""
         self.warm_up()
         w0, c0 = time.perf_counter(), time.process_time()
-        self.t = self._call(self.q, self.v, self.f, int(nsteps), self.acc)
+        left = int(nsteps)
+        cap = self.max_call_steps if self.max_call_steps and not self.adaptive else max(left, 1)
+        while True:
+            k = min(cap, left)
+            self.t = self._call(self.q, self.v, self.f, k, self.acc)
+            left -= k
+            if left <= 0:
+                break
         self.wall_s += time.perf_counter() - w0
         self.cpu_s += time.process_time() - c0
+
+    def bounded_calls(self, work: float = CALL_WORK) -> Stepper:
+        """Compiled calls of at most ``work`` unit-steps from here on (``max_call_steps``), so the
+        stepper comes back to Python — where a signal is acted on — every fraction of a second
+        whatever the chunks asked of ``run``. Sized by work, not by wall time: a run's result must
+        not depend on the machine's load (a call boundary rounds differently from a step inside a
+        call: the fused closing and opening half kicks). Returns the stepper."""
+        self.max_call_steps = max(1, int(work // max(self.system.n_sites, 1)))
+        return self
 
     # -- observations ------------------------------------------------------------------------
     @property
@@ -158,26 +178,34 @@ class Stepper:
         return None
 
     # -- the time loop ---------------------------------------------------------------------
-    def run(self, chunks: Iterable[int], on_frame: Callable[[Stepper], bool | None] | None = None) -> Outcome:
+    def run(self, chunks: Iterable[int], on_frame: Callable[[Stepper], bool | None] | None = None, *,
+            reraise: bool = False) -> Outcome:
         """Advance chunk after chunk of steps; after each, check the state and call ``on_frame``.
 
         Stops at the first failed check ('failed', the state is then past ``t_good``), on
         Ctrl-C or SIGTERM ('interrupted', reason 'SIGINT'/'SIGTERM'), or when ``on_frame``
-        returns True (an observer that has seen enough, 'finished').
+        returns True (an observer that has seen enough, 'finished'). ``reraise``: a Ctrl-C or
+        SIGTERM propagates instead (a pilot, whose partial result is worth nothing: a caller
+        that went on with it would choose from a truncated measurement).
         """
-        t_good = self.t
+        if reraise:
+            return self._run(chunks, on_frame)
         try:
-            for nsteps in chunks:
-                self.advance(nsteps)
-                why = self.failure()
-                if why is not None:
-                    return Outcome("failed", why, t_good)
-                t_good = self.t
-                if on_frame is not None and on_frame(self):
-                    break
+            return self._run(chunks, on_frame)
         except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM under _signals.stop_on_signals
-            return Outcome("interrupted", signal.Signals(signal_of(exc)).name, t_good)
-        return Outcome("finished", "", t_good)
+            return Outcome("interrupted", signal.Signals(signal_of(exc)).name, self._t_good)
+
+    def _run(self, chunks, on_frame) -> Outcome:
+        self._t_good = self.t
+        for nsteps in chunks:
+            self.advance(nsteps)
+            why = self.failure()
+            if why is not None:
+                return Outcome("failed", why, self._t_good)
+            self._t_good = self.t
+            if on_frame is not None and on_frame(self):
+                break
+        return Outcome("finished", "", self._t_good)
 
 
 def frame_chunks(t_end: float, h: float, n_frames: int) -> tuple[float, list[int]]:

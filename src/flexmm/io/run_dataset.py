@@ -3,11 +3,25 @@
 Frames are buffered and flushed in chunks along an unlimited ``time`` dimension, so a run
 far larger than memory streams to disk. Everything goes to a hidden temporary file that is
 renamed into place only when closed: a reader never sees a half-written dataset.
+
+A full disk never leaves a file that cannot be closed: before a batch of frames is written the
+writer checks that the filesystem has room for the chunks it will allocate (``_room``), and
+every batch is flushed to disk (``H5Fflush``) before its frames count as written, so
+``n_written`` are frames really on disk. A small reserve file (``RESERVE_BYTES``) is held
+beside the dataset from the start and released when writing fails, so the file's metadata
+can still be written and the file closed. If HDF5 fails anyway (another process filled the
+disk during a batch), the file is abandoned and ``close`` returns None: nothing is kept,
+and ``closed_why`` says why.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import gc
+import io
 import os
+import sys
 from pathlib import Path
 
 import h5netcdf
@@ -25,6 +39,66 @@ REFERENCES = ("absolute", "rest_state")
 
 BUFFER_BYTES = 32 * 2**20
 CHUNK_BYTES = 4 * 2**20
+#: space held beside a dataset being written, released so a writer that hit a full disk can close it
+RESERVE_BYTES = 2**20
+#: room kept free beyond a batch's chunks (HDF5 metadata: chunk index, attributes)
+METADATA_BYTES = 256 * 2**10
+
+
+#: HDF5 files given up after a write failure (``DatasetWriter._abandon``); never closed
+ABANDONED: list = []
+
+
+def leave(code) -> None:
+    """End the process at once with exit status ``code`` if a dataset was abandoned: the normal
+    exit would have HDF5 flush it again, print errors and crash (exit 139). Otherwise return."""
+    if not ABANDONED:
+        return
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code if isinstance(code, int) else 0 if code is None else 1)
+
+
+class WriteFailed(OSError):
+    """HDF5 failed to write (a full disk, an I/O error): the file cannot be trusted or closed."""
+
+
+@contextlib.contextmanager
+def _quiet_unraisable():
+    """h5py reports failures to close objects it deallocates as 'Exception ignored' tracebacks:
+    the writer already reports the failure, once, as a message."""
+    hook, err = sys.unraisablehook, sys.stderr
+    sys.unraisablehook = lambda _info: None
+    sys.stderr = io.StringIO()  # Cython prints such a traceback itself before calling the hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook, sys.stderr = hook, err
+
+
+def _reserve(path: Path, nbytes: int) -> Path | None:
+    """Hold ``nbytes`` of disk in ``path`` (None where the disk has not even that)."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    except OSError:
+        return None
+    try:
+        try:
+            os.posix_fallocate(fd, 0, nbytes)
+        except (AttributeError, OSError) as exc:
+            if getattr(exc, "errno", None) != errno.EOPNOTSUPP and not isinstance(exc, AttributeError):
+                raise
+            os.write(fd, bytes(nbytes))
+        return path
+    except OSError:
+        os.close(fd)
+        fd = -1
+        path.unlink(missing_ok=True)
+        return None
+    finally:
+        if fd >= 0:
+            os.close(fd)
 
 
 def _attrs(name: str, units: str, long_name: str, extra: list[dict]) -> dict:
@@ -52,12 +126,16 @@ class DatasetWriter:
         self.n_site = n_site
         self.site_names = list(site_vars)
         self.time_names = list(time_vars)
+        self.broken: str | None = None  # why HDF5 failed: the file is then abandoned
+        self.closed_why = ""  # why close kept nothing
+        self.reserve = _reserve(temporary_name(self.path.with_name(self.path.name + ".reserve")), RESERVE_BYTES)
         self.file = h5netcdf.File(self.tmp, "w")
         self.n_frames = n_frames
         self.file.dimensions = {"time": n_frames, "site": n_site}
         cap = 1024 if n_frames is None else max(1, n_frames)  # chunks no longer than a fixed dimension
         chunk_t = int(max(1, min(256, cap, CHUNK_BYTES // (8 * max(n_site, 1)))))
         chunk_1d = (min(1024, cap),)
+        self._chunk_t, self._chunk_1d = chunk_t, chunk_1d[0]
         t = self.file.create_variable("time", ("time",), "f8", chunks=chunk_1d)
         t.attrs.update(variable_attrs("time", {"units": "s", "long_name": "time"}))
         s = self.file.create_variable("site", ("site",), "i8", data=np.arange(n_site))
@@ -92,33 +170,115 @@ class DatasetWriter:
         if len(self._buf) >= self._buf_frames:
             self.flush()
 
+    def _new_chunk_bytes(self, i0: int, k: int) -> int:
+        """Bytes of the chunks that writing frames i0 .. i0 + k − 1 allocates (chunks are whole)."""
+        def new(chunk: int) -> int:
+            return (i0 + k - 1) // chunk - ((i0 - 1) // chunk if i0 > 0 else -1)
+
+        return 8 * (new(self._chunk_t) * self._chunk_t * self.n_site * len(self.site_names)
+                    + new(self._chunk_1d) * self._chunk_1d * (1 + len(self.time_names)))
+
+    def _room(self, i0: int, k: int) -> tuple[int, str]:
+        """How many of the k frames from i0 the filesystem has room for (all of them where it does
+        not report sizes), and, when not all, why."""
+        try:
+            st = os.statvfs(self.tmp.parent)
+        except OSError:
+            return k, ""
+        if st.f_blocks == 0:  # a filesystem that reports no sizes: nothing to check against
+            return k, ""
+        free = st.f_bavail * st.f_frsize - METADATA_BYTES
+        if self._new_chunk_bytes(i0, k) <= free:
+            return k, ""
+        lo, hi = 0, k  # the most frames that fit: bytes grow with the frames
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            lo, hi = (mid, hi) if self._new_chunk_bytes(i0, mid) <= free else (lo, mid - 1)
+        return lo, (f"No space left on device ({max(free, 0) / 2**20:.2f} MiB free, "
+                    f"{self._new_chunk_bytes(i0, k) / 2**20:.2f} MiB needed for the next {k} frames)")
+
     def flush(self) -> None:
+        """Write the buffered frames; ``OSError`` (ENOSPC) after writing those that fit when the disk
+        has no room for all of them (the rest are dropped: ``n_written`` counts what is on disk)."""
+        if not self._buf:
+            return
+        if self.broken:
+            raise WriteFailed(errno.EIO, self.broken)
+        if self.n_frames is not None and self.n_written + len(self._buf) > self.n_frames:
+            raise ValueError(f"more frames than the {self.n_frames} declared")
+        fits, why = self._room(self.n_written, len(self._buf))
+        if fits < len(self._buf):
+            del self._buf[fits:]
+            self._write()
+            raise OSError(errno.ENOSPC, why, str(self.path.parent))
+        self._write()
+
+    def _write(self) -> None:
         if not self._buf:
             return
         i0, k = self.n_written, len(self._buf)
         f = self.file
-        if self.n_frames is None:
-            f.resize_dimension("time", i0 + k)
-        elif i0 + k > self.n_frames:
-            raise ValueError(f"more frames than the {self.n_frames} declared")
-        f.variables["time"][i0 : i0 + k] = [b[0] for b in self._buf]
-        for name in self.site_names:
-            f.variables[name][i0 : i0 + k, :] = np.stack([b[1][name] for b in self._buf])
-        for name in self.time_names:
-            f.variables[name][i0 : i0 + k] = [b[2][name] for b in self._buf]
+        failed = None
+        with _quiet_unraisable():  # h5py objects that fail to close as they go: reported once, below
+            try:
+                if self.n_frames is None:
+                    f.resize_dimension("time", i0 + k)
+                f.variables["time"][i0 : i0 + k] = [b[0] for b in self._buf]
+                for name in self.site_names:
+                    f.variables[name][i0 : i0 + k, :] = np.stack([b[1][name] for b in self._buf])
+                for name in self.time_names:
+                    f.variables[name][i0 : i0 + k] = [b[2][name] for b in self._buf]
+                f._h5file.flush()  # on disk now (a full disk shows here, not when the file is closed)
+            except (OSError, RuntimeError) as exc:  # HDF5's own failure: the file is no longer consistent
+                failed = (getattr(exc, "errno", None) or errno.EIO, _first_line(exc))
+            gc.collect()
+        if failed is not None:
+            self._abandon(f"HDF5 could not write frames {i0}-{i0 + k - 1}: {failed[1]}")
+            raise WriteFailed(failed[0], self.broken)
         self.n_written += k
         self.t_written = self._buf[-1][0]
         self._buf.clear()
 
-    def close(self, attrs: dict) -> Path:
-        """Flush, stamp global attributes, and atomically move the file into place."""
+    def _release_reserve(self) -> None:
+        if self.reserve is not None:
+            self.reserve.unlink(missing_ok=True)
+            self.reserve = None
+
+    def _abandon(self, why: str) -> None:
+        """Give up the file after an HDF5 write failure. HDF5 cannot close a file whose data it
+        cannot write (each try reports errors; one at interpreter exit crashes the process), so the
+        file is never closed: it is kept open in ``ABANDONED`` and its name removed (its space is
+        freed when the process ends, which ``leave`` makes quick)."""
+        self.broken = why
+        self._buf.clear()
+        self._release_reserve()
+        ABANDONED.append(self.file)
+        self.file = None
+        self.tmp.unlink(missing_ok=True)
+
+    def close(self, attrs: dict) -> Path | None:
+        """Flush, stamp global attributes, and atomically move the file into place.
+
+        Returns None, with ``closed_why`` set and the temporary file removed, when the file
+        could not be completed (an HDF5 write failed): then nothing is kept."""
         try:
             self.flush()
         except OSError:  # the disk is full (or failing): the frames still buffered are lost
             self._buf.clear()
-        self.file.attrs.update({**global_attrs(), **{k: v for k, v in attrs.items() if v is not None}})
-        self.file.attrs["n_frames_written"] = self.n_written
-        self.file.close()
+        if self.n_frames is not None and self.n_written < self.n_frames:
+            self._release_reserve()  # room for the metadata, and for the copy that cuts the file
+        if self.broken is None:
+            try:
+                self.file.attrs.update({**global_attrs(), **{k: v for k, v in attrs.items() if v is not None}})
+                self.file.attrs["n_frames_written"] = self.n_written
+                self.file.close()
+            except (OSError, RuntimeError) as exc:
+                self._abandon(f"HDF5 could not complete the file: {_first_line(exc)}")
+        self._release_reserve()
+        if self.broken is not None:
+            self.tmp.unlink(missing_ok=True)
+            self.closed_why = self.broken
+            return None
         if self.n_frames is not None and self.n_written < self.n_frames:
             cut = self.tmp.with_name(self.tmp.name + ".cut")
             try:
@@ -150,10 +310,13 @@ class DatasetWriter:
 
     def abort(self) -> None:
         """Drop the temporary file (nothing is published)."""
-        try:
-            self.file.close()
-        except Exception:  # noqa: BLE001 - best effort on an already failing path
-            pass
+        if self.file is not None:
+            with _quiet_unraisable():
+                try:
+                    self.file.close()
+                except Exception:  # noqa: BLE001 - best effort on an already failing path
+                    pass
+        self._release_reserve()
         self.tmp.unlink(missing_ok=True)
 
 
@@ -181,6 +344,16 @@ def shape_variables(shapes, sites: np.ndarray, length_m: float) -> dict:
         "link_point_x": (("link", "end"), pts[..., 0], "m", f"x of a joint's attachment points {body}"),
         "link_point_y": (("link", "end"), pts[..., 1], "m", f"y of a joint's attachment points {body}"),
     }
+
+
+def _first_line(exc: BaseException) -> str:
+    """HDF5's messages run over several lines (time, file name, buffer address): the first says it."""
+    text = str(exc).strip()
+    if not text:
+        return type(exc).__name__
+    line = text.splitlines()[0]
+    cut = line.find(" (file write failed")
+    return (line[:cut] + ": No space left on device" if "No space left" in text else line[:cut]) if cut > 0 else line
 
 
 def add_state(system, sites: np.ndarray, site_vars: dict, site_coords: dict,

@@ -7,8 +7,11 @@ directory is refused instead of interleaving its files with the first. ``commit(
 - ``finished``: the staging directory *becomes* ``<name>`` in one step — swapped with an
   existing ``<name>`` by ``renameat2(RENAME_EXCHANGE)`` (Linux), then the old contents (an
   earlier result, its analysis and figures) are removed; a plain rename if there is none. A
-  ``<name>`` that holds anything a run directory would not (subdirectories, other files: ``--out
-  runs`` instead of ``--out runs/x``) is refused before the run, never replaced;
+  ``<name>`` (or ``<name>.failed``/``.interrupted``) that holds anything a run directory would not
+  (subdirectories, other files: ``--out runs`` instead of ``--out runs/x``), or files but no
+  ``dataset.nc``/``run.log`` (a directory flexmm did not write, e.g. one holding the user's
+  scene), is refused before the run, never replaced (``refuse_inputs_inside``: nor is a run whose
+  input file lies inside the directory it would replace);
 - ``failed`` / ``interrupted``: the partial result goes to ``<name>.<status>`` (replacing an
   older partial of the same kind); a finished ``<name>`` is never touched, and nothing partial
   sits where a finished result is expected.
@@ -22,15 +25,21 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import fcntl
+import json
 import os
 import re
 import shutil
+import socket
+import time
 from pathlib import Path
 
 from flexmm.errors import OutputError
 
 FINISHED = "finished"
+#: where a run that did not finish is published: ``<name>.<status>``
+PARTIAL = ("failed", "interrupted")
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 
@@ -84,43 +93,174 @@ def clean_stale(directory: Path) -> list[Path]:
     return removed
 
 
+#: errors of a filesystem that has no ``flock`` (Lustre without ``-o flock``, some NFS, FUSE)
+NO_FLOCK = frozenset({errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOLCK})
+
+
+def _start_time(pid: int) -> str | None:
+    """When process ``pid`` started (clock ticks since boot, ``/proc/<pid>/stat``), None if unknown."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat[stat.rfind(")") + 2 :].split()
+    return fields[19] if len(fields) > 19 else None
+
+
+def lock_holder() -> dict:
+    """What an O_EXCL lock file says about its holder: this host, pid and process start time."""
+    return {"host": socket.gethostname(), "pid": os.getpid(), "start": _start_time(os.getpid()),
+            "since": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+
+
+def lock_is_stale(holder: dict, host: str | None = None) -> bool:
+    """True only when the lock's holder is known dead: it is on this host and its pid does not run
+    (or runs a process started at another time: the pid was reused). A lock held on another host
+    is never stale from here: its process cannot be seen, so it is reported, never taken."""
+    if holder.get("host") != (host or socket.gethostname()) or not isinstance(holder.get("pid"), int):
+        return False
+    pid = holder["pid"]
+    if not _pid_alive(pid):
+        return True
+    start = _start_time(pid)
+    return holder.get("start") is not None and start is not None and start != holder["start"]
+
+
+def _read_holder(path: Path) -> dict | None:
+    try:
+        holder = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return holder if isinstance(holder, dict) else None
+
+
+def _describe(holder: dict | None) -> str:
+    if holder is None:
+        return "an unknown process"
+    return f"pid {holder.get('pid')} on host {holder.get('host')} since {holder.get('since', '?')}"
+
+
+@contextlib.contextmanager
+def _exclusive_file(path: Path, what: str):
+    """The fallback where ``flock`` is unsupported: ``path`` created with O_EXCL, holding
+    ``lock_holder()``; removed when the block ends. A lock left by a dead process on this host is
+    broken (``lock_is_stale``); any other is reported with how to remove it by hand."""
+    mine = lock_holder()
+    for _attempt in range(3):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            holder = _read_holder(path)
+            if holder is None:  # being written by its creator this instant, or left unreadable
+                time.sleep(0.2)
+                holder = _read_holder(path)
+            if holder is not None and lock_is_stale(holder):
+                broken = path.with_name(f"{path.name}.stale.{os.getpid()}")
+                with contextlib.suppress(FileNotFoundError):
+                    os.rename(path, broken)  # atomic: of two breakers, the second finds nothing
+                    taken = _read_holder(broken)
+                    if taken is not None and not lock_is_stale(taken):  # a live lock made meanwhile
+                        with contextlib.suppress(OSError):
+                            os.link(broken, path)  # put it back (never over a newer one)
+                    broken.unlink(missing_ok=True)
+                continue
+            raise OutputError(
+                f"{what} is in use by {_describe(holder)} (lock file {path}, created with O_EXCL because this "
+                "filesystem does not support flock); wait for it to finish or choose another output. If no "
+                f"flexmm process runs there any more, remove {path} by hand") from None
+        except OSError as exc:
+            raise OutputError(f"cannot lock {what} with an O_EXCL lock file {path} (this filesystem does not "
+                              f"support flock): {exc.strerror or exc}") from None
+        with os.fdopen(fd, "w") as fh:
+            json.dump(mine, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        break
+    else:
+        raise OutputError(f"cannot lock {what}: the O_EXCL lock file {path} keeps changing hands")
+    try:
+        yield
+    finally:
+        if _read_holder(path) == mine:
+            path.unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def exclusive(lock_path: Path, what: str):
     """Hold an exclusive lock on ``lock_path`` (created if needed) for the block.
 
-    ``OutputError`` naming ``what`` and the holder's pid if another process holds it. The lock is
-    the kernel's (``flock``): it is released when its holder exits, even by ``kill -9``.
+    ``OutputError`` naming ``what`` and the holder if another process holds it. The lock is the
+    kernel's (``flock``): it is released when its holder exits, even by ``kill -9``. Where the
+    filesystem does not support ``flock`` (``NO_FLOCK``), an O_EXCL lock file ``<lock>.excl``
+    holding host, pid and start time is used instead (``_exclusive_file``).
     """
     try:
         lock_path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
         raise OutputError(f"cannot lock {what}: {exc.strerror or exc}") from None
+    fallback = False
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
-            raise OutputError(f"{what} is in use by another flexmm process (pid {holder}); wait for it to "
-                              "finish or choose another output") from None
+            raise OutputError(f"{what} is in use by another flexmm process (pid {holder}; flock on {lock_path}); "
+                              "wait for it to finish or choose another output") from None
+        except OSError as exc:
+            if exc.errno not in NO_FLOCK:
+                raise
+            fallback = True
+        if fallback:
+            with _exclusive_file(lock_path.with_name(lock_path.name + ".excl"), what):
+                yield
+            return
         os.ftruncate(fd, 0)
         os.pwrite(fd, str(os.getpid()).encode(), 0)
         yield
     finally:
-        with contextlib.suppress(OSError):
-            fcntl.flock(fd, fcntl.LOCK_UN)
+        if not fallback:
+            with contextlib.suppress(OSError):
+                fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
 
 
 #: what a run directory may hold (a run's outputs, its analysis and figures): anything else means
 #: the path is not a run directory, and replacing it could destroy unrelated files
+#: files only a flexmm run directory holds (one of them at least)
+RUN_MARKERS = ("dataset.nc", "run.log")
 RUN_FILE_SUFFIXES = (".nc", ".yaml", ".log", ".json", ".csv", ".png", ".svg", ".pdf", ".gif", ".mp4", ".lock", ".tmp")
 
 
 def foreign_contents(directory: Path) -> list[str]:
-    """Entries of ``directory`` that a flexmm run directory would not hold (subdirectories, other files)."""
-    return sorted(p.name for p in directory.iterdir()
-                  if p.is_dir() or not p.name.endswith(RUN_FILE_SUFFIXES))
+    """Entries of ``directory`` that a flexmm run directory would not hold (subdirectories, other files).
+
+    A directory with files but neither ``dataset.nc`` nor ``run.log`` is not one flexmm wrote
+    (every committed run directory, finished or partial, holds its log): all its files are then
+    foreign, so a user's own ``config.yaml`` copied into a fresh ``--out`` directory is never replaced.
+    """
+    entries = list(directory.iterdir())
+    if entries and not any((directory / name).is_file() for name in RUN_MARKERS):
+        return sorted(p.name for p in entries)
+    return sorted(p.name for p in entries if p.is_dir() or not p.name.endswith(RUN_FILE_SUFFIXES))
+
+
+def _shown(names: list[str]) -> str:
+    return ", ".join(names[:5]) + (", ..." if len(names) > 5 else "")
+
+
+def refuse_inputs_inside(run_dir: Path, inputs) -> None:
+    """``OutputError`` if an input file (a scene the user wrote) lies inside ``run_dir`` or one of its
+    partial siblings (``.failed``/``.interrupted``): committing the run would replace it."""
+    final = Path(run_dir).expanduser().absolute().resolve()
+    homes = [final] + [final.with_name(f"{final.name}.{status}") for status in PARTIAL]
+    for item in inputs:
+        path = Path(item).expanduser().absolute().resolve()
+        for home in homes:
+            if home in path.parents:
+                raise OutputError(f"the input {item} is inside the run directory {home}, whose contents a run "
+                                  "replaces: move the input elsewhere or choose another --out (flexmm never "
+                                  "writes over its inputs)")
 
 
 class RunDirectory:
@@ -136,12 +276,13 @@ class RunDirectory:
         self._lock = exclusive(self.lock_path, f"run directory {self.final}")
 
     def __enter__(self) -> RunDirectory:
-        if self.final.is_dir():
-            foreign = foreign_contents(self.final)
+        for status in ("", *PARTIAL):  # every directory a commit may replace
+            where = self.final.with_name(f"{self.final.name}.{status}") if status else self.final
+            foreign = foreign_contents(where) if where.is_dir() else []
             if foreign:
-                shown = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "")
-                raise OutputError(f"{self.final} exists and is not a flexmm run directory (it holds {shown}); "
-                                  "a finished run replaces its run directory: choose a new or empty one")
+                raise OutputError(f"{where} exists and is not a flexmm run directory (it holds {_shown(foreign)}, "
+                                  "files flexmm did not write); a run replaces its run directory, so flexmm "
+                                  "refuses rather than delete them: choose a new or empty directory")
         self._lock.__enter__()
         clean_stale(self.parent)
         if self.final.is_dir():

@@ -1,0 +1,31 @@
+"""A pilot's stepper comes back to Python (where a signal is acted on) within a bound of work."""
+
+from __future__ import annotations
+
+import numpy as np
+from integrator_helpers import chain_problem
+
+from flexmm.integrators.stepper import make_stepper
+
+
+def test_pilot_steppers_come_back_to_python_within_their_work_bound() -> None:
+    """``bounded_calls``: no compiled call longer than the bound, the same steps in all, and a
+    deterministic split (two bounded runs are the same bits; the bound is work, not wall time)."""
+    problem = chain_problem(n_units=50, integrator="pefrl")
+
+    def bounded_run() -> tuple[list[int], np.ndarray]:
+        st = make_stepper(problem, threads=1, check_energy=False).bounded_calls(work=50 * 7)
+        calls = []
+        call = st._call
+        st._call = lambda q, v, f, n, acc: calls.append(n) or call(q, v, f, n, acc)
+        out = st.run([30, 5, 0, 16], None, reraise=True)
+        assert out.ok and st.steps == 51
+        return calls, st.q.copy()
+
+    calls, q = bounded_run()
+    assert calls == [7, 7, 7, 7, 2, 5, 0, 7, 7, 2]
+    calls2, q2 = bounded_run()
+    np.testing.assert_array_equal(q, q2)
+    whole = make_stepper(problem, threads=1, check_energy=False)
+    whole.run([30, 5, 0, 16])
+    np.testing.assert_allclose(q, whole.q, rtol=1e-12, atol=1e-14)  # the same run, up to rounding
