@@ -18,6 +18,7 @@ from typing import Any, TypeVar, get_args, get_origin
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from flexmm.config.base import COERCED_NUMBER
 from flexmm.config.scene import Scene
 from flexmm.errors import FlexmmError
 
@@ -295,6 +296,8 @@ def _issue(err: dict, data: dict, lines: dict, source: str, root: type[BaseModel
     if etype == "value_error":
         msg = str(err.get("ctx", {}).get("error", msg))
         path = _rule_path(path, msg, data)
+    elif etype == COERCED_NUMBER:  # a model's check of its own fields (config.base.Strict): at the field
+        path = path + (err["ctx"]["field"],)
     elif etype == "union_tag_invalid":  # the wrong value sits at the discriminator key
         path = path + (str(err.get("ctx", {}).get("discriminator", "kind")).strip("'\""),)
     dotted = ".".join(str(p) for p in path)
@@ -314,6 +317,8 @@ def _issue(err: dict, data: dict, lines: dict, source: str, root: type[BaseModel
         text = f"unknown key{hint or ';'} expected one of: {', '.join(valid)}" if valid else "unknown key"
     elif etype == "missing":
         text = "required field is missing"
+    elif etype == COERCED_NUMBER:
+        text = f"got {_describe(err['ctx']['given'])}; expected {err['ctx']['expected']}"
     else:
         given = f"got {_describe(err['input'])}; " if "input" in err and not isinstance(err["input"], dict) else ""
         text = f"{given}expected: {msg[0].lower() + msg[1:] if msg else msg}"
