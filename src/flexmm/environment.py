@@ -70,8 +70,8 @@ VARIABLES = {v.name: v for v in (
 
 def _error(name: str, raw: str) -> EnvironmentVariableError:
     var = VARIABLES[name]
-    return EnvironmentVariableError(f"environment variable {name}={raw!r}: expected {var.expected} "
-                                    f"({var.meaning}); unset it for the default")
+    return EnvironmentVariableError(f"environment variable {name}={raw!r}: expected {var.expected}; it sets "
+                                    f"{var.meaning} (unset it for the default)")
 
 
 def value(name: str, default):

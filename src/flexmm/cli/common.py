@@ -108,11 +108,12 @@ def error(message: str) -> UsageError:
     return UsageError(message)
 
 
-def load_or_exit(path: str, overrides: list[str] | None) -> Scene:
-    """Load and validate a scene; ``ConfigError`` (a user error: exit 2) if it does not validate."""
+def load_or_exit(path: str, overrides: list[str] | None, options: dict | None = None) -> Scene:
+    """Load and validate a scene; ``ConfigError`` (a user error: exit 2) if it does not validate.
+    ``options``: config values set by other options, reported under their names (``load_scene``)."""
     from flexmm.config import load_scene
 
-    return load_scene(path, overrides or [])
+    return load_scene(path, overrides or [], options)
 
 
 def analysis_request(spec: str | None):
