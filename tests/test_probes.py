@@ -297,3 +297,30 @@ def test_fuzz_options_and_environment(files, tmp_path, data):
 @given(data=st.data())
 def test_fuzz_options_and_environment_at_length(files, tmp_path, data):
     _fuzz(files, tmp_path, data)
+
+
+# ------------------------------------------------------------------ small things that mislead
+def test_render_sites_takes_colour_limits_from_the_units_shown(files):
+    """``--sites A:B`` once coloured by limits from the whole chain: a window's own wave was
+    saturated (or, as here, a quiet window drawn in the faint colours of a distant pulse)."""
+    from flexmm.render import RenderOptions
+    from flexmm.render.api import still_figure
+
+    ds = xr.load_dataset(files["run_nc"], engine="h5netcdf")
+    theta = np.abs(ds["theta"].values[-1])
+    peak = int(np.argmax(theta))
+    a = 0 if peak >= 30 else 45  # ten units far from the pulse
+    window = theta[a:a + 10].max()
+    assert window < 0.5 * theta.max()  # the case: a quiet window, a strong pulse elsewhere
+    t = float(ds["time"].values[-1])
+    whole = still_figure(files["run"], RenderOptions(time_s=t, color="theta")).colouring
+    shown = still_figure(files["run"], RenderOptions(time_s=t, color="theta", sites=(a, a + 10))).colouring
+    assert whole.vmax > window  # the whole chain's limits reach the pulse
+    assert 0 < shown.vmax <= window * (1 + 1e-12) and shown.vmin == -shown.vmax
+
+
+def test_movie_message_says_render_time_and_movie_length(files, tmp_path):
+    res = answered(invoke("render", files["run"], "--out", tmp_path / "m.gif", "--max-frames", "6", "--fps", "4"),
+                   codes=(0,))
+    n = int(res.stderr.split(": ", 1)[1].split(" frames")[0])
+    assert f"(a {n / 4:.3g} s movie at 4 frames/s); render time " in res.stderr, res.stderr

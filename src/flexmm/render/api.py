@@ -21,7 +21,7 @@ from flexmm.render.figure import Frame
 from flexmm.render.movie import MOVIE_SUFFIXES, ffmpeg_or_error, open_movie
 from flexmm.render.source import RunSource
 from flexmm.render.structure import make_structure
-from flexmm.render.view import describe, make_spacetime, palette_colours, view_extent
+from flexmm.render.view import columns, describe, make_spacetime, palette_colours, view_extent
 
 STILL_SUFFIXES = (".png", ".svg")
 #: frames sampled to fix colour limits, the view and the wells
@@ -139,7 +139,7 @@ def prepare(src: RunSource, opts: RenderOptions, still: bool) -> Picture:
     needed = list(dict.fromkeys(structure.fields + colouring.fields))
     src.require(needed)
     if colouring.values is not None:
-        colouring.set_limits([colouring.values(f) for f in samples], opts.clim)
+        colouring.set_limits(_shown([colouring.values(f) for f in samples], structure, opts.sites), opts.clim)
     extent = view_extent(structure, [structure.draw(f) for f in samples], opts.sites)
     spacetime = None
     if opts.spacetime:
@@ -151,6 +151,16 @@ def prepare(src: RunSource, opts: RenderOptions, still: bool) -> Picture:
                 frame_step_s=_step(src.time[indices] if indices.size > 1 else src.time),
                 spacetime=spacetime, animated=not still)
     return Picture(src, structure, colouring, fig, indices, needed)
+
+
+def _shown(values: list[np.ndarray], structure, sites: tuple[int, int] | None) -> list[np.ndarray]:
+    """The colour values of the units ``--sites`` shows (all without it): the colour limits come
+    from what is on the picture, not from a long chain's quiet rest."""
+    if sites is None:
+        return values
+    col = columns(structure)
+    pick = (col >= sites[0]) & (col < sites[1])
+    return [v[pick] if np.shape(v)[:1] == pick.shape else v for v in values]
 
 
 def still_figure(run: str | Path, opts: RenderOptions) -> Picture:
@@ -201,8 +211,9 @@ def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] 
         wall = _time.perf_counter() - t0
         n = pic.indices.size
         if log:
-            log(f"wrote {path}: {n} frames, t = {src.time[pic.indices[0]]:.6g} s to "
-                f"{src.time[pic.indices[-1]]:.6g} s, {wall:.1f} s ({n / max(wall, 1e-9):.1f} frames/s)")
+            log(f"wrote {path}: {n} frames of the run, t = {src.time[pic.indices[0]]:.6g} s to "
+                f"{src.time[pic.indices[-1]]:.6g} s (a {n / opts.fps:.3g} s movie at {opts.fps:g} frames/s); "
+                f"render time {wall:.1f} s")
         return path
 
 
