@@ -324,3 +324,16 @@ def test_movie_message_says_render_time_and_movie_length(files, tmp_path):
                    codes=(0,))
     n = int(res.stderr.split(": ", 1)[1].split(" frames")[0])
     assert f"(a {n / 4:.3g} s movie at 4 frames/s); render time " in res.stderr, res.stderr
+
+
+def test_more_threads_than_cores_runs_on_the_cores_and_says_so(tmp_path, monkeypatch):
+    """solver.threads above the cores the process may use (here made 1) is clamped with a line."""
+    import flexmm.controller
+    import flexmm.integrators.parallel
+
+    for module in (flexmm.controller, flexmm.integrators.parallel):
+        monkeypatch.setattr(module, "available_threads", lambda: 1)
+    res = answered(invoke("run", LEGO, *TINY_RUN, "--set", "solver.threads=200", "--out", tmp_path / "r"),
+                   codes=(0,))
+    assert "solver.threads 200 > the 1 threads this process may use: running on 1" in res.stderr, res.stderr
+    assert "200 threads" not in res.stderr and ", 2 threads" not in res.stderr, res.stderr
