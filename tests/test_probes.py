@@ -141,6 +141,10 @@ def test_render_answers_every_file(files, kind, tmp_path):
     res = answered(invoke("render", files[kind], "--time", "0.01", "--out", tmp_path / "f.png", "-q"))
     if kind in NOT_A_RUN:
         user_error(res, NOT_A_RUN[kind])
+    elif kind == "nan":  # drawn, with a warning
+        answered(res, "warning: ", "theta holds NaN or infinite values", codes=(0,))
+    else:
+        assert "warning" not in res.stderr, res.stderr
 
 
 @pytest.mark.parametrize("kind", KINDS)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time as _time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 from pathlib import Path
 
 import numpy as np
@@ -119,6 +119,14 @@ class Picture:
     fig: Frame
     indices: np.ndarray
     needed: list[str]
+    #: fields holding NaN or infinite values in the frames sampled for the limits (drawn as they are)
+    nonfinite: list[str] = dataclass_field(default_factory=list)
+
+    def warnings(self) -> list[str]:
+        if not self.nonfinite:
+            return []
+        return [f"warning: {self.src.path}: {', '.join(self.nonfinite)} {'holds' if len(self.nonfinite) == 1 else 'hold'} NaN or infinite values (in the frames "
+                f"sampled for the colour limits): a damaged dataset or a run that blew up; drawn as they are"]
 
     def draw(self, t_s: float, frame: dict) -> None:
         """Move the figure to one frame of the run."""
@@ -150,7 +158,8 @@ def prepare(src: RunSource, opts: RenderOptions, still: bool) -> Picture:
                 subtitle=subtitle, status=src.status_line(), t_max_s=float(src.time[-1]), width=opts.width,
                 frame_step_s=_step(src.time[indices] if indices.size > 1 else src.time),
                 spacetime=spacetime, animated=not still)
-    return Picture(src, structure, colouring, fig, indices, needed)
+    nonfinite = [n for n in names if any(not np.all(np.isfinite(f[n])) for f in samples if n in f)]
+    return Picture(src, structure, colouring, fig, indices, needed, nonfinite)
 
 
 def _shown(values: list[np.ndarray], structure, sites: tuple[int, int] | None) -> list[np.ndarray]:
@@ -173,14 +182,19 @@ def still_figure(run: str | Path, opts: RenderOptions) -> Picture:
     return pic
 
 
-def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] | None = None) -> Path:
-    """Draw a run (one frame or a movie) and return the path written."""
+def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] | None = None,
+               warn: Callable[[str], None] | None = None) -> Path:
+    """Draw a run (one frame or a movie) and return the path written. ``warn`` (default ``log``)
+    gets what the picture cannot be trusted for (NaN/inf in the fields drawn)."""
+    warn = warn or log
     check_options(opts)
     with RunSource(run) as src:
         out, still = output_kind(opts, src.path.parent)
         if out.suffix.lower() == ".mp4":
             ffmpeg_or_error()
         pic = prepare(src, opts, still)
+        for line in pic.warnings() if warn else []:
+            warn(line)
         _mkdir(out)
         t0 = _time.perf_counter()
         if still:
