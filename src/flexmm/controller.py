@@ -19,6 +19,7 @@ from flexmm._signals import signal_of
 from flexmm.assemble import Problem
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
+from flexmm.integrators.parallel import available_threads
 from flexmm.integrators.stepper import DEFAULT_RTOL, Outcome, Stepper, make_stepper
 from flexmm.io.run_dataset import DatasetWriter, MemoryWriter, add_state, estimate_bytes, shape_variables
 from flexmm.io.provenance import provenance_attrs
@@ -353,6 +354,10 @@ def run_problem(
                            atol=scene.solver.atol,
                            max_step=scene.solver.dt_s / sc.time_s if scene.solver.dt_s else None, warm=False)
     threads = stepper.threads
+    asked = scene.solver.threads
+    if asked is not None and asked > available_threads():
+        say(f"solver.threads {asked} > the {available_threads()} threads this process may use: "
+            f"running on {threads}")
     say(f"{s.model}: {s.n_sites} units, {s.ndof} DOFs, {spec.name}, {steps} "
         f"(stable limit {problem.stable_dt * sc.time_s:.4g} s), {n_frames} frames, ~{size / 2**20:.1f} MiB"
         + (f", {threads} threads" if threads > 1 else ""))

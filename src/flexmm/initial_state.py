@@ -109,6 +109,10 @@ def _from_run(system: System, path: str) -> str:
         if rate not in ds:
             raise InitialStateError(f"initial.from_run {path}: its dataset stores no {rate} "
                                     "(continue from a run with output.velocities: true)")
+        last = (np.asarray(ds[f.name].values[-1], float), np.asarray(ds[rate].values[-1], float))
+        if not (np.all(np.isfinite(last[0])) and np.all(np.isfinite(last[1]))):
+            raise InitialStateError(f"initial.from_run {path}: the last frame of its {f.name} or {rate} holds NaN "
+                                    "or infinite values (a damaged dataset or a run that blew up)")
         sl = _slice(system, f.name)
         vs, rs = _scale(system, f.name)
         system.q0[sl] = (np.asarray(ds[f.name].values[-1], float) + _rest_shift(system, ds, f.name)) / vs

@@ -41,8 +41,16 @@ def test_plan_trims_a_long_chain(tmp_path):
 
 
 def test_bad_fidelity_is_a_user_error():
-    res = runner.invoke(app, ["plan", str(ROOT / "configs" / "lego_vector_soliton.yaml"), "-f", "half"])
-    assert res.exit_code == 2 and "valid" in res.output
+    """Reported under --fidelity, listing the valid values, each of which the option's help documents."""
+    from flexmm.plan import FIDELITIES
+
+    for verb in ("plan", "run"):
+        res = runner.invoke(app, [verb, str(ROOT / "configs" / "lego_vector_soliton.yaml"), "-f", "half"])
+        assert res.exit_code == 2 and res.stderr.startswith("error: --fidelity 'half': expected one of "
+                                                            f"{', '.join(FIDELITIES)}"), res.stderr
+        usage = " ".join(runner.invoke(app, [verb, "--help"], env={"COLUMNS": "400"}).output.split())
+        for value in FIDELITIES:
+            assert f"{value} (" in usage or f"{value}." in usage, (value, usage)
     res = runner.invoke(app, ["compare", str(ROOT / "configs" / "lego_vector_soliton.yaml"), "-f", "full"])
     assert res.exit_code == 2
 

@@ -18,10 +18,47 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexmm.errors import FlexmmError
+from flexmm.io.run_dataset import REST_SUFFIX
 
 
 class FieldError(FlexmmError, ValueError):
     """The requested field does not exist in (or cannot be derived from) the dataset."""
+
+
+class DamagedDataset(FieldError):
+    """A run dataset lacks a field its run saved, or holds NaN/inf values where a field is measured:
+    it was damaged or edited (or the run blew up); it is not measured."""
+
+
+def check_saved_fields(ds, config: dict) -> None:
+    """DamagedDataset if ``ds`` lacks a field its run saved: the config's ``output.fields`` (else
+    every field of the model, as the run's rest-state coordinates ``<field>_rest`` list them) and,
+    with ``output.velocities``, their rates. Nothing is then measured on another field instead."""
+    suffix = REST_SUFFIX
+    model = [c[: -len(suffix)] for c in ds.coords if c.endswith(suffix) and ds[c].dims == ("site",)]
+    out = (config or {}).get("output") or {}
+    asked = out.get("fields") or model
+    saved = [f for f in model if f in asked]
+    if out.get("velocities", True):
+        saved += [f + "_dot" for f in saved]
+    missing = [f for f in saved if f not in ds.data_vars]
+    if missing:
+        raise DamagedDataset(f"the dataset has no {', '.join(missing)}, which its run saved (the "
+                             f"stored config's output.fields, or every field of the model): a damaged or "
+                             f"edited dataset, not measured (rerun the scene)")
+
+
+def check_finite(view: "FieldView") -> None:
+    """DamagedDataset if the field measured (or its times) holds NaN or infinite values."""
+    bad = ~np.isfinite(view.values)
+    if not np.all(np.isfinite(view.time)):
+        raise DamagedDataset("the dataset's time holds NaN or infinite values: a damaged dataset, "
+                             "not measured")
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise DamagedDataset(f"{int(bad.sum())} of the {bad.size} values of {view.spec!r} are NaN or "
+                             f"infinite (the first at t = {view.time[i]:.6g} s, site {view.site[j]:g}): a "
+                             f"damaged dataset or a run that blew up, not measured")
 
 
 @dataclass

@@ -22,21 +22,17 @@ from flexmm.analysis.theory_comparison import (
 )
 from flexmm.analysis.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
 from flexmm.analysis.energy import EnergyBudget, energy_budget
-from flexmm.analysis.fields import FieldView, field_view
+from flexmm.analysis.fields import FieldView, check_finite, check_saved_fields, field_view
 from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fronts
 from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
 from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
 from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.analysis.transients import mark_transients
 from flexmm.config.analysis import AnalysisKind, AnalysisOptions
-from flexmm.errors import FlexmmError
+from flexmm.io.identify import RunNotFound, run_dataset
 
 #: the analysis kinds, from the options model (``flexmm.config.analysis``)
 KINDS = get_args(AnalysisKind)
-
-
-class RunNotFound(FlexmmError):
-    """The path is not a run directory (no dataset.nc) or the dataset cannot be read."""
 
 
 @dataclass
@@ -61,34 +57,11 @@ class RunAnalysis:
         return str(self.ctx.ds.attrs.get("title") or self.path.name)
 
 
-def dataset_path(path: str | Path) -> Path:
-    """``RUN_DIR/dataset.nc`` (or the file itself); RunNotFound if missing."""
-    p = Path(path)
-    nc = p / "dataset.nc" if p.is_dir() else p
-    if not nc.is_file():
-        what = "no dataset.nc in" if p.is_dir() else "no such run directory or file:"
-        partial = [q for q in (p.with_name(f"{p.name}.{s}") for s in ("interrupted", "failed", "inaccurate"))
-                   if (q / "dataset.nc").is_file()]
-        hint = f" (an unfinished or inaccurate run is in {partial[0]})" if partial else ""
-        raise RunNotFound(f"{what} {p}{hint}")
-    return nc
-
-
 def run_status(path: str | Path) -> tuple[str, str]:
-    """(status, reason) a run's dataset records ('finished', 'inaccurate', 'failed', 'interrupted'); RunNotFound
-    if it cannot be read. Reads the attributes only (fast)."""
-    import h5py
-
-    nc = dataset_path(path)
-    try:
-        with h5py.File(nc, "r") as f:
-            attrs = f.attrs
-            status = attrs.get("status", "finished")
-            reason = attrs.get("status_reason", "")
-    except (OSError, ValueError) as exc:
-        raise RunNotFound(f"cannot read {nc}: not a readable flexmm dataset ({exc})") from None
-    as_str = lambda v: v.decode() if isinstance(v, bytes) else str(v)  # noqa: E731
-    return as_str(status), as_str(reason)
+    """(status, reason) a run's dataset records ('finished', 'failed', 'interrupted'); RunNotFound
+    (saying what the file is) if it is not a readable run dataset. Reads the attributes only (fast)."""
+    _, attrs = run_dataset(path)
+    return str(attrs.get("status", "finished")), str(attrs.get("status_reason", ""))
 
 
 def open_dataset(path):
@@ -97,7 +70,7 @@ def open_dataset(path):
 
     if isinstance(path, xr.Dataset):
         return path
-    nc = dataset_path(path)
+    nc, _ = run_dataset(path)
     try:
         return xr.load_dataset(nc, engine="h5netcdf")
     except (OSError, ValueError) as exc:
@@ -139,15 +112,18 @@ def default_field_for(kind: str, ds, ctx=None) -> str | None:
 def analyze_run(path, *, field_spec: str | None = None, kind: str = "auto",
                 row: int | None = None, threshold_fraction: float = 0.25,
                 jump: float | None = None) -> RunAnalysis:
-    """Measure one run (a run directory, its .nc file, or its dataset already loaded).
-    Raises RunNotFound, FieldError, PulseNotFound, FrontNotFound, NotDriven."""
+    """Measure one run (a run directory, its .nc file, or its dataset already loaded). Raises
+    RunNotFound, FieldError (DamagedDataset: a field its run saved is missing, or the field measured
+    holds NaN/inf), PulseNotFound, FrontNotFound, NotDriven."""
     if kind not in KINDS:
         raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
     ds = open_dataset(path)
     ctx = RunContext.from_dataset(ds)
+    check_saved_fields(ds, ctx.config)  # a deleted field is an error, never a fallback
     ctx.ds = ds = from_rest(ds, rest_fields(ctx))  # measure what moves on the rest state (dataset only)
     kind = choose_kind(ctx) if kind == "auto" else kind
     view = field_view(ds, field_spec or default_field_for(kind, ds, ctx), row=row)
+    check_finite(view)
     where = Path(path) if isinstance(path, (str, Path)) else Path(path.encoding.get("source", ""))
     out = RunAnalysis(where, kind, ctx, view, energy=energy_budget(ds))
     if kind == "pulse":

@@ -52,6 +52,9 @@ def _main(
                                  help="Print the flexmm version and exit."),
 ) -> None:
     """Nonlinear waves in flexible mechanical metamaterials: run, validate and inspect scenes."""
+    from flexmm import environment
+
+    environment.check()  # a bad FLEXMM_* / NUMBA_NUM_THREADS value is refused before any command runs
 
 
 for _name, _func in (

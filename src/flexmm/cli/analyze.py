@@ -159,6 +159,7 @@ def analyze(
     from flexmm.analysis import export as out_ds
     from flexmm.analysis import figures as plots
     from flexmm.analysis import report
+    from flexmm.io.identify import SWEEP, file_kind
     from flexmm.sweep import is_sweep
 
     options = analysis_options(analysis=analysis, field=field, row=row, threshold=threshold, jump=jump)
@@ -171,7 +172,7 @@ def analyze(
         else:
             console.print(f"wrote {path}")
 
-    sweeps = [r for r in runs if is_sweep(r)]
+    sweeps = [r for r in runs if is_sweep(r) or file_kind(r) == SWEEP]  # a sweep.nc of any name
     for s in sweeps:
         _sweep_summary(s, plot_dir, console, wrote)
     runs = [r for r in runs if r not in sweeps]
@@ -261,7 +262,8 @@ def _sweep_summary(sweep_dir: str, plot_dir: str | None, console, wrote) -> None
     for _, row in flat.iterrows():
         table.add_row(*(v if isinstance(v, str) else _fmt(v) for v in row.tolist()))
     console.print(table)
-    target = Path(plot_dir or sweep_dir) / "sweep.png"
+    folder = Path(sweep_dir) if Path(sweep_dir).is_dir() else Path(sweep_dir).parent  # a sweep.nc: beside it
+    target = Path(plot_dir or folder) / "sweep.png"
     with writing(target.parent):
         target.parent.mkdir(parents=True, exist_ok=True)
         wrote(plot_sweep(sweep_dir, target))

@@ -70,23 +70,37 @@ class _FlagsAsFlags:
         return params
 
 
-class UserErrorCommand(_FlagsAsFlags, TyperCommand):
-    """A typer command that turns user errors into ``error: <message>`` and exit status 2.
+@contextmanager
+def user_errors(ctx: typer.Context | None) -> Iterator[None]:
+    """Turn a user error into ``error: <message>`` on stderr and exit status 2.
 
-    This is the only place the CLI catches ``FlexmmError``; everything else propagates (a failed
-    run exits 1 via ``typer.Exit``, an interrupted sweep 130, a bug keeps its traceback).
+    This is the only place the CLI catches ``FlexmmError`` (the commands' ``invoke`` and the
+    group's, which checks the environment before any command); everything else propagates (a
+    failed run exits 1 via ``typer.Exit``, an interrupted sweep 130, a bug keeps its traceback).
     """
+    try:
+        yield
+    except FlexmmError as exc:
+        typer.echo(user_error_message(exc, ctx), err=True)
+        raise typer.Exit(EXIT_USER_ERROR) from None
+
+
+class UserErrorCommand(_FlagsAsFlags, TyperCommand):
+    """A typer command that turns user errors into ``error: <message>`` and exit status 2
+    (``user_errors``)."""
 
     def invoke(self, ctx: typer.Context):
-        try:
+        with user_errors(ctx):
             return super().invoke(ctx)
-        except FlexmmError as exc:
-            typer.echo(user_error_message(exc, ctx), err=True)
-            raise typer.Exit(EXIT_USER_ERROR) from None
 
 
 class FlexmmGroup(_FlagsAsFlags, TyperGroup):
-    """The ``flexmm`` group: its own flags (``--version``, ``--help``, completion) shown as flags."""
+    """The ``flexmm`` group: its own flags (``--version``, ``--help``, completion) shown as flags;
+    a user error of its callback (a bad environment variable) reported like a command's."""
+
+    def invoke(self, ctx: typer.Context):
+        with user_errors(None):
+            return super().invoke(ctx)
 
 
 def error(message: str) -> UsageError:
@@ -94,11 +108,12 @@ def error(message: str) -> UsageError:
     return UsageError(message)
 
 
-def load_or_exit(path: str, overrides: list[str] | None) -> Scene:
-    """Load and validate a scene; ``ConfigError`` (a user error: exit 2) if it does not validate."""
+def load_or_exit(path: str, overrides: list[str] | None, options: dict | None = None) -> Scene:
+    """Load and validate a scene; ``ConfigError`` (a user error: exit 2) if it does not validate.
+    ``options``: config values set by other options, reported under their names (``load_scene``)."""
     from flexmm.config import load_scene
 
-    return load_scene(path, overrides or [])
+    return load_scene(path, overrides or [], options)
 
 
 def analysis_request(spec: str | None):
@@ -159,4 +174,4 @@ def stderr_is_tty() -> bool:
 
 __all__ = ["EXIT_FAILED_RUN", "EXIT_INTERRUPTED", "EXIT_USER_ERROR", "FlexmmGroup", "OverrideOption",
            "UserErrorCommand", "analysis_request", "check_output_dir", "error", "load_or_exit", "output_dir",
-           "stderr_is_tty", "user_error_message", "writing"]
+           "stderr_is_tty", "user_error_message", "user_errors", "writing"]

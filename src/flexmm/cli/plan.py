@@ -4,9 +4,22 @@ from __future__ import annotations
 
 import typer
 
-from flexmm.cli.common import OverrideOption, analysis_request, load_or_exit
+from flexmm.cli.common import OverrideOption, analysis_request, error, load_or_exit
 
-FidelityOption = typer.Option("auto", "--fidelity", "-f", help="auto (reduce what keeps the answer), full, continuum.")
+FidelityOption = typer.Option(
+    "auto", "--fidelity", "-f",
+    help="auto (reduce what keeps the answer), full (as declared), chain (a sheet's planar wave on its two-row "
+         "chain, approximate), continuum (docs/fidelity.md).")
+
+
+def check_fidelity(value: str) -> None:
+    """A UsageError under ``--fidelity`` naming the valid values (``plan.FIDELITIES``, each in
+    the option's help) unless ``value`` is one of them."""
+    from flexmm.plan import FIDELITIES
+
+    if value not in FIDELITIES:
+        raise error(f"--fidelity {value!r}: expected one of {', '.join(FIDELITIES)} (docs/fidelity.md)")
+
 AnalysisOption = typer.Option(
     None, "--analysis", "-a", help="What the run is for: pulse[:FIELD], front[:FIELD], energy (prunes the output)."
 )
@@ -25,6 +38,7 @@ def plan(
     from flexmm.io.provenance import config_text
     from flexmm.plan import PlanError, make_plan
 
+    check_fidelity(fidelity)
     request = analysis_request(analysis)
     scene = load_or_exit(config, overrides)
     try:

@@ -81,5 +81,5 @@ def render(
         clim=parse_pair(clim, "--clim"), exaggerate=exaggerate, shape=shape, sites=span, spacetime=spacetime,
         row=row, width=width)
     log = None if quiet else (lambda m: typer.echo(m, err=True))
-    path = render_run(run, opts, log=log)
+    path = render_run(run, opts, log=log, warn=lambda m: typer.echo(m, err=True))  # warnings even with -q
     typer.echo(str(path))

@@ -9,7 +9,7 @@ import typer
 from flexmm.cli.common import (
     EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, stderr_is_tty, writing,
 )
-from flexmm.cli.plan import AnalysisOption, FidelityOption
+from flexmm.cli.plan import AnalysisOption, FidelityOption, check_fidelity
 
 
 def run(
@@ -43,10 +43,9 @@ def run(
             ov = list(overrides or [])
             if force:
                 ov.append("solver.allow_unstable=true")
-            if from_run:
-                ov.append(f"initial.from_run={from_run}")
+            check_fidelity(fidelity)
             analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
-            scene = load_or_exit(config, ov)
+            scene = load_or_exit(config, ov, {"initial.from_run": ("--from", from_run)} if from_run else None)
             run_dir = check_output_dir(run_dir_for(scene, out))
             refuse_inputs_inside(run_dir, [config])  # a finished run replaces its directory: never the user's input
             log = None if quiet else (lambda m: typer.echo(m, err=True))

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import importlib
+import types
+import typing
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic_core import PydanticCustomError
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -17,10 +20,67 @@ EndCondition = Literal["free", "fixed", "driven"]
 EdgeCondition = Literal[EndCondition, "periodic"]
 
 
+def _scalar_types(annotation) -> set:
+    """The plain types an annotation admits (through Optional/Union, Annotated, list, tuple)."""
+    origin = typing.get_origin(annotation)
+    if origin is Annotated:
+        return _scalar_types(typing.get_args(annotation)[0])
+    if origin in (typing.Union, types.UnionType, list, tuple, set, frozenset):
+        return set().union(*(_scalar_types(a) for a in typing.get_args(annotation) if a is not Ellipsis))
+    if origin is Literal:
+        return {type(a) for a in typing.get_args(annotation)}
+    return {annotation} if isinstance(annotation, type) else {object}
+
+
+def _scalars(value):
+    """``value`` and, for a list or tuple, its items (recursively)."""
+    if isinstance(value, list | tuple):
+        for item in value:
+            yield from _scalars(item)
+    else:
+        yield value
+
+
+#: pydantic error type of ``_check_numbers`` (the loader reports it at the field, with the value given)
+COERCED_NUMBER = "coerced_number"
+
+
+def _check_numbers(annotation, value) -> str | None:
+    """What is wrong with ``value`` that pydantic's lax mode would quietly turn into a number (None
+    if nothing): a boolean where a number is expected (``n_units: true`` would be 1), a float where
+    only a whole number is (``n_frames: 1e7``, ``n_units: 2.0``)."""
+    kinds = _scalar_types(annotation)
+    if object in kinds or typing.Any in kinds:
+        return None
+    for v in _scalars(value):
+        if isinstance(v, bool) and bool not in kinds and kinds & {int, float}:
+            return "an integer (a boolean is not a number)" if float not in kinds else \
+                "a number (a boolean is not a number)"
+        if isinstance(v, float) and int in kinds and float not in kinds:
+            example = f", e.g. {int(v)}" if v.is_integer() and abs(v) < 1e18 else ""
+            return f"an integer, written without a decimal point or exponent{example}"
+    return None
+
+
 class Strict(BaseModel):
-    """Frozen, closed model: unknown keys are errors, values are never silently coerced to str."""
+    """Frozen, closed model: unknown keys are errors, values are never silently coerced to str,
+    and never to numbers either: a boolean where a number is expected and a float where an
+    integer is are refused (``_check_numbers``), where pydantic's lax mode would accept them."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, str_strip_whitespace=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_coerced_numbers(cls, data):
+        if isinstance(data, dict):
+            for name, field in cls.model_fields.items():
+                key = field.alias or name
+                if key in data and field.annotation is not None:
+                    expected = _check_numbers(field.annotation, data[key])
+                    if expected:
+                        raise PydanticCustomError(COERCED_NUMBER, "{field}: got {given!r}; expected {expected}",
+                                                  {"field": key, "given": data[key], "expected": expected})
+        return data
 
 
 def exactly_one(model: Strict, a: str, b: str, meanings: tuple[str, str] | None = None) -> Strict:

@@ -218,8 +218,11 @@ class Initial(Strict):
     def _run_exists(cls, value: str | None, info: ValidationInfo) -> str | None:
         if value is None:
             return None
+        from flexmm.io.identify import RunNotFound, run_dataset
+
         p = Path(value).expanduser()
-        nc = p / "dataset.nc" if p.suffix != ".nc" else p
-        if not nc.is_file():
-            raise ValueError(f"no dataset.nc in {str(p)!r} (from_run names a finished run directory)")
+        try:  # a run's dataset: not a missing path, an analysis or sweep file, a foreign or damaged one
+            run_dataset(p)
+        except RunNotFound as exc:
+            raise ValueError(f"{exc} (from_run names a finished run directory)") from None
         return str(p.resolve())

@@ -18,6 +18,7 @@ from typing import Any, TypeVar, get_args, get_origin
 import yaml
 from pydantic import BaseModel, ValidationError
 
+from flexmm.config.base import COERCED_NUMBER
 from flexmm.config.scene import Scene
 from flexmm.errors import FlexmmError
 
@@ -174,17 +175,18 @@ def parse_overrides(pairs: list[str]) -> list[tuple[tuple[str, ...], Any, str]]:
     return parsed
 
 
-def apply_overrides(data: dict, overrides, lines: dict, source: str) -> None:
-    """Set each override into ``data`` (in place); record their origin for error messages."""
+def apply_overrides(data: dict, overrides, lines: dict, source: str, option: str = "--set") -> None:
+    """Set each override into ``data`` (in place); record their origin (``--set a.b=c``, or
+    another ``option`` and its value) for error messages."""
     for keys, val, raw in overrides:
         node = data
         for depth, k in enumerate(keys[:-1]):
             if not isinstance(node.get(k), dict):
                 node[k] = {}  # replaces a scalar: errors there come from this override
-                lines[keys[: depth + 1]] = f"--set {raw}"
+                lines[keys[: depth + 1]] = f"{option} {raw}"
             node = node[k]
         node[keys[-1]] = val
-        lines[keys] = f"--set {raw}"
+        lines[keys] = f"{option} {raw}"
 
 
 def _yaml_path(loc: tuple, data: Any) -> tuple:
@@ -295,6 +297,8 @@ def _issue(err: dict, data: dict, lines: dict, source: str, root: type[BaseModel
     if etype == "value_error":
         msg = str(err.get("ctx", {}).get("error", msg))
         path = _rule_path(path, msg, data)
+    elif etype == COERCED_NUMBER:  # a model's check of its own fields (config.base.Strict): at the field
+        path = path + (err["ctx"]["field"],)
     elif etype == "union_tag_invalid":  # the wrong value sits at the discriminator key
         path = path + (str(err.get("ctx", {}).get("discriminator", "kind")).strip("'\""),)
     dotted = ".".join(str(p) for p in path)
@@ -314,6 +318,8 @@ def _issue(err: dict, data: dict, lines: dict, source: str, root: type[BaseModel
         text = f"unknown key{hint or ';'} expected one of: {', '.join(valid)}" if valid else "unknown key"
     elif etype == "missing":
         text = "required field is missing"
+    elif etype == COERCED_NUMBER:
+        text = f"got {_describe(err['ctx']['given'])}; expected {err['ctx']['expected']}"
     else:
         given = f"got {_describe(err['input'])}; " if "input" in err and not isinstance(err["input"], dict) else ""
         text = f"{given}expected: {msg[0].lower() + msg[1:] if msg else msg}"
@@ -362,9 +368,15 @@ def scene_from_dict(data: dict, *, lines: dict | None = None, source: str = "<co
                     context={"base_dir": base_dir} if base_dir is not None else None)
 
 
-def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
-    """Read, override and validate a scene file."""
+def load_scene(path: str | Path, overrides: list[str] | None = None,
+               options: dict[str, tuple[str, Any]] | None = None) -> Scene:
+    """Read, override and validate a scene file. ``options``: config values a command-line option
+    sets, ``{"initial.from_run": ("--from", "runs/x")}``: set after the ``--set`` overrides (the
+    value as given, not read as YAML), and a mistake is reported under the option's name."""
     data, lines = read_yaml(path)
     if overrides:
         apply_overrides(data, parse_overrides(overrides), lines, str(path))
+    for dotted, (option, value) in (options or {}).items():
+        keys = tuple(dotted.split("."))
+        apply_overrides(data, [(keys, value, str(value))], lines, str(path), option=option)
     return scene_from_dict(data, lines=lines, source=str(path), base_dir=Path(path).resolve().parent)

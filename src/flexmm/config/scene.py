@@ -74,6 +74,11 @@ DEFAULT_METHOD = "pefrl"
 ADAPTIVE_INTEGRATORS = frozenset({"dopri5"})
 
 
+#: the most threads a config may ask for (a config stays valid on any machine; a run clamps a
+#: request above the cores it may use to those cores and says so: ``controller.run_problem``)
+MAX_THREADS = 256
+
+
 class Solver(Strict):
     """Time integration: method, step and duration.
 
@@ -99,7 +104,8 @@ class Solver(Strict):
         None, description="absolute tolerance of dopri5, nondimensional (default 1e-2 × rtol)"
     )
     threads: int | None = Field(
-        None, ge=1, le=1024, description="threads for parallel kernels (default: all cores for ≥ 1e5 units, else 1)"
+        None, ge=1, le=MAX_THREADS, description=f"threads for parallel kernels, at most {MAX_THREADS} (default: all "
+        "cores for ≥ 1e5 units, else 1); more than this machine's cores runs on its cores, with a line saying so"
     )
     dt_fraction: float = Field(0.1, gt=0, le=1, description="auto dt = fraction × stable limit "
                                "(with solver.accuracy: null; otherwise the accuracy pilots choose dt)")
@@ -138,11 +144,12 @@ class Output(Strict):
     fields: list[str] | None = Field(None, description="coordinates to save; default all")
     velocities: bool = True
     every_s: Positive | None = Field(None, description="output interval; default from n_frames")
-    n_frames: int = Field(201, ge=2, le=10_000_000)
+    n_frames: int = Field(201, ge=2, le=1_000_000, description="frames saved (at most 10⁶; every_s for more)")
     exact_frame_times: bool = Field(
         False, description="keep frames exactly at every_s (or duration/(n_frames-1)) by shortening the step to "
         "divide the interval; default: the step is kept and the interval rounded to whole steps (both reported)")
-    site_stride: int = Field(1, ge=1)
+    site_stride: int = Field(1, ge=1, description="save every k-th unit; less than lattice.n_units, so at "
+                             "least two units are saved")
     energy: bool = True
 
 
@@ -209,6 +216,10 @@ class Scene(Strict):
             bad = [s for s in self.imperfection.sites if s >= n]
             if bad:
                 raise ValueError(f"imperfection.sites {bad} outside 0..{n - 1}")
+        if self.output.site_stride >= n:
+            raise ValueError(f"output.site_stride={self.output.site_stride} saves only unit 0 of the {n} units "
+                             f"(lattice.n_units); use a stride below {n}, at most {max(1, (n - 1) // 10)} to save "
+                             f"ten or more units")
         if self.output.fields is not None:
             valid = type(lat).FIELD_NAMES
             unknown = [f for f in self.output.fields if f not in valid]

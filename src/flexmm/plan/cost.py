@@ -7,7 +7,8 @@ would take minutes. ``check(cost, out_dir)`` compares it with the limits below a
 space where the output goes; ``enforce`` raises ``ResourceError`` (a user error) unless forced.
 
 Limits, overridable in the environment: ``FLEXMM_MAX_MEMORY_GIB`` (default: 80 % of this
-machine's memory), ``FLEXMM_MAX_OUTPUT_GIB`` (default 100), ``FLEXMM_MAX_STEPS`` (default 1e10).
+machine's memory), ``FLEXMM_MAX_OUTPUT_GIB`` (default 100), ``FLEXMM_MAX_STEPS`` (default 1e10); a value that is not a positive number is refused with a
+message naming the variable (``flexmm.environment``).
 The memory figure is a model, not a measurement: ``BYTES_PER_DOF`` for state, scratch, parameter
 tables and the frame buffer (a streamed 10⁶-unit chain peaked at 0.67 GiB, ≈ 35 doubles per DOF
 above the interpreter's ≈ 0.15 GiB), plus ``BASE_BYTES``.
@@ -21,6 +22,7 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from flexmm import environment
 from flexmm.errors import FlexmmError
 
 PROBE_SITES = 256  # largest lattice built to find the step
@@ -35,22 +37,15 @@ class ResourceError(FlexmmError):
     """A run beyond the configured limits or the free disk space (``--force`` runs it anyway)."""
 
 
-def _env_float(name: str, default: float) -> float:
-    try:
-        return float(os.environ[name])
-    except (KeyError, ValueError):
-        return default
-
-
 def limits() -> dict[str, float]:
     """The limits in force: memory and output in GiB, steps."""
     try:
         ram = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") / GIB
     except (ValueError, OSError, AttributeError):
         ram = 16.0
-    return {"memory_gib": _env_float("FLEXMM_MAX_MEMORY_GIB", 0.8 * ram),
-            "output_gib": _env_float("FLEXMM_MAX_OUTPUT_GIB", 100.0),
-            "steps": _env_float("FLEXMM_MAX_STEPS", 1e10)}
+    return {"memory_gib": environment.number("FLEXMM_MAX_MEMORY_GIB", 0.8 * ram),
+            "output_gib": environment.number("FLEXMM_MAX_OUTPUT_GIB", 100.0),
+            "steps": environment.number("FLEXMM_MAX_STEPS", 1e10)}
 
 
 @dataclass

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import time as _time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from flexmm.render.figure import Frame
 from flexmm.render.movie import MOVIE_SUFFIXES, ffmpeg_or_error, open_movie
 from flexmm.render.source import RunSource
 from flexmm.render.structure import make_structure
-from flexmm.render.view import describe, make_spacetime, palette_colours, view_extent
+from flexmm.render.view import columns, describe, make_spacetime, palette_colours, view_extent
 
 STILL_SUFFIXES = (".png", ".svg")
 #: frames sampled to fix colour limits, the view and the wells
@@ -119,6 +119,14 @@ class Picture:
     fig: Frame
     indices: np.ndarray
     needed: list[str]
+    #: fields holding NaN or infinite values in the frames sampled for the limits (drawn as they are)
+    nonfinite: list[str] = dataclass_field(default_factory=list)
+
+    def warnings(self) -> list[str]:
+        if not self.nonfinite:
+            return []
+        return [f"warning: {self.src.path}: {', '.join(self.nonfinite)} {'holds' if len(self.nonfinite) == 1 else 'hold'} NaN or infinite values (in the frames "
+                f"sampled for the colour limits): a damaged dataset or a run that blew up; drawn as they are"]
 
     def draw(self, t_s: float, frame: dict) -> None:
         """Move the figure to one frame of the run."""
@@ -139,7 +147,7 @@ def prepare(src: RunSource, opts: RenderOptions, still: bool) -> Picture:
     needed = list(dict.fromkeys(structure.fields + colouring.fields))
     src.require(needed)
     if colouring.values is not None:
-        colouring.set_limits([colouring.values(f) for f in samples], opts.clim)
+        colouring.set_limits(_shown([colouring.values(f) for f in samples], structure, opts.sites), opts.clim)
     extent = view_extent(structure, [structure.draw(f) for f in samples], opts.sites)
     spacetime = None
     if opts.spacetime:
@@ -150,7 +158,18 @@ def prepare(src: RunSource, opts: RenderOptions, still: bool) -> Picture:
                 subtitle=subtitle, status=src.status_line(), t_max_s=float(src.time[-1]), width=opts.width,
                 frame_step_s=_step(src.time[indices] if indices.size > 1 else src.time),
                 spacetime=spacetime, animated=not still)
-    return Picture(src, structure, colouring, fig, indices, needed)
+    nonfinite = [n for n in names if any(not np.all(np.isfinite(f[n])) for f in samples if n in f)]
+    return Picture(src, structure, colouring, fig, indices, needed, nonfinite)
+
+
+def _shown(values: list[np.ndarray], structure, sites: tuple[int, int] | None) -> list[np.ndarray]:
+    """The colour values of the units ``--sites`` shows (all without it): the colour limits come
+    from what is on the picture, not from a long chain's quiet rest."""
+    if sites is None:
+        return values
+    col = columns(structure)
+    pick = (col >= sites[0]) & (col < sites[1])
+    return [v[pick] if np.shape(v)[:1] == pick.shape else v for v in values]
 
 
 def still_figure(run: str | Path, opts: RenderOptions) -> Picture:
@@ -163,14 +182,19 @@ def still_figure(run: str | Path, opts: RenderOptions) -> Picture:
     return pic
 
 
-def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] | None = None) -> Path:
-    """Draw a run (one frame or a movie) and return the path written."""
+def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] | None = None,
+               warn: Callable[[str], None] | None = None) -> Path:
+    """Draw a run (one frame or a movie) and return the path written. ``warn`` (default ``log``)
+    gets what the picture cannot be trusted for (NaN/inf in the fields drawn)."""
+    warn = warn or log
     check_options(opts)
     with RunSource(run) as src:
         out, still = output_kind(opts, src.path.parent)
         if out.suffix.lower() == ".mp4":
             ffmpeg_or_error()
         pic = prepare(src, opts, still)
+        for line in pic.warnings() if warn else []:
+            warn(line)
         _mkdir(out)
         t0 = _time.perf_counter()
         if still:
@@ -201,8 +225,9 @@ def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] 
         wall = _time.perf_counter() - t0
         n = pic.indices.size
         if log:
-            log(f"wrote {path}: {n} frames, t = {src.time[pic.indices[0]]:.6g} s to "
-                f"{src.time[pic.indices[-1]]:.6g} s, {wall:.1f} s ({n / max(wall, 1e-9):.1f} frames/s)")
+            log(f"wrote {path}: {n} frames of the run, t = {src.time[pic.indices[0]]:.6g} s to "
+                f"{src.time[pic.indices[-1]]:.6g} s (a {n / opts.fps:.3g} s movie at {opts.fps:g} frames/s); "
+                f"render time {wall:.1f} s")
         return path
 
 

@@ -13,23 +13,11 @@ from typing import Self
 import numpy as np
 
 from flexmm.errors import UsageError
+from flexmm.io.identify import run_dataset
 from flexmm.io.run_dataset import REST_SUFFIX, SHAPE_VARIABLES
 
 #: bytes of field data read per block of frames
 BLOCK_BYTES = 16 * 2**20
-
-
-def dataset_path(path: str | Path) -> Path:
-    """``RUN/dataset.nc`` or the file itself; UsageError naming what is missing."""
-    p = Path(path)
-    nc = p / "dataset.nc" if p.is_dir() else p
-    if not nc.is_file():
-        partial = [q for q in (p.with_name(f"{p.name}.interrupted"), p.with_name(f"{p.name}.failed"))
-                   if (q / "dataset.nc").is_file()]
-        hint = f" (an unfinished run is in {partial[0]})" if partial else ""
-        what = "no dataset.nc in" if p.is_dir() else "no such run directory or file:"
-        raise UsageError(f"{what} {p}{hint}")
-    return nc
 
 
 def _text(value) -> str:
@@ -42,7 +30,7 @@ class RunSource:
     def __init__(self, path: str | Path):
         import h5netcdf
 
-        self.path = dataset_path(path)
+        self.path, _ = run_dataset(path)  # RunNotFound saying what the file is if it is not a run's dataset
         try:
             self.file = h5netcdf.File(self.path, "r")
         except (OSError, ValueError) as exc:
@@ -181,4 +169,4 @@ class RunSource:
         self.close()
 
 
-__all__ = ["RunSource", "dataset_path"]
+__all__ = ["RunSource"]
