@@ -42,38 +42,36 @@ def test_three_lines_reach_a_dataset_and_the_soliton_speed(short_run):
     speed within 3 % of the exact vector-soliton law at its amplitude (the theory module's
     prediction, which the measurement does not use)."""
     res, tmp = short_run
-    speed = flexmm.analyze(res.dataset).speed_m_s
+    m = flexmm.analyze(res.dataset)
+    speed = m.speed_m_s
     assert res.ok and res.status == "finished" and res.message == ""
     assert res.dataset.sizes["time"] == 301 and "theta" in res.dataset
     assert res.error_estimate is not None and res.error_estimate <= res.accuracy["accuracy_requested"]
-    m = flexmm.analyze(res.dataset)
     row = next(c for c in m.comparisons if c["item"] == f"pulse {m.principal.index}" and c["quantity"] == "speed")
     assert row["measured"] == speed and row["predicted"] is not None
     assert abs(speed - row["predicted"]) < 0.03 * row["predicted"]
+    assert repr(res).startswith("<flexmm.Result 'lego_vector_soliton': finished; dataset (time: 301, site: 200), "
+                                "error estimate ")
     # in memory: nothing left on disk, no path
     assert res.path is None
     assert list(tmp.iterdir()) == []
 
 
 def test_analysis_of_a_dataset_equals_that_of_its_file(short_run, tmp_path):
-    """``flexmm.analyze(ds)`` measures what ``flexmm analyze RUN`` measures on the same data."""
+    """``flexmm.analyze(ds)`` measures what ``flexmm analyze RUN`` measures on the same data, and
+    leaves the dataset as it was."""
     res, _ = short_run
     nc = tmp_path / "dataset.nc"
     res.dataset.to_netcdf(nc, engine="h5netcdf")
+    before = res.dataset.copy(deep=True)
     from_memory, from_file = flexmm.analyze(res.dataset), flexmm.analyze(tmp_path)
+    assert res.dataset.identical(before)
     assert from_memory.kind == from_file.kind == "pulse"
     assert repr(from_memory.comparisons) == repr(from_file.comparisons)  # nan-aware
     assert str(from_memory) == str(from_file)
     table = from_memory.dataset
     assert table.attrs["analysis"] == "pulse"
     assert float(table["pulse_speed_m_s"][from_memory.principal.index]) == from_memory.speed_m_s
-
-
-def test_analyze_leaves_the_dataset_unchanged(short_run):
-    res, _ = short_run
-    before = res.dataset.copy(deep=True)
-    flexmm.analyze(res.dataset)
-    assert res.dataset.identical(before)
 
 
 def test_analyze_options_are_validated(short_run):
@@ -184,3 +182,24 @@ def test_import_flexmm_is_light():
     code = "import sys, flexmm; print(sorted(m for m in sys.modules if m.startswith(('flexmm.', 'numpy', 'xarray'))))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "['flexmm._version']"
+
+
+def test_a_failed_run_returns_its_frames_and_why(tmp_path, monkeypatch):
+    """A run that fails (here: the disk fills after 100 frames) does not raise: the Result says
+    'failed' and why, with the frames written, and the temporary directory is gone."""
+    import flexmm.io.run_dataset as run_dataset
+
+    flush = run_dataset.DatasetWriter.flush
+
+    def full_after_100(self) -> None:
+        if self.n_written >= 100:
+            raise OSError(28, "No space left on device")
+        flush(self)
+
+    monkeypatch.setattr(run_dataset.DatasetWriter, "flush", full_after_100)
+    monkeypatch.setattr(run_dataset, "BUFFER_BYTES", 8 * 400 * 2 * 50)  # flush every 50 frames
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    res = flexmm.run(DEMO, **SHORT)
+    assert not res.ok and res.status == "failed" and "No space left on device" in res.message
+    assert res.dataset.sizes["time"] == 100 and res.dataset.attrs["status"] == "failed"
+    assert res.path is None and list(tmp_path.iterdir()) == []

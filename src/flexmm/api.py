@@ -115,6 +115,13 @@ class Result:
         """True when the run finished."""
         return self.status == "finished"
 
+    def __repr__(self) -> str:
+        sizes = ", ".join(f"{k}: {v}" for k, v in self.dataset.sizes.items())
+        est = "" if self.error_estimate is None else f", error estimate {self.error_estimate:.3g}"
+        why = f" ({self.message})" if self.message else ""
+        where = f", written to {self.path}" if self.path is not None else ""
+        return f"<flexmm.Result {self.scene.name!r}: {self.status}{why}; dataset ({sizes}){est}{where}>"
+
     def analyze(self, **options: Any) -> Measurements:
         """``flexmm.analyze`` of this run's dataset."""
         return analyze(self.dataset, **options)
@@ -174,6 +181,9 @@ class Measurements:
     """
 
     report: RunAnalysis
+
+    def __repr__(self) -> str:
+        return f"<flexmm.Measurements {self.kind}: {self.report.name}>\n{self}"
 
     @property
     def kind(self) -> str:
