@@ -1,9 +1,17 @@
-"""Library entry points: load a scene, run it, summarise the result."""
+"""Library entry points: load a scene, run it, measure it, draw it.
+
+The notebook API (``flexmm.run``, ``flexmm.analyze``, ``flexmm.render``, re-exported at the top
+of the package; docs/api.md) is a thin layer over what the command line runs: ``run_scene``
+(``flexmm run``), ``analysis.report`` (``flexmm analyze``) and ``render.api`` (``flexmm render``).
+"""
 
 from __future__ import annotations
 
+import shutil
+import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from flexmm.assemble import build_problem
 from flexmm.config import Scene, load_scene
@@ -11,6 +19,12 @@ from flexmm.controller import RunResult, run_problem
 from flexmm.io.atomic import write_text_atomic
 from flexmm.io.provenance import config_text
 from flexmm.io.rundir import RunDirectory
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from matplotlib.figure import Figure
+
+    from flexmm.analysis.report import RunAnalysis
 
 
 class _InPlace:
@@ -77,4 +91,164 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     return result
 
 
-__all__ = ["load_scene", "run_scene", "run_dir_for", "build_problem"]
+@dataclass
+class Result:
+    """What ``flexmm.run`` returns: the run's dataset and how the run went.
+
+    ``dataset``: the run's ``xarray.Dataset``, loaded in memory (SI units; the layout of
+    docs/architecture.md "Dataset layout"); ``status``: 'finished', 'failed' or 'interrupted';
+    ``message``: why a run did not finish ('' if it did); ``error_estimate``: the estimated
+    relative error of the wave amplitudes and speeds (None for a run without one), ``accuracy``
+    the full estimate and its target (the dataset's ``accuracy_*`` attributes); ``path``: the
+    dataset file when the run was written to a directory (``out``), else None; ``scene``: the
+    validated scene that was asked for; ``log``: the run's log lines.
+    """
+
+    dataset: xr.Dataset
+    status: str
+    message: str
+    error_estimate: float | None
+    accuracy: dict
+    path: Path | None
+    scene: Scene
+    log: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when the run finished."""
+        return self.status == "finished"
+
+    def __repr__(self) -> str:
+        sizes = ", ".join(f"{k}: {v}" for k, v in self.dataset.sizes.items())
+        est = "" if self.error_estimate is None else f", error estimate {self.error_estimate:.3g}"
+        why = f" ({self.message})" if self.message else ""
+        where = f", written to {self.path}" if self.path is not None else ""
+        return f"<flexmm.Result {self.scene.name!r}: {self.status}{why}; dataset ({sizes}){est}{where}>"
+
+    def analyze(self, **options: Any) -> Measurements:
+        """``flexmm.analyze`` of this run's dataset."""
+        return analyze(self.dataset, **options)
+
+    def render(self, t: float | None = None, **options: Any) -> Figure:
+        """``flexmm.render`` of this run's dataset."""
+        return render(self.dataset, t=t, **options)
+
+
+def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, overrides: dict[str, Any] | None = None,
+        fidelity: str = "auto", analysis: str | None = None, progress: bool = False,
+        **dotted: Any) -> Result:
+    """Run a scene and return its dataset in memory, its status and its error estimate.
+
+    ``scene``: the path of a YAML file, YAML text, a dict of the same content, or a ``Scene``.
+    Overrides are dotted keys, given as ``overrides={"solver.duration_s": 0.1}`` and/or as
+    keyword arguments (``**{"solver.duration_s": 0.1}``; the keyword form wins on a clash).
+    ``out``: a run directory to write (dataset.nc, config.yaml, run.log, as ``flexmm run --out``);
+    None runs in a temporary directory that is removed once the dataset is loaded.
+    ``fidelity`` and ``analysis`` are ``flexmm run``'s options of the same names.
+
+    A mistake in the scene or an override raises ``flexmm.errors.FlexmmError`` (``ConfigError``
+    naming the source, the dotted field and what was expected); a run that fails or is
+    interrupted returns with ``status`` and ``message`` saying so.
+    """
+    from flexmm.analysis.report import open_dataset
+    from flexmm.config import resolve_scene
+    from flexmm.plan.cost import EXACT_SITES, enforce
+    from flexmm.plan.output import parse_analysis
+
+    parse_analysis(analysis)  # an unknown analysis is an error before anything runs
+    sc = resolve_scene(scene, {**(overrides or {}), **dotted})
+    tmp = None if out is not None else Path(tempfile.mkdtemp(prefix="flexmm-run-"))
+    try:
+        run_dir = Path(out).expanduser() if out is not None else tmp / sc.name
+        enforce(sc, run_dir, step=sc.lattice.n_sites > EXACT_SITES)
+        res = run_scene(sc, run_dir=run_dir, progress=progress, fidelity=fidelity, analysis=analysis)
+        ds = open_dataset(res.path)
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return Result(dataset=ds, status=res.status, message=res.reason,
+                  error_estimate=res.accuracy.get("accuracy_estimate"), accuracy=dict(res.accuracy),
+                  path=res.path if out is not None else None, scene=sc, log=list(res.log))
+
+
+@dataclass
+class Measurements:
+    """What ``flexmm.analyze`` returns: the measurements of one run against theory.
+
+    ``kind``: the analysis made ('pulse', 'front', 'driven' or 'modes'); ``principal``: the
+    feature the scene is about (the measurement ``flexmm run`` summarises: a ``PulseMeasurement``,
+    ``FrontMeasurement``, ``WaveGroup`` or ``DrivenMeasurement``), None if nothing was measured;
+    ``comparisons``: the rows of ``flexmm analyze``'s table (item, quantity, measured,
+    predicted, units, rel_diff, note); ``dataset``: everything measured as an ``xarray.Dataset``
+    (what ``flexmm analyze`` saves as analysis.nc); ``report``: the full ``RunAnalysis``.
+    """
+
+    report: RunAnalysis
+
+    def __repr__(self) -> str:
+        return f"<flexmm.Measurements {self.kind}: {self.report.name}>\n{self}"
+
+    @property
+    def kind(self) -> str:
+        return self.report.kind
+
+    @property
+    def principal(self) -> Any:
+        from flexmm.analysis.summary import principal
+
+        pick = principal(self.report)
+        return None if pick is None else pick[1]
+
+    @property
+    def speed_m_s(self) -> float | None:
+        """The speed of the principal pulse, front or wave group in m/s (None: none measured)."""
+        return getattr(self.principal, "speed_m_s", None)
+
+    @property
+    def comparisons(self) -> list[dict]:
+        return [c.as_dict() for c in self.report.comparisons]
+
+    @property
+    def dataset(self) -> xr.Dataset:
+        from flexmm.analysis.export import to_dataset
+
+        return to_dataset(self.report)
+
+    def __str__(self) -> str:
+        from flexmm.analysis.summary import summary_lines
+
+        return "\n".join(summary_lines(self.report))
+
+
+def analyze(run: xr.Dataset | str | Path | Result, **options: Any) -> Measurements:
+    """Measure a run as ``flexmm analyze`` does: its pulses, fronts, driven response or wave
+    groups, compared with the model's theory.
+
+    ``run``: the run's ``xarray.Dataset`` (e.g. ``flexmm.run(...).dataset``), a ``Result``, a
+    run directory or its dataset.nc. ``options``: ``kind`` ('auto', 'pulse', 'front', 'driven',
+    'modes'), ``field`` ('theta', 'u', 'strain', ...), ``row``, ``threshold_fraction``, ``jump``
+    (``flexmm analyze``'s options; a mistake raises ``ConfigError``). Nothing to measure raises
+    a ``FlexmmError`` subclass (``PulseNotFound``, ``FrontNotFound``, ...).
+    """
+    from flexmm.analysis.report import analyze_dataset, analyze_with
+    from flexmm.config.analysis import AnalysisOptions
+    from flexmm.config.loader import validate
+
+    opts = validate(AnalysisOptions, options, source="flexmm.analyze")
+    if isinstance(run, Result):
+        run = run.dataset
+    if hasattr(run, "data_vars"):
+        return Measurements(analyze_dataset(run, field_spec=opts.field, kind=opts.kind, row=opts.row,
+                                            threshold_fraction=opts.threshold_fraction, jump=opts.jump))
+    return Measurements(analyze_with(run, opts))
+
+
+def render(run: xr.Dataset | str | Path | Result, t: float | None = None, **options: Any) -> Figure:
+    """One frame of a run as a matplotlib Figure: ``flexmm.render.api.figure`` (``flexmm.render``)."""
+    from flexmm.render.api import figure
+
+    return figure(run, t, **options)
+
+
+__all__ = ["Measurements", "Result", "analyze", "build_problem", "load_scene", "render", "run", "run_dir_for",
+           "run_scene"]

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-import flexmm
+from flexmm._version import __version__
 from flexmm.io.cf import DIMENSIONLESS, units_from_name, write_netcdf
 from flexmm.io.provenance import git_commit
 
@@ -145,7 +145,7 @@ def to_dataset(res) -> xr.Dataset:
     ds.attrs.update(source=str(res.path), source_config_sha256=str(src.get("config_sha256", "")),
                     model=res.ctx.model, analysis=res.kind, field=v.spec, field_units=v.units,
                     field_reference="rest_state",  # analysis measures every field from the run's rest state
-                    flexmm_version=flexmm.__version__, git_commit=git_commit())
+                    flexmm_version=__version__, git_commit=git_commit())
     return ds
 
 

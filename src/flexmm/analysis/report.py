@@ -117,7 +117,18 @@ def analyze_run(path, *, field_spec: str | None = None, kind: str = "auto",
     holds NaN/inf), PulseNotFound, FrontNotFound, NotDriven."""
     if kind not in KINDS:
         raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
-    ds = open_dataset(path)
+    return analyze_dataset(open_dataset(path), path=path, field_spec=field_spec, kind=kind, row=row,
+                           threshold_fraction=threshold_fraction, jump=jump)
+
+
+def analyze_dataset(ds, *, path: str | Path | None = None, field_spec: str | None = None, kind: str = "auto",
+                    row: int | None = None, threshold_fraction: float = 0.25,
+                    jump: float | None = None) -> RunAnalysis:
+    """``analyze_run`` on a run's ``xarray.Dataset`` in memory (not modified); ``path``: where it
+    came from, for the record (default: the file it was read from, else ``<in memory>``)."""
+    if kind not in KINDS:
+        raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
+    path = path if path is not None else (ds.encoding.get("source") or "<in memory>")
     ctx = RunContext.from_dataset(ds)
     check_saved_fields(ds, ctx.config)  # a deleted field is an error, never a fallback
     ctx.ds = ds = from_rest(ds, rest_fields(ctx))  # measure what moves on the rest state (dataset only)
@@ -169,7 +180,7 @@ def measure_run(path: str | Path, *, field_spec: str | None = None,
         return None, str(exc)
 
 
-__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_run", "analyze_with", "choose_kind", "measure_run",
+__all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_dataset", "analyze_run", "analyze_with", "choose_kind", "measure_run",
            "open_dataset",
            "FrontNotFound", "NoWaveGroups", "NotDriven", "PulseNotFound", "RestStateMissing"]
 

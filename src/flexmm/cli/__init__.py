@@ -20,6 +20,7 @@ from flexmm.cli import analyze as _analyze
 from flexmm.cli import bench as _bench
 from flexmm.cli import compare as _compare
 from flexmm.cli import design as _design
+from flexmm.cli import export as _export
 from flexmm.cli import fit as _fit
 from flexmm.cli import plan as _plan
 from flexmm.cli import render as _render
@@ -68,6 +69,7 @@ for _name, _func in (
     ("stability", _stability.stability),
     ("bench", _bench.bench),
     ("render", _render.render),
+    ("export", _export.export),
     ("fit", _fit.fit),
     ("design", _design.design),
 ):

@@ -136,6 +136,15 @@ def read_yaml(path: str | Path) -> tuple[dict, dict[Path_, int]]:
         line = raw[: exc.start].count(b"\n") + 1
         raise ConfigError([ConfigIssue(src, line, "", f"not UTF-8 text (byte 0x{raw[exc.start]:02x} at "
                                                       f"offset {exc.start}); save the file as UTF-8")]) from None
+    return parse_yaml(text, src)
+
+
+def parse_yaml(text: str, src: str = "<string>") -> tuple[dict, dict[Path_, int]]:
+    """Parse YAML text (a config given as a string; ``src`` names it in errors) into a dict plus
+    a key-path -> line map; ConfigError on failure, with the same checks as ``read_yaml``."""
+    if len(text) > MAX_CONFIG_BYTES:
+        raise ConfigError([ConfigIssue(src, None, "", f"text of {len(text):,} characters; a config is at most "
+                                                      f"{MAX_CONFIG_BYTES:,}")])
     try:
         node = yaml.compose(text, Loader=_Loader)
         size = _expanded_size(node, {})
@@ -175,18 +184,18 @@ def parse_overrides(pairs: list[str]) -> list[tuple[tuple[str, ...], Any, str]]:
     return parsed
 
 
-def apply_overrides(data: dict, overrides, lines: dict, source: str, option: str = "--set") -> None:
-    """Set each override into ``data`` (in place); record their origin (``--set a.b=c``, or
-    another ``option`` and its value) for error messages."""
+def apply_overrides(data: dict, overrides, lines: dict, source: str, origin: str = "--set") -> None:
+    """Set each override into ``data`` (in place); record their origin (``origin raw``, e.g.
+    ``--set a.b=1``) for error messages."""
     for keys, val, raw in overrides:
         node = data
         for depth, k in enumerate(keys[:-1]):
             if not isinstance(node.get(k), dict):
                 node[k] = {}  # replaces a scalar: errors there come from this override
-                lines[keys[: depth + 1]] = f"{option} {raw}"
+                lines[keys[: depth + 1]] = f"{origin} {raw}"
             node = node[k]
         node[keys[-1]] = val
-        lines[keys] = f"{option} {raw}"
+        lines[keys] = f"{origin} {raw}"
 
 
 def _yaml_path(loc: tuple, data: Any) -> tuple:
@@ -378,5 +387,50 @@ def load_scene(path: str | Path, overrides: list[str] | None = None,
         apply_overrides(data, parse_overrides(overrides), lines, str(path))
     for dotted, (option, value) in (options or {}).items():
         keys = tuple(dotted.split("."))
-        apply_overrides(data, [(keys, value, str(value))], lines, str(path), option=option)
+        apply_overrides(data, [(keys, value, str(value))], lines, str(path), origin=option)
     return scene_from_dict(data, lines=lines, source=str(path), base_dir=Path(path).resolve().parent)
+
+
+def _looks_like_path(text: str) -> bool:
+    """A scene given as one string: a file path (one line that names a file, ends in .yaml/.yml or
+    has no ``key: value``) rather than YAML text."""
+    if "\n" in text:
+        return False
+    return Path(text).expanduser().is_file() or text.endswith((".yaml", ".yml")) or ":" not in text
+
+
+def resolve_scene(scene: Scene | dict | str | Path, overrides: dict[str, Any] | None = None) -> Scene:
+    """A validated Scene from a YAML file path, YAML text, a dict or a Scene, with ``overrides``
+    (dotted keys to Python values, e.g. ``{"solver.duration_s": 0.1}``) applied.
+
+    A mistake raises ``ConfigError`` naming the source (the file, ``<string>`` or ``<dict>``) and
+    line where there is one, the dotted field path and what was expected; a mistake in an
+    override names it (``override solver.duration_s=-1``). The dict given is not modified.
+    """
+    import copy
+
+    from flexmm.io.provenance import resolved_config
+
+    pairs = [(tuple(k for k in str(key).split(".") if k), val, f"{key}={val!r}")
+             for key, val in (overrides or {}).items()]
+    for keys, _, raw in pairs:
+        if not keys:
+            raise ConfigError([ConfigIssue("override", None, raw, "empty key path")])
+    if isinstance(scene, Scene):
+        if not pairs:
+            return scene
+        data, lines, source, base = resolved_config(scene), {}, "<Scene>", None
+    elif isinstance(scene, dict):
+        data, lines, source, base = copy.deepcopy(scene), {}, "<dict>", None
+    elif isinstance(scene, Path) or (isinstance(scene, str) and _looks_like_path(scene)):
+        path = Path(scene).expanduser()
+        data, lines = read_yaml(path)
+        source, base = str(path), path.resolve().parent
+    elif isinstance(scene, str):
+        data, lines = parse_yaml(scene)
+        source, base = "<string>", None
+    else:
+        raise ConfigError([ConfigIssue("scene", None, "", f"got {_describe(scene)}; expected: a Scene, a dict, "
+                                                          "YAML text or the path of a YAML file")])
+    apply_overrides(data, pairs, lines, source, origin="override")
+    return scene_from_dict(data, lines=lines, source=source, base_dir=base)

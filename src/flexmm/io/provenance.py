@@ -12,7 +12,7 @@ from pathlib import Path
 
 import yaml
 
-import flexmm
+from flexmm._version import __version__
 
 LIBRARIES = ("numpy", "scipy", "numba", "xarray", "h5netcdf", "h5py", "pydantic")
 
@@ -35,7 +35,7 @@ def config_hash(scene) -> str:
 @lru_cache(maxsize=1)
 def git_commit() -> str:
     """Commit of the flexmm source tree ('+dirty' if modified), or 'unknown'."""
-    here = Path(flexmm.__file__).resolve().parent
+    here = Path(__file__).resolve().parent.parent
     try:
         sha = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5
@@ -68,7 +68,7 @@ def provenance_attrs(scene) -> dict[str, str]:
     return {
         "config": config_text(scene),
         "config_sha256": config_hash(scene),
-        "flexmm_version": flexmm.__version__,
+        "flexmm_version": __version__,
         "git_commit": git_commit(),
         "libraries": library_versions(),
     }

@@ -172,14 +172,36 @@ def _shown(values: list[np.ndarray], structure, sites: tuple[int, int] | None) -
     return [v[pick] if np.shape(v)[:1] == pick.shape else v for v in values]
 
 
-def still_figure(run: str | Path, opts: RenderOptions) -> Picture:
-    """The picture of one frame (--time, default the last), drawn but not saved (tests, notebooks)."""
+def still_figure(run, opts: RenderOptions) -> Picture:
+    """The picture of one frame (--time, default the last), drawn but not saved (tests, notebooks);
+    ``run``: a run directory, its dataset.nc or the run's ``xarray.Dataset``."""
     check_options(opts)
     with RunSource(run) as src:
         pic = prepare(src, opts, still=True)
         i = int(pic.indices[0])
         pic.draw(float(src.time[i]), next(src.frames([i], pic.needed))[2])
     return pic
+
+
+#: the options of ``figure`` (the fields of ``RenderOptions`` that a still uses)
+FIGURE_OPTIONS = ("color", "clim", "exaggerate", "shape", "sites", "spacetime", "row", "width")
+
+
+def figure(run, t: float | None = None, **options):
+    """One frame of a run drawn as ``flexmm render --time t`` draws it, as a matplotlib Figure
+    (shown inline by Jupyter; ``fig.savefig(...)`` to save it): ``flexmm.render`` (docs/api.md).
+
+    ``run``: the run's ``xarray.Dataset``, a ``flexmm.run`` result, a run directory or its
+    dataset.nc; ``t``: the time in s (the nearest frame; default the last). ``options``:
+    ``FIGURE_OPTIONS``, the fields of ``RenderOptions`` of those names; a bad value raises
+    ``UsageError``.
+    """
+    unknown = sorted(set(options) - set(FIGURE_OPTIONS))
+    if unknown:
+        raise UsageError(f"flexmm.render: unknown option {', '.join(unknown)}; expected one of "
+                         f"{', '.join(FIGURE_OPTIONS)}")
+    run = getattr(run, "dataset", run)  # a flexmm.run result
+    return still_figure(run, RenderOptions(time_s=t, **options)).fig.fig
 
 
 def render_run(run: str | Path, opts: RenderOptions, log: Callable[[str], None] | None = None,
@@ -246,4 +268,4 @@ def _mkdir(out: Path) -> None:
         raise OutputError(f"cannot create {out.parent}: {exc.strerror or exc}") from None
 
 
-__all__ = ["Picture", "RenderOptions", "prepare", "render_run", "still_figure"]
+__all__ = ["FIGURE_OPTIONS", "Picture", "RenderOptions", "figure", "prepare", "render_run", "still_figure"]

@@ -24,17 +24,45 @@ def _text(value) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
+class _Variable:
+    """An xarray variable read through the part of h5netcdf's interface ``RunSource`` uses."""
+
+    def __init__(self, var):
+        self.var = var
+        self.dimensions = tuple(var.dims)
+        self.attrs = dict(var.attrs)
+
+    def __getitem__(self, key) -> np.ndarray:
+        return np.asarray(self.var.values[key])
+
+
+class _InMemory:
+    """A run's ``xarray.Dataset`` in memory, read like the open file (``attrs``, ``variables``)."""
+
+    def __init__(self, ds):
+        self.attrs = dict(ds.attrs)
+        self.variables = {str(name): _Variable(var) for name, var in ds.variables.items()}
+
+    def close(self) -> None:
+        pass
+
+
 class RunSource:
-    """A run's dataset opened for reading frames (use as a context manager)."""
+    """A run's dataset opened for reading frames (use as a context manager): a run directory, its
+    dataset.nc, or the run's ``xarray.Dataset`` in memory."""
 
-    def __init__(self, path: str | Path):
-        import h5netcdf
+    def __init__(self, path):
+        if hasattr(path, "data_vars"):  # an xarray.Dataset
+            self.path = Path(path.encoding.get("source") or "<in memory>/dataset.nc")
+            self.file = _InMemory(path)
+        else:
+            import h5netcdf
 
-        self.path, _ = run_dataset(path)  # RunNotFound saying what the file is if it is not a run's dataset
-        try:
-            self.file = h5netcdf.File(self.path, "r")
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"cannot read {self.path}: not a readable flexmm dataset ({exc})") from None
+            self.path, _ = run_dataset(path)  # RunNotFound saying what the file is if it is not a run's dataset
+            try:
+                self.file = h5netcdf.File(self.path, "r")
+            except (OSError, ValueError) as exc:
+                raise UsageError(f"cannot read {self.path}: not a readable flexmm dataset ({exc})") from None
         f = self.file
         self.attrs = {k: _text(v) if isinstance(v, (str, bytes)) else v for k, v in f.attrs.items()}
         if "time" not in f.variables or "site" not in f.variables:

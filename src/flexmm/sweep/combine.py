@@ -53,10 +53,9 @@ def combine(plan):
     """The sweep dataset (xarray) of a plan, from what is on disk now."""
     import xarray as xr
 
+    from flexmm._version import __version__
     from flexmm.io.provenance import config_text, git_commit, resolved_config
     from flexmm.sweep.theory import reference_lines
-
-    import flexmm
 
     spec = plan.spec
     shape = spec.shape
@@ -105,7 +104,7 @@ def combine(plan):
         "lattice_kind": base_scene.lattice.kind,
         "field": units.get("field", ""),
         "measured": units.get("kind", ""),
-        "flexmm_version": flexmm.__version__,
+        "flexmm_version": __version__,
         "git_commit": git_commit(),
         "n_points": int(np.prod(shape)),
         "n_finished": counts["finished"],
