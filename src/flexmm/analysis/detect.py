@@ -1,6 +1,6 @@
 """Find localized features in every frame and link them into tracks through time.
 
-Per frame, peaks of ±field above a height threshold (scipy.signal.find_peaks with a prominence
+Per frame, peaks of ±field above a height threshold (``analysis.peaks.find_peaks`` with a prominence
 criterion) are located to sub-site accuracy by a parabola through the three samples around the
 maximum. Peaks are then linked frame to frame by a greedy nearest-neighbour tracker that predicts
 each track's position from its recent velocity, keeps a track alive across a few missing frames
@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import find_peaks
+
+from flexmm.analysis.peaks import find_peaks
 
 
 @dataclass
@@ -74,7 +75,7 @@ def frame_peaks(profile: np.ndarray, x: np.ndarray, height: float | tuple[float,
         if not np.isfinite(level):
             continue
         y = sign * profile
-        idx, _ = find_peaks(y, height=level, prominence=0.5 * level)
+        idx = find_peaks(y, height=level, prominence_min=0.5 * level)
         for k in idx:
             off, h = refine_peak(y, int(k))
             out.append((float(np.interp(k + off, np.arange(x.size), x)), sign * h, int(k)))
