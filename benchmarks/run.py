@@ -721,17 +721,20 @@ def _stages_once(src: Path, out_dir: Path, extra: tuple[str, ...] = ()) -> dict:
     """One warm demo in a fresh interpreter of tree ``src``: {stage: seconds} and the wall time."""
     args = {"stages": STAGE_FUNCS, "opaque": OPAQUE_STAGES, "argv": [str(LEGO), "--out", str(out_dir), *extra]}
     env = dict(os.environ, PYTHONPATH=str(src))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", STAGES_CHILD, json.dumps(args)], env=env, capture_output=True,
                           text=True, cwd=ROOT.parent)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if proc.returncode != 0:
         raise RuntimeError(f"demo_stages child failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
     row = json.loads(proc.stdout.strip().splitlines()[-1])
     totals = row["totals"]
     totals["interpreter"] = wall - row["in_process_s"]
     printed = [ln for ln in proc.stdout.strip().splitlines()[:-1] if not ln.startswith("dataset: ")]
-    return {"wall_s": wall, "stages": totals, "summary_text": printed}
+    return {"wall_s": wall, "cpu_s": cpu, "stages": totals, "summary_text": printed}
 
 
 def demo_stages(repeats: int = 7) -> list[dict]:
@@ -770,10 +773,12 @@ def demo_stages(repeats: int = 7) -> list[dict]:
             vals = [r["stages"].get(stage, 0.0) for r in rows]
             table[stage] = {"min_s": min(vals), "median_s": float(np.median(vals))}
             print(f"  {stage:<12s} {min(vals):7.3f} {float(np.median(vals)):9.3f}")
-        walls = [r["wall_s"] for r in rows]
-        print(f"  {'end to end':<12s} {min(walls):7.3f} {float(np.median(walls)):9.3f}")
+        walls, cpus = [r["wall_s"] for r in rows], [r["cpu_s"] for r in rows]
+        print(f"  {'end to end':<12s} {min(walls):7.3f} {float(np.median(walls)):9.3f}   "
+              f"(process CPU time: min {min(cpus):.3f}, median {float(np.median(cpus)):.3f} s)")
         out.append({"tree": tag, "src": str(trees[tag]), "repeats": repeats, "stages": table,
-                    "wall_min_s": min(walls), "wall_median_s": float(np.median(walls)), "runs": rows,
+                    "wall_min_s": min(walls), "wall_median_s": float(np.median(walls)),
+                    "cpu_min_s": min(cpus), "cpu_median_s": float(np.median(cpus)), "runs": rows,
                     "load": os.getloadavg()})
     if len(runs) == 2 and runs["this"][0]["summary_text"] != runs["base"][0]["summary_text"]:
         print("  the two trees print different summaries:")

@@ -40,22 +40,37 @@ def local_maxima(x: np.ndarray) -> np.ndarray:
 def prominence(x: np.ndarray, k: int) -> tuple[float, int, int]:
     """(prominence, left base, right base) of the peak at index ``k`` of ``x``."""
     top = x[k]
-    lo = k
-    while lo > 0 and x[lo - 1] <= top:
-        lo -= 1
-    hi = k
-    while hi < x.size - 1 and x[hi + 1] <= top:
-        hi += 1
+    higher = np.flatnonzero(x[:k] > top)  # the walk to either side stops before a higher sample
+    lo = int(higher[-1]) + 1 if higher.size else 0
+    higher = np.flatnonzero(x[k + 1 :] > top)
+    hi = k + int(higher[0]) if higher.size else x.size - 1
     # the lowest sample on each side, the one nearest the peak on ties
     left = k - int(np.argmin(x[lo : k + 1][::-1]))
     right = k + int(np.argmin(x[k : hi + 1]))
     return float(top - max(x[left], x[right])), left, right
 
 
-def find_peaks(x: np.ndarray, height: float | None = None, prominence_min: float | None = None) -> np.ndarray:
-    """Local maxima at least ``height`` high and at least ``prominence_min`` prominent."""
+def local_maxima_rows(values: np.ndarray) -> list[np.ndarray]:
+    """``local_maxima`` of every row of a 2D array, at once where no two neighbours are equal."""
+    v = np.asarray(values, float)
+    if v.shape[1] < 3:
+        return [np.zeros(0, np.intp) for _ in range(v.shape[0])]
+    strict = (v[:, 1:-1] > v[:, :-2]) & (v[:, 1:-1] > v[:, 2:])
+    flat = np.any(v[:, 1:] == v[:, :-1], axis=1)  # a flat top: the row's own search
+    rows, cols = np.nonzero(strict)
+    split = np.searchsorted(rows, np.arange(1, v.shape[0]))
+    out = np.split((cols + 1).astype(np.intp), split)
+    for j in np.flatnonzero(flat):
+        out[j] = local_maxima(v[j])
+    return out
+
+
+def find_peaks(x: np.ndarray, height: float | None = None, prominence_min: float | None = None,
+               maxima: np.ndarray | None = None) -> np.ndarray:
+    """Local maxima at least ``height`` high and at least ``prominence_min`` prominent
+    (``maxima``: ``local_maxima(x)``, if known)."""
     x = np.asarray(x, float)
-    idx = local_maxima(x)
+    idx = local_maxima(x) if maxima is None else maxima
     if height is not None:
         idx = idx[x[idx] >= height]
     if prominence_min is not None and idx.size:
