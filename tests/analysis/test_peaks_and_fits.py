@@ -36,6 +36,18 @@ def test_local_maxima_and_filtered_peaks_match_scipy():
         assert np.array_equal(peaks.find_peaks(x, height=level, prominence_min=0.5 * level), want), (x, level)
 
 
+def test_local_maxima_of_every_row_at_once():
+    """Rows with and without flat tops (the row's own search), as scipy finds them row by row."""
+    rng = np.random.default_rng(2)
+    for k in range(60):
+        v = rng.integers(0, 4, (6, int(rng.integers(3, 40)))).astype(float) if k % 2 else rng.standard_normal((6, 25))
+        v[0] = rng.standard_normal(v.shape[1])
+        got = peaks.local_maxima_rows(v)
+        assert len(got) == v.shape[0]
+        for row, idx in zip(v, got):
+            assert np.array_equal(idx, find_peaks(row)[0]), row
+
+
 def test_peak_widths_match_scipy_at_every_index():
     """Width and both crossings, bit for bit, at every sample (peaks, slopes, plateaus, ends)."""
     for x in _signals():
