@@ -670,28 +670,31 @@ STAGE_ORDER = ("interpreter", "imports", "plan", "build", "step bound", "pilot",
 #: its clock starts at its first line (the interpreter's own start-up is the parent's wall time less this)
 STAGES_CHILD = r"""
 import time
-T0 = time.perf_counter()
+T0, C0 = time.perf_counter(), time.process_time()  # C0: the interpreter's start-up CPU time
 import importlib, json, sys
 args = json.loads(sys.argv[1])
 for m in ("flexmm.cli", "flexmm.cli.run", "flexmm.api") + tuple({m for fs in args["stages"].values() for m, _ in fs}):
     importlib.import_module(m)
 totals = {"imports": time.perf_counter() - T0}
+cpu = {"interpreter": C0, "imports": time.process_time() - C0}
 stack = []
 
 def timed(fn, stage):
     def wrapper(*a, **k):
         if any(s[0] in args["opaque"] for s in stack):
             return fn(*a, **k)
-        t0 = time.perf_counter()
-        stack.append([stage, 0.0])
+        t0, c0 = time.perf_counter(), time.process_time()
+        stack.append([stage, 0.0, 0.0])
         try:
             return fn(*a, **k)
         finally:
-            _, inner = stack.pop()
-            dt = time.perf_counter() - t0
+            _, inner, inner_c = stack.pop()
+            dt, dc = time.perf_counter() - t0, time.process_time() - c0
             totals[stage] = totals.get(stage, 0.0) + dt - inner
+            cpu[stage] = cpu.get(stage, 0.0) + dc - inner_c
             if stack:
                 stack[-1][1] += dt
+                stack[-1][2] += dc
     return wrapper
 
 for stage, funcs in args["stages"].items():
@@ -707,18 +710,20 @@ for stage, funcs in args["stages"].items():
             if getattr(m, attr, None) is fn:
                 setattr(m, attr, timed(fn, stage))
 from flexmm.cli import app
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 try:
     app(["run", *args["argv"]], standalone_mode=False)
 finally:
-    end = time.perf_counter()
+    end, cend = time.perf_counter(), time.process_time()
     totals["cli (rest)"] = (end - t0) - sum(v for k, v in totals.items() if k != "imports")
-    print(json.dumps({"totals": totals, "in_process_s": end - T0}))
+    cpu["cli (rest)"] = (cend - c0) - sum(v for k, v in cpu.items() if k not in ("imports", "interpreter"))
+    print(json.dumps({"totals": totals, "cpu": cpu, "in_process_s": end - T0}))
 """
 
 
 def _stages_once(src: Path, out_dir: Path, extra: tuple[str, ...] = ()) -> dict:
-    """One warm demo in a fresh interpreter of tree ``src``: {stage: seconds} and the wall time."""
+    """One warm demo in a fresh interpreter of tree ``src``: {stage: wall seconds}, {stage: CPU
+    seconds of the process} (on a shared machine the CPU times are the steadier), wall and CPU time."""
     args = {"stages": STAGE_FUNCS, "opaque": OPAQUE_STAGES, "argv": [str(LEGO), "--out", str(out_dir), *extra]}
     env = dict(os.environ, PYTHONPATH=str(src))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -734,7 +739,7 @@ def _stages_once(src: Path, out_dir: Path, extra: tuple[str, ...] = ()) -> dict:
     totals = row["totals"]
     totals["interpreter"] = wall - row["in_process_s"]
     printed = [ln for ln in proc.stdout.strip().splitlines()[:-1] if not ln.startswith("dataset: ")]
-    return {"wall_s": wall, "cpu_s": cpu, "stages": totals, "summary_text": printed}
+    return {"wall_s": wall, "cpu_s": cpu, "stages": totals, "stages_cpu": row["cpu"], "summary_text": printed}
 
 
 def demo_stages(repeats: int = 7) -> list[dict]:
@@ -749,7 +754,8 @@ def demo_stages(repeats: int = 7) -> list[dict]:
     observer and the dataset's writer), checks (the stepper's blow-up and energy checks, the
     stiffness tracker), the rest of ``run_problem``, the summary (``_print_summary``, with the
     imports it makes) and the rest of the CLI. Each stage's time excludes the timed calls nested
-    in it. Minimum and median over ``repeats``; with ``$FLEXMM_BASELINE`` (a checkout of another
+    in it; wall and CPU time of each (the interpreter's CPU: what the process had used at its first
+    line). Minimum and median over ``repeats``; with ``$FLEXMM_BASELINE`` (a checkout of another
     commit, e.g. ``git worktree add /tmp/base main``) the two trees alternate run by run.
     """
     import tempfile
@@ -767,12 +773,15 @@ def demo_stages(repeats: int = 7) -> list[dict]:
     out = []
     for tag, rows in runs.items():
         print(f"warm demo stages, {tag} ({trees[tag]}), {repeats} runs; {_load()}")
-        print(f"  {'stage':<12s} {'min s':>7s} {'median s':>9s}")
+        print(f"  {'stage':<12s} {'min s':>7s} {'median s':>9s}  {'CPU min s':>9s} {'CPU median s':>12s}")
         table = {}
         for stage in STAGE_ORDER:
             vals = [r["stages"].get(stage, 0.0) for r in rows]
-            table[stage] = {"min_s": min(vals), "median_s": float(np.median(vals))}
-            print(f"  {stage:<12s} {min(vals):7.3f} {float(np.median(vals)):9.3f}")
+            cpus = [r["stages_cpu"].get(stage, 0.0) for r in rows]
+            table[stage] = {"min_s": min(vals), "median_s": float(np.median(vals)),
+                            "cpu_min_s": min(cpus), "cpu_median_s": float(np.median(cpus))}
+            print(f"  {stage:<12s} {min(vals):7.3f} {float(np.median(vals)):9.3f}  {min(cpus):9.3f} "
+                  f"{float(np.median(cpus)):12.3f}")
         walls, cpus = [r["wall_s"] for r in rows], [r["cpu_s"] for r in rows]
         print(f"  {'end to end':<12s} {min(walls):7.3f} {float(np.median(walls)):9.3f}   "
               f"(process CPU time: min {min(cpus):.3f}, median {float(np.median(cpus)):.3f} s)")
