@@ -5,7 +5,7 @@
                                               #              | roofline | sheet_throughput | contention | sheet | workprecision
                                               #              | render | gradient | gradient_dashpots | gradient_splitting | gradient_midpoint
                                               #              | gradient_models
-                                              #              | accuracy
+                                              #              | accuracy | demo_stages
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -694,6 +694,160 @@ def startup(repeats: int = 7) -> list[dict]:
         _repeat("flexmm run (demo, first run: empty cache)", run, max(2, repeats // 3), warmup=0, fresh_cache=True),
     ]
     return rows
+
+
+#: the warm demo's stages, timed in a fresh interpreter (``demo_stages``): stage -> (module, attribute)
+#: of the functions or methods whose time (less that of timed calls nested in them) counts for it
+STAGE_FUNCS = {
+    "plan": [("flexmm.plan", "make_plan")],
+    "build": [("flexmm.assemble", "build_system")],
+    "step bound": [("flexmm.stability", "omega_max"), ("flexmm.stability", "top_mode")],
+    "pilot": [("flexmm.prepare", "_accuracy")],
+    "integration": [("flexmm.integrators.stepper", "Stepper.advance"), ("flexmm.integrators.stepper", "Stepper.warm_up")],
+    "frames": [("flexmm.controller", "_Observer.__init__"), ("flexmm.controller", "_Observer.frame"),
+               ("flexmm.io.run_dataset", "DatasetWriter.close")],
+    "checks": [("flexmm.integrators.stepper", "Stepper.failure"), ("flexmm.integrators.stepper", "Stepper.energies"),
+               ("flexmm.controller", "_StepFollower.check")],
+    "run (rest)": [("flexmm.controller", "run_problem")],
+    "summary": [("flexmm.cli.run", "_print_summary")],
+}
+#: stages that keep the time of everything called inside them (the pilots' integration is the pilot's)
+OPAQUE_STAGES = ("pilot", "summary")
+STAGE_ORDER = ("start/exit", "imports", "plan", "build", "step bound", "pilot", "integration", "frames", "checks",
+               "run (rest)", "summary", "cli (rest)")
+
+#: the child of ``demo_stages``: ``flexmm run`` in this interpreter with the stage functions wrapped;
+#: its clock starts at its first line (the interpreter's own start-up is the parent's wall time less this)
+STAGES_CHILD = r"""
+import time
+T0, C0 = time.perf_counter(), time.process_time()  # C0: the interpreter's start-up CPU time
+import importlib, json, sys
+args = json.loads(sys.argv[1])
+for m in ("flexmm.cli", "flexmm.cli.run", "flexmm.api") + tuple({m for fs in args["stages"].values() for m, _ in fs}):
+    importlib.import_module(m)
+totals = {"imports": time.perf_counter() - T0}
+cpu = {"start/exit": C0, "imports": time.process_time() - C0}
+stack = []
+
+def timed(fn, stage):
+    def wrapper(*a, **k):
+        if any(s[0] in args["opaque"] for s in stack):
+            return fn(*a, **k)
+        t0, c0 = time.perf_counter(), time.process_time()
+        stack.append([stage, 0.0, 0.0])
+        try:
+            return fn(*a, **k)
+        finally:
+            _, inner, inner_c = stack.pop()
+            dt, dc = time.perf_counter() - t0, time.process_time() - c0
+            totals[stage] = totals.get(stage, 0.0) + dt - inner
+            cpu[stage] = cpu.get(stage, 0.0) + dc - inner_c
+            if stack:
+                stack[-1][1] += dt
+                stack[-1][2] += dc
+    return wrapper
+
+for stage, funcs in args["stages"].items():
+    for mod, attr in funcs:
+        owner = sys.modules[mod]
+        if "." in attr:  # a method: patch the class
+            cls, name = attr.split(".")
+            owner = getattr(owner, cls)
+            setattr(owner, name, timed(getattr(owner, name), stage))
+            continue
+        fn = getattr(owner, attr)
+        for m in list(sys.modules.values()):  # every module that imported it by name
+            if getattr(m, attr, None) is fn:
+                setattr(m, attr, timed(fn, stage))
+from flexmm.cli import app
+t0, c0 = time.perf_counter(), time.process_time()
+try:
+    app(["run", *args["argv"]], standalone_mode=False)
+finally:
+    end, cend = time.perf_counter(), time.process_time()
+    totals["cli (rest)"] = (end - t0) - sum(v for k, v in totals.items() if k != "imports")
+    cpu["cli (rest)"] = (cend - c0) - sum(v for k, v in cpu.items() if k not in ("imports", "start/exit"))
+    print(json.dumps({"totals": totals, "cpu": cpu, "in_process_s": end - T0}), flush=True)
+ending = getattr(sys.modules["flexmm.cli"], "_end", None)  # the console script's own way out, if the tree has one
+if ending is not None:
+    ending(0)
+"""
+
+
+def _stages_once(src: Path, out_dir: Path, extra: tuple[str, ...] = ()) -> dict:
+    """One warm demo in a fresh interpreter of tree ``src``: {stage: wall seconds}, {stage: CPU
+    seconds of the process} (on a shared machine the CPU times are the steadier), wall and CPU time."""
+    args = {"stages": STAGE_FUNCS, "opaque": OPAQUE_STAGES, "argv": [str(LEGO), "--out", str(out_dir), *extra]}
+    env = dict(os.environ, PYTHONPATH=str(src))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", STAGES_CHILD, json.dumps(args)], env=env, capture_output=True,
+                          text=True, cwd=ROOT.parent)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if proc.returncode != 0:
+        raise RuntimeError(f"demo_stages child failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+    row = json.loads(proc.stdout.strip().splitlines()[-1])
+    totals = row["totals"]
+    totals["start/exit"] = wall - row["in_process_s"]
+    row["cpu"]["start/exit"] = cpu - sum(v for k, v in row["cpu"].items() if k != "start/exit")
+    printed = [ln for ln in proc.stdout.strip().splitlines()[:-1] if not ln.startswith("dataset: ")]
+    return {"wall_s": wall, "cpu_s": cpu, "stages": totals, "stages_cpu": row["cpu"], "summary_text": printed}
+
+
+def demo_stages(repeats: int = 7) -> list[dict]:
+    """Where the warm demo's time goes (issue 37): ``flexmm run configs/lego_vector_soliton.yaml``
+    with its printed summary, in fresh interpreters, numba's cache warm (one warm-up run first).
+
+    Stages: the interpreter's start-up and exit (process wall and CPU time less what the child
+    measured; the child ends as the tree's console script does), the
+    imports of the run path (the CLI, ``flexmm.api`` and the modules below; an import made later,
+    such as the analysis's during the summary, counts for its stage), plan (``make_plan``, less its
+    builds), build (``build_system``), step bound (``omega_max``/``top_mode``), pilot (the accuracy
+    pilots, with everything they call), integration (``Stepper.advance``/``warm_up``), frames (the
+    observer and the dataset's writer), checks (the stepper's blow-up and energy checks, the
+    stiffness tracker), the rest of ``run_problem``, the summary (``_print_summary``, with the
+    imports it makes) and the rest of the CLI. Each stage's time excludes the timed calls nested
+    in it; wall and CPU time of each. Minimum and median over ``repeats``; with ``$FLEXMM_BASELINE`` (a checkout of another
+    commit, e.g. ``git worktree add /tmp/base main``) the two trees alternate run by run.
+    """
+    import tempfile
+
+    trees = {"this": ROOT.parent / "src"}
+    if os.environ.get(BASELINE_ENV):
+        trees["base"] = Path(os.environ[BASELINE_ENV]) / "src"
+    runs: dict[str, list[dict]] = {tag: [] for tag in trees}
+    with tempfile.TemporaryDirectory(prefix="flexmm-bench-stages-") as tmp:
+        for k in range(repeats + 1):
+            for tag in (list(trees) if k % 2 == 0 else list(trees)[::-1]):
+                row = _stages_once(trees[tag], Path(tmp) / tag)
+                if k:  # the first round warms the numba cache and the file system
+                    runs[tag].append(row)
+    out = []
+    for tag, rows in runs.items():
+        print(f"warm demo stages, {tag} ({trees[tag]}), {repeats} runs; {_load()}")
+        print(f"  {'stage':<12s} {'min s':>7s} {'median s':>9s}  {'CPU min s':>9s} {'CPU median s':>12s}")
+        table = {}
+        for stage in STAGE_ORDER:
+            vals = [r["stages"].get(stage, 0.0) for r in rows]
+            cpus = [r["stages_cpu"].get(stage, 0.0) for r in rows]
+            table[stage] = {"min_s": min(vals), "median_s": float(np.median(vals)),
+                            "cpu_min_s": min(cpus), "cpu_median_s": float(np.median(cpus))}
+            print(f"  {stage:<12s} {min(vals):7.3f} {float(np.median(vals)):9.3f}  {min(cpus):9.3f} "
+                  f"{float(np.median(cpus)):12.3f}")
+        walls, cpus = [r["wall_s"] for r in rows], [r["cpu_s"] for r in rows]
+        print(f"  {'end to end':<12s} {min(walls):7.3f} {float(np.median(walls)):9.3f}   "
+              f"(process CPU time: min {min(cpus):.3f}, median {float(np.median(cpus)):.3f} s)")
+        out.append({"tree": tag, "src": str(trees[tag]), "repeats": repeats, "stages": table,
+                    "wall_min_s": min(walls), "wall_median_s": float(np.median(walls)),
+                    "cpu_min_s": min(cpus), "cpu_median_s": float(np.median(cpus)), "runs": rows,
+                    "load": os.getloadavg()})
+    if len(runs) == 2 and runs["this"][0]["summary_text"] != runs["base"][0]["summary_text"]:
+        print("  the two trees print different summaries:")
+        for tag in runs:
+            print("\n".join(f"    {tag}: {line}" for line in runs[tag][0]["summary_text"]))
+    return out
 
 
 def sweep_overhead(points: tuple[int, int] = (2, 10), repeats: int = 3) -> dict:
@@ -1391,7 +1545,8 @@ SECTIONS = {"startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_sc
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
             "gradient_midpoint": gradient_midpoint,
-            "gradient_models": gradient_models, "accuracy": accuracy, "network": network}
+            "gradient_models": gradient_models, "accuracy": accuracy, "network": network,
+            "demo_stages": demo_stages}
 
 
 def main(argv: list[str]) -> None:

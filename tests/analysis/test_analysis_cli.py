@@ -133,3 +133,17 @@ def test_driven_run_table_and_analysis_file(tmp_path):
     assert float(ana["driven_transmission"]) == pytest.approx(math.exp(-0.02 * 59), rel=1e-6)
     assert (tmp_path / "d" / "spectrum_u.png").is_file()
     assert yaml.safe_load(ana.attrs["analysis"]) == "driven"
+
+
+def test_analyze_without_plot_does_not_import_matplotlib(tmp_path, lego_config):
+    """Figures only when asked for: importing matplotlib costs more than the demo's analysis (issue 37)."""
+    import subprocess
+    import sys
+
+    run, _, _ = _lego_soliton_run(tmp_path / "run", lego_config, -0.4)
+    code = ("import sys; from typer.testing import CliRunner; from flexmm.cli import app; "
+            f"r = CliRunner().invoke(app, ['analyze', {str(run)!r}, '--no-save']); assert r.exit_code == 0, r.output; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[]"

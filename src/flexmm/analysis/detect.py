@@ -1,6 +1,6 @@
 """Find localized features in every frame and link them into tracks through time.
 
-Per frame, peaks of ±field above a height threshold (scipy.signal.find_peaks with a prominence
+Per frame, peaks of ±field above a height threshold (``analysis.peaks.find_peaks`` with a prominence
 criterion) are located to sub-site accuracy by a parabola through the three samples around the
 maximum. Peaks are then linked frame to frame by a greedy nearest-neighbour tracker that predicts
 each track's position from its recent velocity, keeps a track alive across a few missing frames
@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import find_peaks
+
+from flexmm.analysis.peaks import find_peaks, local_maxima_rows
 
 
 @dataclass
@@ -36,8 +37,11 @@ class Track:
         """Slope of the last ``n_last`` positions against time (0 for a single point)."""
         if len(self.pos) < 2:
             return 0.0
-        t, x = np.asarray(self.time[-n_last:]), np.asarray(self.pos[-n_last:])
-        return float(np.polyfit(t - t[-1], x, 1)[0]) if np.ptp(t) > 0 else 0.0
+        t, x = self.time[-n_last:], self.pos[-n_last:]  # least-squares line, written out: called per frame and track
+        n = len(t)
+        tm, xm = sum(t) / n, sum(x) / n
+        stt = sum((ti - tm) ** 2 for ti in t)
+        return float(sum((ti - tm) * (xi - xm) for ti, xi in zip(t, x)) / stt) if max(t) > min(t) else 0.0
 
     def predict(self, t: float) -> float:
         return self.pos[-1] + self.velocity() * (t - self.time[-1])
@@ -64,17 +68,19 @@ def refine_peak(y: np.ndarray, k: int) -> tuple[float, float]:
     return off, float(b - 0.25 * (a - c) * off)
 
 
-def frame_peaks(profile: np.ndarray, x: np.ndarray, height: float | tuple[float, float]
-                ) -> list[tuple[float, float, int]]:
+def frame_peaks(profile: np.ndarray, x: np.ndarray, height: float | tuple[float, float],
+                maxima: tuple[np.ndarray, np.ndarray] | None = None) -> list[tuple[float, float, int]]:
     """Peaks of +profile and −profile above ``height`` (one level, or (positive, negative)) and
-    with a prominence of at least half of it: (position, signed height, index)."""
+    with a prominence of at least half of it: (position, signed height, index). ``maxima``: the
+    local maxima of +profile and −profile, if known."""
     out = []
     levels = (height, height) if np.isscalar(height) else height
-    for sign, level in zip((1, -1), levels):
+    for n, (sign, level) in enumerate(zip((1, -1), levels)):
         if not np.isfinite(level):
             continue
         y = sign * profile
-        idx, _ = find_peaks(y, height=level, prominence=0.5 * level)
+        idx = find_peaks(y, height=level, prominence_min=0.5 * level,
+                         maxima=maxima[n] if maxima is not None else None)
         for k in idx:
             off, h = refine_peak(y, int(k))
             out.append((float(np.interp(k + off, np.arange(x.size), x)), sign * h, int(k)))
@@ -190,5 +196,7 @@ def track_peaks(values: np.ndarray, time: np.ndarray, x: np.ndarray, *, threshol
     """Peaks of every frame of ``values`` (n_time, n_pos) above ``threshold`` (one level, or one
     per polarity), linked into tracks."""
     gate = auto_gate(values, x) if gate is None else gate
-    dets = [[(p, h) for p, h, _ in frame_peaks(values[j], x, threshold)] for j in range(values.shape[0])]
+    up, down = local_maxima_rows(values), local_maxima_rows(-values)
+    dets = [[(p, h) for p, h, _ in frame_peaks(values[j], x, threshold, (up[j], down[j]))]
+            for j in range(values.shape[0])]
     return merge_tracks(link(time, dets, gate, max_gap), gate)

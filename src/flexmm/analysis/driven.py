@@ -14,7 +14,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.signal import periodogram
 
 
 class NotDriven(Exception):
@@ -81,6 +80,8 @@ def drive_frequency(config: dict | None) -> tuple[float | None, str]:
 def measure_driven(view, frequency_hz: float | None = None, *, end: str = "left",
                    steady_fraction: float = 0.4, n_harmonics: int = 5) -> DrivenMeasurement:
     """Steady-state response of a driven FieldView (frequency from the config or given)."""
+    from scipy.signal import periodogram  # here: scipy.signal is slow to import
+
     t, y = view.time, view.values
     drive, far = (0, view.n_pos - 1) if end == "left" else (view.n_pos - 1, 0)
     if frequency_hz is None:

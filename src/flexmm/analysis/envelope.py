@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import hilbert
 
 
 @dataclass(frozen=True)
@@ -41,6 +40,8 @@ def _half_crossing(env: np.ndarray, k: int, step: int) -> float:
 
 def envelope_track(time: np.ndarray, values: np.ndarray) -> EnvelopeTrack:
     """Track the largest envelope in each frame of ``values`` (n_t, n_sites)."""
+    from scipy.signal import hilbert  # here: scipy.signal is slow to import
+
     env = np.abs(hilbert(values, axis=1))
     pos, amp, width = [], [], []
     for row in env:

@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import ndimage, stats
 
 from flexmm.analysis.detect import link, merge_tracks
 
@@ -75,6 +74,8 @@ def _front_crossings(x: np.ndarray, s: np.ndarray, min_run: int = 3) -> np.ndarr
     Oscillations behind a front (overshoot past ½ and back) make short runs; removing them by
     a morphological opening and closing (scipy.ndimage) keeps one crossing per front.
     """
+    from scipy import ndimage  # here: slow to import, and only fronts need it
+
     b = s >= 0.5
     st = np.ones(min_run, bool)
     b = ndimage.binary_closing(ndimage.binary_opening(b, st), st)
@@ -145,7 +146,11 @@ def final_speed(t: np.ndarray, pos: np.ndarray, fraction: float = LATE_FRACTION)
     res = xx - np.polyval(coef, tt - tt.mean())
     dof = tt.size - 2
     se = float(np.sqrt(cov[0, 0] * float(res @ res) / dof)) if dof > 0 else np.inf
-    return float(coef[0]), float(stats.t.ppf(0.975, dof) * se) if dof > 0 else np.inf
+    if dof <= 0:
+        return float(coef[0]), np.inf
+    from scipy import stats  # here: slow to import, and only fronts need it
+
+    return float(coef[0]), float(stats.t.ppf(0.975, dof) * se)
 
 
 def measure_fronts(view, *, jump: float | None = None, min_travel_sites: float = 3.0) -> list[FrontMeasurement]:

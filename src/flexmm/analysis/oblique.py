@@ -18,7 +18,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 import yaml
-from scipy.ndimage import uniform_filter1d
 
 from flexmm._blas import single_blas_thread
 from flexmm.analysis.context import Comparison, RunContext
@@ -93,6 +92,8 @@ def wave_groups(ds, *, smooth: float = 15.0, threshold_fraction: float = 0.15, m
     ud, vd = ds.u_dot.values[frames], ds.v_dot.values[frames]
     nb = centres.size
     energy = np.stack([np.bincount(idx, 0.5 * (a * a + b * b), minlength=nb) for a, b in zip(ud, vd)])
+    from scipy.ndimage import uniform_filter1d  # here: slow to import, and only oblique waves need it
+
     energy = uniform_filter1d(energy, size=max(1, int(round(smooth))), axis=1, mode="constant")
     thr = threshold_fraction * float(energy.max())
     tracks = [tr for tr in track_peaks(energy, time[frames], centres, threshold=(thr, np.inf),

@@ -14,17 +14,16 @@ its standard error. Width = FWHM of |field(x)| at the frame where the pulse is m
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.signal import find_peaks, peak_widths
 
 from flexmm.analysis.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
 from flexmm.analysis.detect import Track, refine_peak, split_reversals, track_peaks
+from flexmm.analysis.peaks import local_maxima, peak_width
 from flexmm.analysis.profiles import SHAPES
 from flexmm.analysis.steady import steady_part
-from flexmm.analysis.widths import PEAK_WARNING, fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
+from flexmm.analysis.widths import fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
 
 
 class PulseNotFound(Exception):
@@ -100,12 +99,9 @@ def leading_pulse(ds, field: str = "theta", *, threshold_fraction: float = 0.5,
     mid = sel[sel.size // 2]
     frame = int(np.argmin(np.abs(time - times[mid])))
     prof = np.abs(values[frame])
-    loc, _ = find_peaks(np.concatenate([[0.0], prof, [0.0]]))
-    loc = loc - 1
+    loc = local_maxima(np.concatenate([[0.0], prof, [0.0]])) - 1
     k = int(loc[np.argmin(np.abs(loc - mid))]) if loc.size else mid
-    with warnings.catch_warnings():  # a flat or one-sample profile: width 0, reported as such
-        warnings.filterwarnings("ignore", PEAK_WARNING, RuntimeWarning)
-        widths = peak_widths(prof, [k], rel_height=0.5)[0]
+    widths = [peak_width(prof, k)[0]]  # a flat or one-sample profile: width 0, reported as such
     spacing = float(np.median(np.diff(x))) if x.size > 1 else 1.0
     units = ds[field].attrs.get("units", "")
     return Pulse(
@@ -244,12 +240,12 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
     delay = float(intercepts[-1] - intercepts[0])
     pick = frames_inside(pos, t, fwhm, *bounds, others)
     sub = pick[:: max(1, pick.size // 25)]
-    fw, fits = frame_fits(view, frames, pos, h, pol, fwhm, sub) if sub.size else (np.nan, {})
+    fw, sech_fits, middle_fits = frame_fits(view, frames, pos, h, pol, fwhm, sub) if sub.size else (np.nan, [], {})
     if not np.isfinite(fw):  # a short run: no frame well inside the fitted stretch; any frame whose
         # half-maximum lies inside the chain
         whole = np.flatnonzero((pos - fwhm >= view.x.min()) & (pos + fwhm <= view.x.max()))
         whole = whole[:: max(1, whole.size // 25)]
-        fw = frame_fits(view, frames, pos, h, pol, fwhm, whole)[0] if whole.size else np.nan
+        fw = frame_fits(view, frames, pos, h, pol, fwhm, whole, fit=False)[0] if whole.size else np.nan
     W = {s: (np.nan, np.nan) for s in SHAPES}
     if pick.size:
         pooled = pooled_fits(view, frames, t, pos, pick, fwhm, lambda xc: pol * np.exp(att0 + att * direction * xc))
@@ -274,7 +270,7 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
         amplitude_last=float(peaks[np.argmax(direction * x)]),
         attenuation_per_m=float(-att), attenuation_stderr_per_m=float(att_err),
         fwhm_m=fw, width_sech_m=W["sech"][0], width_sech2_m=W["sech2"][0], width_kg_m=W["kg"][0],
-        kg_b=W["kg"][1], width_spread_m=spread(fits.get("sech", [])),
+        kg_b=W["kg"][1], width_spread_m=spread(sech_fits),
         temporal_fwhm_s=t_fwhm,
         n_collisions=int(intercepts.size - 1), collision_delay_s=delay,
         collision_shift_m=float(-delay * abs(speed)),
@@ -283,7 +279,7 @@ def _measure_group(view, index, pol, direction, fwhm, bounds, others, track, arr
         arrival_time_s=times, peak=peaks, segment=seg, steady=steady, track_time_s=t, track_pos_m=pos,
         profile_x_m=view.x[prof], profile_values=view.values[frames[mid], prof],
         profile_time_s=float(view.time[frames[mid]]),
-        profile_fits={s: fits[s][sub.size // 2] for s in fits if fits[s]},
+        profile_fits=middle_fits,
     )
 
 
@@ -359,7 +355,7 @@ def measure_pulses(view, *, threshold_fraction: float = 0.25, min_travel_sites: 
     are left out of the speed and amplitude (``steady``: formation distance and time, amplitude
     range, breathing and its period); amplitude = median signed peak of the steady part, its
     first and last values and the attenuation rate α of |peak| ∝ exp(−α · distance); spatial
-    FWHM (peak_widths) and fits of sech, sech² and the §1.3 profile; temporal FWHM; polarity
+    FWHM (``peaks.peak_width``) and fits of sech, sech² and the §1.3 profile; temporal FWHM; polarity
     (see ``arrivals`` and ``widths``).
 
     Peaks above ``threshold_fraction`` of the largest |value| and above NOISE_FACTOR times the

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import get_args
 
+from flexmm._blas import single_blas_thread
 from flexmm.analysis.collisions import Collision, find_collisions
 from flexmm.analysis.theory_comparison import (
     Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, compare_transient,
@@ -109,12 +110,16 @@ def default_field_for(kind: str, ds, ctx=None) -> str | None:
     return None
 
 
+@single_blas_thread()
 def analyze_run(path, *, field_spec: str | None = None, kind: str = "auto",
                 row: int | None = None, threshold_fraction: float = 0.25,
                 jump: float | None = None) -> RunAnalysis:
     """Measure one run (a run directory, its .nc file, or its dataset already loaded). Raises
     RunNotFound, FieldError (DamagedDataset: a field its run saved is missing, or the field measured
-    holds NaN/inf), PulseNotFound, FrontNotFound, NotDriven."""
+    holds NaN/inf), PulseNotFound, FrontNotFound, NotDriven.
+
+    On one BLAS thread: its linear algebra is small (line and profile fits), and BLAS threads
+    waiting for busy cores cost more than the work."""
     if kind not in KINDS:
         raise ValueError(f"unknown analysis {kind!r}; choose one of {', '.join(KINDS)}")
     return analyze_dataset(open_dataset(path), path=path, field_spec=field_spec, kind=kind, row=row,

@@ -21,7 +21,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
+
+from flexmm.analysis.peaks import smooth_cubic7
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,7 @@ def _noise(a: np.ndarray) -> float:
     (the filter's central weight is 1/3) to the noise of one sample."""
     if a.size < 7:
         return 0.0
-    r = a - savgol_filter(a, 7, 3)
+    r = a - smooth_cubic7(a)
     return float(1.4826 * np.median(np.abs(r - np.median(r))) / np.sqrt(2.0 / 3.0))
 
 

@@ -1,26 +1,22 @@
 """Spatial and temporal widths of a tracked pulse.
 
-- FWHM: scipy.signal.peak_widths on the spatial profile, median over up to 25 frames;
+- FWHM: ``analysis.peaks.peak_width`` on the spatial profile, median over up to 25 frames;
 - shape widths W (sech, sech², §1.3 profile; see ``profiles``): one least-squares fit of all
   usable frames pooled in the frame moving with the pulse, each frame divided by the fitted
   amplitude at its position — pooling averages noise far better than frame-by-frame fits;
-- temporal FWHM: peak_widths on the time traces at the fitted sites.
+- temporal FWHM: ``peak_width`` on the time traces at the fitted sites.
 Usable frames have the pulse at least 2 FWHM inside the fitted stretch of chain and no other
 pulse within 6 FWHM.
 """
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
-from scipy.signal import peak_widths
 
+from flexmm.analysis.peaks import peak_width
 from flexmm.analysis.profiles import SHAPES, ProfileFit, fit_profile, shape_fwhm
 
 POOLED_FRAMES = 200  # frames pooled into the co-moving width fit
-#: message of scipy's PeakPropertyWarning (a zero width or prominence; scipy does not export the class)
-PEAK_WARNING = "some peaks have a"
 
 
 def _fwhm_at(y: np.ndarray, k: int) -> float:
@@ -29,9 +25,7 @@ def _fwhm_at(y: np.ndarray, k: int) -> float:
     k = lo + int(np.argmax(y[lo : k + 2]))
     if not 0 < k < y.size - 1:
         return np.nan
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", PEAK_WARNING, RuntimeWarning)
-        return float(peak_widths(y, [k], rel_height=0.5)[0][0])
+    return peak_width(y, k)[0]
 
 
 def fwhm_estimate(view, tr_frames, tr_pos, polarity) -> float:
@@ -51,17 +45,25 @@ def frames_inside(tr_pos, tr_t, fwhm, lo_x, hi_x, others, n_max=POOLED_FRAMES) -
     return idx[np.linspace(0, idx.size - 1, min(n_max, idx.size)).astype(int)] if idx.size else idx
 
 
-def frame_fits(view, tr_frames, tr_pos, tr_h, polarity, fwhm, pick) -> tuple[float, dict]:
-    """Median spatial FWHM (m) and per-frame shape fits {shape: [ProfileFit]} at frames ``pick``."""
-    fw, fits = [], {s: [] for s in SHAPES}
-    for j in pick:
+def frame_fits(view, tr_frames, tr_pos, tr_h, polarity, fwhm, pick, fit: bool = True) -> tuple[float, list, dict]:
+    """Median spatial FWHM (m) at frames ``pick``; with ``fit``, the sech fit of each of them
+    (their spread is ``spread``) and every shape's fit of the middle one {shape: ProfileFit}
+    (the profile the figures draw): what is reported of per-frame fits, and nothing more."""
+    fw, sech_fits, middle = [], [], {}
+    for n, j in enumerate(pick):
         y = view.values[tr_frames[j]]
         fw.append(_fwhm_at(polarity * y, int(np.argmin(np.abs(view.x - tr_pos[j])))) * view.spacing_m)
+        if not fit:
+            continue
         w = np.abs(view.x - tr_pos[j]) <= 3 * fwhm
-        for s in SHAPES:
-            fits[s].append(fit_profile(view.x[w], y[w], s, (tr_h[j], tr_pos[j], fwhm / shape_fwhm(s, 1.0))))
+        for s in SHAPES if n == len(pick) // 2 else ("sech",):
+            f = fit_profile(view.x[w], y[w], s, (tr_h[j], tr_pos[j], fwhm / shape_fwhm(s, 1.0)))
+            if s == "sech":
+                sech_fits.append(f)
+            if n == len(pick) // 2:
+                middle[s] = f
     fw = [v for v in fw if np.isfinite(v)]
-    return (float(np.median(fw)) if fw else np.nan), fits
+    return (float(np.median(fw)) if fw else np.nan), sech_fits, middle
 
 
 def pooled_fits(view, tr_frames, tr_t, tr_pos, pick, fwhm, amplitude_at) -> dict[str, ProfileFit]:
@@ -98,9 +100,7 @@ def temporal_fwhm(view, sites, times, polarity, half_window) -> float:
         y = polarity * view.values[win, i]
         k = int(np.argmax(y))
         if 0 < k < y.size - 1:
-            with warnings.catch_warnings():  # a peak on a slope: its width is simply not used
-                warnings.filterwarnings("ignore", PEAK_WARNING, RuntimeWarning)
-                w, _, left, right = peak_widths(y, [k], rel_height=0.5)
-            if left[0] > 0 and right[0] < y.size - 1:
-                widths.append(w[0] * float(np.median(np.diff(view.time[win]))))
+            w, left, right = peak_width(y, k)
+            if left > 0 and right < y.size - 1:  # a peak on a slope: its width is not used
+                widths.append(w * float(np.median(np.diff(view.time[win]))))
     return float(np.median(widths)) if widths else np.nan

@@ -157,10 +157,12 @@ def analyze(
     from rich.console import Console
 
     from flexmm.analysis import export as out_ds
-    from flexmm.analysis import figures as plots
     from flexmm.analysis import report
     from flexmm.io.identify import SWEEP, file_kind
     from flexmm.sweep import is_sweep
+
+    if plot:  # matplotlib only when figures are asked for (it costs more than the demo's analysis)
+        from flexmm.analysis import figures as plots
 
     options = analysis_options(analysis=analysis, field=field, row=row, threshold=threshold, jump=jump)
     data_to_stdout = json_out == "-" or csv_out == "-"
