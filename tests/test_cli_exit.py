@@ -25,7 +25,11 @@ class _Ended(Exception):
 
 @pytest.fixture
 def ending(monkeypatch):
-    """Record the calls of os._exit and of the exit handlers instead of making them."""
+    """Record the calls of os._exit and of the exit handlers instead of making them (with no
+    dataset abandoned by an earlier test in this process: that exit is tested in test_nothing_lost)."""
+    from flexmm.io import run_dataset
+
+    monkeypatch.setattr(run_dataset, "ABANDONED", [])
     calls = []
 
     def fake_exit(code):

@@ -164,7 +164,7 @@ def test_sweep_workers_die_with_their_parent_and_the_sweep_resumes(tmp_path) -> 
     t0 = time.monotonic()
     workers: list[int] = []
     while not workers and time.monotonic() - t0 < 60:
-        workers = [p for p in _children(proc.pid) if list((sweep / "points").glob("*/point.json"))]
+        workers = [p for p in _children(proc.pid) if (sweep / "store" / "status.npy").exists()]
         time.sleep(0.2)
     assert workers, proc.communicate()
     proc.kill()

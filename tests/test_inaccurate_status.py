@@ -63,16 +63,19 @@ def test_flexmm_run_exits_3_on_an_inaccurate_run(tmp_path, strict) -> None:
 
 
 def test_a_sweep_point_that_ends_inaccurate_is_failed_with_its_reason(tmp_path) -> None:
-    import json
+    """Run in a sweep (one worker process), the coarse point is stored as failed with its reason."""
+    import yaml
 
-    from flexmm.io.provenance import config_hash, resolved_config
-    from flexmm.sweep.store import ERROR, FAILED, SweepStore
-    from flexmm.sweep.worker import Task, run_point
+    from flexmm.sweep import load_sweep, run_sweep
+    from flexmm.sweep.store import CODE, FAILED, SweepStore
 
-    sc = scene_from_dict(scene(dt_s=9e-4))
-    store = SweepStore(tmp_path / "sweep")
-    h = config_hash(sc)
-    info = run_point(Task(h, resolved_config(sc), str(store.point_dir(h)), {"solver.dt_s": 9e-4}))
-    assert info["status"] == "inaccurate" and "misses the target" in info["reason"]
-    assert json.loads((store.point_dir(h) / ERROR).read_text())["status"] == "inaccurate"
-    assert store.state(h) == FAILED
+    base = tmp_path / "coarse.yaml"
+    base.write_text(yaml.safe_dump(scene()))
+    spec_path = tmp_path / "s.yaml"
+    spec_path.write_text(yaml.safe_dump({"name": "coarse_sweep", "base": str(base),
+                                         "vary": {"grid": {"solver.dt_s": [9e-4]}}}))
+    report = run_sweep(load_sweep(spec_path), tmp_path / "sw", workers=1)
+    assert report.n_failed == 1 and report.n_finished == 0
+    store = SweepStore(tmp_path / "sw")
+    assert store.status()[0] == CODE[FAILED]
+    assert b"misses the target" in bytes(store.read()["note"][0])

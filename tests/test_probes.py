@@ -71,6 +71,7 @@ def files(tmp_path_factory) -> dict[str, Path]:
     from flexmm.sweep import load_sweep
     from flexmm.sweep.combine import write_combined
     from flexmm.sweep.execute import prepare
+    from flexmm.sweep.observe import OBSERVABLES
 
     d = tmp_path_factory.mktemp("probes")
     run = d / "run"
@@ -82,7 +83,9 @@ def files(tmp_path_factory) -> dict[str, Path]:
                     "vary:\n  grid:\n    excitation.velocity_m_s: [2, 3]\n")
     sweep = d / "sweep"
     sweep.mkdir()
-    write_combined(prepare(load_sweep(spec), sweep))  # a sweep.nc of pending points (nothing run)
+    plan = prepare(load_sweep(spec), sweep)
+    plan.store.create_or_check(plan.fingerprint, plan.n_points, list(OBSERVABLES), plan.spec.name)  # laid out, not run
+    write_combined(plan)  # a sweep.nc of pending points (nothing run)
     renamed = d / "renamed_sweep.nc"
     renamed.write_bytes((sweep / "sweep.nc").read_bytes())
     ds = xr.load_dataset(run / "dataset.nc", engine="h5netcdf")

@@ -63,6 +63,9 @@ SAMPLES = 512  # samples of a trace over its window (fewer when the window has f
 MAX_SITES = 2048  # sites a trace keeps per field (a larger lattice is sampled at a stride)
 PASSED = 0.9  # a wave has passed a site once the site's |q − q0| is below this fraction of its peak
 TRIM = 0.1  # fraction of sites with the largest deviations left out (``_kept``)
+#: largest motion (nondimensional: of the lattice's length scale, or rad) below which a field
+#: carries no wave: round-off about a static (e.g. relaxed) state, whose relative errors are noise
+MOTION_FLOOR = 1e-10
 SITE_FLOOR = 0.2  # sites whose peak is below this fraction of the field's largest are left out
 
 
@@ -247,8 +250,8 @@ def quantity_error(a: Trace, ref: Trace) -> QuantityError:
     e_amp = e_c = 0.0
     for f in range(peak_r.shape[0]):
         top = float(peak_r[f].max())
-        if top <= 1e-12 * top_all or top == 0.0:
-            continue  # a field that does not move
+        if top <= 1e-12 * top_all or top <= MOTION_FLOOR:
+            continue  # a field that does not move (round-off about a static state is no wave)
         sel = peak_r[f] >= SITE_FLOOR * top
         # amplitudes of the waves that have passed: the peak before the window's last tenth and
         # fallen from since (at a site a wave is still reaching, the peak measures the timing)

@@ -443,8 +443,14 @@ def _build_problem(scene: Scene, built: tuple[System, Terms] | None = None) -> P
                          "Hertz chain); set solver.dt_s")
     # explicit regularised friction: keep h F/(m v_ε) <= 1
     dt, stable, notes = resolve_dt(spec, w_max, scene.solver, sc.time_s, friction_rate)
-    notes = [*notes, *overdamping(scene, system, w_max)]
     duration = scene.solver.duration_s / sc.time_s
-    if scene.initial is not None and scene.initial.from_run:  # provenance: the run this one continues
-        notes = [*notes, f"initial state: the last frame of {scene.initial.from_run}"]
-    return Problem(scene, system, terms, damp, dt, duration, w_max, stable, notes)
+    return Problem(scene, system, terms, damp, dt, duration, w_max, stable, [*notes, *scene_notes(scene, system, w_max)])
+
+
+def scene_notes(scene: Scene, system: System, w_max: float) -> list[str]:
+    """The notes of a problem that do not depend on its step: damping that overdamps the scene's
+    waves, and the run this one continues (provenance)."""
+    notes = list(overdamping(scene, system, w_max))
+    if scene.initial is not None and scene.initial.from_run:
+        notes.append(f"initial state: the last frame of {scene.initial.from_run}")
+    return notes

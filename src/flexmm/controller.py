@@ -33,6 +33,9 @@ PROGRESS_EVERY_S = 10.0
 INACCURATE_FACTOR = 10.0
 #: ... or, undriven and undamped, when its energy at the end differs from the start by more than this fraction
 ENERGY_LIMIT = 1e-2
+#: ... of its energy, or of this nondimensional energy if that is smaller: a run resting in its
+#: ground state (E0 at round-off) does not change its energy by a fraction of nothing
+ENERGY_FLOOR = 1e-12
 
 
 def inaccuracy(attrs: dict, stepper: Stepper, problem: Problem) -> str | None:
@@ -49,8 +52,8 @@ def inaccuracy(attrs: dict, stepper: Stepper, problem: Problem) -> str | None:
     energies = stepper.energies() if conservative else None
     if energies is not None:
         e0, e = stepper.guard.e0, sum(energies)
-        drift = abs(e - e0) / max(abs(e0), 1e-300)
-        if e0 != 0 and drift > ENERGY_LIMIT:
+        drift = abs(e - e0) / max(abs(e0), ENERGY_FLOOR)
+        if drift > ENERGY_LIMIT:
             return (f"no drive or damping, yet its energy changed by {100 * drift:.3g} % (E = {e:.4g} from "
                     f"E0 = {e0:.4g}, nondimensional; at most {100 * ENERGY_LIMIT:g} %): the step does not resolve "
                     "the motion")

@@ -19,7 +19,7 @@ import math
 from typing import Callable
 
 from flexmm import accuracy as acc
-from flexmm.assemble import Problem, build_problem, overdamping
+from flexmm.assemble import Problem, build_problem, scene_notes
 from flexmm.config.scene import DEFAULT_METHOD
 from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
@@ -125,7 +125,7 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     plan.scene, plan.choice = planned, choice
     if choice.integrator == scene.solver.integrator:  # same method: the built problem only changes dt
         problem.scene, problem.dt = planned, choice.dt
-        problem.notes = overdamping(planned, problem.system, problem.omega_max)  # not the dt it no longer uses
+        problem.notes = scene_notes(planned, problem.system, problem.omega_max)  # not the dt it no longer uses
         return problem
     return build_problem(planned, built=plan.built_for(planned))  # another method: its own stable limit
 

@@ -40,7 +40,9 @@ def test_symplectic_step_is_reduced_between_frames_and_reported(tmp_path) -> Non
     from flexmm.io.run_dataset import open_run
 
     res = run_scene(_hardening(2.0, "velocity_verlet", 0.6), run_dir=tmp_path / "r")
-    assert res.ok, res.reason
+    # stable throughout, but Verlet at 0.6 of the limit of a stiffening chain changes its energy by
+    # ~13 %: the run reaches its end and is published as inaccurate (docs/architecture.md, Run statuses)
+    assert res.status == "inaccurate" and "energy changed" in res.reason, res.reason
     ds = open_run(res.path)
     assert ds.attrs["step_reductions"] >= 1 and ds.attrs["dt_min_s"] < ds.attrs["dt_s"]
     assert ds.attrs["omega_max_run_rad_s"] > 1.3 * ds.attrs["omega_max_rad_s"]

@@ -65,9 +65,9 @@ def test_cli_prints_the_estimate_and_strict_fails_a_miss(tmp_path) -> None:
     from flexmm.cli import app
 
     args = ["run", "configs/b_lego_amplitude_gap.yaml", "--fidelity", "full", "--set", "lattice.n_units=40",
-            "--set", "solver.duration_s=0.02", "--set", "solver.dt_s=1e-4", "--set", "solver.accuracy=1e-9",
+            "--set", "solver.duration_s=0.02", "--set", "solver.dt_s=1e-4", "--set", "solver.accuracy=5e-6",
             "--out", str(tmp_path / "r")]
-    res = CliRunner().invoke(app, args)
+    res = CliRunner().invoke(app, args)  # the estimate (~1.7e-5) misses 5e-6, by less than 10x: a warning
     assert res.exit_code == 0, res.output
     assert "error estimate:" in res.output and "exceeds the target" in res.output
     res = CliRunner().invoke(app, args + ["--strict"])
