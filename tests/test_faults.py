@@ -159,7 +159,7 @@ def test_sweep_workers_die_with_their_parent_and_the_sweep_resumes(tmp_path) -> 
     import psutil
 
     sweep = tmp_path / "sw"
-    vary = ["--vary", "excitation.velocity_m_s=0.5:3:4", "--set", "solver.duration_s=40"]
+    vary = ["--vary", "excitation.velocity_m_s=0.5:3:2", "--set", "solver.duration_s=5"]
     proc = start("sweep", DEMO, "--out", sweep, "--workers", "1", *vary)
     t0 = time.monotonic()
     workers: list[int] = []
@@ -175,9 +175,13 @@ def test_sweep_workers_die_with_their_parent_and_the_sweep_resumes(tmp_path) -> 
         time.sleep(0.2)
     alive = [w for w in workers if psutil.pid_exists(w) and psutil.Process(w).status() != "zombie"]
     assert alive == [], "workers outlived their sweep"
-    res = flexmm("sweep", DEMO, "--out", sweep, "--workers", "1", *vary[:2], "--set", "solver.duration_s=0.02")
-    # other settings make other points (other hashes); the killed sweep's directory is usable again
-    assert res.returncode == 0, res.stderr
+    # the same sweep resumes in the killed sweep's directory: every point ends done or failed (a long
+    # demo may miss its accuracy by more than 10x: failed, exit 1), none is left pending
+    res = flexmm("sweep", DEMO, "--out", sweep, "--workers", "1", *vary)
+    assert res.returncode in (0, 1) and "Traceback" not in res.stderr, res.stderr
+    from flexmm.sweep.store import CODE, PENDING, SweepStore
+
+    assert not (SweepStore(sweep).status() == CODE[PENDING]).any()
 
 
 def test_two_sweeps_on_one_directory_do_not_mix(tmp_path) -> None:

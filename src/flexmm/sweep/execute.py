@@ -197,7 +197,7 @@ def _run_local(spec, work: Iterator[Batch], n_workers, record: OnOutcome, errors
 
     n = max(1, n_workers)
     ex = ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn"),
-                             initializer=init_worker, initargs=(spec,))
+                             initializer=init_worker, initargs=(spec, os.getpid()))
     in_flight: dict = {}
     nxt = [next(work, None)]
 

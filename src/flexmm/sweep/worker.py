@@ -44,21 +44,23 @@ class Batch:
         return len(self.indices)
 
 
-def init_worker(spec=None) -> None:
+def init_worker(spec=None, parent: int | None = None) -> None:
     """Process initialiser: the sweep's spec; one numba/BLAS thread; Ctrl-C is only honoured
-    inside a batch; the worker dies with the sweep that spawned it (``die_with_parent``)."""
+    inside a batch; the worker dies with the sweep ``parent`` (its pid) that spawned it
+    (``die_with_parent``)."""
     global _SPEC
     _SPEC = spec
     pin_threads()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    die_with_parent()
+    die_with_parent(os.getppid() if parent is None else parent)
 
 
-def die_with_parent(poll_s: float = 1.0) -> None:
-    """End this process when its parent does (a ``kill -9`` of the sweep must not leave workers
-    running and writing points): the kernel's parent-death signal on Linux, and a watchdog
-    thread that notices being re-parented, everywhere."""
-    parent = os.getppid()
+def die_with_parent(parent: int, poll_s: float = 1.0) -> None:
+    """End this process when its parent ``parent`` does (a ``kill -9`` of the sweep must not
+    leave workers running and writing points): the kernel's parent-death signal on Linux, and a
+    watchdog thread that notices being re-parented, everywhere. ``parent`` comes from the sweep
+    itself: a worker whose sweep died while it was still starting (a spawned interpreter takes a
+    second or more) is re-parented already, and its own ``getppid`` would name the new parent."""
     try:
         import ctypes
 
