@@ -203,7 +203,7 @@ def test_bodies_sit_at_x_plus_u(example_lattice, tmp_path, monkeypatch, stored):
     if kind in RIGID:
         pytest.skip("masses only")
     if kind in NOT_RENDERED:
-        pytest.skip(f"flexmm.render has no {kind} yet")
+        pytest.skip(f"{kind} is drawn from its stored shapes (tests/render/test_shapes.py), not by the renderer tested here")
     lat, system = build(example["lattice"])
     fields = random_fields(system, 2, seed=7)
     run = write_run(tmp_path / "run", example["lattice"], system, fields, state=stored)

@@ -34,7 +34,7 @@ def joint_stiffness(released_energy: float, switch: float, beta: float) -> float
 def build(cfg) -> System:
     """The linkage as a System (a two-row rotating_sheet with pins and bistable joints)."""
     from flexmm.models.sheet_kernels import SheetArgs
-    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hinge_pairs,
+    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hinge_pairs, hold_fixed_ends,
                                               hinge_table)
     from flexmm.models.magnets import empty_dipoles
     from flexmm.models.loads import empty_loads
@@ -56,9 +56,7 @@ def build(cfg) -> System:
     mass = np.concatenate([np.ones(2 * n), np.full(n, J / (m * L * L))])
     inv_mass = 1.0 / mass
     ends = {k: v for k, v in edge_sites(2, nc).items() if k in ("left", "right")}
-    for end, sites in ends.items():
-        if getattr(cfg, end) == "fixed":
-            inv_mass[np.concatenate([np.asarray(sites) + f * n for f in range(3)])] = 0.0
+    hold_fixed_ends(cfg, inv_mass, ends, n)
     spacing = L * math.cos(cfg.theta0_rad)
     row, col = np.divmod(np.arange(n), nc)
     return System(

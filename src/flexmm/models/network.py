@@ -23,7 +23,7 @@ import numpy as np
 from flexmm.config.network import RigidNetwork
 from flexmm.models import ligaments as lg
 from flexmm.models.base import FieldSpec, System, UnitShapes
-from flexmm.models.rotating_sheet import edge_sites
+from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
 from flexmm.units import Scales
 
 FIELDS = (
@@ -109,10 +109,7 @@ def build(cfg: RigidNetwork) -> System:
     mass = np.concatenate([mass_si / m, mass_si / m, inertia_si / (m * a * a)])
     inv_mass = 1.0 / mass
     ends = edge_sites(nr, nc)
-    for end, sites in ends.items():
-        if getattr(cfg, end) == "fixed":
-            for f in range(3):
-                inv_mass[f * n + np.asarray(sites)] = 0.0
+    hold_fixed_ends(cfg, inv_mass, ends, n)
     row, col = np.divmod(np.arange(n), nc)
     x_links = np.flatnonzero(lig[:, lg.L_EX] == 1.0)
     return System(

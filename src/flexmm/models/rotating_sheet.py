@@ -100,6 +100,14 @@ def hinge_table(a, b, axis, sigma, theta0, half_a, half_b, ligament, kl, ks, kt)
     return hprm
 
 
+def hold_fixed_ends(cfg, inv_mass: np.ndarray, ends: dict[str, list[int]], n: int, n_fields: int = 3) -> None:
+    """Zero the inverse masses of every field of the units of each end ``cfg`` declares fixed
+    (``cfg.left`` etc.), in place: a fixed end holds all DOFs of its units."""
+    for end, sites in ends.items():
+        if getattr(cfg, end) == "fixed":
+            inv_mass[np.concatenate([np.asarray(sites) + f * n for f in range(n_fields)])] = 0.0
+
+
 def edge_sites(n_rows: int, n_cols: int) -> dict[str, list[int]]:
     """Site lists of the four edges (left/right: columns; bottom/top: rows)."""
     site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
@@ -138,10 +146,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
     mass = np.concatenate([site_v["mass_kg"], site_v["mass_kg"], site_v["inertia_kg_m2"] / a**2]) / m
     inv_mass = 1.0 / mass
     ends = edge_sites(nr, nc)
-    for end, sites in ends.items():
-        if getattr(cfg, end) == "fixed":
-            for f in range(3):
-                inv_mass[f * n + np.asarray(sites)] = 0.0
+    hold_fixed_ends(cfg, inv_mass, ends, n)
     horiz = hax == 0
     spacing = h * a
     system = System(

@@ -20,7 +20,7 @@ import numpy as np
 
 from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
 from flexmm.models.base import FieldSpec, System, UnitShapes
-from flexmm.models.rotating_sheet import edge_sites
+from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
 from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN, N_HINGE_PARAMS
 from flexmm.models.triangle_kernels import TriangleArgs
 from flexmm.models.variation import parameter_arrays
@@ -112,10 +112,7 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
         args.hinge_prm[:, H_KS] = hinges["k_shear_n_per_m"] / kl
         args.hinge_prm[:, H_KT] = hinges["k_rot_n_m_per_rad"] / (kl * a**2)
     inv_mass = 1.0 / mass
-    for end, sites in ends.items():
-        if getattr(cfg, end) == "fixed":
-            for f in range(3):
-                inv_mass[f * n + np.asarray(sites)] = 0.0
+    hold_fixed_ends(cfg, inv_mass, ends, n)
     a = cfg.a_m
     x, y = centroids(n_rows, n_cols, cfg.theta0_rad)
     rows = np.flatnonzero(args.axis_sin < 1.0)  # the hinges along the rows (not the vertical ones)
