@@ -424,6 +424,7 @@ def verify(problem, accuracy: float, choice: Choice, row: dict, every: float | N
     for k in range(VERIFY_TRIES):
         est = estimate(problem, spec, h, window=choice.pilot_time)
         if prev[0] > h and est.error > 0.5 * prev[1].error and est.error > accuracy:
+            row["converges"] = False  # the estimate measures a threshold's timing, not the step's error
             row["why"] = (f"the error estimate does not shrink with the step ({prev[1].error:.2g} at "
                           f"{prev[0]:.3g}, {est.error:.2g} at {h:.3g}, nondimensional): what the run reports "
                           "is not converging in the step (a threshold or a collision)")

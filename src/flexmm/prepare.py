@@ -116,7 +116,8 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
         notes.append(f"WARNING: accuracy {target:g} looks out of reach ({row['why']}); the run uses the step "
                      "above and its error estimate is reported")
     attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
-             "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable)}
+             "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable),
+             "accuracy_converges": int(row.get("converges", True))}
     if mode == "pilot":  # step doubling over the pilot window at the step used is the estimate
         attrs.update(_estimate_attrs(target, choice.estimate, ts))
         notes.append(_estimate_line(target, choice.estimate, ts))
