@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from conftest import EXAMPLE_LATTICES
 from flexmm.config import scene_from_dict
 from flexmm.models import MODELS
 from flexmm.models import ligaments as lg
@@ -114,3 +115,52 @@ def test_rotating_squares_sheet_is_the_ligament_law_on_its_hinge_points(lattice)
         scale = max(np.abs(f_sheet).max(), 1.0)
         assert_allclose(f_net, f_sheet, rtol=0, atol=1e-13 * scale)
         assert lg.network_energy(qn, net) == pytest.approx(system.energy(q, system.args), rel=1e-13, abs=1e-15)
+
+
+def triangles_as_network(args):
+    """The ligament table of a rotating-triangles lattice: hinge points r_A = h_A R(σ_A θ0) e,
+    r_B = −h_B R(σ_B θ0) e on the hinge axis e, rest offset D e (docs/physics.md §1.6)."""
+    ha, hb, ec, es, hprm, theta0 = args[:6]
+    n = theta0.size
+    sig_a = hprm[:, H_SIGN]
+    sigma = np.zeros(n)
+    sigma[ha], sigma[hb] = sig_a, -sig_a
+    e = np.stack([ec, es], 1)
+
+    def turned(vec, phi):
+        c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        return np.concatenate([c * vec[:, :1] - s * vec[:, 1:], s * vec[:, :1] + c * vec[:, 1:]], 1)
+
+    lig = np.zeros((ha.size, lg.N_LIGAMENT_PARAMS))
+    lig[:, [lg.L_AX, lg.L_AY]] = turned(hprm[:, H_HALF_A, None] * e, sigma[ha] * theta0[ha])
+    lig[:, [lg.L_BX, lg.L_BY]] = turned(-hprm[:, H_HALF_B, None] * e, sigma[hb] * theta0[hb])
+    lig[:, [lg.L_OX, lg.L_OY]] = hprm[:, H_REST, None] * e
+    lig[:, [lg.L_EX, lg.L_EY]] = e
+    lig[:, lg.L_KL], lig[:, lg.L_KS], lig[:, lg.L_KT] = hprm[:, H_KL], hprm[:, H_KS], hprm[:, H_KT]
+    return lg.NetworkArgs(ha, hb, lig, np.empty(n), np.empty(n)), sigma
+
+
+TRIANGLE_EXAMPLES = [(kind, name, ex["lattice"]) for kind, exs in EXAMPLE_LATTICES.items()
+                     if kind.startswith("rotating_triangles") for name, ex in exs.items()]
+
+
+@pytest.mark.parametrize(("kind", "name", "lattice"), TRIANGLE_EXAMPLES, ids=[f"{k}-{n}" for k, n, _ in TRIANGLE_EXAMPLES])
+def test_rotating_triangles_are_the_ligament_law_on_their_hinge_points(kind, name, lattice):
+    """Every triangle example of tests/conftest.py (strip and kagome, twisted, periodic, graded):
+    the triangles' kernel and the general law on their hinge points give the same forces and
+    energies (θ staggered: the units' rotations are σθ)."""
+    scene = scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}})
+    system = MODELS[kind].build(scene.lattice)
+    net, sigma = triangles_as_network(system.args)
+    n = sigma.size
+    rng = np.random.default_rng(9)
+    for amplitude in (0.02, 0.3):
+        q = amplitude * rng.normal(size=3 * n)
+        f_tri = np.empty(3 * n)
+        system.force(q, system.args, f_tri)
+        qn = q.copy()
+        qn[2 * n :] *= sigma
+        f_net = force(qn, net)
+        f_net[2 * n :] *= sigma
+        assert_allclose(f_net, f_tri, rtol=0, atol=1e-13 * np.abs(f_tri).max())
+        assert lg.network_energy(qn, net) == pytest.approx(system.energy(q, system.args), rel=1e-13)
