@@ -155,6 +155,9 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
         "random-quads-fixed-3x3": {"lattice": dict(_NET, pattern="random_quads", vertex_jitter=0.1, seed=4, n_rows=3,
                                                    n_cols=3, ligament_length_m=0.001, left="fixed"),
                                    "translation_invariant": True},
+        "kagome-3x4": {"lattice": dict(_NET, pattern="rotating_triangles", n_rows=3, n_cols=4, theta0_rad=-0.15,
+                                       bottom="fixed"),
+                       "translation_invariant": True},
     },
     "bistable_linkage": {
         "six-bars": {

@@ -91,3 +91,36 @@ def test_network_config_errors_are_clear():
     with pytest.raises(ConfigError, match="periodic"):
         scene({"kind": "rigid_network", "left": "periodic", "right": "periodic", "n_rows": 2, "n_cols": 4, **LAW})
     assert math.isfinite(built({"kind": "rigid_network", "n_rows": 1, "n_cols": 3, **LAW}).mass.sum())
+
+
+def test_triangle_network_is_the_rotating_triangles_sheet():
+    """The kagome generated as a network and rotating_triangles_sheet with the same side, twist,
+    springs and (polygon) masses: the same rest positions, SI masses, forces and energies to 1e-13
+    (the sheet's θ is staggered: rotations σθ, torques σ·)."""
+    a, rho, t0 = 0.02, 20.0, 0.2
+    law = {"a_m": a, "theta0_rad": t0, "k_long_n_per_m": 7e4, "k_shear_n_per_m": 7e3, "k_rot_n_m_per_rad": 0.5}
+    shape = {"n_rows": 4, "n_cols": 6}
+    net = built({"kind": "rigid_network", "pattern": "rotating_triangles", "areal_density_kg_m2": rho, **law, **shape})
+    tri = built({"kind": "rotating_triangles_sheet", "mass_kg": rho * math.sqrt(3) / 4 * a * a, **law, **shape})
+    n = tri.n_sites
+    r, c = np.divmod(np.arange(n), 6)
+    sigma = np.where((r + c) % 2 == 0, 1.0, -1.0)
+    si = lambda s, kinds: np.concatenate([np.full(n, s.scales.generalised_force(k)) for k in kinds])  # noqa: E731
+    assert_allclose(net.mass * np.repeat([net.scales.mass_kg] * 2 + [net.scales.inertia], n),
+                    tri.mass * np.repeat([tri.scales.mass_kg] * 2 + [tri.scales.inertia], n), rtol=1e-13)
+    for name in ("x", "y"):
+        assert_allclose(net.site_coords[name], tri.site_coords[name], rtol=0, atol=1e-15)
+    rng = np.random.default_rng(12)
+    for amplitude in (0.01, 0.2):
+        q = amplitude * rng.normal(size=3 * n)  # SI-equal states: lengths in units of a for both
+        qn = q.copy()
+        qn[2 * n :] *= sigma
+        f_tri, f_net = np.empty(3 * n), np.empty(3 * n)
+        tri.force(q, tri.args, f_tri)
+        net.force(qn, net.args, f_net)
+        f_tri *= si(tri, ("length", "length", "angle"))
+        f_net *= si(net, ("length", "length", "angle"))
+        f_net[2 * n :] *= sigma
+        assert_allclose(f_net, f_tri, rtol=0, atol=1e-13 * np.abs(f_tri).max())
+        assert net.energy(qn, net.args) * net.scales.energy == pytest.approx(
+            tri.energy(q, tri.args) * tri.scales.energy, rel=1e-13)

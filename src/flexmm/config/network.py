@@ -4,11 +4,13 @@ Rigid polygons joined vertex to vertex by ligaments, each with the paper's three
 (k_l along its axis, k_s across it, k_θ on the relative rotation of the two units). The geometry
 comes from a generator: ``rotating_squares`` (the units of ``rotating_squares_sheet``, any θ0 and
 ligament length, rotations unstaggered) or ``random_quads`` (the same lattice with every vertex of
-every unit moved at random by up to ``vertex_jitter`` of a, seeded: the quads of a disordered sheet).
+every unit moved at random by up to ``vertex_jitter`` of a, seeded: the quads of a disordered sheet)
+or ``rotating_triangles`` (the kagome of docs/physics.md §1.6).
 """
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
@@ -24,12 +26,13 @@ class RigidNetwork(Strict):
     #: per-site coordinates of the built model, in state order (models.network.FIELDS)
     FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
 
-    pattern: Literal["rotating_squares", "random_quads"] = Field(
+    pattern: Literal["rotating_squares", "random_quads", "rotating_triangles"] = Field(
         "rotating_squares", description="geometry generator: squares of diagonal a at rest rotations ±θ0 "
-        "(checkerboard), or the same with every vertex moved at random (random_quads)")
+        "(checkerboard), the same with every vertex moved at random (random_quads), or the kagome of "
+        "equilateral triangles of side a twisted by ±θ0 (rotating_triangles)")
     n_rows: int = Field(ge=1, le=100_000)
     n_cols: int = Field(ge=2, le=100_000)
-    a_m: Positive = Field(description="vertex-to-vertex size (diagonal) of a unit (m)")
+    a_m: Positive = Field(description="vertex-to-vertex size of a unit (m): a square's diagonal, a triangle's side")
     theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad), alternating in sign")
     ligament_length_m: NonNegative = Field(0.0, description="rest length of every ligament (m)")
     vertex_jitter: NonNegative = Field(
@@ -63,6 +66,11 @@ class RigidNetwork(Strict):
         for a, b in (("left", "right"), ("bottom", "top")):
             if "periodic" in (getattr(self, a), getattr(self, b)):
                 raise ValueError(f"{a}/{b}: a rigid_network's edges are free or fixed (periodic is not supported yet)")
-        if self.pattern == "rotating_squares" and self.vertex_jitter:
+        if self.pattern != "random_quads" and self.vertex_jitter:
             raise ValueError("vertex_jitter moves the vertices of random_quads: set pattern: random_quads")
+        if self.pattern == "rotating_triangles":
+            if self.ligament_length_m:
+                raise ValueError("rotating_triangles are hinged vertex to vertex: ligament_length_m must be 0")
+            if not abs(self.theta0_rad) < math.pi / 3:
+                raise ValueError(f"rotating_triangles: |theta0_rad| < π/3 (the pores close), got {self.theta0_rad}")
         return self

@@ -12,6 +12,8 @@ and the top vertex (1) to the bottom vertex (3) of the unit above, with axis ŷ;
 the two vertices' separation in the reference geometry, so the reference is stress-free.
 ``random_quads`` moves every vertex by a uniform random vector of up to ``vertex_jitter`` · a in
 each coordinate (``numpy.random.default_rng(seed)``); centres are then the polygons' centroids.
+``rotating_triangles`` is the kagome of §1.6 (a the side, twist θ0 alternating in sign): each
+hinge joins the two vertices that point along its axis at rest.
 """
 
 from __future__ import annotations
@@ -53,6 +55,47 @@ def square_vertices(cfg: RigidNetwork) -> np.ndarray:
     return vertices
 
 
+def square_links(n_rows: int, n_cols: int):
+    """(units a, units b, vertex of a, vertex of b, axis (L, 2)): x neighbours, then y neighbours."""
+    site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
+    parts = [(site[:, :-1].ravel(), site[:, 1:].ravel(), X_LINK), (site[:-1, :].ravel(), site[1:, :].ravel(), Y_LINK)]
+    a = np.concatenate([p[0] for p in parts])
+    b = np.concatenate([p[1] for p in parts])
+    va = np.concatenate([np.full(p[0].size, p[2][0]) for p in parts])
+    vb = np.concatenate([np.full(p[0].size, p[2][1]) for p in parts])
+    axis = np.concatenate([np.tile(p[2][2], (p[0].size, 1)) for p in parts])
+    return a, b, va, vb, axis
+
+
+def triangle_geometry(cfg: RigidNetwork):
+    """The kagome of rotating triangles (docs/physics.md §1.6; ``models.rotating_triangles``'s
+    centroids and hinges): (N, 3, 2) vertices in units of the side a, and the links — each hinge
+    joins the vertex of A and the vertex of B that point along its axis at rest."""
+    from flexmm.models.rotating_triangles import HALF, centroids, kagome_hinges, sublattice_sign
+
+    nr, nc, t0 = cfg.n_rows, cfg.n_cols, cfg.theta0_rad
+    sigma = sublattice_sign(nr, nc)
+    x, y = centroids(nr, nc, t0)
+    ang = (np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad([90.0, 210.0, 330.0])[None, :]
+           + (sigma * t0)[:, None])
+    vertices = np.stack([x, y], 1)[:, None, :] + HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
+    a, b, beta = kagome_hinges(nr, nc, False, False)
+    axis = np.stack([np.cos(beta), np.sin(beta)], 1)
+
+    def towards(unit, direction):  # the vertex of each unit pointing closest to ``direction`` (L, 2)
+        d = vertices[unit] - np.stack([x, y], 1)[unit][:, None, :]
+        return np.argmax(np.einsum("lvk,lk->lv", d, direction), axis=1)
+
+    return vertices, (a, b, towards(a, axis), towards(b, -axis), axis)
+
+
+def geometry(cfg: RigidNetwork):
+    """(vertices (N, V, 2) in units of a, links (units a, units b, vertex of a, vertex of b, axis))."""
+    if cfg.pattern == "rotating_triangles":
+        return triangle_geometry(cfg)
+    return square_vertices(cfg), square_links(cfg.n_rows, cfg.n_cols)
+
+
 def polygon_inertia(vertices: np.ndarray, density: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mass (N,), centroid (N, 2) and polar moment of inertia about the centroid (N,) of simple
     polygons (N, V, 2) (vertices in order) of uniform areal density (shoelace sums about each
@@ -70,52 +113,43 @@ def polygon_inertia(vertices: np.ndarray, density: float) -> tuple[np.ndarray, n
     return mass, np.stack([cx, cy], 1) + mean, inertia
 
 
-def links(n_rows: int, n_cols: int) -> list[tuple[np.ndarray, np.ndarray, tuple]]:
-    """(units a, units b, link) of the x neighbours and the y neighbours."""
-    site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
-    return [(site[:, :-1].ravel(), site[:, 1:].ravel(), X_LINK), (site[:-1, :].ravel(), site[1:, :].ravel(), Y_LINK)]
-
-
-def ligament_table(vertices: np.ndarray, centres: np.ndarray, n_rows: int, n_cols: int, ks: float, kt: float):
-    """(units a, units b, table (L, N_LIGAMENT_PARAMS)) with k_l = 1 (nondimensional)."""
-    ua, ub, rows = [], [], []
-    for a, b, (va, vb, axis) in links(n_rows, n_cols):
-        lig = np.zeros((a.size, lg.N_LIGAMENT_PARAMS))
-        ra = vertices[a, va] - centres[a]
-        rb = vertices[b, vb] - centres[b]
-        gap0 = vertices[b, vb] - vertices[a, va]
-        lig[:, [lg.L_AX, lg.L_AY]] = ra
-        lig[:, [lg.L_BX, lg.L_BY]] = rb
-        lig[:, [lg.L_OX, lg.L_OY]] = centres[b] - centres[a] - gap0
-        lig[:, [lg.L_EX, lg.L_EY]] = axis
-        lig[:, [lg.L_KL, lg.L_KS, lg.L_KT]] = (1.0, ks, kt)
-        ua.append(a)
-        ub.append(b)
-        rows.append(lig)
-    return (np.concatenate(ua).astype(np.int64), np.concatenate(ub).astype(np.int64), np.concatenate(rows))
+def ligament_table(vertices: np.ndarray, centres: np.ndarray, links, ks: float, kt: float) -> np.ndarray:
+    """The ligament table (L, N_LIGAMENT_PARAMS) of ``links`` with k_l = 1 (nondimensional): the
+    joined vertices relative to their centres, the rest offset that makes the reference
+    stress-free (the centres' separation less the vertices' gap), the link's axis."""
+    a, b, va, vb, axis = links
+    ar = np.arange(a.size)
+    lig = np.zeros((a.size, lg.N_LIGAMENT_PARAMS))
+    pa, pb = vertices[a, va[ar]], vertices[b, vb[ar]]
+    lig[:, [lg.L_AX, lg.L_AY]] = pa - centres[a]
+    lig[:, [lg.L_BX, lg.L_BY]] = pb - centres[b]
+    lig[:, [lg.L_OX, lg.L_OY]] = centres[b] - centres[a] - (pb - pa)
+    lig[:, [lg.L_EX, lg.L_EY]] = axis
+    lig[:, [lg.L_KL, lg.L_KS, lg.L_KT]] = (1.0, ks, kt)
+    return lig
 
 
 def build(cfg: RigidNetwork) -> System:
     """The network as a System: state (u, v, θ) of its units; edges free or fixed (all DOFs held)."""
     nr, nc, n, a = cfg.n_rows, cfg.n_cols, cfg.n_units, cfg.a_m
-    vertices = square_vertices(cfg)
+    vertices, links = geometry(cfg)
     mass_si, centres, inertia_si = polygon_inertia(vertices * a, cfg.areal_density_kg_m2)
     centres = centres / a
     m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
-    ua, ub, lig = ligament_table(vertices, centres, nr, nc, cfg.k_shear_n_per_m / kl,
-                                 cfg.k_rot_n_m_per_rad / (kl * a * a))
+    ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
+    lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a))
     args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n))
     mass = np.concatenate([mass_si / m, mass_si / m, inertia_si / (m * a * a)])
     inv_mass = 1.0 / mass
     ends = edge_sites(nr, nc)
     hold_fixed_ends(cfg, inv_mass, ends, n)
     row, col = np.divmod(np.arange(n), nc)
-    x_links = np.flatnonzero(lig[:, lg.L_EX] == 1.0)
+    x_links = np.arange(nr * (nc - 1))  # the links along the rows come first (both generators)
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=Scales(a, math.sqrt(m / kl), m),
         mass=mass, inv_mass=inv_mass, args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
-        spacing_m=a * (math.cos(cfg.theta0_rad)) + cfg.ligament_length_m,
+        spacing_m=a * math.cos(cfg.theta0_rad) + cfg.ligament_length_m,
         site_coords={"x": centres[:, 0] * a} | ({"y": centres[:, 1] * a, "row": row, "col": col} if nr > 1 else {}),
         ends=ends, rotation_field="theta", axis_fields={"x": "u", "y": "v"},
         end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
