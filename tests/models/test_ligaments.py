@@ -102,18 +102,23 @@ def test_rotating_squares_sheet_is_the_ligament_law_on_its_hinge_points(lattice)
     scene = scene_from_dict({"name": "t", "lattice": cfg, "solver": {"duration_s": 1e-3}})
     system = MODELS["rotating_squares_sheet"].build(scene.lattice)
     net, sigma = sheet_as_network(system)
+    assert_same_forces(system, net, sigma, (0.0, 0.05, 0.4), seed=5)
+
+
+def assert_same_forces(system, net, sigma, amplitudes, seed):
+    """The model's forces and energy at random staggered states equal the network's at the same
+    states with rotations σθ (torques σ times), to 1e-13 of the largest force."""
     n = sigma.size
-    rng = np.random.default_rng(5)
-    for amplitude in (0.0, 0.05, 0.4):
+    rng = np.random.default_rng(seed)
+    for amplitude in amplitudes:
         q = amplitude * rng.normal(size=3 * n)
-        f_sheet = np.empty(3 * n)
-        system.force(q, system.args, f_sheet)
+        f_model = np.empty(3 * n)
+        system.force(q, system.args, f_model)
         qn = q.copy()
         qn[2 * n :] *= sigma
         f_net = force(qn, net)
         f_net[2 * n :] *= sigma
-        scale = max(np.abs(f_sheet).max(), 1.0)
-        assert_allclose(f_net, f_sheet, rtol=0, atol=1e-13 * scale)
+        assert_allclose(f_net, f_model, rtol=0, atol=1e-13 * max(np.abs(f_model).max(), 1.0))
         assert lg.network_energy(qn, net) == pytest.approx(system.energy(q, system.args), rel=1e-13, abs=1e-15)
 
 
@@ -152,15 +157,4 @@ def test_rotating_triangles_are_the_ligament_law_on_their_hinge_points(kind, nam
     scene = scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}})
     system = MODELS[kind].build(scene.lattice)
     net, sigma = triangles_as_network(system.args)
-    n = sigma.size
-    rng = np.random.default_rng(9)
-    for amplitude in (0.02, 0.3):
-        q = amplitude * rng.normal(size=3 * n)
-        f_tri = np.empty(3 * n)
-        system.force(q, system.args, f_tri)
-        qn = q.copy()
-        qn[2 * n :] *= sigma
-        f_net = force(qn, net)
-        f_net[2 * n :] *= sigma
-        assert_allclose(f_net, f_tri, rtol=0, atol=1e-13 * np.abs(f_tri).max())
-        assert lg.network_energy(qn, net) == pytest.approx(system.energy(q, system.args), rel=1e-13)
+    assert_same_forces(system, net, sigma, (0.02, 0.3), seed=9)

@@ -83,6 +83,34 @@ class Strict(BaseModel):
         return data
 
 
+class GridUnits(Strict):
+    """Units on an n_rows × n_cols grid (site = row · n_cols + col) with four edges: the shape
+    fields shared by the sheet-like lattices (rigid networks, the kagome of triangles)."""
+
+    n_rows: int = Field(ge=1, le=100_000)
+    n_cols: int = Field(ge=2, le=100_000)
+    left: EdgeCondition = "free"
+    right: EdgeCondition = "free"
+    bottom: EdgeCondition = "free"
+    top: EdgeCondition = "free"
+
+    @property
+    def n_sites(self) -> int:
+        return self.n_rows * self.n_cols
+
+    @property
+    def n_units(self) -> int:
+        return self.n_rows * self.n_cols
+
+    def grid_copy(self, n: int, even: bool = False):
+        """The same lattice cut to at most about ``n`` units (square, an even side if ``even``),
+        for cheap estimates; not validated."""
+        side = max(2, int(n**0.5))
+        side += side % 2 if even else 0
+        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side),
+                                       **({"variation": []} if "variation" in type(self).model_fields else {})})
+
+
 def exactly_one(model: Strict, a: str, b: str, meanings: tuple[str, str] | None = None) -> Strict:
     """Require exactly one of the optional fields ``a`` and ``b``; return the model.
 

@@ -15,10 +15,10 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import EdgeCondition, Finite, NonNegative, Positive, Strict
+from flexmm.config.base import Finite, GridUnits, NonNegative, Positive
 
 
-class RigidNetwork(Strict):
+class RigidNetwork(GridUnits):
     """Rigid polygons joined by ligaments at their vertices, from a geometry generator; u, v, θ
     per unit (θ the rotation from the reference geometry, not staggered). Unit = row · n_cols + col."""
 
@@ -30,8 +30,6 @@ class RigidNetwork(Strict):
         "rotating_squares", description="geometry generator: squares of diagonal a at rest rotations ±θ0 "
         "(checkerboard), the same with every vertex moved at random (random_quads), or the kagome of "
         "equilateral triangles of side a twisted by ±θ0 (rotating_triangles)")
-    n_rows: int = Field(ge=1, le=100_000)
-    n_cols: int = Field(ge=2, le=100_000)
     a_m: Positive = Field(description="vertex-to-vertex size of a unit (m): a square's diagonal, a triangle's side")
     theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad), alternating in sign")
     ligament_length_m: NonNegative = Field(0.0, description="rest length of every ligament (m)")
@@ -43,23 +41,10 @@ class RigidNetwork(Strict):
     k_rot_n_m_per_rad: NonNegative = Field(description="ligament rotational stiffness k_θ (N m/rad)")
     areal_density_kg_m2: Positive = Field(
         description="mass per area of the units: each unit's mass and polar inertia follow from its polygon")
-    left: EdgeCondition = "free"
-    right: EdgeCondition = "free"
-    bottom: EdgeCondition = "free"
-    top: EdgeCondition = "free"
-
-    @property
-    def n_sites(self) -> int:
-        return self.n_rows * self.n_cols
-
-    @property
-    def n_units(self) -> int:
-        return self.n_rows * self.n_cols
 
     def small_copy(self, n: int):
         """The same network cut to at most about ``n`` units (for cheap estimates; not validated)."""
-        side = max(2, int(n**0.5))
-        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side)})
+        return self.grid_copy(n)
 
     @model_validator(mode="after")
     def _check(self):

@@ -12,7 +12,7 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import EdgeCondition, Finite, NonNegative, Positive, Strict
+from flexmm.config.base import EdgeCondition, Finite, GridUnits, NonNegative, Positive, Strict
 from flexmm.config.rigid import HINGE_TARGETS
 from flexmm.config.variation import Variation, check_variations
 
@@ -88,7 +88,7 @@ class RotatingTrianglesChain(_TriangleUnits):
         return self
 
 
-class RotatingTrianglesSheet(_TriangleUnits):
+class RotatingTrianglesSheet(_TriangleUnits, GridUnits):
     """A kagome sheet of rigid triangles (docs/physics.md §1.6): n_rows zig-zag rows of n_cols
     triangles; site = row · n_cols + col, the triangle at (row, col) points up if row + col is
     even. Every triangle is hinged to its left and right neighbours, an up triangle also to the
@@ -98,27 +98,9 @@ class RotatingTrianglesSheet(_TriangleUnits):
     #: per-site coordinates of the built model, in state order (models.rotating_triangles.FIELDS)
     FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
 
-    n_rows: int = Field(ge=1, le=100_000)
-    n_cols: int = Field(ge=2, le=100_000)
-    left: EdgeCondition = "free"
-    right: EdgeCondition = "free"
-    bottom: EdgeCondition = "free"
-    top: EdgeCondition = "free"
-
-    @property
-    def n_sites(self) -> int:
-        return self.n_rows * self.n_cols
-
-    @property
-    def n_units(self) -> int:
-        return self.n_rows * self.n_cols
-
     def small_copy(self, n: int):
-        """The same sheet cut to at most about ``n`` units (for cheap estimates; not validated)."""
-        side = max(2, int(n**0.5))
-        side += side % 2
-        return self.model_copy(update={"n_rows": min(self.n_rows, side), "n_cols": min(self.n_cols, side),
-                                       "variation": []})
+        """The same sheet cut to at most about ``n`` units, an even side (for cheap estimates; not validated)."""
+        return self.grid_copy(n, even=True)
 
     @model_validator(mode="after")
     def _check(self):
