@@ -126,14 +126,6 @@ def test_same_sweep_on_a_dask_local_cluster_gives_the_same_results(local_run, tm
                                b[["speed", "speed_stderr", "amplitude", "width"]], rtol=1e-12, atol=0)
 
 
-@pytest.fixture
-def in_process_scheduler():
-    """A real Dask LocalCluster in this process (threads): no worker start-up or recompilation."""
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
-        yield cluster.scheduler_address
-
 
 def test_failed_points_are_recorded_and_retried_only_on_request(tmp_path, in_process_scheduler):
     spec = tiny_spec(tmp_path, TINY.replace("excitation.amplitude_rad: [0.3, 0.45, 0.6]",

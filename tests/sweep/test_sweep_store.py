@@ -39,13 +39,6 @@ def spec_file(tmp_path: Path, vary: str, name: str = "s.yaml"):
     return load_sweep(p)
 
 
-@pytest.fixture
-def in_process_scheduler():
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
-        yield cluster.scheduler_address
-
 
 def test_a_point_whose_own_values_are_invalid_is_recorded_failed_not_a_crash(tmp_path, in_process_scheduler):
     # each value is valid with the other axis at its first value (the up-front check passes);

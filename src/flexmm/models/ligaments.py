@@ -140,6 +140,16 @@ def network_energy(q, args):
 
 
 @jit
+def strain_variation(lam, n, a, b, pax, pay, pbx, pby):
+    """(δg_x, δg_y, δΔφ): the variation of the gap and of θ_b − θ_a along λ,
+    δg = δx_b − δx_a + λ_θb J p_b − λ_θa J p_a with J p = (−p_y, p_x)."""
+    ta, tb = lam[2 * n + a], lam[2 * n + b]
+    wx = (lam[b] - lam[a]) - (tb * pby - ta * pay)
+    wy = (lam[n + b] - lam[n + a]) + (tb * pbx - ta * pax)
+    return wx, wy, tb - ta
+
+
+@jit
 def network_hvp(q, args, dq, out):
     """∇²E(q) dq of a ligament network into ``out`` (3N,): the Hessian-vector product the
     adjoint and tangent steps and the linear analysis need."""
@@ -155,25 +165,14 @@ def network_hvp(q, args, dq, out):
         gx, gy, pax, pay, pbx, pby, dphi = ligament_gap(q, n, a, b, prm, cs, sn)
         _, fx, fy, _ = ligament_law(gx, gy, dphi, prm)
         ta, tb = dq[2 * n + a], dq[2 * n + b]
-        # δg = δx_b − δx_a + δθ_b J p_b − δθ_a J p_a, J p = (−p_y, p_x)
-        dgx = (dq[b] - dq[a]) - (tb * pby - ta * pay)
-        dgy = (dq[n + b] - dq[n + a]) + (tb * pbx - ta * pax)
-        kx, ky, kp = ligament_hvp(dgx, dgy, tb - ta, prm)
+        dgx, dgy, dphi_q = strain_variation(dq, n, a, b, pax, pay, pbx, pby)
+        kx, ky, kp = ligament_hvp(dgx, dgy, dphi_q, prm)
         out[b] += kx
         out[n + b] += ky
         out[a] -= kx
         out[n + a] -= ky
         out[2 * n + b] += fma(ky, pbx, -(kx * pby)) - tb * fma(fx, pbx, fy * pby) + kp
         out[2 * n + a] -= fma(ky, pax, -(kx * pay)) - ta * fma(fx, pax, fy * pay) + kp
-
-
-@jit
-def _strain_variation(q, lam, n, a, b, pax, pay, pbx, pby):
-    """(w_x, w_y, δΔφ): the variation of the gap g and of θ_b − θ_a along λ (δg of ``network_hvp``)."""
-    ta, tb = lam[2 * n + a], lam[2 * n + b]
-    wx = (lam[b] - lam[a]) - (tb * pby - ta * pay)
-    wy = (lam[n + b] - lam[n + a]) + (tb * pbx - ta * pax)
-    return wx, wy, tb - ta
 
 
 @jit
@@ -194,7 +193,7 @@ def network_adjoint(q, args, lam, out, g1, g2):
         b = ub[k]
         prm = lig[k]
         gx, gy, pax, pay, pbx, pby, dphi = ligament_gap(q, n, a, b, prm, cs, sn)
-        wx, wy, dl = _strain_variation(q, lam, n, a, b, pax, pay, pbx, pby)
+        wx, wy, dl = strain_variation(lam, n, a, b, pax, pay, pbx, pby)
         _, fx, fy, _ = ligament_law(gx, gy, dphi, prm)
         kx, ky, _ = ligament_hvp(wx, wy, dl, prm)
         ex, ey = prm[L_EX], prm[L_EY]
