@@ -16,7 +16,7 @@ SWEEPS    := $(wildcard sweeps/*.yaml)
 RUN_OUT   := $(patsubst configs/%.yaml,runs/%/dataset.nc,$(CONFIGS))
 SWEEP_OUT := $(patsubst sweeps/%.yaml,runs/sweeps/%/sweep.nc,$(SWEEPS))
 FIGURES   := $(patsubst sweeps/%.yaml,runs/figures/%.png,$(SWEEPS))
-# `make gallery`: one short movie per scene (GALLERY_EXT=mp4 for MP4s; needs ffmpeg)
+# `make gallery`: one short movie per scene (GALLERY_EXT=mp4 for MP4s, through the mp4 extra's ffmpeg)
 GALLERY_EXT ?= gif
 GALLERY   := $(patsubst configs/%.yaml,runs/gallery/%.$(GALLERY_EXT),$(CONFIGS))
 # worker processes per sweep: one per core, or one when make itself runs jobs in parallel (-jN)
@@ -28,7 +28,7 @@ SWEEP_WORKERS ?= $(if $(filter -j%,$(MAKEFLAGS)),1,0)
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,dask]'
+	$(BIN)/python -m pip install --quiet -e '.[test,dask,mp4]'
 	touch $@
 
 install: $(STAMP)

@@ -109,11 +109,24 @@ def test_missing_run_is_a_message(tmp_path):
 
 
 def test_mp4_without_ffmpeg_is_a_message(chain_run, tmp_path, monkeypatch):
+    """Neither an ffmpeg on PATH nor the mp4 extra: a message saying how to get one, no file."""
     monkeypatch.setenv("PATH", str(tmp_path / "empty-bin"))
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # the extra not installed
     result = invoke(chain_run, "-o", tmp_path / "m.mp4")
     assert result.exit_code == 2
-    assert "error: writing MP4 needs ffmpeg, which is not on PATH" in result.output
-    assert "--out movie.gif" in result.output
+    assert "error: writing MP4 needs ffmpeg: install flexmm's mp4 extra" in result.output
+    assert "pip install 'flexmm[mp4]'" in result.output and "--out movie.gif" in result.output
+    assert not list(tmp_path.glob("m.mp4*"))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--out", "m.gif"], "error: --mp4 writes an MP4 movie: give --out NAME.mp4, not --out m.gif"),
+    (["--time", "1ms"], "error: --mp4 writes a movie: --time picks one frame"),
+])
+def test_mp4_flag_conflicts_are_messages(chain_run, args, message):
+    result = invoke(chain_run, "--mp4", *args)
+    assert result.exit_code == 2, result.output
+    assert message in result.output
 
 
 def test_mp4_frames_are_piped_to_ffmpeg(chain_run, tmp_path, monkeypatch):
@@ -136,11 +149,23 @@ def test_mp4_frames_are_piped_to_ffmpeg(chain_run, tmp_path, monkeypatch):
     assert (tmp_path / "m.mp4").read_bytes() == b"mp4"
 
 
-@pytest.mark.skipif(not __import__("shutil").which("ffmpeg"), reason="ffmpeg is not installed")
-def test_real_mp4(chain_run, tmp_path):
-    result = invoke(chain_run, "-o", tmp_path / "m.mp4", "-q")
+def test_mp4_without_system_ffmpeg(chain_run, tmp_path, monkeypatch):
+    """``--mp4`` with no ffmpeg on PATH writes RUN/render.mp4 through the mp4 extra's static ffmpeg:
+    an MP4 container ('ftyp' box first) holding the run's 6 frames at the picture's size."""
+    ffmpeg = pytest.importorskip("imageio_ffmpeg", reason="the mp4 extra (imageio-ffmpeg) is not installed")
+    monkeypatch.setenv("PATH", str(tmp_path / "empty-bin"))
+    result = invoke(chain_run, "--mp4", "--fps", "10", "-q")
     assert result.exit_code == 0, result.output
-    assert (tmp_path / "m.mp4").stat().st_size > 1000
+    movie = chain_run / "render.mp4"
+    assert result.output.strip() == str(movie)
+    assert movie.read_bytes()[4:8] == b"ftyp"
+    frames = ffmpeg.read_frames(str(movie))
+    meta = next(frames)
+    assert meta["codec"] == "h264" and meta["size"][0] == 960 and meta["fps"] == 10
+    w, h = meta["size"]
+    images = list(frames)
+    assert len(images) == 6 and all(len(im) == w * h * 3 for im in images)
+    assert not list(chain_run.glob("*.tmp*"))
 
 
 def test_gif_movie_streams_every_frame(chain_run, tmp_path):

@@ -47,7 +47,8 @@ def parse_pair(text: str | None, option: str, kind=float):
 def render(
     run: str = typer.Argument(..., help="Run directory (or its dataset.nc)."),
     out: str = typer.Option(None, "--out", "-o", help="Output file: .png or .svg (one frame), .gif or .mp4 "
-                            "(movie; MP4 needs ffmpeg). Default RUN/render.gif, or RUN/render.png with --time."),
+                            "(movie). Default RUN/render.gif (RUN/render.mp4 with --mp4), or RUN/render.png "
+                            "with --time."),
     time: str = typer.Option(None, "--time", "-t", help="Draw the frame nearest this time (s; or 250ms, 40us)."),
     start: str = typer.Option(None, "--start", help="Movie: first time (default the run's start)."),
     stop: str = typer.Option(None, "--stop", help="Movie: last time (default the run's end)."),
@@ -67,6 +68,9 @@ def render(
                                    "quantity with a marker at the current time."),
     row: int = typer.Option(None, "--row", help="Row of a sheet or grid for the space–time diagram (default middle)."),
     width: int = typer.Option(960, "--width", help="Picture width in pixels."),
+    mp4: bool = typer.Option(False, "--mp4", help="Write the movie as H.264 MP4 (default RUN/render.mp4). "
+                             "Uses ffmpeg from PATH, else the static ffmpeg of flexmm's mp4 extra "
+                             "(pip install 'flexmm[mp4]')."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the path written."),
 ) -> None:
     """Draw the deformed structure of a run: one frame (PNG, SVG) or a movie (GIF, MP4)."""
@@ -79,7 +83,7 @@ def render(
         out=Path(out) if out else None, time_s=parse_time(time, "--time"), start_s=parse_time(start, "--start"),
         stop_s=parse_time(stop, "--stop"), every=every, max_frames=max_frames, fps=fps, color=color,
         clim=parse_pair(clim, "--clim"), exaggerate=exaggerate, shape=shape, sites=span, spacetime=spacetime,
-        row=row, width=width)
+        row=row, width=width, movie_format="mp4" if mp4 else "gif")
     log = None if quiet else (lambda m: typer.echo(m, err=True))
     path = render_run(run, opts, log=log, warn=lambda m: typer.echo(m, err=True))  # warnings even with -q
     typer.echo(str(path))

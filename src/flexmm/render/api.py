@@ -47,12 +47,20 @@ class RenderOptions:
     spacetime: bool = False
     row: int | None = None
     width: int = 960
+    movie_format: str = "gif"  # the default movie's format when ``out`` is None: 'gif' or 'mp4'
 
 
 def output_kind(opts: RenderOptions, run_dir: Path) -> tuple[Path, bool]:
     """(output path, still?) from --out and --time; UsageError for an unknown suffix or a conflict."""
     still_default = opts.time_s is not None
-    out = opts.out if opts.out is not None else run_dir / ("render.png" if still_default else "render.gif")
+    if opts.movie_format == "mp4":
+        if opts.out is not None and opts.out.suffix.lower() != ".mp4":
+            raise UsageError(f"--mp4 writes an MP4 movie: give --out NAME.mp4, not --out {opts.out}, or drop --mp4")
+        if still_default:
+            raise UsageError("--mp4 writes a movie: --time picks one frame (write it as .png or .svg), "
+                             "--start/--stop choose a movie's frames")
+    default = "render.png" if still_default else f"render.{opts.movie_format}"
+    out = opts.out if opts.out is not None else run_dir / default
     suffix = out.suffix.lower()
     if suffix not in STILL_SUFFIXES + MOVIE_SUFFIXES:
         raise UsageError(f"--out {out}: unknown output suffix {suffix or '(none)'!r}; use .png or .svg for "

@@ -1,8 +1,10 @@
-"""Movie writers fed one RGB frame at a time: animated GIF (Pillow) and MP4 (the system's ffmpeg).
+"""Movie writers fed one RGB frame at a time: animated GIF (Pillow) and MP4 (ffmpeg).
 
 Neither keeps frames in memory: the GIF writer encodes each frame as it comes (one global palette
 made from the first frame and the colour map, then only the rectangle that changed), the MP4
-writer pipes raw frames to ffmpeg. Both write to a temporary name and rename when closed.
+writer pipes raw frames to ffmpeg. Both write to a temporary name and rename when closed. The
+ffmpeg is the one on PATH, else the static build the optional ``imageio-ffmpeg`` package ships
+(``pip install 'flexmm[mp4]'``), so MP4 needs no system ffmpeg.
 """
 
 from __future__ import annotations
@@ -125,13 +127,23 @@ class GifWriter:
 
 
 def ffmpeg_or_error() -> str:
-    """Path of ffmpeg on PATH, or UsageError saying how to get it (or to write a GIF)."""
+    """Path of an ffmpeg executable: the one on PATH, else imageio-ffmpeg's bundled static build;
+    UsageError saying how to get one (or to write a GIF) when there is neither."""
     exe = shutil.which("ffmpeg")
-    if exe is None:
-        raise UsageError("writing MP4 needs ffmpeg, which is not on PATH: install it from your system's "
-                         "packages (e.g. apt install ffmpeg, brew install ffmpeg, conda install ffmpeg) "
-                         "or write a GIF instead (--out movie.gif)")
-    return exe
+    if exe is not None:
+        return exe
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        pass
+    else:
+        try:
+            return imageio_ffmpeg.get_ffmpeg_exe()
+        except RuntimeError:  # its binary is missing for this platform
+            pass
+    raise UsageError("writing MP4 needs ffmpeg: install flexmm's mp4 extra, which brings a static ffmpeg "
+                     "(pip install 'flexmm[mp4]'), or ffmpeg from your system's packages (e.g. apt install "
+                     "ffmpeg, brew install ffmpeg), or write a GIF instead (--out movie.gif)")
 
 
 class Mp4Writer:
