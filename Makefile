@@ -19,11 +19,16 @@ FIGURES   := $(patsubst sweeps/%.yaml,runs/figures/%.png,$(SWEEPS))
 # `make gallery`: one short movie per scene (GALLERY_EXT=mp4 for MP4s, through the mp4 extra's ffmpeg)
 GALLERY_EXT ?= gif
 GALLERY   := $(patsubst configs/%.yaml,runs/gallery/%.$(GALLERY_EXT),$(CONFIGS))
+# `make docs`: the documentation site in runs/site (mkdocs.yml); the gallery's entries, one per scene,
+# are file targets (remade when the scene changes; `make -j2 docs` makes two at a time)
+DOCS_STAMP  = $(VENV)/.docs-stamp
+RELEASE_STAMP = $(VENV)/.release-stamp
+DOCS_GALLERY := $(patsubst configs/%.yaml,runs/docs/gallery/%.json,$(CONFIGS))
 # worker processes per sweep: one per core, or one when make itself runs jobs in parallel (-jN)
 SWEEP_WORKERS ?= $(if $(filter -j%,$(MAKEFLAGS)),1,0)
 
 .DELETE_ON_ERROR:
-.PHONY: install demo test test-slow bench clean reproduce figures gallery
+.PHONY: install demo test test-slow bench clean reproduce figures gallery docs release-check
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -60,9 +65,29 @@ gallery: $(GALLERY)
 runs/gallery/%.$(GALLERY_EXT): runs/%/dataset.nc
 	$(BIN)/flexmm render runs/$* --out $@ --max-frames 120 --width 720 --spacetime --quiet
 
+$(DOCS_STAMP): pyproject.toml | $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	touch $@
+
+runs/docs/gallery/%.json: configs/%.yaml | $(DOCS_STAMP)
+	$(BIN)/python docs/hooks/gallery.py $< runs/docs/gallery
+
+docs: $(DOCS_GALLERY) | $(DOCS_STAMP)
+	$(BIN)/mkdocs build --strict
+
+# `make release-check`: build the sdist and the wheel into dist/ and check their metadata (twine)
+$(RELEASE_STAMP): pyproject.toml | $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[release]'
+	touch $@
+
+release-check: | $(RELEASE_STAMP)
+	rm -rf dist
+	$(BIN)/python -m build --outdir dist .
+	$(BIN)/twine check --strict dist/*
+
 bench: $(STAMP)
 	@if [ -f benchmarks/run.py ]; then $(BIN)/python benchmarks/run.py; \
 	else echo "bench: benchmarks/run.py does not exist yet"; fi
 
 clean:
-	rm -rf runs/*/ benchmarks/results
+	rm -rf runs/*/ benchmarks/results dist
