@@ -24,6 +24,7 @@ GALLERY   := $(patsubst configs/%.yaml,runs/gallery/%.$(GALLERY_EXT),$(CONFIGS))
 DOCS_STAMP  = $(VENV)/.docs-stamp
 RELEASE_STAMP = $(VENV)/.release-stamp
 DOCS_GALLERY := $(patsubst configs/%.yaml,runs/docs/gallery/%.json,$(CONFIGS))
+SITE_DIR ?= runs/site
 # worker processes per sweep: one per core, or one when make itself runs jobs in parallel (-jN)
 SWEEP_WORKERS ?= $(if $(filter -j%,$(MAKEFLAGS)),1,0)
 
@@ -73,7 +74,7 @@ runs/docs/gallery/%.json: configs/%.yaml | $(DOCS_STAMP)
 	$(BIN)/python docs/hooks/gallery.py $< runs/docs/gallery
 
 docs: $(DOCS_GALLERY) | $(DOCS_STAMP)
-	$(BIN)/mkdocs build --strict
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir $(SITE_DIR)
 
 # `make release-check`: build the sdist and the wheel into dist/ and check their metadata (twine)
 $(RELEASE_STAMP): pyproject.toml | $(STAMP)

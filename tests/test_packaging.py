@@ -4,6 +4,7 @@ repository, runs; its metadata carries the licence, the version and the type mar
 from __future__ import annotations
 
 import email.parser
+import importlib.util
 import os
 import re
 import shutil
@@ -30,18 +31,24 @@ def _run(cmd, **kw) -> subprocess.CompletedProcess:
     return out
 
 
-@pytest.fixture(scope="module")
-def wheel(tmp_path_factory) -> Path:
-    """The wheel built from a copy of the sources (nothing written into the repository)."""
-    tmp = tmp_path_factory.mktemp("wheel")
+def _source_tree(tree: Path) -> Path:
+    """A copy of what building reads, in ``tree`` (nothing is written into the repository)."""
+    tree.mkdir(parents=True)
     for name in SOURCES:
         src = ROOT / name
         if src.is_dir():
-            shutil.copytree(src, tmp / "src-tree" / name, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+            shutil.copytree(src, tree / name, ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
         else:
-            (tmp / "src-tree").mkdir(exist_ok=True)
-            shutil.copy2(src, tmp / "src-tree" / name)
-    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--quiet", "-w", tmp / "dist", tmp / "src-tree"])
+            shutil.copy2(src, tree / name)
+    return tree
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory) -> Path:
+    """The wheel built from a copy of the sources."""
+    tmp = tmp_path_factory.mktemp("wheel")
+    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--quiet", "-w", tmp / "dist",
+          _source_tree(tmp / "src-tree")])
     (whl,) = (tmp / "dist").glob("flexmm-*.whl")
     return whl
 
@@ -98,3 +105,18 @@ def test_the_wheel_installs_and_runs_outside_the_repository(wheel, tmp_path):
     (tmp_path / "bad.yaml").write_text(bad)
     res = subprocess.run([exe, "validate", "bad.yaml"], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert res.returncode == 2 and "lattice.n_units" in res.stderr and "Traceback" not in res.stderr
+
+
+@pytest.mark.slow
+def test_sdist_and_wheel_build_and_pass_twine_check(tmp_path):
+    """What ``make release-check`` does, on a copy of the sources: ``python -m build`` makes an
+    sdist and a wheel of the one version, and ``twine check --strict`` passes on both (the README
+    renders as the package's long description)."""
+    for tool in ("build", "twine"):
+        if importlib.util.find_spec(tool) is None:
+            pytest.skip(f"{tool} is not installed (pip install '.[release]', or make release-check)")
+    _run([sys.executable, "-m", "build", "--outdir", tmp_path / "dist", _source_tree(tmp_path / "src-tree")])
+    built = sorted(p.name for p in (tmp_path / "dist").iterdir())
+    assert built == [f"flexmm-{flexmm.__version__}-py3-none-any.whl", f"flexmm-{flexmm.__version__}.tar.gz"]
+    out = _run([sys.executable, "-m", "twine", "check", "--strict", *sorted((tmp_path / "dist").iterdir())])
+    assert out.stdout.count("PASSED") == 2, out.stdout
