@@ -27,7 +27,7 @@ pytestmark = pytest.mark.slow
 
 # ---------------------------------------------------------------- reduced models
 # the LEGO demo's full run measures its soliton through the free end's chaotic reflected field:
-# its speed and amplitude move by 1-3 % with the step (README), so the comparison allows 2 %; its
+# its speed and amplitude move by 1-3 % with the step (benchmarks/README.md, "The demo's output"), so the comparison allows 2 %; its
 # continuum run (a discrete pilot over ~40 % of the run, then the soliton) saves no work against
 # the full run at the default accuracy (measured 0.42x: PEFRL made the full run cheap), so no
 # work ratio is asserted there
