@@ -150,7 +150,7 @@ def scene_page(entry: dict, config_text: str) -> str:
     if entry["mode"] == "run":
         est = entry["error_estimate"]
         lines += [f"*Made by this site's build from `{entry['config']}`*: `flexmm run {entry['config']}` "
-                  f"(status {entry['status']}, {entry['wall_s']:.1f} s including compilation"
+                  f"(status {entry['status']}, {entry['wall_s']:.1f} s, any compilation included"
                   + (f"; estimated error {est:.2g} of the wave amplitudes and speeds" if est is not None else "")
                   + f"), then `{entry['render']}` (flexmm {entry['flexmm_version']}).", ""]
         lines += ["## Measured against theory", "", "What `flexmm run` prints after the run "
