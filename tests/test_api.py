@@ -203,3 +203,17 @@ def test_a_failed_run_returns_its_frames_and_why(tmp_path, monkeypatch):
     assert not res.ok and res.status == "failed" and "No space left on device" in res.message
     assert res.dataset.sizes["time"] == 100 and res.dataset.attrs["status"] == "failed"
     assert res.path is None and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("kind", ["pulse", "front", "driven"])
+def test_nothing_to_measure_is_a_flexmm_error(short_run, kind):
+    """A run in which nothing moves has no pulse, front or drive: ``flexmm.analyze`` raises a
+    FlexmmError (what a caller of the API catches), not a bare Exception."""
+    res, _ = short_run
+    still = res.dataset.copy(deep=True)
+    for name, var in still.data_vars.items():
+        if var.dims == ("time", "site"):
+            still[name].values[...] = still[name].values[:1]  # every frame the first (rest)
+    with pytest.raises(FlexmmError) as err:
+        flexmm.analyze(still, kind=kind)
+    assert not isinstance(err.value, ConfigError)

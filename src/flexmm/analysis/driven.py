@@ -15,8 +15,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from flexmm.errors import FlexmmError
 
-class NotDriven(Exception):
+
+class NotDriven(FlexmmError):
     """The run has no harmonic drive (or no drive frequency could be found)."""
 
 

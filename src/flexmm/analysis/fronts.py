@@ -25,9 +25,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from flexmm.analysis.detect import link, merge_tracks
+from flexmm.errors import FlexmmError
 
 
-class FrontNotFound(Exception):
+class FrontNotFound(FlexmmError):
     """No site switched state, or no front could be followed."""
 
 

@@ -22,6 +22,7 @@ import yaml
 from flexmm._blas import single_blas_thread
 from flexmm.analysis.context import Comparison, RunContext
 from flexmm.analysis.detect import track_peaks
+from flexmm.errors import FlexmmError
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,7 @@ def wave_groups(ds, *, smooth: float = 15.0, threshold_fraction: float = 0.15, m
     return sorted(out, key=lambda g: -g.speed_m_s)
 
 
-class NoWaveGroups(Exception):
+class NoWaveGroups(FlexmmError):
     """No group travelled far enough to be measured."""
 
 

@@ -24,9 +24,10 @@ from flexmm.analysis.peaks import local_maxima, peak_width
 from flexmm.analysis.profiles import SHAPES
 from flexmm.analysis.steady import steady_part
 from flexmm.analysis.widths import fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
+from flexmm.errors import FlexmmError
 
 
-class PulseNotFound(Exception):
+class PulseNotFound(FlexmmError):
     """No pulse above the threshold crossed enough sites to measure."""
 
 
