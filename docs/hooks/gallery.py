@@ -48,6 +48,14 @@ def _header(text: str) -> str:
     return "\n".join(lines)
 
 
+def _shown(config: Path) -> str:
+    """The scene file's path as a reader would type it: relative to the working directory."""
+    try:
+        return config.resolve().relative_to(Path.cwd().resolve()).as_posix()
+    except ValueError:
+        return config.as_posix()
+
+
 def _write(path: Path, data: bytes) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_bytes(data)
@@ -71,7 +79,7 @@ def make_entry(config: Path, out_dir: Path, budget: float = BUDGET_UNIT_STEPS) -
     cost = estimate(scene)
     work = cost.n_sites * cost.steps if cost.steps else math.inf
     t0 = time.perf_counter()
-    entry = {"name": scene.name, "config": config.as_posix(), "config_sha256": _sha(text),
+    entry = {"name": scene.name, "config": _shown(config), "config_sha256": _sha(text),
              "flexmm_version": flexmm.__version__, "description": scene.description or "",
              "header": _header(text), "work_unit_steps": work, "picture": f"{scene.name}.png"}
     if work <= budget:
@@ -222,7 +230,7 @@ def on_files(files, config):
         entry = load_entry(path, out_dir)
         if entry is None:
             print(f"gallery: making the entry of {path.name}", file=sys.stderr, flush=True)
-            entry = make_entry(path.relative_to(root), out_dir) if Path.cwd() == root else make_entry(path, out_dir)
+            entry = make_entry(path, out_dir)
         entries.append(entry)
         files.append(File.generated(config, f"gallery/{path.stem}.md", content=scene_page(entry, path.read_text())))
         files.append(File.generated(config, f"gallery/{entry['picture']}", abs_src_path=str(out_dir / entry["picture"])))
