@@ -120,3 +120,18 @@ def test_the_pulse_analysis_imports_neither_scipy_signal_nor_stats():
             "'scipy.ndimage'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_line_fit_slope_error_and_degenerate_abscissae():
+    """The slope and its standard error against numpy's covariance; points that share one
+    abscissa (arrivals in one column of a sheet) have no line: NaN, not an exception."""
+    from flexmm.analysis.arrivals import line_fit
+
+    x = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
+    y = 2.0 * x + 1.0 + np.array([0.1, -0.1, 0.05, 0.0, -0.05])
+    slope, intercept, err = line_fit(x, y)
+    coef, cov = np.polyfit(x, y, 1, cov=True)
+    assert slope == pytest.approx(coef[0]) and intercept == pytest.approx(coef[1])
+    assert err == pytest.approx(np.sqrt(cov[0, 0])) and 0 < err < 0.1
+    assert np.isnan(line_fit(np.array([1.0, 2.0]), np.array([0.0, 1.0]))[2])
+    assert all(np.isnan(v) for v in line_fit(np.full(4, 2.5), np.array([0.0, 1.0, 2.0, 3.0])))

@@ -101,7 +101,10 @@ def segments(overlap_in_travel_order: np.ndarray) -> np.ndarray:
 
 
 def line_fit(x, y):
-    """Slope, intercept and slope standard error of the least-squares line y(x)."""
+    """Slope, intercept and slope standard error of the least-squares line y(x); all NaN when
+    the points share one abscissa (arrivals at sites of one column of a sheet, say)."""
+    if np.unique(x).size < 2:
+        return np.nan, np.nan, np.nan
     if x.size < 3:
         coef = np.polyfit(x, y, 1)
         return coef[0], coef[1], np.nan
