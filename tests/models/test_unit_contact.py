@@ -7,10 +7,13 @@ undamped run through repeated contacts, and central differences of a gradient th
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
+
+import flexmm
 
 from flexmm.config import scene_from_dict
 from flexmm.models import MODELS
@@ -118,3 +121,54 @@ def test_the_second_derivative_oracles_see_contacts():
     q = np.random.default_rng(4).normal(0.0, 0.05, system.ndof)  # the fixture's state
     args = system.args
     assert uc.contacts_reference(q, system.n_sites, args.contact_units, args.contacts)[0] > 0.0
+
+
+SCENE = Path(__file__).resolve().parents[2] / "configs" / "pore_closing_contact.yaml"
+
+
+def test_energy_is_conserved_through_repeated_contacts():
+    """The pore-closing scene, smaller, run as ``flexmm run`` runs it (default accuracy, undamped):
+    pores close into contact several times, no vertex reaches its edge, and the total energy stays
+    within 1e-6 of its initial value."""
+    res = flexmm.run(SCENE, **{"lattice.n_rows": 4, "lattice.n_cols": 8, "solver.duration_s": 0.012})
+    assert res.ok
+    ds, system = res.dataset, MODELS["rigid_network"].build(res.scene.lattice)
+    args, n, a = system.args, system.n_sites, res.scene.lattice.a_m
+    q = np.concatenate([ds["u"].values / a, ds["v"].values / a, ds["theta"].values], axis=1)
+    gaps = np.array([uc.pair_distances(qk, n, args.contact_units, args.contacts) for qk in q])
+    touching = np.any(gaps < args.contacts[:, uc.C_CUT], axis=1)
+    assert np.sum(touching[1:] & ~touching[:-1]) >= 3  # separate contact episodes
+    assert 0.0 < gaps.min() < 0.5 * args.contacts[0, uc.C_CUT]
+    energy = ds["total_energy"].values
+    assert np.max(np.abs(energy - energy[0])) <= 1e-6 * energy[0]
+
+
+def test_gradient_through_contacts_matches_central_differences():
+    """``flexmm design``'s adjoint through a pore closing into contact (a 2 × 3 network, damped):
+    the gradient of a smooth objective of the trajectory with respect to the ligament table, the
+    inverse masses and the initial state equals central differences to 1e-6."""
+    import yaml
+
+    from design.test_gradient import _central, _directions, _objective
+    from flexmm.assemble import build_problem
+    from flexmm.design.gradient import trajectory_of
+
+    data = yaml.safe_load(SCENE.read_text())
+    data["lattice"].update(n_rows=2, n_cols=3)
+    data["excitation"]["velocity_m_s"] = 3.0
+    data["damping"] = {"viscous": {"damping_ratio": 0.02}}
+    problem = build_problem(scene_from_dict(data))
+    h = problem.dt / 10
+    traj, raw = trajectory_of(problem, nsteps=800, stride=5, h=h)
+    rec, _ = traj.run(raw)
+    args, n = problem.system.args, problem.system.n_sites
+    gaps = np.array([uc.pair_distances(q, n, args.contact_units, args.contacts) for q in rec.q])
+    assert gaps.min() < 0.5 * args.contacts[0, uc.C_CUT]  # the run goes deep into contact
+    objective = _objective((traj.n_samples, traj.obs.size))
+    _, grad, _ = traj.gradient(raw, objective, segment=8)
+    directions = _directions(raw, np.random.default_rng(0), traj.terms.drv_shape, traj.terms.drv_mode)
+    for block in ("t1", "minv", "q0", "v0"):
+        arr = getattr(raw, block)
+        fd = _central(traj, raw, arr, arr.copy(), directions[block], objective)
+        adj = float(np.vdot(getattr(grad, block), directions[block]))
+        assert abs(adj - fd) < 1e-6 * abs(fd), (block, adj, fd)

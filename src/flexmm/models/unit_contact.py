@@ -147,11 +147,10 @@ def contacts_hvp(q, n, cs, sn, units, table, dq, out):
                             + (dgy * sx - dgx * sy) + t * te * (fx * sx + fy * sy))
 
 
-def contacts_reference(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarray) -> tuple[float, np.ndarray]:
-    """Readable numpy version of the contacts' energy and forces (vectorised over pairs)."""
-    f = np.zeros(3 * n)
-    if units.shape[0] == 0:
-        return 0.0, f
+def pair_geometry(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarray):
+    """(p_P, p_0 + t s, δ, d) of every pair at state q, numpy: the vertex's rotated offset, the
+    closest point of the edge from the edge unit's centre (each (2, C)), the separation (2, C)
+    and its length (C,)."""
     iv, ie = units[:, 0], units[:, 1]
     p = table.T
     x, th = q[: 2 * n].reshape(2, n), q[2 * n : 3 * n]
@@ -165,10 +164,23 @@ def contacts_reference(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarr
     w = p[[C_DX, C_DY]] + x[:, iv] - x[:, ie] + pp - p0
     t = np.clip(np.sum(w * s, 0) / np.sum(s * s, 0), 0.0, 1.0)
     sep = w - t * s
-    d = np.hypot(sep[0], sep[1])
-    k, c = p[C_K], p[C_CUT]
-    on = d < c
-    gap = np.where(on, c - d, 0.0)
+    return pp, p0 + t * s, sep, np.hypot(sep[0], sep[1])
+
+
+def pair_distances(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Vertex–edge distances (C,) of the pairs at state q (units of the table)."""
+    return pair_geometry(q, n, units, table)[3]
+
+
+def contacts_reference(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarray) -> tuple[float, np.ndarray]:
+    """Readable numpy version of the contacts' energy and forces (vectorised over pairs)."""
+    f = np.zeros(3 * n)
+    if units.shape[0] == 0:
+        return 0.0, f
+    iv, ie = units[:, 0], units[:, 1]
+    pp, closest, sep, d = pair_geometry(q, n, units, table)
+    k, c = table[:, C_K], table[:, C_CUT]
+    gap = np.where(d < c, c - d, 0.0)
     energy = float(np.sum(0.5 * k * gap**3 / d))
     force = -0.5 * k * gap**2 * (c + 2 * d) / d**2 * sep / d  # E'(d) δ/d, (2, C)
 
@@ -179,7 +191,7 @@ def contacts_reference(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarr
         np.add.at(f, dim * n + iv, -force[dim])
         np.add.at(f, dim * n + ie, force[dim])
     np.add.at(f, 2 * n + iv, -cross(force, pp))
-    np.add.at(f, 2 * n + ie, cross(force, p0 + t * s))
+    np.add.at(f, 2 * n + ie, cross(force, closest))
     return energy, f
 
 
@@ -217,10 +229,8 @@ def contact_pairs(vertices: np.ndarray, centres: np.ndarray, links, k: float, cu
         return NO_PAIRS, NO_CONTACTS
     table = np.array(rows)
     pairs = np.array(units, np.int64)
-    n = centres.shape[0]
-    e, _ = contacts_reference(np.zeros(3 * n), n, pairs, table)
-    if e > 0.0:
-        dist = rest_distances(pairs, table)
+    dist = rest_distances(pairs, table)
+    if np.any(dist <= cutoff):
         worst = int(np.argmin(dist))
         raise ContactError(
             f"lattice.contact.cutoff_m: vertex–edge pairs are closer than the cutoff in the reference geometry "
@@ -231,9 +241,5 @@ def contact_pairs(vertices: np.ndarray, centres: np.ndarray, links, k: float, cu
 
 def rest_distances(units: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Vertex–edge distances (C,) of the pairs in the reference geometry (units of the table)."""
-    p = table.T
-    w = p[[C_DX, C_DY]] + p[[C_PX, C_PY]] - p[[C_0X, C_0Y]]
-    s = p[[C_1X, C_1Y]] - p[[C_0X, C_0Y]]
-    t = np.clip(np.sum(w * s, 0) / np.sum(s * s, 0), 0.0, 1.0)
-    sep = w - t * s
-    return np.hypot(sep[0], sep[1])
+    n = int(units.max()) + 1 if units.size else 0
+    return pair_distances(np.zeros(3 * n), n, units, table)
