@@ -37,7 +37,8 @@ and the law's derivative along its own parameters (k_l, k_s, k_θ, e, ℓ: ``lig
 gives the adjoint's and the tangent's parameter products. Each law is written once, in those
 three functions, and lifted over the ligament table by ``network_force``, ``network_energy``,
 ``network_hvp``, ``network_adjoint`` and ``network_tangent`` (one loop for every law: the law is a
-switch inside it); energy-based contacts between units (``flexmm.models.unit_contact``) are added
+switch inside it, and each kernel inlines its loop once per law with the law a constant, so the
+switch folds away); energy-based contacts between units (``flexmm.models.unit_contact``) are added
 in the same loops. ``network_reference`` is the readable numpy version (the tests' oracle).
 """
 
@@ -198,12 +199,9 @@ def network_angles(q, n, cs, sn):
         sn[i] = s
 
 
-@jit
-def _network(q, args, out, want_force):
-    """Energy of every ligament and contact, and −∂E/∂q added to ``out`` when ``want_force``."""
-    ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
-    n = cs.shape[0]
-    network_angles(q, n, cs, sn)
+@jit(inline=True)
+def _ligaments(q, n, ua, ub, lig, cs, sn, out, want_force, law):
+    """Energy of every ligament, and −∂E/∂q added to ``out`` when ``want_force``."""
     total = 0.0
     for k in range(ua.shape[0]):
         a = ua[k]
@@ -220,6 +218,23 @@ def _network(q, args, out, want_force):
             # ∂E/∂θ_a = −G·J p_a − T_d + ½T_m, with G·J p = G_y p_x − G_x p_y
             out[2 * n + a] += fma(fy, pax, -(fx * pay)) + fp - 0.5 * tm
             out[2 * n + b] -= fma(fy, pbx, -(fx * pby)) + fp + 0.5 * tm
+    return total
+
+
+@jit
+def _network(q, args, out, want_force):
+    """Energy of every ligament and contact, and −∂E/∂q added to ``out`` when ``want_force``.
+    Each ligament loop below is the one of ``_ligaments``, inlined with the law as a constant
+    (the law's branches fold away: a switch per ligament costs the paper's law 2–3x)."""
+    ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
+    n = cs.shape[0]
+    network_angles(q, n, cs, sn)
+    if law == LAW_DIFFLEXMM:
+        total = _ligaments(q, n, ua, ub, lig, cs, sn, out, want_force, LAW_DIFFLEXMM)
+    elif law == LAW_DIFFLEXMM_LINEAR:
+        total = _ligaments(q, n, ua, ub, lig, cs, sn, out, want_force, LAW_DIFFLEXMM_LINEAR)
+    else:
+        total = _ligaments(q, n, ua, ub, lig, cs, sn, out, want_force, LAW_PAPER)
     return total + uc.contacts(q, n, cs, sn, args[6], args[7], out, want_force)
 
 
@@ -247,15 +262,9 @@ def strain_variation(lam, n, a, b, pax, pay, pbx, pby):
     return wx, wy, tb - ta, 0.5 * (ta + tb)
 
 
-@jit
-def network_hvp(q, args, dq, out):
-    """∇²E(q) dq of a ligament network into ``out`` (3N,): the Hessian-vector product the
-    adjoint and tangent steps and the linear analysis need (contacts included)."""
-    ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
-    n = cs.shape[0]
-    network_angles(q, n, cs, sn)
-    for k in range(out.shape[0]):
-        out[k] = 0.0
+@jit(inline=True)
+def _ligaments_hvp(q, n, ua, ub, lig, cs, sn, dq, out, law):
+    """∇²E dq of every ligament added to ``out``."""
     for k in range(ua.shape[0]):
         a = ua[k]
         b = ub[k]
@@ -271,22 +280,29 @@ def network_hvp(q, args, dq, out):
         out[n + a] -= ky
         out[2 * n + b] += fma(ky, pbx, -(kx * pby)) - tb * fma(fx, pbx, fy * pby) + kp + 0.5 * km
         out[2 * n + a] -= fma(ky, pax, -(kx * pay)) - ta * fma(fx, pax, fy * pay) + kp - 0.5 * km
-    uc.contacts_hvp(q, n, cs, sn, args[6], args[7], dq, out)
 
 
 @jit
-def network_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ = −∇²E λ added to ``out`` and (∂F/∂p)ᵀλ = −∂(λ·∇E)/∂p to g1 (the ligament table's
-    gradient, (L, N_LIGAMENT_PARAMS); g2 unused). With (w, δΔφ, δθ̄) the strains' variation along λ:
-    λ·∇E = G·w + T_d δΔφ + T_m δθ̄, so ∂/∂o = H w (H w: the g part of the law's Hessian applied
-    to the variation), ∂/∂r_b = R(θ_b)ᵀ (H w − λ_θb J G), ∂/∂r_a = −R(θ_a)ᵀ (H w − λ_θa J G), and
-    the law's own parameters from ``ligament_param_variation`` column by column."""
+def network_hvp(q, args, dq, out):
+    """∇²E(q) dq of a ligament network into ``out`` (3N,): the Hessian-vector product the
+    adjoint and tangent steps and the linear analysis need (contacts included)."""
     ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
     n = cs.shape[0]
-    hv = np.empty_like(out)
-    network_hvp(q, args, lam, hv)  # also leaves cos/sin of θ in cs, sn
+    network_angles(q, n, cs, sn)
     for k in range(out.shape[0]):
-        out[k] -= hv[k]
+        out[k] = 0.0
+    if law == LAW_DIFFLEXMM:
+        _ligaments_hvp(q, n, ua, ub, lig, cs, sn, dq, out, LAW_DIFFLEXMM)
+    elif law == LAW_DIFFLEXMM_LINEAR:
+        _ligaments_hvp(q, n, ua, ub, lig, cs, sn, dq, out, LAW_DIFFLEXMM_LINEAR)
+    else:
+        _ligaments_hvp(q, n, ua, ub, lig, cs, sn, dq, out, LAW_PAPER)
+    uc.contacts_hvp(q, n, cs, sn, args[6], args[7], dq, out)
+
+
+@jit(inline=True)
+def _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, law):
+    """−∂(λ·∇E)/∂p of every ligament added to its row of g1 (``network_adjoint``)."""
     unit = np.zeros(N_LIGAMENT_PARAMS)
     for k in range(ua.shape[0]):
         a = ua[k]
@@ -315,14 +331,29 @@ def network_adjoint(q, args, lam, out, g1, g2):
 
 
 @jit
-def network_tangent(q, args, dq, d1, d2, out):
-    """(∂F/∂q) dq + (∂F/∂p) dp into ``out``, dp = d1 the ligament table's direction (d2 unused):
-    −∇²E dq − δ_p(∇E), the parameter variation of the gradient of ``_network`` term by term."""
+def network_adjoint(q, args, lam, out, g1, g2):
+    """(∂F/∂q)ᵀλ = −∇²E λ added to ``out`` and (∂F/∂p)ᵀλ = −∂(λ·∇E)/∂p to g1 (the ligament table's
+    gradient, (L, N_LIGAMENT_PARAMS); g2 unused). With (w, δΔφ, δθ̄) the strains' variation along λ:
+    λ·∇E = G·w + T_d δΔφ + T_m δθ̄, so ∂/∂o = H w (H w: the g part of the law's Hessian applied
+    to the variation), ∂/∂r_b = R(θ_b)ᵀ (H w − λ_θb J G), ∂/∂r_a = −R(θ_a)ᵀ (H w − λ_θa J G), and
+    the law's own parameters from ``ligament_param_variation`` column by column."""
     ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
     n = cs.shape[0]
-    network_hvp(q, args, dq, out)  # also leaves cos/sin of θ in cs, sn
+    hv = np.empty_like(out)
+    network_hvp(q, args, lam, hv)  # also leaves cos/sin of θ in cs, sn
     for k in range(out.shape[0]):
-        out[k] = -out[k]
+        out[k] -= hv[k]
+    if law == LAW_DIFFLEXMM:
+        _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, LAW_DIFFLEXMM)
+    elif law == LAW_DIFFLEXMM_LINEAR:
+        _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, LAW_DIFFLEXMM_LINEAR)
+    else:
+        _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, LAW_PAPER)
+
+
+@jit(inline=True)
+def _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, law):
+    """−δ_p(∇E) of every ligament along the table direction d1, added to ``out``."""
     for k in range(ua.shape[0]):
         a = ua[k]
         b = ub[k]
@@ -344,6 +375,23 @@ def network_tangent(q, args, dq, d1, d2, out):
         # torques: δ(G·J p) = δG·J p + G·J δp
         out[2 * n + a] += fma(dfy, pax, -(dfx * pay)) + fma(fy, dax, -(fx * day)) + dfp - 0.5 * dfm
         out[2 * n + b] -= fma(dfy, pbx, -(dfx * pby)) + fma(fy, dbx, -(fx * dby)) + dfp + 0.5 * dfm
+
+
+@jit
+def network_tangent(q, args, dq, d1, d2, out):
+    """(∂F/∂q) dq + (∂F/∂p) dp into ``out``, dp = d1 the ligament table's direction (d2 unused):
+    −∇²E dq − δ_p(∇E), the parameter variation of the gradient of ``_network`` term by term."""
+    ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
+    n = cs.shape[0]
+    network_hvp(q, args, dq, out)  # also leaves cos/sin of θ in cs, sn
+    for k in range(out.shape[0]):
+        out[k] = -out[k]
+    if law == LAW_DIFFLEXMM:
+        _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, LAW_DIFFLEXMM)
+    elif law == LAW_DIFFLEXMM_LINEAR:
+        _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, LAW_DIFFLEXMM_LINEAR)
+    else:
+        _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, LAW_PAPER)
 
 
 def network_pack(args) -> tuple[np.ndarray, np.ndarray]:

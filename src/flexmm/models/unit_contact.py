@@ -67,9 +67,9 @@ def _turn(c, s, x, y):
 
 @jit
 def pair_frame(q, n, cs, sn, iv, ie, prm):
-    """(p_P, p_0, s, w, t, inside, δ, d) of one pair: the rotated offsets of the vertex and the
+    """(p_P, p_0, s, w, t, inside, δ, d²) of one pair: the rotated offsets of the vertex and the
     edge's start, the edge vector, the vertex relative to the edge's start, the closest point's
-    parameter (and whether it lies strictly inside the edge), the separation and its length."""
+    parameter (and whether it lies strictly inside the edge), the separation and its squared length."""
     ppx, ppy = _turn(cs[iv], sn[iv], prm[C_PX], prm[C_PY])
     p0x, p0y = _turn(cs[ie], sn[ie], prm[C_0X], prm[C_0Y])
     p1x, p1y = _turn(cs[ie], sn[ie], prm[C_1X], prm[C_1Y])
@@ -80,7 +80,7 @@ def pair_frame(q, n, cs, sn, iv, ie, prm):
     inside = 0.0 < t < 1.0
     t = min(max(t, 0.0), 1.0)
     dx, dy = wx - t * sx, wy - t * sy
-    return ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, math.sqrt(dx * dx + dy * dy)
+    return ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, dx * dx + dy * dy
 
 
 @jit
@@ -91,9 +91,10 @@ def contacts(q, n, cs, sn, units, table, out, want_force):
     for c in range(units.shape[0]):
         prm = table[c]
         iv, ie = units[c, 0], units[c, 1]
-        ppx, ppy, p0x, p0y, sx, sy, _, _, t, _, dx, dy, d = pair_frame(q, n, cs, sn, iv, ie, prm)
-        if d >= prm[C_CUT]:
+        ppx, ppy, p0x, p0y, sx, sy, _, _, t, _, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
+        if d2 >= prm[C_CUT] * prm[C_CUT]:
             continue
+        d = math.sqrt(d2)
         e, de, _ = barrier(d, prm[C_K], prm[C_CUT])
         total += e
         if want_force:
@@ -117,9 +118,10 @@ def contacts_hvp(q, n, cs, sn, units, table, dq, out):
     for c in range(units.shape[0]):
         prm = table[c]
         iv, ie = units[c, 0], units[c, 1]
-        ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d = pair_frame(q, n, cs, sn, iv, ie, prm)
-        if d >= prm[C_CUT]:
+        ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
+        if d2 >= prm[C_CUT] * prm[C_CUT]:
             continue
+        d = math.sqrt(d2)
         _, de, dde = barrier(d, prm[C_K], prm[C_CUT])
         nx, ny = dx / d, dy / d
         fx, fy = de * nx, de * ny
