@@ -135,11 +135,11 @@ def ligament_law(gx, gy, dphi, tbar, prm, law):
 
 
 @jit
-def bond_variation(gx, gy, tbar, prm, dcx, dcy, da0, dgam0, db0):
-    """(δG_x, δG_y, δT_m) of the nonlinear DifFlexMM law when the bond c moves by δc and A, γ, B
-    move by da0, dgam0, db0 besides (parameter changes), from G = A u + B w, T_m = −B, with
-    u = c/r, w = J u/r: δu = J u (J u·δc)/r, δw = −[u (J u·δc) + J u (u·δc)]/r², δγ = w·δc + dgam0."""
-    cx, cy, r, _, big_a, big_b = bond_frame(gx, gy, tbar, prm)
+def bond_variation(cx, cy, r, big_a, big_b, prm, dcx, dcy, da0, dgam0, db0):
+    """(δG_x, δG_y, δT_m) of the nonlinear DifFlexMM law at its ``bond_frame`` when the bond c
+    moves by δc and A, γ, B move by da0, dgam0, db0 besides (parameter changes), from G = A u + B w,
+    T_m = −B, u = c/r, w = J u/r: δu = J u (J u·δc)/r, δw = −[u (J u·δc) + J u (u·δc)]/r²,
+    δγ = w·δc + dgam0."""
     ux, uy = cx / r, cy / r
     al = ux * dcx + uy * dcy  # u·δc
     be = ux * dcy - uy * dcx  # J u·δc
@@ -155,7 +155,8 @@ def bond_variation(gx, gy, tbar, prm, dcx, dcy, da0, dgam0, db0):
 def ligament_hvp(gx, gy, dphi, tbar, dgx, dgy, ddphi, dtbar, prm, law):
     """(δG_x, δG_y, δT_d, δT_m): the law's Hessian at (g, Δφ, θ̄) applied to (δg, δΔφ, δθ̄)."""
     if law == LAW_DIFFLEXMM:
-        kx, ky, km = bond_variation(gx, gy, tbar, prm, dgx, dgy, 0.0, -dtbar, 0.0)
+        cx, cy, r, _, big_a, big_b = bond_frame(gx, gy, tbar, prm)
+        kx, ky, km = bond_variation(cx, cy, r, big_a, big_b, prm, dgx, dgy, 0.0, -dtbar, 0.0)
         return kx, ky, prm[L_KT] * ddphi, km
     # the paper's and the linearised laws are quadratic: their gradient is their Hessian's product
     _, kx, ky, kp, km = ligament_law(dgx, dgy, ddphi, dtbar, prm, law)
@@ -163,20 +164,28 @@ def ligament_hvp(gx, gy, dphi, tbar, dgx, dgy, ddphi, dtbar, prm, law):
 
 
 @jit
+def bond_param_variation(cx, cy, r, gam, big_a, big_b, dphi, prm, dp):
+    """``ligament_param_variation`` of the nonlinear DifFlexMM law at its ``bond_frame``: c = ℓe + g
+    moves by ℓ δe + δℓ e, and ψ (the bond's angle less e's) by −(J e·δe)/|e|² besides."""
+    dkl, dks, dex, dey, dell = dp[L_KL], dp[L_KS], dp[L_EX], dp[L_EY], dp[L_LEN]
+    ex, ey, ell, kl, ks = prm[L_EX], prm[L_EY], prm[L_LEN], prm[L_KL], prm[L_KS]
+    da0 = dkl * (r - ell) - kl * dell
+    dgam0 = -(ex * dey - ey * dex) / (ex * ex + ey * ey)
+    db0 = (dks * ell + 2.0 * ks * dell) * ell * gam
+    kx, ky, km = bond_variation(cx, cy, r, big_a, big_b, prm, ell * dex + dell * ex, ell * dey + dell * ey,
+                                da0, dgam0, db0)
+    return kx, ky, dp[L_KT] * dphi, km
+
+
+@jit
 def ligament_param_variation(gx, gy, dphi, tbar, prm, law, dp):
     """(δG_x, δG_y, δT_d, δT_m) at fixed (g, Δφ, θ̄) along a direction ``dp`` of the law's own
     parameters (the ``LAW_COLUMNS`` of a table row: k_l, k_s, k_θ, e, ℓ)."""
+    if law == LAW_DIFFLEXMM:
+        cx, cy, r, gam, big_a, big_b = bond_frame(gx, gy, tbar, prm)
+        return bond_param_variation(cx, cy, r, gam, big_a, big_b, dphi, prm, dp)
     dkl, dks, dex, dey, dell = dp[L_KL], dp[L_KS], dp[L_EX], dp[L_EY], dp[L_LEN]
     ex, ey, ell, kl, ks = prm[L_EX], prm[L_EY], prm[L_LEN], prm[L_KL], prm[L_KS]
-    dtd = dp[L_KT] * dphi
-    if law == LAW_DIFFLEXMM:
-        _, _, r, gam, _, _ = bond_frame(gx, gy, tbar, prm)
-        # c = ℓe + g: δc = ℓ δe + δℓ e; ψ is the bond's angle less e's: δψ ∋ −(J e·δe)/|e|²
-        da0 = dkl * (r - ell) - kl * dell
-        dgam0 = -(ex * dey - ey * dex) / (ex * ex + ey * ey)
-        db0 = (dks * ell + 2.0 * ks * dell) * ell * gam
-        kx, ky, km = bond_variation(gx, gy, tbar, prm, ell * dex + dell * ex, ell * dey + dell * ey, da0, dgam0, db0)
-        return kx, ky, dtd, km
     lin = 1.0 if law == LAW_DIFFLEXMM_LINEAR else 0.0
     el = gx * ex + gy * ey
     es = gy * ex - gx * ey - lin * ell * tbar
@@ -187,7 +196,25 @@ def ligament_param_variation(gx, gy, dphi, tbar, prm, law, dp):
     fs, dfs = ks * es, dks * es + ks * des
     kx = dfl * ex + fl * dex - (dfs * ey + fs * dey)
     ky = dfl * ey + fl * dey + (dfs * ex + fs * dex)
-    return kx, ky, dtd, -lin * (dfs * ell + fs * dell)
+    return kx, ky, dp[L_KT] * dphi, -lin * (dfs * ell + fs * dell)
+
+
+@jit
+def ligament_param_products(gx, gy, dphi, tbar, prm, law, wx, wy, dl, dm, unit, row):
+    """The adjoint's law part: row[j] −= ∂(G·w + T_d δΔφ + T_m δθ̄)/∂p_j for the law's columns
+    (``ligament_param_variation`` along each column; the nonlinear law's frame computed once);
+    ``unit`` a zeroed scratch row."""
+    cx, cy, r, gam, big_a, big_b = 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+    if law == LAW_DIFFLEXMM:
+        cx, cy, r, gam, big_a, big_b = bond_frame(gx, gy, tbar, prm)
+    for col in LAW_COLUMNS:
+        unit[col] = 1.0
+        if law == LAW_DIFFLEXMM:
+            px, py, pd, pm = bond_param_variation(cx, cy, r, gam, big_a, big_b, dphi, prm, unit)
+        else:
+            px, py, pd, pm = ligament_param_variation(gx, gy, dphi, tbar, prm, law, unit)
+        unit[col] = 0.0
+        row[col] -= px * wx + py * wy + pd * dl + pm * dm
 
 
 @jit
@@ -323,11 +350,7 @@ def _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, law):
         g1[k, L_BY] -= -sb * xb + cb * yb
         g1[k, L_OX] -= kx
         g1[k, L_OY] -= ky
-        for col in LAW_COLUMNS:
-            unit[col] = 1.0
-            px, py, pd, pm = ligament_param_variation(gx, gy, dphi, tbar, prm, law, unit)
-            unit[col] = 0.0
-            g1[k, col] -= px * wx + py * wy + pd * dl + pm * dm
+        ligament_param_products(gx, gy, dphi, tbar, prm, law, wx, wy, dl, dm, unit, g1[k])
 
 
 @jit
