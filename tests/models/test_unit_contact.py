@@ -146,7 +146,7 @@ def test_energy_is_conserved_through_repeated_contacts():
 def test_gradient_through_contacts_matches_central_differences():
     """``flexmm design``'s adjoint through a pore closing into contact (a 2 × 3 network, damped):
     the gradient of a smooth objective of the trajectory with respect to the ligament table, the
-    inverse masses and the initial state equals central differences to 1e-6."""
+    contact table, the inverse masses and the initial state equals central differences to 1e-6."""
     import yaml
 
     from design.test_gradient import _central, _directions, _objective
@@ -167,7 +167,7 @@ def test_gradient_through_contacts_matches_central_differences():
     objective = _objective((traj.n_samples, traj.obs.size))
     _, grad, _ = traj.gradient(raw, objective, segment=8)
     directions = _directions(raw, np.random.default_rng(0), traj.terms.drv_shape, traj.terms.drv_mode)
-    for block in ("t1", "minv", "q0", "v0"):
+    for block in ("t1", "t2", "minv", "q0", "v0"):
         arr = getattr(raw, block)
         fd = _central(traj, raw, arr, arr.copy(), directions[block], objective)
         adj = float(np.vdot(getattr(grad, block), directions[block]))

@@ -356,7 +356,7 @@ def _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, law):
 @jit
 def network_adjoint(q, args, lam, out, g1, g2):
     """(∂F/∂q)ᵀλ = −∇²E λ added to ``out`` and (∂F/∂p)ᵀλ = −∂(λ·∇E)/∂p to g1 (the ligament table's
-    gradient, (L, N_LIGAMENT_PARAMS); g2 unused). With (w, δΔφ, δθ̄) the strains' variation along λ:
+    gradient, (L, N_LIGAMENT_PARAMS)) and g2 (the contact table's, ``unit_contact.contacts_adjoint``). With (w, δΔφ, δθ̄) the strains' variation along λ:
     λ·∇E = G·w + T_d δΔφ + T_m δθ̄, so ∂/∂o = H w (H w: the g part of the law's Hessian applied
     to the variation), ∂/∂r_b = R(θ_b)ᵀ (H w − λ_θb J G), ∂/∂r_a = −R(θ_a)ᵀ (H w − λ_θa J G), and
     the law's own parameters from ``ligament_param_variation`` column by column."""
@@ -372,6 +372,7 @@ def network_adjoint(q, args, lam, out, g1, g2):
         _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, LAW_DIFFLEXMM_LINEAR)
     else:
         _ligaments_adjoint(q, n, ua, ub, lig, cs, sn, lam, g1, LAW_PAPER)
+    uc.contacts_adjoint(q, n, cs, sn, args[6], args[7], lam, g2)
 
 
 @jit(inline=True)
@@ -402,7 +403,7 @@ def _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, law):
 
 @jit
 def network_tangent(q, args, dq, d1, d2, out):
-    """(∂F/∂q) dq + (∂F/∂p) dp into ``out``, dp = d1 the ligament table's direction (d2 unused):
+    """(∂F/∂q) dq + (∂F/∂p) dp into ``out``, dp = (d1, d2) the ligament and contact tables' directions:
     −∇²E dq − δ_p(∇E), the parameter variation of the gradient of ``_network`` term by term."""
     ua, ub, lig, cs, sn, law = args[0], args[1], args[2], args[3], args[4], args[5]
     n = cs.shape[0]
@@ -415,16 +416,17 @@ def network_tangent(q, args, dq, d1, d2, out):
         _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, LAW_DIFFLEXMM_LINEAR)
     else:
         _ligaments_tangent(q, n, ua, ub, lig, cs, sn, d1, out, LAW_PAPER)
+    uc.contacts_tangent(q, n, cs, sn, args[6], args[7], d2, out)
 
 
 def network_pack(args) -> tuple[np.ndarray, np.ndarray]:
-    """The differentiable tables of a network: its ligament table, and no second table."""
-    return args.ligaments, np.zeros(0)
+    """The differentiable tables of a network: its ligament table and its contact table."""
+    return args.ligaments, args.contacts
 
 
 def network_unpack(args, t1: np.ndarray, t2: np.ndarray):
-    """``args`` with its ligament table replaced."""
-    return args._replace(ligaments=t1)
+    """``args`` with its ligament and contact tables replaced."""
+    return args._replace(ligaments=t1, contacts=t2)
 
 
 def law_reference(g: np.ndarray, dphi: np.ndarray, tbar: np.ndarray, p: np.ndarray, law: int):

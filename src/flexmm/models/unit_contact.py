@@ -25,6 +25,10 @@ A's i−1→i and B's j→j+1 on the other, polygons counter-clockwise). As the 
 turn towards each other about the ligament, so each edge's far vertex approaches the other edge:
 the pairs are (A_{i+1}, B's edge), (B_{j−1}, A's edge) and the same on the other side. The joined
 vertices themselves are held by the ligament and are not pairs. Pairs are fixed at build.
+
+``contacts``, ``contacts_hvp``, ``contacts_adjoint`` and ``contacts_tangent`` are added inside the
+network's kernels (``flexmm.models.ligaments``); the contact table is the network's second
+parameter table. ``contacts_reference`` is the numpy version.
 """
 
 from __future__ import annotations
@@ -110,11 +114,35 @@ def contacts(q, n, cs, sn, units, table, out, want_force):
 
 
 @jit
+def pair_second(nx, ny, d, de, dde, t, inside, wx, wy, sx, sy, dwx, dwy, dsx, dsy):
+    """(δF_w, δF_s) of one pair: the Hessian of its energy in (w, s) applied to (δw, δs). With
+    F_w = E'(d) n̂ (n̂ = δ/d), F_s = −t F_w, δt (zero where t is clamped), δδ = δw − t δs − δt s,
+    δd = n̂·δδ: δF_w = E'' δd n̂ + E' (δδ − n̂ δd)/d and δF_s = −δt F_w − t δF_w."""
+    dt = 0.0
+    if inside:
+        ss = sx * sx + sy * sy
+        dt = (dwx * sx + dwy * sy + wx * dsx + wy * dsy - 2.0 * t * (sx * dsx + sy * dsy)) / ss
+    ddx, ddy = dwx - t * dsx - dt * sx, dwy - t * dsy - dt * sy
+    dd = nx * ddx + ny * ddy
+    dfx = dde * dd * nx + de * (ddx - nx * dd) / d
+    dfy = dde * dd * ny + de * (ddy - ny * dd) / d
+    return dfx, dfy, -dt * de * nx - t * dfx, -dt * de * ny - t * dfy
+
+
+@jit
+def _variation(dq, n, iv, ie, ppx, ppy, p0x, p0y, sx, sy):
+    """(δw, δs) along dq: δw = δx_p − δx_e + δθ_p J p_P − δθ_e J p_0, δs = δθ_e J s (J v = (−v_y, v_x))."""
+    tp, te = dq[2 * n + iv], dq[2 * n + ie]
+    dwx = dq[iv] - dq[ie] - tp * ppy + te * p0y
+    dwy = dq[n + iv] - dq[n + ie] + tp * ppx - te * p0x
+    return dwx, dwy, -te * sy, te * sx
+
+
+@jit
 def contacts_hvp(q, n, cs, sn, units, table, dq, out):
-    """∇²E dq of the contact pairs added to ``out``: with F = E'(d) n̂ (n̂ = δ/d) and δw, δs the
-    variations of w and s along dq, δt (zero where t is clamped), δδ = δw − t δs − δt s,
-    δd = n̂·δδ and δF = E'' δd n̂ + E' (δδ − n̂ δd)/d; then the chain rule through w and s,
-    with their second derivatives in the rotations (∂²(R r)/∂θ² = −R r)."""
+    """∇²E dq of the contact pairs added to ``out``: ``pair_second`` along the variations of w and
+    s, then the chain rule through them, with their second derivatives in the rotations
+    (∂²(R r)/∂θ² = −R r)."""
     for c in range(units.shape[0]):
         prm = table[c]
         iv, ie = units[c, 0], units[c, 1]
@@ -126,20 +154,8 @@ def contacts_hvp(q, n, cs, sn, units, table, dq, out):
         nx, ny = dx / d, dy / d
         fx, fy = de * nx, de * ny
         tp, te = dq[2 * n + iv], dq[2 * n + ie]
-        # δw = δx_p − δx_e + δθ_p J p_P − δθ_e J p_0;  δs = δθ_e J s  (J v = (−v_y, v_x))
-        dwx = dq[iv] - dq[ie] - tp * ppy + te * p0y
-        dwy = dq[n + iv] - dq[n + ie] + tp * ppx - te * p0x
-        dsx, dsy = -te * sy, te * sx
-        dt = 0.0
-        if inside:
-            ss = sx * sx + sy * sy
-            dt = (dwx * sx + dwy * sy + wx * dsx + wy * dsy - 2.0 * t * (sx * dsx + sy * dsy)) / ss
-        ddx, ddy = dwx - t * dsx - dt * sx, dwy - t * dsy - dt * sy
-        dd = nx * ddx + ny * ddy
-        dfx = dde * dd * nx + de * (ddx - nx * dd) / d
-        dfy = dde * dd * ny + de * (ddy - ny * dd) / d
-        # ∂E/∂s = −t F: its variation
-        dgx, dgy = -dt * fx - t * dfx, -dt * fy - t * dfy
+        dwx, dwy, dsx, dsy = _variation(dq, n, iv, ie, ppx, ppy, p0x, p0y, sx, sy)
+        dfx, dfy, dgx, dgy = pair_second(nx, ny, d, de, dde, t, inside, wx, wy, sx, sy, dwx, dwy, dsx, dsy)
         out[iv] += dfx
         out[n + iv] += dfy
         out[ie] -= dfx
@@ -147,6 +163,91 @@ def contacts_hvp(q, n, cs, sn, units, table, dq, out):
         out[2 * n + iv] += (dfy * ppx - dfx * ppy) - tp * (fx * ppx + fy * ppy)
         out[2 * n + ie] += (-(dfy * p0x - dfx * p0y) + te * (fx * p0x + fy * p0y)
                             + (dgy * sx - dgx * sy) + t * te * (fx * sx + fy * sy))
+
+
+@jit
+def _rotate_back(c, s, x, y):
+    """R(θ)ᵀ (x, y) from c = cos θ, s = sin θ."""
+    return c * x + s * y, c * y - s * x
+
+
+@jit
+def contacts_adjoint(q, n, cs, sn, units, table, lam, g2):
+    """−∂(λ·∇E)/∂p of the contact pairs added to g2 (C, N_CONTACT_PARAMS) (the state part is
+    ``contacts_hvp``'s). λ·∇E = F_w·δw_λ + F_s·δs_λ; with (G_w, G_s) = ``pair_second`` along
+    (δw_λ, δs_λ) and δd_λ = n̂·(δw_λ − t δs_λ): ∂/∂D = G_w, ∂/∂r_P = R_pᵀ(G_w − λ_θp J F_w),
+    ∂/∂r_0 = −R_eᵀ(G_w + G_s − λ_θe J (F_w + F_s)), ∂/∂r_1 = R_eᵀ(G_s − λ_θe J F_s),
+    ∂/∂k = (E'/k) δd_λ, ∂/∂c = −(3k/2)(c² − d²)/d² δd_λ."""
+    for c in range(units.shape[0]):
+        prm = table[c]
+        iv, ie = units[c, 0], units[c, 1]
+        ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
+        cut = prm[C_CUT]
+        if d2 >= cut * cut:
+            continue
+        d = math.sqrt(d2)
+        k = prm[C_K]
+        _, de, dde = barrier(d, k, cut)
+        nx, ny = dx / d, dy / d
+        fx, fy = de * nx, de * ny
+        hx, hy = -t * fx, -t * fy  # F_s
+        tp, te = lam[2 * n + iv], lam[2 * n + ie]
+        dwx, dwy, dsx, dsy = _variation(lam, n, iv, ie, ppx, ppy, p0x, p0y, sx, sy)
+        gwx, gwy, gsx, gsy = pair_second(nx, ny, d, de, dde, t, inside, wx, wy, sx, sy, dwx, dwy, dsx, dsy)
+        dd = nx * (dwx - t * dsx) + ny * (dwy - t * dsy)
+        row = g2[c]
+        row[C_DX] -= gwx
+        row[C_DY] -= gwy
+        # J v = (−v_y, v_x)
+        ax, ay = _rotate_back(cs[iv], sn[iv], gwx + tp * fy, gwy - tp * fx)
+        row[C_PX] -= ax
+        row[C_PY] -= ay
+        bx, by = _rotate_back(cs[ie], sn[ie], gwx + gsx + te * (fy + hy), gwy + gsy - te * (fx + hx))
+        row[C_0X] += bx
+        row[C_0Y] += by
+        ex, ey = _rotate_back(cs[ie], sn[ie], gsx + te * hy, gsy - te * hx)
+        row[C_1X] -= ex
+        row[C_1Y] -= ey
+        row[C_K] -= de / k * dd
+        row[C_CUT] += 1.5 * k * (cut * cut - d2) / d2 * dd
+
+
+@jit
+def contacts_tangent(q, n, cs, sn, units, table, d2tab, out):
+    """−δ_p(∇E) of the contact pairs along the table direction ``d2tab`` (C, N_CONTACT_PARAMS),
+    added to ``out``: δw = δD + R_p δr_P − R_e δr_0 and δs = R_e(δr_1 − δr_0) through
+    ``pair_second``, E' through k and c, and the rotated offsets in the torques."""
+    for c in range(units.shape[0]):
+        prm = table[c]
+        dp = d2tab[c]
+        iv, ie = units[c, 0], units[c, 1]
+        ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
+        cut = prm[C_CUT]
+        if d2 >= cut * cut:
+            continue
+        d = math.sqrt(d2)
+        k = prm[C_K]
+        _, de, dde = barrier(d, k, cut)
+        nx, ny = dx / d, dy / d
+        fx, fy = de * nx, de * ny
+        hx, hy = -t * fx, -t * fy
+        dppx, dppy = _turn(cs[iv], sn[iv], dp[C_PX], dp[C_PY])
+        dp0x, dp0y = _turn(cs[ie], sn[ie], dp[C_0X], dp[C_0Y])
+        dp1x, dp1y = _turn(cs[ie], sn[ie], dp[C_1X], dp[C_1Y])
+        dwx, dwy = dp[C_DX] + dppx - dp0x, dp[C_DY] + dppy - dp0y
+        dsx, dsy = dp1x - dp0x, dp1y - dp0y
+        dfx, dfy, dgx, dgy = pair_second(nx, ny, d, de, dde, t, inside, wx, wy, sx, sy, dwx, dwy, dsx, dsy)
+        dde_p = de / k * dp[C_K] - 1.5 * k * (cut * cut - d2) / d2 * dp[C_CUT]  # δE' from k and c
+        dfx, dfy = dfx + dde_p * nx, dfy + dde_p * ny
+        dgx, dgy = dgx - t * dde_p * nx, dgy - t * dde_p * ny
+        out[iv] -= dfx
+        out[n + iv] -= dfy
+        out[ie] += dfx
+        out[n + ie] += dfy
+        # ∂E/∂θ_p = F_w·J p_P, ∂E/∂θ_e = −F_w·J p_0 + F_s·J s  (a·J b = a_y b_x − a_x b_y)
+        out[2 * n + iv] -= (dfy * ppx - dfx * ppy) + (fy * dppx - fx * dppy)
+        out[2 * n + ie] -= (-(dfy * p0x - dfx * p0y) - (fy * dp0x - fx * dp0y)
+                            + (dgy * sx - dgx * sy) + (hy * dsx - hx * dsy))
 
 
 def pair_geometry(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarray):
