@@ -192,12 +192,15 @@ if CACHE_NOTE:
     warnings.warn(f"flexmm: {CACHE_NOTE}", RuntimeWarning, stacklevel=2)
 
 
-def jit(fn=None, *, parallel: bool = False):
-    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT)."""
+def jit(fn=None, *, parallel: bool = False, inline: bool = False):
+    """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT). ``inline``:
+    copied into every compiled caller (numba's IR inlining), so that arguments the caller passes
+    as constants are constants of the copy (a law chosen outside a loop is folded inside it)."""
 
     def wrap(f):
         if NO_JIT:
             return f
-        return numba.njit(f, cache=CACHE_DIR is not None, parallel=parallel, **JIT_OPTIONS)
+        return numba.njit(f, cache=CACHE_DIR is not None, parallel=parallel, inline="always" if inline else "never",
+                          **JIT_OPTIONS)
 
     return wrap if fn is None else wrap(fn)

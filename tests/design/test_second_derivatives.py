@@ -78,6 +78,20 @@ LATTICES |= {
                       "n_rows": 2, "n_cols": 3, "a_m": 0.01, "theta0_rad": 0.2, "ligament_length_m": 0.001,
                       "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3, "k_rot_n_m_per_rad": 2e-3,
                       "areal_density_kg_m2": 20.0},
+    # DifFlexMM's ligament laws on disordered quads (axis along each rest gap)
+    "network-difflexmm": {"kind": "rigid_network", "pattern": "random_quads", "vertex_jitter": 0.1, "seed": 2,
+                          "n_rows": 2, "n_cols": 3, "a_m": 0.01, "theta0_rad": 0.2, "ligament_length_m": 0.001,
+                          "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3, "k_rot_n_m_per_rad": 2e-3,
+                          "areal_density_kg_m2": 20.0, "ligament_law": "difflexmm"},
+    "network-difflexmm-linear": {"kind": "rigid_network", "n_rows": 2, "n_cols": 3, "a_m": 0.01, "theta0_rad": 0.2,
+                                 "ligament_length_m": 0.001, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
+                                 "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0,
+                                 "ligament_law": "difflexmm_linear"},
+    # nearly closed pores (acute corners 0.256 a apart at rest) and a cutoff just below: the random
+    # states put vertices inside it
+    "network-contact": {"kind": "rigid_network", "n_rows": 3, "n_cols": 3, "a_m": 0.01, "theta0_rad": 0.6,
+                        "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3, "k_rot_n_m_per_rad": 2e-3,
+                        "areal_density_kg_m2": 20.0, "contact": {"stiffness_n_per_m": 1e4, "cutoff_m": 2.5e-3}},
     # configs/g_magnetic_bistable_unidirectional.yaml's laws (a chain of masses: dipole bonds to
     # first and second neighbours, an asymmetric double well on site)
     "mass-dipole-bistable": {"kind": "mass_chain", "n_units": 7, "spacing_m": 0.02, "mass_kg": 0.005,

@@ -16,8 +16,9 @@ from flexmm.models import ligaments as lg
 from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN
 
 
-def random_network(rng, n=7, n_lig=15):
-    """Units at random centres with ligaments between random points, axes and stiffnesses."""
+def random_network(rng, n=7, n_lig=15, law="paper"):
+    """Units at random centres with ligaments between random points, axes, stiffnesses and rest
+    lengths, under one of the ligament laws."""
     ua = rng.integers(0, n, n_lig)
     ub = (ua + rng.integers(1, n, n_lig)) % n
     lig = np.zeros((n_lig, lg.N_LIGAMENT_PARAMS))
@@ -25,7 +26,8 @@ def random_network(rng, n=7, n_lig=15):
     ang = rng.uniform(0, 2 * np.pi, n_lig)
     lig[:, lg.L_EX], lig[:, lg.L_EY] = np.cos(ang), np.sin(ang)
     lig[:, [lg.L_KL, lg.L_KS, lg.L_KT]] = rng.uniform(0.2, 2.0, (n_lig, 3))
-    args = lg.NetworkArgs(ua.astype(np.int64), ub.astype(np.int64), lig, np.empty(n), np.empty(n))
+    lig[:, lg.L_LEN] = rng.uniform(0.5, 1.5, n_lig)
+    args = lg.NetworkArgs(ua.astype(np.int64), ub.astype(np.int64), lig, np.empty(n), np.empty(n), lg.LAWS[law])
     return args, 0.3 * rng.normal(size=3 * n)
 
 
@@ -35,9 +37,10 @@ def force(q, args):
     return f
 
 
+@pytest.mark.parametrize("law", sorted(lg.LAWS))
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_network_force_is_minus_the_energy_gradient_and_matches_the_reference(seed):
-    args, q = random_network(np.random.default_rng(seed))
+def test_network_force_is_minus_the_energy_gradient_and_matches_the_reference(seed, law):
+    args, q = random_network(np.random.default_rng(seed), law=law)
     f = force(q, args)
     e_ref, f_ref = lg.network_reference(q, args)
     assert lg.network_energy(q, args) == pytest.approx(e_ref, rel=1e-13)
@@ -54,16 +57,88 @@ def test_network_force_is_minus_the_energy_gradient_and_matches_the_reference(se
     assert abs(f[:n].sum()) < 1e-12 and abs(f[n : 2 * n].sum()) < 1e-12  # internal forces balance
 
 
+@pytest.mark.parametrize("law", sorted(lg.LAWS))
 @pytest.mark.parametrize("seed", [3, 4])
-def test_network_hessian_vector_product_is_the_force_derivative(seed):
+def test_network_hessian_vector_product_is_the_force_derivative(seed, law):
     rng = np.random.default_rng(seed)
-    args, q = random_network(rng)
+    args, q = random_network(rng, law=law)
     dq = rng.normal(size=q.size)
     hv = np.empty_like(q)
     lg.network_hvp(q, args, dq, hv)
     h = 1e-6
     fd = -(force(q + h * dq, args) - force(q - h * dq, args)) / (2 * h)
     assert_allclose(hv, fd, rtol=0, atol=1e-7 * np.abs(hv).max())
+
+
+def difflexmm_energy(q, centres, r_a, r_b, v0, ua, ub, k, law):
+    """DifFlexMM's ligament energy in its own variables: each joined point moves with its unit,
+    d = x + (R(θ) − I) r, the bond is c = v0 + d_b − d_a (v0 the rest bond vector, l0 = |v0|);
+    nonlinear strains (|c|/l0 − 1, the angle of c less that of R(θ̄) v0 in [−π, π), Δθ) or
+    linearised ones (d·v0/l0², v0 × d/l0² − θ̄, Δθ), E = ½ k_l (ε l0)² + ½ k_s (γ l0)² + ½ k_θ Δθ²."""
+    n = centres.shape[0]
+    x, th = q[: 2 * n].reshape(2, n).T, q[2 * n :]
+
+    def moved(unit, r):
+        c, s = np.cos(th[unit]), np.sin(th[unit])
+        return x[unit] + np.stack([c * r[:, 0] - s * r[:, 1], s * r[:, 0] + c * r[:, 1]], 1) - r
+
+    d = moved(ub, r_b) - moved(ua, r_a)
+    l0 = np.hypot(v0[:, 0], v0[:, 1])
+    mean, dth = 0.5 * (th[ua] + th[ub]), th[ub] - th[ua]
+    if law == "difflexmm":
+        c = v0 + d
+        axial = np.hypot(c[:, 0], c[:, 1]) / l0 - 1
+        pushed = np.arctan2(v0[:, 1], v0[:, 0]) + mean
+        shear = np.mod(np.arctan2(c[:, 1], c[:, 0]) - pushed + np.pi, 2 * np.pi) - np.pi
+    else:
+        axial = np.sum(d * v0, 1) / l0**2
+        shear = (v0[:, 0] * d[:, 1] - v0[:, 1] * d[:, 0]) / l0**2 - mean
+    return float(np.sum(0.5 * k[0] * (axial * l0) ** 2 + 0.5 * k[1] * (shear * l0) ** 2 + 0.5 * k[2] * dth**2))
+
+
+@pytest.mark.parametrize("law", ["difflexmm", "difflexmm_linear"])
+def test_difflexmm_laws_are_difflexmms_ligament_energy(law):
+    """Units at random centres, ligaments with random rest bond vectors v0 between random points:
+    the network's energy (table: axis v0/|v0|, rest length |v0|, rest offset X_b − X_a − v0)
+    equals DifFlexMM's ligament energy written in its own variables, at large random states."""
+    rng = np.random.default_rng(21)
+    n, n_lig = 6, 12
+    centres = 3 * rng.normal(size=(n, 2))
+    ua = rng.integers(0, n, n_lig)
+    ub = (ua + rng.integers(1, n, n_lig)) % n
+    r_a, v0 = rng.normal(size=(n_lig, 2)), rng.normal(size=(n_lig, 2))
+    r_b = centres[ua] + r_a + v0 - centres[ub]
+    k = rng.uniform(0.2, 2.0, 3)
+    lig = np.zeros((n_lig, lg.N_LIGAMENT_PARAMS))
+    length = np.hypot(v0[:, 0], v0[:, 1])
+    lig[:, [lg.L_AX, lg.L_AY]], lig[:, [lg.L_BX, lg.L_BY]] = r_a, r_b
+    lig[:, [lg.L_OX, lg.L_OY]] = centres[ub] - centres[ua] - v0
+    lig[:, [lg.L_EX, lg.L_EY]] = v0 / length[:, None]
+    lig[:, [lg.L_KL, lg.L_KS, lg.L_KT, lg.L_LEN]] = np.column_stack([np.tile(k, (n_lig, 1)), length])
+    args = lg.NetworkArgs(ua, ub, lig, np.empty(n), np.empty(n), lg.LAWS[law])
+    for amplitude in (0.0, 0.05, 0.5):
+        q = amplitude * rng.normal(size=3 * n)
+        expected = difflexmm_energy(q, centres, r_a, r_b, v0, ua, ub, k, law)
+        assert lg.network_energy(q, args) == pytest.approx(expected, rel=1e-12, abs=1e-15)
+
+
+def test_linearised_law_is_the_nonlinear_laws_linearisation():
+    """At rest the two DifFlexMM laws have the same Hessian (the same small-amplitude waves), and
+    the energies part at third order in the amplitude."""
+    rng = np.random.default_rng(8)
+    nonlinear, _ = random_network(rng, law="difflexmm")
+    lig = nonlinear.ligaments  # stress-free at rest: g = 0 at q = 0
+    lig[:, [lg.L_OX, lg.L_OY]] = lig[:, [lg.L_AX, lg.L_AY]] - lig[:, [lg.L_BX, lg.L_BY]]
+    linear = nonlinear._replace(law=lg.LAWS["difflexmm_linear"])
+    q0 = np.zeros(3 * nonlinear.cos.size)
+    for dq in rng.normal(size=(3, q0.size)):
+        h_nl, h_lin = np.empty_like(q0), np.empty_like(q0)
+        lg.network_hvp(q0, nonlinear, dq, h_nl)
+        lg.network_hvp(q0, linear, dq, h_lin)
+        assert_allclose(h_nl, h_lin, rtol=0, atol=1e-13 * np.abs(h_lin).max())
+    dq = rng.normal(size=q0.size)
+    gaps = [abs(lg.network_energy(s * dq, nonlinear) - lg.network_energy(s * dq, linear)) for s in (1e-2, 5e-3)]
+    assert gaps[0] / gaps[1] == pytest.approx(8.0, rel=0.05)
 
 
 def sheet_as_network(system):

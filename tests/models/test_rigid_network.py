@@ -90,6 +90,11 @@ def test_network_config_errors_are_clear():
         scene({"kind": "rigid_network", "vertex_jitter": 0.1, "n_rows": 2, "n_cols": 3, **LAW})
     with pytest.raises(ConfigError, match="periodic"):
         scene({"kind": "rigid_network", "left": "periodic", "right": "periodic", "n_rows": 2, "n_cols": 4, **LAW})
+    with pytest.raises(ConfigError, match="ligament_length_m > 0"):
+        scene({"kind": "rigid_network", "ligament_law": "difflexmm", "n_rows": 2, "n_cols": 3, **LAW})
+    with pytest.raises(ConfigError, match="cutoff_m"):
+        scene({"kind": "rigid_network", "contact": {"stiffness_n_per_m": 1.0, "cutoff_m": -1e-3}, "n_rows": 2,
+               "n_cols": 3, **LAW})
     assert math.isfinite(built({"kind": "rigid_network", "n_rows": 1, "n_cols": 3, **LAW}).mass.sum())
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from flexmm.config.network import RigidNetwork
 from flexmm.models import ligaments as lg
+from flexmm.models import unit_contact as uc
 from flexmm.models.base import FieldSpec, System, UnitShapes
 from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
 from flexmm.units import Scales
@@ -113,18 +114,27 @@ def polygon_inertia(vertices: np.ndarray, density: float) -> tuple[np.ndarray, n
     return mass, np.stack([cx, cy], 1) + mean, inertia
 
 
-def ligament_table(vertices: np.ndarray, centres: np.ndarray, links, ks: float, kt: float) -> np.ndarray:
+def ligament_table(vertices: np.ndarray, centres: np.ndarray, links, ks: float, kt: float,
+                   law: int = lg.LAW_PAPER) -> np.ndarray:
     """The ligament table (L, N_LIGAMENT_PARAMS) of ``links`` with k_l = 1 (nondimensional): the
     joined vertices relative to their centres, the rest offset that makes the reference
-    stress-free (the centres' separation less the vertices' gap), the link's axis."""
+    stress-free (the centres' separation less the vertices' gap), the link's axis, and the rest
+    length ℓ = |gap|. DifFlexMM's laws read the bond along the rest gap: their axis is gap/ℓ (the
+    link's axis where ℓ = 0)."""
     a, b, va, vb, axis = links
     ar = np.arange(a.size)
     lig = np.zeros((a.size, lg.N_LIGAMENT_PARAMS))
     pa, pb = vertices[a, va[ar]], vertices[b, vb[ar]]
+    gap = pb - pa
+    length = np.hypot(gap[:, 0], gap[:, 1])
     lig[:, [lg.L_AX, lg.L_AY]] = pa - centres[a]
     lig[:, [lg.L_BX, lg.L_BY]] = pb - centres[b]
-    lig[:, [lg.L_OX, lg.L_OY]] = centres[b] - centres[a] - (pb - pa)
+    lig[:, [lg.L_OX, lg.L_OY]] = centres[b] - centres[a] - gap
     lig[:, [lg.L_EX, lg.L_EY]] = axis
+    if law != lg.LAW_PAPER:
+        along = length > 1e-12
+        lig[along, lg.L_EX], lig[along, lg.L_EY] = gap[along, 0] / length[along], gap[along, 1] / length[along]
+    lig[:, lg.L_LEN] = length
     lig[:, [lg.L_KL, lg.L_KS, lg.L_KT]] = (1.0, ks, kt)
     return lig
 
@@ -138,8 +148,11 @@ def build(cfg: RigidNetwork) -> System:
     m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
     ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
-    lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a))
-    args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n))
+    law = lg.LAWS[cfg.ligament_law]
+    lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law)
+    contact = () if cfg.contact is None else uc.contact_pairs(
+        vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a)
+    args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n), law, *contact)
     mass = np.concatenate([mass_si / m, mass_si / m, inertia_si / (m * a * a)])
     inv_mass = 1.0 / mass
     ends = edge_sites(nr, nc)
