@@ -119,7 +119,7 @@ class Result:
         return self.status == "finished"
 
     def __repr__(self) -> str:
-        sizes = ", ".join(f"{k}: {v}" for k, v in self.dataset.sizes.items())
+        sizes = ", ".join(f"{k}: {self.dataset.sizes[k]}" for k in ("time", "site") if k in self.dataset.sizes)
         est = "" if self.error_estimate is None else f", error estimate {self.error_estimate:.3g}"
         why = f" ({self.message})" if self.message else ""
         where = f", written to {self.path}" if self.path is not None else ""

@@ -13,7 +13,7 @@ import xarray as xr
 import yaml
 from typer.testing import CliRunner
 
-from flexmm.analysis.synthetic import SynthPulse, pulse_dataset
+from synthetic import SynthPulse, pulse_dataset
 from flexmm.cli import app
 from flexmm.config import scene_from_dict
 from flexmm.io.provenance import config_text
@@ -122,7 +122,7 @@ def test_no_pulse_exits_1(tmp_path):
 
 
 def test_driven_run_table_and_analysis_file(tmp_path):
-    from flexmm.analysis.synthetic import driven_dataset
+    from synthetic import driven_dataset
 
     (tmp_path / "d").mkdir()
     driven_dataset(harmonic=0.05).to_netcdf(tmp_path / "d" / "dataset.nc", engine="h5netcdf")

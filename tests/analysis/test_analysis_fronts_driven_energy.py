@@ -10,7 +10,7 @@ import xarray as xr
 
 from flexmm.analysis import FrontNotFound, energy_budget, field_view, measure_driven, measure_fronts
 from flexmm.analysis.driven import drive_frequency, lockin, pass_bands
-from flexmm.analysis.synthetic import driven_dataset, front_dataset, pulse_dataset
+from synthetic import driven_dataset, front_dataset, pulse_dataset
 
 
 def test_front_speed_width_and_switched_sites():

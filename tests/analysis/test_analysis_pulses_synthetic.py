@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from flexmm.analysis import PulseNotFound, field_view, leading_pulse, measure_pulses
 from flexmm.analysis.profiles import SHAPES, fit_profile, shape_fwhm
-from flexmm.analysis.synthetic import SynthPulse, pulse_dataset
+from synthetic import SynthPulse, pulse_dataset
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])

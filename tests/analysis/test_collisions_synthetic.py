@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from flexmm.analysis import field_view, measure_pulses
 from flexmm.analysis.collisions import find_collisions
-from flexmm.analysis.synthetic import SynthLeg, SynthPulse, collision_dataset, pulse_dataset
+from synthetic import SynthLeg, SynthPulse, collision_dataset, pulse_dataset
 
 
 def _collisions(ds):

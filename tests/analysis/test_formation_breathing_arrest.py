@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from flexmm.analysis import field_view, measure_fronts, measure_pulses
 from flexmm.analysis.steady import steady_part
-from flexmm.analysis.synthetic import SynthPulse, front_dataset, pulse_dataset
+from synthetic import SynthPulse, front_dataset, pulse_dataset
 
 # each example analyses a whole dataset (~1 s): report a failure as found rather than shrink it for minutes
 NO_SHRINK = (Phase.explicit, Phase.reuse, Phase.generate)

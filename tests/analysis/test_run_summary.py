@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from flexmm.analysis import field_view, measure_pulses, report
 from flexmm.analysis.context import RunContext
 from flexmm.analysis.summary import principal, summary_lines
-from flexmm.analysis.synthetic import SynthPulse, pulse_dataset
+from synthetic import SynthPulse, pulse_dataset
 from flexmm.cli import app
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"

@@ -10,7 +10,7 @@ import pytest
 from flexmm.analysis import field_view, measure_pulses
 from flexmm.analysis.report import analyze_run
 from flexmm.analysis.summary import principal, summary_lines
-from flexmm.analysis.synthetic import SynthPulse, pulse_dataset
+from synthetic import SynthPulse, pulse_dataset
 from flexmm.analysis.transients import mark_transients
 
 END_S = 30.0  # the lobe fades out around this time, and the steady pulse fades in

@@ -41,7 +41,7 @@ def model_potential_j(system, q: np.ndarray) -> float:
 def test_energy_per_unit_adds_up_to_the_model_energy(example_lattice):
     kind, example = example_lattice
     if kind in NOT_RENDERED:
-        pytest.skip(f"{kind} is drawn from its stored shapes (tests/render/test_shapes.py), not by the renderer tested here")
+        pytest.skip(f"{kind} has no energy colouring (its drawing gives the model energy: tests/render/test_shapes.py)")
     lat, system = build(example["lattice"])
     fields = random_fields(system, 2, seed=11, amplitude=0.5)
     sc = system.scales
@@ -65,7 +65,7 @@ def test_parameter_tables_match_the_model(example_lattice):
     """θ0, masses, inertias and hinge stiffnesses read from the config equal the built model's."""
     kind, example = example_lattice
     if kind in NOT_RENDERED:
-        pytest.skip(f"{kind} is drawn from its stored shapes (tests/render/test_shapes.py), not by the renderer tested here")
+        pytest.skip(f"{kind} has no energy colouring (its drawing gives the model energy: tests/render/test_shapes.py)")
     lat, system = build(example["lattice"])
     sc = system.scales
     n = system.n_sites

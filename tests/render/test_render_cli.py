@@ -87,7 +87,7 @@ def test_finished_run_title_has_no_status(chain_run):
     (["--exaggerate", "0"], "error: --exaggerate must be a positive number, got 0"),
     (["--fps", "0"], "error: --fps must be in (0, 100], got 0"),
     (["--every", "0"], "error: --every must be ≥ 1, got 0"),
-    (["--shape", "triangle"], "error: --shape must be square, cross or bars, got 'triangle'"),
+    (["--shape", "triangle"], "error: --shape must be one of square, polygon, cross, bars, got 'triangle'"),
     (["--width", "10"], "error: --width must be between 320 and 4000 pixels, got 10"),
     (["--spacetime", "--row", "3"], "error: --row 3: the lattice has rows 0 to 0"),
     (["--spacetime", "--color", "none"], "error: --spacetime shows the colour quantity: choose one"),
@@ -207,7 +207,7 @@ def test_predeformed_run_is_exaggerated_about_its_rest_state(tmp_path):
     pic = still_figure(run, RenderOptions(time_s=1e-3, shape="square", exaggerate=s))
     centres, phi = pic.structure.state({"u": fields["u"][1], "theta": fields["theta"][1]})
     sigma = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
-    np.testing.assert_allclose(phi, sigma * (0.1 + 0.15 + s * (fields["theta"][1] - 0.15)), atol=1e-14)
+    np.testing.assert_allclose(pic.structure.orientation(phi), sigma * (0.1 + 0.15 + s * (fields["theta"][1] - 0.15)), atol=1e-14)
     np.testing.assert_allclose(centres[:, 0], system.site_coords["x"] + rest["u"], atol=1e-15)
     assert base.scale == 1.0
     label = pic.colouring.label

@@ -1,5 +1,5 @@
-"""Models drawn from the shapes their datasets store (render.structure.ShapeStructure): rotating
-triangles and rigid networks. Oracles: joined points meet at rest, every drawn unit is its stored
+"""Rigid units drawn from the shapes their datasets store (render.structure.ShapeStructure): every
+rigid-unit model (squares, linkage, triangles, networks). Oracles: joined points meet at rest, every drawn unit is its stored
 polygon moved rigidly, and the drawn joints give back the model's own energy."""
 
 import numpy as np
@@ -10,6 +10,8 @@ from flexmm.render.api import RenderOptions, still_figure
 from render_helpers import build, polygons, random_fields, write_run
 
 SHAPED = ("rotating_triangles_chain", "rotating_triangles_sheet", "rigid_network")
+#: every model drawn from stored shapes (the squares' hinges are their own law: energy in test_kinematics.py)
+RIGID = SHAPED + ("rotating_squares_chain", "rotating_squares_sheet", "bistable_linkage")
 
 
 def drawn(tmp_path, lattice, system, fields, k):
@@ -21,15 +23,15 @@ def drawn(tmp_path, lattice, system, fields, k):
     return polygons(pic), xy
 
 
-def shaped(example_lattice):
+def shaped(example_lattice, kinds=SHAPED):
     kind, example = example_lattice
-    if kind not in SHAPED:
-        pytest.skip(f"{kind} is drawn by the squares' or masses' renderer")
+    if kind not in kinds:
+        pytest.skip(f"{kind}: {'masses' if kind not in RIGID else 'the hinge law of the squares'}")
     return example["lattice"]
 
 
 def test_joined_points_meet_at_rest_and_units_keep_their_shape(example_lattice, tmp_path):
-    lattice = shaped(example_lattice)
+    lattice = shaped(example_lattice, RIGID)
     lat, system = build(lattice)
     fields = random_fields(system, 2, seed=3, amplitude=0.5)
     rest_poly, rest_segs = drawn(tmp_path / "a", lattice, system, fields, 0)
@@ -38,12 +40,22 @@ def test_joined_points_meet_at_rest_and_units_keep_their_shape(example_lattice, 
     # at rest each drawn joint spans the model's rest gap g0 = X_b − X_a − o (a network's ligament
     # table), or nothing (triangles are hinged at their vertices)
     expected = np.zeros((sh.links.shape[0], 2))
+    if getattr(lat, "ligament_length_m", 0.0):  # a square sheet's ligaments, along each hinge's axis
+        ua, ub = sh.links.T
+        along_x = system.site_coords["row"][ua] == system.site_coords["row"][ub]
+        expected = lat.ligament_length_m * np.stack([along_x, ~along_x], 1)
     if hasattr(system.args, "ligaments"):
         from flexmm.models import ligaments as lg
         xy = np.stack([system.site_coords["x"], system.site_coords["y"]], 1)
         ua, ub = sh.links.T
         expected = xy[ub] - xy[ua] - system.args.ligaments[:, [lg.L_OX, lg.L_OY]] * a
-    np.testing.assert_allclose(rest_segs[:, 1] - rest_segs[:, 0], expected, rtol=0, atol=1e-12 * a)
+    if sh.images is not None:  # a chain's lateral hinges meet the mirror images at rest too
+        expected = np.concatenate([expected, np.zeros((sh.images.size, 2))])
+    gaps = rest_segs[:, 1] - rest_segs[:, 0]
+    if lat.kind == "rotating_squares_chain" and np.ptp(sh.angle * sh.rotation_sign):
+        # a graded chain (1D: its shear is measured from the rest state): corners offset across the row
+        gaps, expected = gaps[:, 0], expected[:, 0]
+    np.testing.assert_allclose(gaps, expected, rtol=0, atol=1e-12 * a)
     poly, _ = drawn(tmp_path / "b", lattice, system, fields, 1)
     # each unit moved rigidly: its edge lengths are those of the rest polygon
     edges = lambda p: np.hypot(*(np.roll(p, -1, 1) - p).transpose(2, 0, 1))  # noqa: E731

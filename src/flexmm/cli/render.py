@@ -61,8 +61,9 @@ def render(
     clim: str = typer.Option(None, "--clim", help="Colour limits LOW:HIGH (default from the frames drawn)."),
     exaggerate: float = typer.Option(1.0, "--exaggerate", "-x", help="Scale displacements and rotations "
                                      "from rest by this factor (stated on the picture)."),
-    shape: str = typer.Option(None, "--shape", help="Units as square, cross or bars (default: crosses for the "
-                              "LEGO chain, squares for sheets, bars for the linkage)."),
+    shape: str = typer.Option(None, "--shape", help="Units as their polygon (square), a cross of arms to their "
+                              "vertices, or bars (default: as the model draws them: crosses for the LEGO chain, "
+                              "polygons for sheets and networks, bars for the linkage)."),
     sites: str = typer.Option(None, "--sites", help="Show only columns (chain: units) A:B (B excluded)."),
     spacetime: bool = typer.Option(False, "--spacetime", help="Add the space–time diagram of the colour "
                                    "quantity with a marker at the current time."),

@@ -2,7 +2,7 @@
 
 flexmm writes three kinds of netCDF file: a run's ``dataset.nc`` (``flexmm run``: ``time`` and
 ``site`` variables, the resolved scene in the ``config`` attribute, the model in ``model``;
-``analysis.synthetic`` writes the same layout with ``model`` only), an ``analysis.nc``
+the tests' synthetic datasets have the same layout with ``model`` only), an ``analysis.nc``
 (``flexmm analyze``: attributes ``analysis`` and ``source``, the run it measured) and a sweep's
 ``sweep.nc`` (``flexmm sweep``: attribute ``sweep_spec``). ``kind_of`` tells them apart from
 the attributes and variable names alone (read with h5py, no data loaded); anything else that

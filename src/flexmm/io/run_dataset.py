@@ -144,13 +144,13 @@ class DatasetWriter:
         for name, (values, units, long_name, *extra) in site_coords.items():
             c = self.file.create_variable(name, ("site",), np.asarray(values).dtype, data=values)
             c.attrs.update(_attrs(name, units, long_name, extra))
-        for name, (dims, values, units, long_name) in (constants or {}).items():
+        for name, (dims, values, units, long_name, *extra) in (constants or {}).items():
             values = np.asarray(values)
             for dim, size in zip(dims, values.shape):
                 if dim not in self.file.dimensions:
                     self.file.dimensions[dim] = size
             c = self.file.create_variable(name, dims, values.dtype, data=values)
-            c.attrs.update(_attrs(name, units, long_name, []))
+            c.attrs.update(_attrs(name, units, long_name, extra))
         for name, (units, long_name, *extra) in site_vars.items():
             v = self.file.create_variable(name, ("time", "site"), "f8", chunks=(chunk_t, n_site))
             v.attrs.update(_attrs(name, units, long_name, extra))
@@ -321,12 +321,19 @@ class DatasetWriter:
 
 
 #: the variables ``shape_variables`` writes
-SHAPE_VARIABLES = ("unit_centre_x", "unit_centre_y", "unit_vertex_x", "unit_vertex_y", "rotation_sign", "link_site", "link_point_x", "link_point_y")
+#: how a unit is drawn (``UnitShapes.outline``, stored as its index ``unit_outline``): its polygon,
+#: arms from its centre to its vertices (a cross, for squares), or thin arms (bars)
+OUTLINES = ("polygon", "cross", "bars")
+SHAPE_VARIABLES = ("unit_centre_x", "unit_centre_y", "unit_vertex_x", "unit_vertex_y", "rotation_sign", "link_site",
+                   "link_point_x", "link_point_y", "unit_outline", "unit_angle", "unit_marker_x", "unit_marker_y",
+                   "link_joint", "unit_image_offset", "image_vertex")
 
 
 def shape_variables(shapes, sites: np.ndarray, length_m: float) -> dict:
     """The ``constants`` (``DatasetWriter``) of a model's ``UnitShapes`` on the saved sites:
-    polygons (site, vertex) and rotation signs per saved unit, the joints between saved units."""
+    polygons (site, vertex) and rotation signs per saved unit, the joints between saved units, and
+    how to draw them (outline, reference angles, markers, joints, mirror images) where the model
+    gives them."""
     if shapes is None:
         return {}
     index = np.full(shapes.rotation_sign.size, -1, np.int64)  # unit -> its position along ``site``
@@ -334,7 +341,7 @@ def shape_variables(shapes, sites: np.ndarray, length_m: float) -> dict:
     keep = (index[shapes.links[:, 0]] >= 0) & (index[shapes.links[:, 1]] >= 0)
     pts = shapes.link_points[keep] * length_m
     body = "relative to the unit's centre in the reference configuration"
-    return {
+    out = {
         "unit_centre_x": (("site",), shapes.centres[sites, 0] * length_m, "m", "x of the unit's centre in the reference configuration"),
         "unit_centre_y": (("site",), shapes.centres[sites, 1] * length_m, "m", "y of the unit's centre in the reference configuration"),
         "unit_vertex_x": (("site", "vertex"), shapes.vertices[sites, :, 0] * length_m, "m", f"x of the unit's vertices {body}"),
@@ -343,7 +350,22 @@ def shape_variables(shapes, sites: np.ndarray, length_m: float) -> dict:
         "link_site": (("link", "end"), index[shapes.links[keep]], "1", "the two sites a hinge or ligament joins"),
         "link_point_x": (("link", "end"), pts[..., 0], "m", f"x of a joint's attachment points {body}"),
         "link_point_y": (("link", "end"), pts[..., 1], "m", f"y of a joint's attachment points {body}"),
+        "unit_outline": ((), np.int64(OUTLINES.index(shapes.outline)), "1", "how a unit is drawn",
+                         {"flag_values": np.arange(len(OUTLINES)), "flag_meanings": " ".join(OUTLINES)}),
     }
+    if shapes.angle is not None:
+        out["unit_angle"] = (("site",), shapes.angle[sites], "rad", "the unit's orientation in the reference configuration")
+    if shapes.markers is not None:
+        out["unit_marker_x"] = (("site", "marker"), shapes.markers[sites, :, 0] * length_m, "m", f"x of a point on the unit (a magnet) {body}")
+        out["unit_marker_y"] = (("site", "marker"), shapes.markers[sites, :, 1] * length_m, "m", f"y of a point on the unit (a magnet) {body}")
+    if shapes.link_joints:
+        out["link_joint"] = ((), np.int64(1), "1", "each link carries a joint (drawn at its midpoint)")
+    if shapes.images is not None and shapes.images.shape[1]:
+        out["unit_image_offset"] = (("site", "image"), shapes.images[sites] * length_m, "m",
+                                    "vertical offset of the unit's mirror image across the row (a lateral hinge)")
+        out["image_vertex"] = (("image",), shapes.image_vertex, "1",
+                               "the vertex of a unit joined to its reflection in the unit's mirror image")
+    return out
 
 
 def _first_line(exc: BaseException) -> str:
@@ -437,8 +459,10 @@ def load_run_quickly(path: str | Path):
         names = {int(d.attrs["_Netcdf4Dimid"]): n for n, d in items.items() if d.attrs.get("CLASS") == b"DIMENSION_SCALE"}
         variables = {}
         for name, d in items.items():
+            if str(_attr_value(d.attrs.get("NAME", ""))).startswith("This is a netCDF dimension but not a netCDF variable"):
+                continue  # a dimension without a coordinate variable (the units' vertices, links)
             ids = d.attrs.get("_Netcdf4Coordinates")
-            dims = tuple(names[int(i)] for i in ids) if ids is not None else (name,)
+            dims = tuple(names[int(i)] for i in ids) if ids is not None else (name,) if d.ndim else ()
             attrs = {k: _attr_value(v) for k, v in d.attrs.items() if k not in _HIDDEN_ATTRS}
             variables[name] = xr.Variable(dims, d[()], attrs)
         attrs = {k: _attr_value(v) for k, v in f.attrs.items() if k not in _HIDDEN_ATTRS}
@@ -483,8 +507,8 @@ class MemoryWriter:
                               variable_attrs("site", {"units": "1", "long_name": "site index"}))}
         for name, (values, units, long_name, *extra) in self.site_coords.items():
             variables[name] = (("site",), np.asarray(values), _attrs(name, units, long_name, extra))
-        for name, (dims, values, units, long_name) in self.constants.items():
-            variables[name] = (dims, np.asarray(values), _attrs(name, units, long_name, []))
+        for name, (dims, values, units, long_name, *extra) in self.constants.items():
+            variables[name] = (dims, np.asarray(values), _attrs(name, units, long_name, extra))
         coord_names = " ".join(self.site_coords)
         for name, (units, long_name, *extra) in self.site_vars.items():
             data = np.array([f[1][name] for f in frames], float).reshape(n, self.n_site)

@@ -11,6 +11,7 @@ from typing import NamedTuple, Callable
 
 import numpy as np
 
+from flexmm.io.run_dataset import OUTLINES
 from flexmm.units import Scales
 
 
@@ -64,9 +65,19 @@ class UnitShapes:
     with a run's dataset, so that ``flexmm render`` draws any model from it without rebuilding it.
 
     ``centres`` (N, 2): the units' centres in the reference configuration; ``vertices`` (N, V, 2):
-    each unit's polygon there, relative to its centre; ``rotation_sign`` (N,): a unit turns by rotation_sign · θ (−1 on the counter-rotating
-    sublattice of a staggered θ); ``links`` (L, 2) the units each hinge or ligament joins and
-    ``link_points`` (L, 2, 2) its two attachment points relative to those units' centres.
+    each unit's polygon there, relative to its centre; ``rotation_sign`` (N,): a unit turns by
+    rotation_sign · θ (−1 on the counter-rotating sublattice of a staggered θ); ``links`` (L, 2) the
+    units each hinge or ligament joins and ``link_points`` (L, 2, 2) its two attachment points
+    relative to those units' centres.
+
+    How to draw them: ``outline`` (``io.run_dataset.OUTLINES``); ``angle`` (N,) each unit's orientation in the
+    reference configuration (its polygon is already turned by it; reported, not applied);
+    ``markers`` (N, M, 2) points fixed to each unit (its magnets), relative to its centre in the
+    reference configuration; ``link_joints``: a link carries a joint, drawn at its midpoint;
+    ``images`` (N, K) the vertical offsets of mirror images of each unit (a chain's lateral hinges
+    join each unit to its image across the row: image k is the unit reflected about the horizontal
+    through its centre and shifted by ``images[:, k]``, joined at vertex ``image_vertex[k]`` of the
+    unit to the reflection of that vertex).
     """
 
     centres: np.ndarray
@@ -74,6 +85,37 @@ class UnitShapes:
     rotation_sign: np.ndarray
     links: np.ndarray
     link_points: np.ndarray
+    outline: str = "polygon"
+    angle: np.ndarray | None = None
+    markers: np.ndarray | None = None
+    link_joints: bool = False
+    images: np.ndarray | None = None
+    image_vertex: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.outline not in OUTLINES:
+            raise ValueError(f"outline {self.outline!r}: expected one of {', '.join(OUTLINES)}")
+
+
+#: the corners of ``square_units``' polygons, in their order
+RIGHT, TOP, LEFT, BOTTOM = range(4)
+
+
+def square_units(centres: np.ndarray, theta0: np.ndarray, sigma: np.ndarray, half: float, links: np.ndarray,
+                 corners: np.ndarray, **drawing) -> UnitShapes:
+    """The ``UnitShapes`` of square units (hinge-to-hinge diagonal 2·``half``) turning by σθ (σ =
+    ``sigma`` per unit), their corners right, top, left, bottom (``RIGHT``...) at centre +
+    half (cos(σθ0 + kπ/2), sin(σθ0 + kπ/2)); link l joins corner ``corners[l, 0]`` of unit
+    ``links[l, 0]`` to corner ``corners[l, 1]`` of unit ``links[l, 1]``; ``drawing``: the other
+    fields of ``UnitShapes``."""
+    angle = np.asarray(sigma, float) * np.asarray(theta0, float)
+    ang = angle[:, None] + 0.5 * np.pi * np.arange(4)
+    vertices = half * np.stack([np.cos(ang), np.sin(ang)], -1)
+    links = np.asarray(links, np.int64).reshape(-1, 2)
+    corners = np.asarray(corners, np.int64).reshape(-1, 2)
+    points = np.stack([vertices[links[:, k], corners[:, k]] for k in range(2)], 1).reshape(-1, 2, 2)
+    return UnitShapes(np.asarray(centres, float), vertices, np.asarray(sigma, float).copy(), links, points,
+                      angle=angle, **drawing)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ def build(cfg) -> System:
     """The linkage as a System (a two-row rotating_sheet with pins and bistable joints)."""
     from flexmm.models.sheet_kernels import SheetArgs
     from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hinge_pairs, hold_fixed_ends,
-                                              hinge_table)
+                                              hinge_table, sheet_shapes)
     from flexmm.models.magnets import empty_dipoles
     from flexmm.models.loads import empty_loads
     from flexmm.units import Scales
@@ -67,4 +67,6 @@ def build(cfg) -> System:
         ends=ends, longitudinal_field="u", rotation_field="theta", axis_fields={"x": "u", "y": "v"},
         end_fields={"left": "u", "right": "u"}, omega_ref=1.0, grid_shape=(2, nc),
         site_coord_attrs=COORD_ATTRS, neighbour_pairs=np.stack([ha[hax == 0], hb[hax == 0]], 1),
+        shapes=sheet_shapes(2, nc, ha, hb, hax, sigma, theta0, math.cos(cfg.theta0_rad), outline="bars",
+                            link_joints=True),
     )

@@ -13,7 +13,7 @@ import numpy as np
 
 from flexmm.config.rigid import RotatingSquaresChain
 from flexmm.models import predeform, variation
-from flexmm.models.base import FieldSpec, RotatingSquaresND, System
+from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, RotatingSquaresND, System, UnitShapes, square_units
 from flexmm.models.hinge import (
     ChainArgs,
     H_KL,
@@ -22,6 +22,7 @@ from flexmm.models.hinge import (
     N_SITE_PARAMS,
     S_KG,
     S_KR,
+    S_THETA0,
 )
 from flexmm.units import Scales
 
@@ -124,6 +125,7 @@ def build(cfg: RotatingSquaresChain) -> System:
         v0=np.zeros(2 * n),
         spacing_m=spacing,
         site_coords={"x": x},
+        shapes=chain_shapes(args, x / cfg.a_m, cfg.n_lateral),
         ends={"left": [0], "right": [n - 1]},
         longitudinal_field="u",
         rotation_field="theta",
@@ -135,6 +137,21 @@ def build(cfg: RotatingSquaresChain) -> System:
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
     return system
+
+
+def chain_shapes(args, x: np.ndarray, n_lateral: int) -> UnitShapes:
+    """The chain's squares (diagonal 1, σ alternating) at x along the row, drawn as crosses, each
+    hinge from the right corner of a unit to the left corner of the next; a lateral hinge joins
+    the bottom (top) corner of a unit to its mirror image a cos θ0 below (above)."""
+    n = x.size
+    theta0 = args.site_prm[:, S_THETA0]
+    sigma = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    gap = np.cos(theta0)
+    images = np.stack([-gap, gap], 1)[:, :n_lateral]
+    links = np.stack([args.hinge_a, args.hinge_b], 1)
+    return square_units(np.stack([x, np.zeros(n)], 1), theta0, sigma, 0.5, links,
+                        np.tile([RIGHT, LEFT], (links.shape[0], 1)), outline="cross", images=images,
+                        image_vertex=np.array([BOTTOM, TOP][:n_lateral], np.int64))
 
 
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:

@@ -23,7 +23,7 @@ import numpy as np
 
 from flexmm.config.rigid import RotatingSquaresSheet
 from flexmm.models import predeform, variation
-from flexmm.models.base import FieldSpec, RotatingSquaresND, System
+from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, RotatingSquaresND, System, UnitShapes, square_units
 from flexmm.models.hinge import (H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN,
                                  N_HINGE_PARAMS)
 from flexmm.models.joints import empty_joints
@@ -163,6 +163,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
         grid_shape=(nr, nc),
         site_coord_attrs=COORD_ATTRS,
         neighbour_pairs=np.stack([ha[horiz], hb[horiz]], 1),
+        shapes=sheet_shapes(nr, nc, ha, hb, hax, sigma, theta0, h, markers=None if cfg.magnets is None else dip[2]),
         rotating_squares=RotatingSquaresND(
             theta0=cfg.theta0_rad, Ks=cfg.k_shear_n_per_m / kl, Ktheta=cfg.k_rot_n_m_per_rad / (kl * a * a),
             alpha2=J / (m * a * a), n_v=2, s_v=1,
@@ -171,6 +172,27 @@ def build(cfg: RotatingSquaresSheet) -> System:
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
     return system
+
+
+def sheet_shapes(nr: int, nc: int, ha, hb, hax, sigma, theta0, spacing: float, outline: str = "polygon",
+                 markers: np.ndarray | None = None, link_joints: bool = False) -> UnitShapes:
+    """The squares of a sheet (diagonal 1) at (col, row) · ``spacing``, its hinges between the right
+    and left corners (horizontal) or the top and bottom corners (vertical) of neighbours (the
+    periodic wraps, far apart in the reference configuration, are not drawn); ``markers``: the
+    magnets' body-frame positions (M, 2) (``magnets.face_magnets``), turned by each unit's σθ0."""
+    row, col = np.divmod(np.arange(nr * nc), nc)
+    across = np.where(hax == 0, col[hb] - col[ha], row[hb] - row[ha]) == 1
+    along = np.where(hax == 0, row[hb] - row[ha], col[hb] - col[ha]) == 0
+    drawn = across & along
+    corners = np.where(hax[drawn, None] == 0, [RIGHT, LEFT], [TOP, BOTTOM])
+    placed = None
+    if markers is not None:
+        c, s = np.cos(sigma * theta0)[:, None], np.sin(sigma * theta0)[:, None]
+        placed = np.stack([c * markers[None, :, 0] - s * markers[None, :, 1],
+                           s * markers[None, :, 0] + c * markers[None, :, 1]], -1)
+    return square_units(np.stack([col, row], 1) * spacing, theta0, sigma, 0.5,
+                        np.stack([ha[drawn], hb[drawn]], 1), corners, outline=outline, markers=placed,
+                        link_joints=link_joints)
 
 
 def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:

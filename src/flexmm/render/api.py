@@ -20,7 +20,7 @@ from flexmm.render.colour import Colouring, make_colouring
 from flexmm.render.figure import Frame
 from flexmm.render.movie import MOVIE_SUFFIXES, ffmpeg_or_error, open_movie
 from flexmm.render.source import RunSource
-from flexmm.render.structure import make_structure
+from flexmm.render.structure import SHAPE_NAMES, make_structure
 from flexmm.render.view import columns, describe, make_spacetime, palette_colours, view_extent
 
 STILL_SUFFIXES = (".png", ".svg")
@@ -89,8 +89,8 @@ def check_options(opts: RenderOptions) -> None:
         raise UsageError(f"--width must be between 320 and 4000 pixels, got {opts.width}")
     if opts.clim is not None and not opts.clim[1] > opts.clim[0]:
         raise UsageError(f"--clim needs LOW < HIGH, got {opts.clim[0]:g}:{opts.clim[1]:g}")
-    if opts.shape is not None and opts.shape not in ("square", "cross", "bars"):
-        raise UsageError(f"--shape must be square, cross or bars, got {opts.shape!r}")
+    if opts.shape is not None and opts.shape not in SHAPE_NAMES:
+        raise UsageError(f"--shape must be one of {', '.join(SHAPE_NAMES)}, got {opts.shape!r}")
 
 
 def load_lattice(src: RunSource):

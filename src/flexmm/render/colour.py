@@ -15,7 +15,7 @@ import numpy as np
 from flexmm.errors import UsageError
 from flexmm.render.masses import onsite_barriers, site_energy_j, well_index
 from flexmm.render.rigid import unit_energy_j
-from flexmm.render.structure import MassStructure, RigidStructure, ShapeStructure
+from flexmm.render.structure import MassStructure, ShapeStructure
 
 SPECIAL = ("energy", "well", "none")
 SYMBOLS = {"u": "u", "v": "v", "theta": "θ", "u_dot": "du/dt", "v_dot": "dv/dt", "theta_dot": "dθ/dt"}
@@ -59,9 +59,7 @@ class Colouring:
 def default_colour(source, structure) -> str:
     """theta for rotating units, the well for bistable lattices, else the velocity or u."""
     if isinstance(structure, ShapeStructure):
-        return "theta"
-    if isinstance(structure, RigidStructure):
-        return "well" if structure.p.joint is not None else "theta"
+        return "well" if structure.p is not None and structure.p.joint is not None else "theta"
     if onsite_barriers_present(structure):
         return "well"
     return "u_dot" if "u_dot" in source.fields else "u"
@@ -86,10 +84,10 @@ def _field(name: str, source) -> Colouring:
 
 
 def _energy(source, structure) -> Colouring:
-    if isinstance(structure, ShapeStructure):
+    if isinstance(structure, ShapeStructure) and structure.p is None:
         raise UsageError(f"--color energy is not available for {source.model} (colour by a field instead)")
     rates = [r for r in ("u_dot", "v_dot", "theta_dot") if r in source.fields]
-    if isinstance(structure, RigidStructure):
+    if isinstance(structure, ShapeStructure):
         p = structure.p
         if structure.sites.size != p.n_units or np.any(structure.sites != np.arange(p.n_units)):
             raise UsageError("--color energy needs every unit saved (the run has output.site_stride > 1)")
@@ -109,7 +107,7 @@ def _energy(source, structure) -> Colouring:
         def values(f):
             return site_energy_j(p, f["u"], f.get("u_dot"))
         note = ""
-    what = "energy per unit" if isinstance(structure, RigidStructure) else "energy per site"
+    what = "energy per unit" if isinstance(structure, ShapeStructure) else "energy per site"
     if not rates:
         note += ", potential only: velocities not saved"
     return Colouring("energy", f"{what} (J{note})", names, values, cmap="magma_r")
@@ -117,10 +115,8 @@ def _energy(source, structure) -> Colouring:
 
 def _well(source, structure, samples_u: list[np.ndarray] | None) -> Colouring:
     if isinstance(structure, ShapeStructure):
-        raise UsageError(f"--color well: {source.model} has no multistable elements (use a field)")
-    if isinstance(structure, RigidStructure):
         p = structure.p
-        if p.joint is None:
+        if p is None or p.joint is None:
             raise UsageError("--color well: this lattice has no multistable elements (use a field or energy)")
         _, beta, switch = p.joint
         label = "state of the unit's joints (deployed: θ past the barrier, βψ*/2)"

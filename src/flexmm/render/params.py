@@ -84,15 +84,11 @@ def checkerboard(n_rows: int, n_cols: int) -> np.ndarray:
     return np.where((r + c) % 2 == 0, 1.0, -1.0)
 
 
-def rigid_params(lat) -> RigidParams:
-    """The RigidParams of a rotating_squares_chain, rotating_squares_sheet or bistable_linkage config."""
-    if lat.kind == "rotating_squares_chain":
-        return _chain(lat)
-    if lat.kind == "rotating_squares_sheet":
-        return _sheet(lat)
-    if lat.kind == "bistable_linkage":
-        return _linkage(lat)
-    raise ValueError(f"not a rigid-unit lattice: {lat.kind!r}")
+def rigid_params(lat) -> RigidParams | None:
+    """The RigidParams of a rotating_squares_chain, rotating_squares_sheet or bistable_linkage
+    config (what the energy and well colourings read); None for other lattices."""
+    make = {"rotating_squares_chain": _chain, "rotating_squares_sheet": _sheet, "bistable_linkage": _linkage}.get(lat.kind)
+    return None if make is None else make(lat)
 
 
 def _base(lat, mass: float, inertia: float) -> dict:

@@ -1,7 +1,7 @@
 """What to draw of a run at one frame: unit polygons, hinge and spring lines, bodies.
 
-``make_structure(source, lattice, shape, exaggeration)`` picks the kind: rigid units (rotating-
-squares chain and sheet, bistable linkage) or masses (chain, network, grid). Given one frame of
+``make_structure(source, lattice, shape, exaggeration)``: rigid units of any model, drawn from the
+shapes its dataset stores (``ShapeStructure``), or masses (chain, network, grid). Given one frame of
 the dataset's fields, ``Structure.draw(frame)`` returns a ``Drawing`` in metres. Exaggeration
 scales every field's departure from rest (the predeformed state, if any): displacements and
 rotations alike, so a small-amplitude picture is the linear mode shape magnified.
@@ -14,13 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexmm.errors import UsageError
-from flexmm.render import rigid
+from flexmm.io.run_dataset import OUTLINES, shape_variables
 from flexmm.render.masses import MassParams, mass_params
-from flexmm.render.params import RigidParams, rigid_params
+from flexmm.render.params import rigid_params
 
-RIGID_KINDS = ("rotating_squares_chain", "rotating_squares_sheet", "bistable_linkage")
 MASS_KINDS = ("mass_chain", "mass_network", "mass_grid")
-DEFAULT_SHAPE = {"rotating_squares_chain": "cross", "rotating_squares_sheet": "square", "bistable_linkage": "bars"}
 #: draw springs as zigzags up to this many bonds (straight lines beyond)
 ZIGZAG_MAX_BONDS = 400
 
@@ -51,93 +49,78 @@ def _scaled(frame: dict, rest: dict, name: str, scale: float, n: int) -> np.ndar
     return base + scale * (value - base)
 
 
-class RigidStructure:
-    """Rotating units: each drawn unit is a saved site, placed and turned by u, v, θ."""
+#: arm half-width of the ``cross`` and ``bars`` outlines, as a fraction of the centre-to-vertex distance
+ARM_WIDTH = {"cross": 0.28, "bars": 0.07}
+#: ``--shape`` names of the outlines (``square``: a unit's own polygon)
+SHAPE_NAMES = {"square": "polygon", "polygon": "polygon", "cross": "cross", "bars": "bars"}
 
-    def __init__(self, p: RigidParams, sites: np.ndarray, coords: dict, rest: dict, shape: str, scale: float):
-        self.p, self.sites, self.rest, self.shape, self.scale = p, sites, rest, shape, scale
-        if sites.size and sites.max() >= p.n_units:
-            raise UsageError(f"the dataset has site {sites.max()} but its config has {p.n_units} units")
-        self.index = np.full(p.n_units, -1, np.int64)
-        self.index[sites] = np.arange(sites.size)
-        y = coords.get("y", np.zeros(sites.size))
-        self.rest_xy = np.stack([np.asarray(coords["x"], float), np.asarray(y, float)], 1)
-        self.fields = ["u", "theta"] + (["v"] if p.kind != "rotating_squares_chain" else [])
-        self.spacing_m = 2 * p.half_m * float(np.cos(np.mean(p.theta0_rad)))
 
-    def state(self, frame: dict) -> tuple[np.ndarray, np.ndarray]:
-        """Drawn centres (n, 2) and orientations φ (n,) of the saved units."""
-        n = self.sites.size
-        centres = self.rest_xy.copy()
-        centres[:, 0] += _scaled(frame, self.rest, "u", self.scale, n)
-        centres[:, 1] += _scaled(frame, self.rest, "v", self.scale, n)
-        theta = _scaled(frame, self.rest, "theta", self.scale, n)
-        return centres, rigid.orientation(self.p, self.sites, theta)
+def outlines(centres: np.ndarray, points: np.ndarray, outline: str) -> np.ndarray:
+    """Polygons (N, V', 2) of units at ``centres`` (N, 2) whose vertices are ``points`` (N, V, 2):
+    the polygon itself (V' = V), or arms from the centre to each vertex (V' = 3V: the end of arm k
+    is a segment through vertex k, along arm k + 1, and the corner between arms k and k + 1)."""
+    if outline == "polygon":
+        return points
+    c = centres[:, None, :]
+    e = points - c  # arm k, from the centre to vertex k
+    w = ARM_WIDTH[outline] * e  # along arm k: the arms' half-width
+    w_next = np.roll(w, -1, axis=1)  # along arm k + 1 (across arm k, for squares)
+    tip_lo, tip_hi = c + e - w_next, c + e + w_next
+    inner = c + w + w_next
+    return np.stack([tip_lo, tip_hi, inner], axis=2).reshape(len(centres), 3 * e.shape[1], 2)
 
-    def draw(self, frame: dict) -> Drawing:
-        """Units, their mirror rows, hinge lines and markers (pins, magnets) at one frame."""
-        centres, phi = self.state(frame)
-        pts = rigid.hinge_points(centres, phi, self.p.half_m)
-        segs = [rigid.hinge_segments(self.p, self.index, pts)]
-        ghosts = []
-        for k, (gc, gphi) in enumerate(rigid.mirror_units(self.p, self.sites, centres, phi)):
-            gpts = rigid.hinge_points(gc, gphi, self.p.half_m)
-            ghosts.append(rigid.outlines(gc, gpts, self.shape))
-            below = k == 0  # lateral hinge: bottom of the unit to top of the image below (or vice versa)
-            segs.append(np.stack([pts[:, rigid.BOTTOM if below else rigid.TOP],
-                                  gpts[:, rigid.TOP if below else rigid.BOTTOM]], 1))
-        dots = None
-        if self.p.magnets is not None:
-            dots = self._magnets(centres, phi)
-        elif self.p.joint is not None:
-            seg = segs[0]
-            dots = 0.5 * (seg[:, 0] + seg[:, 1])
-        return Drawing(polygons=rigid.outlines(centres, pts, self.shape),
-                       ghosts=np.concatenate(ghosts) if ghosts else None,
-                       lines=np.concatenate(segs), dots=dots, edge="face" if self.shape == "bars" else "#222222")
 
-    def _magnets(self, centres, phi) -> np.ndarray:
-        """Face magnets: body-frame (±a/4, ±a/4) − recess along the face normal, turned by φ."""
-        a, recess = 2 * self.p.half_m, self.p.magnets[0]
-        r2 = 1 / np.sqrt(2)
-        dirs = np.array([[r2, r2], [-r2, r2], [-r2, -r2], [r2, -r2]])
-        body = 0.25 * a * np.sign(dirs) - recess * dirs  # (4, 2)
-        c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
-        x = centres[:, None, 0] + c * body[None, :, 0] - s * body[None, :, 1]
-        y = centres[:, None, 1] + s * body[None, :, 0] + c * body[None, :, 1]
-        return np.stack([x, y], -1).reshape(-1, 2)
-
-    def colour_repeats(self) -> int:
-        """Ghost rows repeat the units' colours this many times."""
-        return self.p.n_lateral
+def _pair(shapes: dict, stem: str, shape: tuple) -> np.ndarray:
+    """(…, 2) of the stored ``stem_x``, ``stem_y`` (zeros of ``shape`` if absent)."""
+    if f"{stem}_x" not in shapes:
+        return np.zeros(shape + (2,))
+    return np.stack([np.asarray(shapes[f"{stem}_x"], float), np.asarray(shapes[f"{stem}_y"], float)], -1)
 
 
 class ShapeStructure:
-    """Rigid units drawn from the shapes their dataset stores (any model that stores them): each
-    unit's polygon placed by (u, v) and turned by rotation_sign · θ, each joint a line between its
-    two attachment points."""
+    """Rigid units drawn from the shapes their dataset stores (``io.run_dataset.shape_variables``):
+    each unit's polygon placed by (u, v) and turned by rotation_sign · θ, outlined as the model
+    says (or ``outline``), each joint a line between its two attachment points, points fixed to
+    the units (magnets) or the joints as dots, and mirror images across the row (a chain's lateral
+    hinges) as ghosts. ``params``: the lattice's ``render.params.RigidParams`` where it has them
+    (the energy and well colourings), else None."""
 
-    def __init__(self, shapes: dict, sites: np.ndarray, coords: dict, rest: dict, scale: float):
-        self.sites, self.rest, self.scale = sites, rest, scale
-        self.vertices = np.stack([shapes["unit_vertex_x"], shapes["unit_vertex_y"]], -1)  # (n, V, 2)
-        self.sign = np.asarray(shapes.get("rotation_sign", np.ones(sites.size)), float)
+    def __init__(self, shapes: dict, sites: np.ndarray, coords: dict, rest: dict, scale: float,
+                 fields: list[str], outline: str | None = None, params=None):
+        self.sites, self.rest, self.scale, self.p = sites, rest, scale, params
+        n = sites.size
+        self.vertices = _pair(shapes, "unit_vertex", (n, 0))  # (n, V, 2)
+        self.sign = np.asarray(shapes.get("rotation_sign", np.ones(n)), float)
+        self.angle = np.asarray(shapes.get("unit_angle", np.zeros(n)), float)
         self.links = np.asarray(shapes.get("link_site", np.zeros((0, 2), np.int64)), np.int64)
-        self.link_points = np.stack([shapes.get("link_point_x", np.zeros((0, 2))),
-                                     shapes.get("link_point_y", np.zeros((0, 2)))], -1)  # (L, 2, 2)
-        self.rest_xy = np.stack([shapes["unit_centre_x"], shapes["unit_centre_y"]], 1)
+        self.link_points = _pair(shapes, "link_point", (0, 2))  # (L, 2, 2)
+        self.markers = _pair(shapes, "unit_marker", (n, 0))  # (n, M, 2)
+        self.joints = bool(shapes.get("link_joint", 0))
+        self.images = np.asarray(shapes.get("unit_image_offset", np.zeros((n, 0))), float)
+        self.image_vertex = np.asarray(shapes.get("image_vertex", np.zeros(0, np.int64)), np.int64)
+        self.outline = outline or OUTLINES[int(shapes.get("unit_outline", 0))]
+        self.rest_xy = _pair(shapes, "unit_centre", (n,))
         self.col = np.asarray(coords.get("col", sites), np.int64)
-        self.row = np.asarray(coords.get("row", np.zeros(sites.size)), np.int64)
-        self.fields = ["u", "v", "theta"]
+        self.row = np.asarray(coords.get("row", np.zeros(n)), np.int64)
+        self.fields = [name for name in ("u", "v", "theta") if name in fields]
         gaps = np.hypot(*(self.rest_xy[self.links[:, 1]] - self.rest_xy[self.links[:, 0]]).T)
         self.spacing_m = float(np.median(gaps)) if gaps.size else float(np.ptp(self.vertices[..., 0]))
 
-    def draw(self, frame: dict) -> Drawing:
-        """The units' polygons and the joints' lines at one frame."""
+    def state(self, frame: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Drawn centres (n, 2) and rotations from the reference configuration (n,) of the units."""
         n = self.sites.size
         centres = self.rest_xy.copy()
         centres[:, 0] += _scaled(frame, self.rest, "u", self.scale, n)
         centres[:, 1] += _scaled(frame, self.rest, "v", self.scale, n)
-        phi = self.sign * _scaled(frame, self.rest, "theta", self.scale, n)
+        return centres, self.sign * _scaled(frame, self.rest, "theta", self.scale, n)
+
+    def orientation(self, phi: np.ndarray) -> np.ndarray:
+        """The units' orientations: their reference angle plus the rotation ``phi`` (``state``)."""
+        return self.angle + phi
+
+    def draw(self, frame: dict) -> Drawing:
+        """The units' outlines, their joints' lines and dots, and their mirror images at one frame."""
+        centres, phi = self.state(frame)
         c, s = np.cos(phi), np.sin(phi)
 
         def placed(unit, body):  # centre + R(φ) body, body (..., 2) for each unit
@@ -146,14 +129,31 @@ class ShapeStructure:
             y = su * body[..., 0] + cu * body[..., 1]
             return centres[unit] + np.stack([x, y], -1)
 
-        units = np.arange(n)
-        polygons = placed(units[:, None], self.vertices)
-        lines = np.stack([placed(self.links[:, k], self.link_points[:, k]) for k in range(2)], 1)
-        return Drawing(polygons=polygons, lines=lines if lines.size else None)
+        units = np.arange(self.sites.size)
+        points = placed(units[:, None], self.vertices)
+        segs = [np.stack([placed(self.links[:, k], self.link_points[:, k]) for k in range(2)], 1)]
+        ghosts = []
+        nv = self.vertices.shape[1]
+        order = -np.arange(nv) % nv  # a reflection's vertices in reverse order: counter-clockwise again
+        for k, vertex in enumerate(self.image_vertex):  # the unit reflected about its row, shifted
+            image = centres + np.stack([np.zeros(units.size), self.images[:, k]], 1)
+            mirrored = image[:, None, :] + (points[:, order] - centres[:, None, :]) * [1.0, -1.0]
+            ghosts.append(outlines(image, mirrored, self.outline))
+            segs.append(np.stack([points[:, vertex], mirrored[:, order[vertex]]], 1))
+        lines = np.concatenate(segs)
+        dots = None
+        if self.markers.shape[1]:
+            dots = placed(units[:, None], self.markers).reshape(-1, 2)
+        elif self.joints and segs[0].size:
+            dots = 0.5 * (segs[0][:, 0] + segs[0][:, 1])
+        return Drawing(polygons=outlines(centres, points, self.outline),
+                       ghosts=np.concatenate(ghosts) if ghosts else None,
+                       lines=lines if lines.size else None, dots=dots,
+                       edge="face" if self.outline == "bars" else "#222222")
 
     def colour_repeats(self) -> int:
-        """No ghost rows."""
-        return 0
+        """Ghost rows repeat the units' colours this many times."""
+        return self.image_vertex.size
 
 
 class MassStructure:
@@ -209,20 +209,29 @@ def springs(a: np.ndarray, b: np.ndarray, radius: float, coils: int = 4) -> np.n
 
 
 def make_structure(source, lattice, shape: str | None, scale: float):
-    """The Structure of a run (from its dataset's sites and its stored lattice config)."""
-    kind = lattice.kind
+    """The Structure of a run: its units drawn from the shapes its dataset stores (a dataset
+    written before they were stored: from its model built again), or its masses."""
     if "x" not in source.coords:
         raise UsageError(f"{source.path} has no site positions (coordinate 'x'): cannot draw its structure")
-    if source.shapes:
-        return ShapeStructure(source.shapes, source.sites, source.coords, source.rest, scale)
-    if kind in RIGID_KINDS:
-        shape = shape or DEFAULT_SHAPE[kind]
-        return RigidStructure(rigid_params(lattice), source.sites, source.coords, source.rest, shape, scale)
-    if kind in MASS_KINDS:
+    if lattice.kind in MASS_KINDS:
         stored = source.coords.get("u_rest")  # u is measured from it (no relaxation needed)
         rest = None if stored is None else (source.sites, np.asarray(stored, float))
         return MassStructure(mass_params(lattice, rest), source.sites, scale)
-    raise UsageError(f"cannot draw model {kind!r}")
+    shapes = source.shapes or _built_shapes(source, lattice)
+    return ShapeStructure(shapes, source.sites, source.coords, source.rest, scale, source.fields,
+                          SHAPE_NAMES[shape] if shape else None, rigid_params(lattice))
 
 
-__all__ = ["Drawing", "MassStructure", "RigidStructure", "ShapeStructure", "make_structure", "springs"]
+def _built_shapes(source, lattice) -> dict:
+    """The shape variables of a dataset that does not store them, from its model built again."""
+    from flexmm.models import MODELS
+
+    builder = MODELS.get(lattice.kind)
+    system = builder.build(lattice) if builder is not None else None
+    if system is None or system.shapes is None:
+        raise UsageError(f"cannot draw model {lattice.kind!r}")
+    length = system.scales.length_m
+    return {name: values for name, (_, values, *_) in shape_variables(system.shapes, source.sites, length).items()}
+
+
+__all__ = ["Drawing", "MassStructure", "ShapeStructure", "make_structure", "outlines", "springs"]

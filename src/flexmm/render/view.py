@@ -11,7 +11,7 @@ from flexmm.errors import UsageError
 from flexmm.render.colour import Colouring
 from flexmm.render.figure import bounds
 from flexmm.render.source import RunSource
-from flexmm.render.structure import Drawing, MassStructure, RigidStructure, ShapeStructure
+from flexmm.render.structure import Drawing, MassStructure, ShapeStructure
 
 #: rows of the space–time diagram at most
 SPACETIME_ROWS = 600
@@ -37,8 +37,6 @@ def columns(structure) -> np.ndarray:
     sites = structure.sites
     if isinstance(structure, ShapeStructure):
         return structure.col
-    if isinstance(structure, RigidStructure):
-        return sites % structure.p.n_cols
     if structure.p.grid_shape is not None:
         return sites % structure.p.grid_shape[0]
     return sites
@@ -49,8 +47,6 @@ def rows(structure) -> np.ndarray:
     sites = structure.sites
     if isinstance(structure, ShapeStructure):
         return structure.row
-    if isinstance(structure, RigidStructure):
-        return sites // structure.p.n_cols
     if structure.p.grid_shape is not None:
         return sites // structure.p.grid_shape[0]
     return np.zeros(sites.size, np.int64)
@@ -119,11 +115,12 @@ def describe(src: RunSource, lattice, structure, scale: float) -> tuple[str, str
             "mass_grid": lambda: f"{lattice.nx} columns × {lattice.ny} rows of masses",
             "mass_network": lambda: f"{len(lattice.branches)} branches, {n} masses",
             "mass_chain": lambda: f"{n} masses"}.get(kind, lambda: f"{n} units")()
-    if isinstance(structure, RigidStructure) and structure.p.n_lateral:
-        size += f", n_lateral = {structure.p.n_lateral} (mirror row{'s' if structure.p.n_lateral > 1 else ''} shaded)"
+    images = structure.colour_repeats()
+    if images:
+        size += f", n_lateral = {images} (mirror row{'s' if images > 1 else ''} shaded)"
     if n != getattr(lattice, "n_units", n):
         size += f" ({n} saved: output.site_stride > 1)"
-    what = "displacements and rotations" if isinstance(structure, RigidStructure) else "displacements"
+    what = "displacements and rotations" if isinstance(structure, ShapeStructure) else "displacements"
     scale_txt = "drawn to scale" if scale == 1 else f"{what} ×{scale:g} (exaggerated)"
     planned = str(src.attrs.get("plan_dimension", "kept"))
     reduced = "" if planned in ("kept", "") else f" ({planned})"

@@ -21,7 +21,7 @@ from flexmm.errors import OutputError
 from flexmm.io.atomic import atomic_target, write_text_atomic
 from flexmm.render.api import load_lattice
 from flexmm.render.source import RunSource
-from flexmm.render.structure import RigidStructure, make_structure
+from flexmm.render.structure import ShapeStructure, make_structure
 
 #: VTK's cell type of a single point
 VTK_VERTEX = 1
@@ -87,9 +87,9 @@ def export_vtk(run, out: str | Path | None = None, *, start_s: float | None = No
             for i, t, frame in src.frames(indices, names):
                 data = {name: frame[name] for name in names}
                 data["site"] = src.sites.astype(np.int64)
-                if isinstance(structure, RigidStructure):
+                if isinstance(structure, ShapeStructure):
                     points, phi = structure.state(frame)
-                    data["orientation_rad"] = phi
+                    data["orientation_rad"] = structure.orientation(phi)
                 else:
                     points = structure.positions(frame)
                 file = f"{src.name}_{i:05d}.vtu"
