@@ -235,8 +235,9 @@ def from_file(cfg: RigidNetwork) -> Network:
     towards /= np.hypot(towards[:, 0], towards[:, 1])[:, None]
     axis = np.where((np.hypot(gap[:, 0], gap[:, 1]) > 1e-9 * float(np.median(np.ptp(vertices, 1).max(1))))[:, None],
                     along, towards)
-    given = [k for k, g in enumerate(ligs) if g.axis is not None]
-    axis[given] = [np.asarray(ligs[k].axis) / math.hypot(*ligs[k].axis) for k in given]
+    for k, g in enumerate(ligs):
+        if g.axis is not None:
+            axis[k] = np.asarray(g.axis) / math.hypot(*g.axis)
     return Network(vertices, (a, b, i, j, axis), mass, inertia, stiffness, rest_gap, grid=None, full_grid=False)
 
 
