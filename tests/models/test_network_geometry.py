@@ -196,6 +196,12 @@ def test_generated_patterns_are_valid_networks():
     d = np.hypot(*(free[:, None, :] - free[None, :, :]).transpose(2, 0, 1))
     np.fill_diagonal(d, np.inf)
     assert d.min() < 1e-8  # two free vertices meet: the pore is closed
+    hexa = built({"kind": "rigid_network", "pattern": "rotating_hexagons", "a_m": 0.01, "n_rows": 2, "n_cols": 3,
+                  **LAW, "theta0_rad": 0.3})
+    m = 20.0 * 1.5 * math.sqrt(3) * 1e-4  # ρ (3√3/2) s²
+    n = hexa.n_sites
+    assert_allclose(hexa.mass[:n] * hexa.scales.mass_kg, m, rtol=1e-13)
+    assert_allclose(hexa.mass[2 * n :] * hexa.scales.inertia, 5 / 12 * m * 1e-4, rtol=1e-13)
     with pytest.raises(ConfigError, match="π/6"):
         scene({"kind": "rigid_network", "pattern": "rotating_hexagons", "a_m": 1.0, "n_rows": 2, "n_cols": 3,
                **LAW, "theta0_rad": 0.6})

@@ -142,8 +142,8 @@ class RigidNetwork(GridUnits):
             if "periodic" in (getattr(self, a), getattr(self, b)):
                 raise ValueError(f"{a}/{b}: a rigid_network's edges are free or fixed (periodic is not supported yet)")
         if self.geometry is not None:
-            given = sorted({"pattern", "theta0_rad", "ligament_length_m", "vertex_jitter", "seed", "aspect_ratio",
-                            "mask"} & self.model_fields_set)
+            given = [k for k in ("pattern", "theta0_rad", "ligament_length_m", "vertex_jitter", "seed",
+                                 "aspect_ratio", "mask") if getattr(self, k) != type(self).model_fields[k].default]
             if given:
                 raise ValueError(f"geometry: the file gives the units and ligaments; remove {', '.join(given)}")
         names = self.unit_set_names()
