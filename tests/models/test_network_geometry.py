@@ -137,8 +137,11 @@ def test_geometry_faults_are_reported_at_their_line(tmp_path, edit, message, at)
 def test_schema_errors_of_the_file_and_the_scene(tmp_path):
     path = broken(tmp_path, lambda d: d["units"][3].pop("inertia_kg_m2"))
     with pytest.raises(ConfigError, match="give both mass_kg and inertia_kg_m2") as err:
-        scene({"kind": "rigid_network", "geometry": path, **LAW})
+        built({"kind": "rigid_network", "geometry": path, **LAW})
     assert err.value.issues[0].source == path and err.value.issues[0].line == line_of(path, "mass_kg")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="expected a mapping with a list of"):
+        scene({"kind": "rigid_network", "geometry": str(tmp_path / "list.yaml"), "a_m": 0.01, **LAW})
     with pytest.raises(ConfigError, match="not found"):
         scene({"kind": "rigid_network", "geometry": str(tmp_path / "none.yaml"), **LAW})
     with pytest.raises(ConfigError, match="remove theta0_rad"):

@@ -18,10 +18,11 @@ A ligament's ``rest_gap_m`` is its rest vector from vertex i of a to vertex j of
 two vertices' separation in the file, so the file's geometry is stress-free); its ``axis`` the
 direction of its longitudinal spring (default: along the rest gap, or from the centroid of a to
 that of b when the gap is shorter than 10⁻⁹ of the units' size); its stiffnesses default to the
-lattice's. The schema is checked here (``read_geometry``: file:line errors); the geometry itself —
-convex, simple polygons without repeated vertices, no two units overlapping, ligaments naming
-existing units and vertices, one connected piece — when the network is built
-(``models.geometry.geometry_issues``), reported at the same file:line.
+lattice's. The schema is ``GeometryFile``; it is checked, and the geometry itself — convex,
+simple polygons without repeated vertices, no two units overlapping, ligaments naming existing
+units and vertices, one connected piece (``models.geometry.geometry_issues``) — when the network
+is built (``models.network.read_geometry``), every fault reported at its file:line. A scene's
+validation reads only the number of units and the set names (``raw_geometry``).
 """
 
 from __future__ import annotations
@@ -104,27 +105,37 @@ class GeometryFile(Strict):
     sets: dict[str, UnitSet] = Field(default_factory=dict)
 
 
-def read_geometry(path: str | Path) -> tuple[GeometryFile, dict]:
-    """(the validated file, its key-path -> line map); ConfigError naming file:line otherwise."""
-    from flexmm.config.loader import read_yaml, validate
-
-    data, lines = read_yaml(path)
-    return validate(GeometryFile, data, lines=lines, source=str(path)), lines
+_RAW: dict[tuple, dict] = {}
 
 
-_READ: dict[tuple, tuple[GeometryFile, dict]] = {}
+def raw_geometry(path: str | Path) -> dict:
+    """The geometry file as plain YAML data, read once per version of the file (path, size,
+    modification time), for what a scene's validation needs of it: the number of units and the
+    names of its sets. ValueError if it is not a YAML mapping with a list of units (its schema is
+    checked, at file:line, when the network is built: ``models.network.read_geometry``)."""
+    import yaml
 
-
-def read_geometry_cached(path: str | Path) -> tuple[GeometryFile, dict]:
-    """``read_geometry``, read once per version of the file (path, size, modification time): a scene
-    validated several times (plan, sweep points) reads its geometry file once."""
     st = Path(path).stat()
     key = (str(path), st.st_size, st.st_mtime_ns)
-    if key not in _READ:
-        if len(_READ) > 32:
-            _READ.clear()
-        _READ[key] = read_geometry(path)
-    return _READ[key]
+    if key not in _RAW:
+        try:
+            data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            raise ValueError(f"geometry file {str(path)!r} cannot be read as YAML: "
+                             f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+        if not isinstance(data, dict) or not isinstance(data.get("units"), list) or len(data["units"]) < 2:
+            raise ValueError(f"geometry file {str(path)!r}: expected a mapping with a list of (two or more) units "
+                             "and ligaments (docs/scenes.md, Geometry sources)")
+        if len(_RAW) > 32:
+            _RAW.clear()
+        _RAW[key] = data
+    return _RAW[key]
+
+
+def set_names(data: dict) -> list[str]:
+    """The names of a geometry file's unit sets."""
+    sets = data.get("sets")
+    return [str(k) for k in sets] if isinstance(sets, dict) else []
 
 
 def resolved_path(value: str, base_dir) -> str:
@@ -133,5 +144,5 @@ def resolved_path(value: str, base_dir) -> str:
     return str(p if p.is_absolute() or base_dir is None else (Path(base_dir) / p).resolve())
 
 
-__all__ = ["GeometryFile", "GeometryLigament", "GeometryUnit", "UnitSet", "read_geometry", "read_geometry_cached",
-           "resolved_path"]
+__all__ = ["GeometryFile", "GeometryLigament", "GeometryUnit", "UnitSet", "raw_geometry", "resolved_path",
+           "set_names"]

@@ -22,7 +22,7 @@ from typing import ClassVar, Literal
 from pydantic import Field, ValidationInfo, model_validator
 
 from flexmm.config.base import Finite, GridUnits, NonNegative, Positive, Strict
-from flexmm.config.geometry import Point, UnitSet, read_geometry_cached, resolved_path
+from flexmm.config.geometry import Point, UnitSet, raw_geometry, resolved_path, set_names
 
 #: the patterns a generator makes (``models.network.geometry``)
 Pattern = Literal["rotating_squares", "random_quads", "rotating_triangles", "rotating_hexagons", "rectangles"]
@@ -103,22 +103,27 @@ class RigidNetwork(GridUnits):
         path = resolved_path(data["geometry"], (info.context or {}).get("base_dir"))
         if not Path(path).is_file():
             raise ValueError(f"geometry file {path!r} not found")
-        geo = read_geometry_cached(path)[0]
-        n = len(geo.units)
+        units = raw_geometry(path)["units"]
+        n = len(units)
         data = dict(data, geometry=path)
         for key, value in (("n_rows", 1), ("n_cols", n)):
             if data.setdefault(key, value) != value:
                 raise ValueError(f"{key}: the geometry file gives {n} units in one row (n_rows 1, n_cols {n}); "
                                  "leave n_rows and n_cols out")
-        sizes = sorted(max(math.dist(p, q) for p in u.vertices_m for q in u.vertices_m) for u in geo.units)
-        data.setdefault("a_m", sizes[len(sizes) // 2])
+        if "a_m" not in data:
+            try:
+                sizes = sorted(max(math.dist(p, q) for p in u["vertices_m"] for q in u["vertices_m"]) for u in units)
+            except (TypeError, KeyError, ValueError):
+                sizes = None  # a malformed unit: the schema check of the build says where
+            if sizes and sizes[len(sizes) // 2] > 0:
+                data["a_m"] = sizes[len(sizes) // 2]
         return data
 
     def unit_set_names(self) -> list[str]:
         """The names ``fixed_units`` and ``excitation.units`` may use: ``unit_sets`` and the file's ``sets``."""
         names = list(self.unit_sets)
         if self.geometry is not None:
-            names += list(read_geometry_cached(self.geometry)[0].sets)
+            names += set_names(raw_geometry(self.geometry))
         return names
 
     @property

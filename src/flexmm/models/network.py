@@ -170,6 +170,7 @@ class Network:
     rest_gap: np.ndarray | None = None
     grid: tuple[np.ndarray, np.ndarray] | None = None  # (row, col) of every unit
     full_grid: bool = True
+    sets: dict | None = None  # a geometry file's named unit sets (config.geometry.UnitSet)
 
 
 def generated(cfg: RigidNetwork) -> Network:
@@ -201,13 +202,22 @@ def cut(net: Network, keep: np.ndarray) -> Network:
     return Network(net.vertices[keep], links, grid=grid, full_grid=False)
 
 
+def read_geometry(path: str):
+    """(the validated ``config.geometry.GeometryFile``, its key-path -> line map); ConfigError
+    naming file:line otherwise."""
+    from flexmm.config.geometry import GeometryFile
+    from flexmm.config.loader import read_yaml, validate
+
+    data, lines = read_yaml(path)
+    return validate(GeometryFile, data, lines=lines, source=str(path)), lines
+
+
 def from_file(cfg: RigidNetwork) -> Network:
     """The network of a geometry file (``config.geometry``), its geometry checked: ConfigError at
     the file's line of the first unit or ligament at fault."""
-    from flexmm.config.geometry import read_geometry_cached
     from flexmm.config.loader import ConfigError, ConfigIssue
 
-    f, lines = read_geometry_cached(cfg.geometry)
+    f, lines = read_geometry(cfg.geometry)
     polys = [np.asarray(u.vertices_m, float) for u in f.units]
     ligs = f.ligaments
     a, i, b, j = (np.array([getattr(g, k) for g in ligs], np.int64) for k in "aibj")
@@ -238,7 +248,8 @@ def from_file(cfg: RigidNetwork) -> Network:
     for k, g in enumerate(ligs):
         if g.axis is not None:
             axis[k] = np.asarray(g.axis) / math.hypot(*g.axis)
-    return Network(vertices, (a, b, i, j, axis), mass, inertia, stiffness, rest_gap, grid=None, full_grid=False)
+    return Network(vertices, (a, b, i, j, axis), mass, inertia, stiffness, rest_gap, grid=None, full_grid=False,
+                   sets=f.sets)
 
 
 def bounding_ends(centres: np.ndarray, sizes: np.ndarray) -> dict[str, list[int]]:
@@ -250,13 +261,9 @@ def bounding_ends(centres: np.ndarray, sizes: np.ndarray) -> dict[str, list[int]
             "bottom": np.flatnonzero(y <= y.min() + h).tolist(), "top": np.flatnonzero(y >= y.max() - h).tolist()}
 
 
-def named_sets(cfg: RigidNetwork, centres_m: np.ndarray) -> dict[str, list[int]]:
-    """Every named unit set of the lattice (``unit_sets``, a geometry file's ``sets``) as unit indices."""
-    specs = dict(cfg.unit_sets)
-    if cfg.geometry is not None:
-        from flexmm.config.geometry import read_geometry_cached
-
-        specs.update(read_geometry_cached(cfg.geometry)[0].sets)
+def named_sets(specs: dict, centres_m: np.ndarray) -> dict[str, list[int]]:
+    """Named unit sets (``config.geometry.UnitSet``: the lattice's ``unit_sets``, a geometry file's
+    ``sets``) as unit indices, given the units' centres (N, 2) in m."""
     n, out = centres_m.shape[0], {}
     for name, spec in specs.items():
         units = geo.unit_set(spec, centres_m)
@@ -299,7 +306,7 @@ def build(cfg: RigidNetwork) -> System:
     else:
         ends = bounding_ends(centres, np.ptp(vertices, 1).max(1))
     hold_fixed_ends(cfg, inv_mass, ends, n)
-    groups = named_sets(cfg, centres * a)
+    groups = named_sets(dict(cfg.unit_sets) | (net.sets or {}), centres * a)
     for name in cfg.fixed_units:
         inv_mass[np.concatenate([np.asarray(groups[name]) + f * n for f in range(3)])] = 0.0
     if net.full_grid:
