@@ -8,21 +8,12 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import yaml
 from conftest import GEOMETRY_FILE
-from render_helpers import build, random_fields, write_run
-from typer.testing import CliRunner
+from render_helpers import build, export, random_fields, write_run
 
-from flexmm.cli import app
 
 SVG = "{http://www.w3.org/2000/svg}"
 LAW = {"kind": "rigid_network", "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3, "k_rot_n_m_per_rad": 2e-3,
        "areal_density_kg_m2": 20.0}
-runner = CliRunner()
-
-
-def export(*args):
-    result = runner.invoke(app, ["export", *[str(a) for a in args]])
-    assert "Traceback" not in result.output, result.output
-    return result
 
 
 def read_svg(path):

@@ -138,8 +138,9 @@ class RigidNetwork(GridUnits):
         return None
 
     def small_copy(self, n: int):
-        """The same network cut to at most about ``n`` units (for cheap estimates; not validated)."""
-        return self.grid_copy(n)
+        """The same network cut to at most about ``n`` units (for cheap estimates; not validated); a
+        network whose units are not a full grid, or carry named sets placed on it, whole."""
+        return self if self.trim_issue else self.grid_copy(n)
 
     @model_validator(mode="after")
     def _check(self):
