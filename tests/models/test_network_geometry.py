@@ -260,3 +260,20 @@ def test_rotating_hexagons_force_is_minus_the_energy_gradient_and_conserve_energ
     e = np.array([s.energy(q, s.args) + 0.5 * np.sum(s.mass * v * v) for q, v in zip(tr.q, tr.v)])
     assert e[0] > 0 and np.max(np.abs(e - e[0])) < 1e-6 * e[0]
     assert np.max(np.abs(tr.q[-1][2 * s.n_sites :])) > 1e-4
+
+
+def test_kicks_and_drives_act_on_named_sets():
+    """A kick and a force drive given ``units`` act on that set's units only (the end gives the
+    drive's direction), and a kick may not name both an end and a set."""
+    lat = {"kind": "rigid_network", "geometry": GEOMETRY_FILE, **LAW}
+    kicked = build_problem(scene(lat, excitation={"kind": "kicks", "kicks": [
+        {"units": "top", "velocity_y_m_s": 0.2}]})).system
+    n = kicked.n_sites
+    assert np.flatnonzero(kicked.v0).tolist() == [n + 2, n + 3]
+    driven = build_problem(scene(lat, excitation={"kind": "boundary_force", "end": "bottom", "units": "left_pair",
+                                                  "amplitude_n": 0.5, "duration_s": 1e-3}))
+    assert driven.terms.drv_dof.tolist() == [n + 0, n + 2]  # v of units 0 and 2 (the bottom's normal field)
+    with pytest.raises(ConfigError, match="exactly one of end, sites or units"):
+        scene(lat, excitation={"kind": "kicks", "kicks": [{"end": "left", "units": "top", "velocity_x_m_s": 1.0}]})
+    with pytest.raises(ConfigError, match="not both"):
+        scene(lat, excitation={"kind": "impact", "velocity_m_s": 1.0, "units": "top", "sites": [0]})
