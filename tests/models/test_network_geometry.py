@@ -208,6 +208,9 @@ def test_generated_patterns_are_valid_networks():
     with pytest.raises(ConfigError, match="π/6"):
         scene({"kind": "rigid_network", "pattern": "rotating_hexagons", "a_m": 1.0, "n_rows": 2, "n_cols": 3,
                **LAW, "theta0_rad": 0.6})
+    with pytest.raises(geo.GeometryError, match="the pores have closed"):  # rectangles close at |θ0| = π/4
+        built({"kind": "rigid_network", "pattern": "rectangles", "aspect_ratio": 0.5, "a_m": 0.01, "n_rows": 4,
+               "n_cols": 4, "theta0_rad": 0.8, **LAW})
     sq = built({"kind": "rigid_network", "a_m": 0.01, "n_rows": 3, "n_cols": 3, "theta0_rad": 0.2, **LAW})
     rc = built({"kind": "rigid_network", "pattern": "rectangles", "a_m": 0.01, "n_rows": 3, "n_cols": 3,
                 "theta0_rad": 0.2, **LAW})

@@ -174,7 +174,10 @@ class Network:
 
 
 def generated(cfg: RigidNetwork) -> Network:
-    """The generator's network, cut by the mask if there is one (a cut into pieces is refused)."""
+    """The generator's network, cut by the mask if there is one (a cut into pieces is refused);
+    units that overlap (their pores closed: a rest rotation too large for the shape) are refused."""
+    if cfg.pattern != "random_quads":
+        refuse_overlap(cfg)
     vertices, links = geometry(cfg)
     n = vertices.shape[0]
     row, col = np.divmod(np.arange(n), cfg.n_cols)
@@ -186,6 +189,18 @@ def generated(cfg: RigidNetwork) -> Network:
     if not keep.any():
         raise geo.GeometryError("lattice.mask keeps no unit: the outline holds no unit centre, or the holes cover it")
     return cut(net, keep)
+
+
+def refuse_overlap(cfg: RigidNetwork) -> None:
+    """GeometryError if the units of a periodic pattern overlap (checked on a 3 × 3 patch, which
+    holds every pair of neighbours of the whole sheet)."""
+    vertices, _ = geometry(cfg.model_copy(update={"n_rows": min(cfg.n_rows, 3), "n_cols": min(cfg.n_cols, 3)}))
+    pairs = geo.overlapping_pairs(list(vertices), 1e-9)
+    if pairs:
+        p, q = pairs[0]
+        raise geo.GeometryError(f"lattice: {cfg.pattern} at theta0_rad = {cfg.theta0_rad:g} overlap (units {p} and {q} "
+                                f"by {geo.overlap_depth(vertices[p], vertices[q]) * cfg.a_m:.3g} m): the pores have "
+                                "closed; use a smaller |theta0_rad| or longer ligaments")
 
 
 def cut(net: Network, keep: np.ndarray) -> Network:
