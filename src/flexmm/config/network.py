@@ -45,7 +45,10 @@ class Hole(Strict):
 
 class Mask(Strict):
     """Cut a generated sheet: keep the units whose reference centre lies inside ``outline_m`` (a
-    polygon; default the whole sheet) and outside every hole, with the ligaments between kept units."""
+    polygon; default the whole sheet) and outside every hole, with the ligaments between kept units.
+    The kept units are numbered in grid order; ``lattice.n_units`` still counts the whole grid (the
+    config does not build the geometry), so cost estimates are upper bounds: address units of a
+    masked sheet by named sets (box, circle) rather than by index."""
 
     outline_m: list[Point] | None = Field(None, min_length=3, description="outline polygon, vertices in order (m)")
     holes: list[Hole] = Field(default_factory=list)
