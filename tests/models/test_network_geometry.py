@@ -280,3 +280,12 @@ def test_kicks_and_drives_act_on_named_sets():
         scene(lat, excitation={"kind": "kicks", "kicks": [{"end": "left", "units": "top", "velocity_x_m_s": 1.0}]})
     with pytest.raises(ConfigError, match="not both"):
         scene(lat, excitation={"kind": "impact", "velocity_m_s": 1.0, "units": "top", "sites": [0]})
+
+
+def test_the_documented_geometry_file_builds(tmp_path):
+    """The example geometry file of docs/scenes.md ("Geometry sources") is a valid network."""
+    text = (Path(__file__).resolve().parents[2] / "docs" / "scenes.md").read_text()
+    block = text.split("## Geometry sources")[1].split("```yaml\n")[1].split("```")[0]
+    (tmp_path / "doc.yaml").write_text(block)
+    net = built({"kind": "rigid_network", "geometry": str(tmp_path / "doc.yaml"), **LAW})
+    assert net.n_sites == 2 and net.args.unit_a.size == 2 and net.site_groups == {"left": [0]}
