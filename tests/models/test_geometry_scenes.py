@@ -56,3 +56,18 @@ def test_tapered_sheet_from_a_geometry_file(tmp_path):
     assert t[arrival[38]] == pytest.approx(15.4e-3, abs=0.3e-3)
     assert first[2] == pytest.approx(0.964, rel=0.02)
     assert all(0.15 < first[k] < 0.2 for k in (10, 15, 20, 25, 30, 35))
+
+
+def test_a_disk_spreads_the_centre_kick(tmp_path):
+    """The 657-unit disk: the mean largest |θ| in rings around the centre falls as r^(-0.58) from
+    0.0027 rad (4–7 cm) to 0.0015 rad (13–19 cm), near a 2D wave's r^(-1/2), and rises at the rim."""
+    _, ds, _ = run("rotating_squares_disk", tmp_path)
+    assert ds.sizes["site"] == 657
+    r = np.hypot(ds["x"].values - 0.235216, ds["y"].values - 0.235216)
+    peak = np.abs(ds["theta"].values).max(0)
+    edges = np.arange(0.04, 0.23, 0.03)
+    rings = [(r[(r >= lo) & (r < hi)].mean(), peak[(r >= lo) & (r < hi)].mean()) for lo, hi in zip(edges, edges[1:])]
+    rm, pm = np.array(rings).T
+    assert pm[0] == pytest.approx(2.68e-3, rel=0.03) and pm[4] == pytest.approx(1.49e-3, rel=0.03)
+    assert np.polyfit(np.log(rm[:-1]), np.log(pm[:-1]), 1)[0] == pytest.approx(-0.58, abs=0.03)
+    assert pm[-1] > 1.2 * pm[-2]  # the free rim
