@@ -289,3 +289,12 @@ def test_the_documented_geometry_file_builds(tmp_path):
     (tmp_path / "doc.yaml").write_text(block)
     net = built({"kind": "rigid_network", "geometry": str(tmp_path / "doc.yaml"), **LAW})
     assert net.n_sites == 2 and net.args.unit_a.size == 2 and net.site_groups == {"left": [0]}
+
+
+def test_a_malformed_unit_is_reported_in_the_file_when_built(tmp_path):
+    path = broken(tmp_path, lambda d: d["units"][1].update(vertices_m=[[0.012, 0]], oops=1))
+    s = scene({"kind": "rigid_network", "geometry": path, **LAW})  # the scene only counts the units
+    with pytest.raises(ConfigError) as err:
+        MODELS["rigid_network"].build(s.lattice)
+    text = str(err.value)
+    assert f"{path}:3: units.1.vertices_m" in text and "units.1.oops" in text

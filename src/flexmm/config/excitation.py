@@ -253,7 +253,7 @@ class Soliton(Excitation):
 
 
 class Kick(Strict):
-    """Initial velocities of chosen units: an end's units, or listed sites."""
+    """Initial velocities of chosen units: an end's units, listed sites, or a named unit set."""
 
     end: End | None = None
     sites: list[Annotated[int, Field(ge=0)]] | None = None

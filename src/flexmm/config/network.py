@@ -117,9 +117,9 @@ class RigidNetwork(GridUnits):
             try:
                 sizes = sorted(max(math.dist(p, q) for p in u["vertices_m"] for q in u["vertices_m"]) for u in units)
             except (TypeError, KeyError, ValueError):
-                sizes = None  # a malformed unit: the schema check of the build says where
-            if sizes and sizes[len(sizes) // 2] > 0:
-                data["a_m"] = sizes[len(sizes) // 2]
+                sizes = None
+            # a malformed unit: a placeholder scale, the file's schema check when it is built says where
+            data["a_m"] = sizes[len(sizes) // 2] if sizes and sizes[len(sizes) // 2] > 0 else 1.0
         return data
 
     def unit_set_names(self) -> list[str]:
