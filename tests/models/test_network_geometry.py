@@ -211,6 +211,10 @@ def test_generated_patterns_are_valid_networks():
     with pytest.raises(geo.GeometryError, match="the pores have closed"):  # rectangles close at |θ0| = π/4
         built({"kind": "rigid_network", "pattern": "rectangles", "aspect_ratio": 0.5, "a_m": 0.01, "n_rows": 4,
                "n_cols": 4, "theta0_rad": 0.8, **LAW})
+    for pattern in ("rotating_hexagons", "rectangles"):  # the spacing is the columns' pitch
+        net = built({"kind": "rigid_network", "pattern": pattern, "a_m": 0.01, "n_rows": 2, "n_cols": 4,
+                     "theta0_rad": 0.2, **LAW, **({"aspect_ratio": 0.5} if pattern == "rectangles" else {})})
+        assert net.spacing_m == pytest.approx(net.site_coords["x"][1] - net.site_coords["x"][0], rel=1e-12)
     sq = built({"kind": "rigid_network", "a_m": 0.01, "n_rows": 3, "n_cols": 3, "theta0_rad": 0.2, **LAW})
     rc = built({"kind": "rigid_network", "pattern": "rectangles", "a_m": 0.01, "n_rows": 3, "n_cols": 3,
                 "theta0_rad": 0.2, **LAW})

@@ -113,6 +113,15 @@ def kagome_geometry(cfg: RigidNetwork):
     return vertices, (a, b, towards(a, axis), towards(b, -axis), axis)
 
 
+def column_pitch(cfg: RigidNetwork) -> float:
+    """Distance between neighbouring columns of a generated sheet (m)."""
+    if cfg.pattern == "rotating_hexagons":
+        return math.sqrt(3.0) * cfg.a_m * math.cos(cfg.theta0_rad)
+    if cfg.pattern == "rectangles":
+        return cfg.a_m * math.cos(cfg.theta0_rad + math.pi / 4 - math.atan(cfg.aspect_ratio)) + cfg.ligament_length_m
+    return cfg.a_m * math.cos(cfg.theta0_rad) + cfg.ligament_length_m
+
+
 def geometry(cfg: RigidNetwork):
     """(vertices (N, V, 2) in units of a, links (units a, units b, vertex of a, vertex of b, axis))."""
     if cfg.pattern in ("rotating_triangles", "rotating_hexagons"):
@@ -337,7 +346,7 @@ def build(cfg: RigidNetwork) -> System:
         coords |= {"row": net.grid[0], "col": net.grid[1]}
         attrs = COORD_ATTRS
     joined = np.hypot(*(centres[ub] - centres[ua]).T)
-    spacing = a * math.cos(cfg.theta0_rad) + cfg.ligament_length_m if net.full_grid else a * float(np.median(joined))
+    spacing = column_pitch(cfg) if net.full_grid else a * float(np.median(joined))
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=Scales(a, math.sqrt(m / kl), m),
         mass=mass, inv_mass=inv_mass, args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
