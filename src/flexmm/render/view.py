@@ -121,7 +121,7 @@ def describe(src: RunSource, lattice, structure, scale: float) -> tuple[str, str
             "mass_chain": lambda: f"{n} masses"}.get(kind, lambda: f"{n} units")()
     if isinstance(structure, RigidStructure) and structure.p.n_lateral:
         size += f", n_lateral = {structure.p.n_lateral} (mirror row{'s' if structure.p.n_lateral > 1 else ''} shaded)"
-    if n > 1 and int(structure.sites[1] - structure.sites[0]) > 1:  # a masked network saves all its units
+    if n != getattr(lattice, "n_units", n) and getattr(lattice, "mask", None) is None:  # a mask removes units
         size += f" ({n} saved: output.site_stride > 1)"
     what = "displacements and rotations" if isinstance(structure, RigidStructure) else "displacements"
     scale_txt = "drawn to scale" if scale == 1 else f"{what} ×{scale:g} (exaggerated)"
