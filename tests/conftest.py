@@ -8,6 +8,7 @@ a new model is noticed. Add a small representative config for it below.
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import pytest
 
@@ -54,6 +55,8 @@ def _chain(**changes) -> dict:
 
 _SHEET = LEGO_SHEET
 # rotating triangles (docs/physics.md §1.6): LEGO k_l, a stiffer shear spring (0.1 k_l) to couple the fields
+#: a geometry file of two squares and two triangles (tests/models/data)
+GEOMETRY_FILE = str(Path(__file__).resolve().parent / "models" / "data" / "mixed_units.yaml")
 _NET = {"kind": "rigid_network", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
         "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0}
 _TRI = {"a_m": 0.02, "k_long_n_per_m": LEGO_PARAMETERS["k_long_n_per_m"], "k_shear_n_per_m": 7169.0,
@@ -158,6 +161,17 @@ EXAMPLE_LATTICES: dict[str, dict[str, dict]] = {
         "kagome-3x4": {"lattice": dict(_NET, pattern="rotating_triangles", n_rows=3, n_cols=4, theta0_rad=-0.15,
                                        bottom="fixed"),
                        "translation_invariant": True},
+        "hexagons-3x4": {"lattice": dict(_NET, pattern="rotating_hexagons", n_rows=3, n_cols=4, theta0_rad=0.2),
+                         "translation_invariant": True},
+        "rectangles-3x3": {"lattice": dict(_NET, pattern="rectangles", aspect_ratio=0.6, n_rows=3, n_cols=3,
+                                           theta0_rad=0.1, ligament_length_m=0.001),
+                           "translation_invariant": True},
+        "file-mixed": {"lattice": {k: v for k, v in _NET.items() if k != "a_m"} | {"geometry": GEOMETRY_FILE},
+                       "translation_invariant": True},
+        "masked-squares-4x4": {"lattice": dict(_NET, n_rows=4, n_cols=4, theta0_rad=0.2,
+                                               mask={"holes": [{"circle_m": [0.0, 0.0, 0.004]}]},
+                                               unit_sets={"far": {"box_m": [0.02, 0.02, 1.0, 1.0]}}, fixed_units=["far"]),
+                               "translation_invariant": True},
     },
     "bistable_linkage": {
         "six-bars": {

@@ -48,6 +48,18 @@ def _end_dofs(system: System, end: str, field_name: str | None = None,
     return [system.dof(fname, s) for s in (system.ends[end] if sites is None else sites)]
 
 
+def _targets(system: System, exc) -> list[int] | None:
+    """The units an excitation (or kick) lists: its ``sites``, or the named unit set ``units``
+    (``System.site_groups``); None: its end's units."""
+    name = getattr(exc, "units", None)
+    if name is None:
+        return exc.sites
+    if name not in system.site_groups:
+        raise SceneError(f"excitation units {name!r}: model {system.model!r} has no such unit set "
+                         f"({', '.join(system.site_groups) or 'none'})")
+    return system.site_groups[name]
+
+
 def _launch_solitons(system: System, scene: Scene, pulses) -> None:
     """Superpose launched solitons (each launcher overwrites q0, v0; their states are added).
 
@@ -78,7 +90,8 @@ def apply_kicks(system: System, scene: Scene, exc, terms: dict) -> None:
     """Add initial velocities (x, y, rotation) to the kicked units."""
     sc, axes = system.scales, system.axis_fields
     for kick in exc.kicks:
-        sites = system.ends[kick.end] if kick.sites is None else kick.sites
+        sites = _targets(system, kick)
+        sites = system.ends[kick.end] if sites is None else sites
         for axis, value in (("x", kick.velocity_x_m_s), ("y", kick.velocity_y_m_s)):
             if value:
                 if axis not in axes:
@@ -135,14 +148,14 @@ def apply_impact(system: System, scene: Scene, exc, terms: dict) -> None:
     """An initial velocity of the end units, or a striker DOF with its contact."""
     sc = system.scales
     direction = INWARD[exc.end]
-    dofs = _end_dofs(system, exc.end, sites=exc.sites)
+    dofs = _end_dofs(system, exc.end, sites=_targets(system, exc))
     if exc.striker is not None:
         ij, prm = _add_striker(system, exc, dofs[0], direction)
         terms["con_ij"], terms["con_prm"] = ij, prm
     else:
         system.v0[dofs] += direction * exc.velocity_m_s / sc.velocity
     if exc.angular_velocity_rad_s:
-        rot = _end_dofs(system, exc.end, _rotation_field(system, "angular_velocity_rad_s"), exc.sites)
+        rot = _end_dofs(system, exc.end, _rotation_field(system, "angular_velocity_rad_s"), _targets(system, exc))
         system.v0[rot] += exc.angular_velocity_rad_s * sc.time_s
 
 
@@ -150,9 +163,9 @@ def apply_shaker(system: System, scene: Scene, exc, terms: dict) -> None:
     """A harmonic drive row (displacement, force or prescribed rotation) with its ramps."""
     sc = system.scales
     direction = INWARD[exc.end]
-    dofs = _end_dofs(system, exc.end, sites=exc.sites)
+    dofs = _end_dofs(system, exc.end, sites=_targets(system, exc))
     if exc.amplitude_rad is not None:  # a prescribed harmonic rotation of the end units
-        dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_rad"), exc.sites)
+        dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_rad"), _targets(system, exc))
         amp, mode = exc.amplitude_rad, MODE_DISPLACEMENT
     elif exc.mode == "displacement":
         amp, mode = direction * exc.amplitude_m / sc.length_m, MODE_DISPLACEMENT
@@ -168,10 +181,10 @@ def apply_boundary_displacement(system: System, scene: Scene, exc, terms: dict) 
     """A prescribed displacement (or rotation) pulse of the end units."""
     sc = system.scales
     direction = INWARD[exc.end]
-    dofs = _end_dofs(system, exc.end, sites=exc.sites)
+    dofs = _end_dofs(system, exc.end, sites=_targets(system, exc))
     if exc.amplitude_rad is not None:  # a prescribed rotation of the end units
         rot = _rotation_field(system, "amplitude_rad")
-        dofs = _end_dofs(system, exc.end, rot, exc.sites)
+        dofs = _end_dofs(system, exc.end, rot, _targets(system, exc))
         amp = exc.amplitude_rad
     else:
         amp = direction * exc.amplitude_m / sc.length_m
@@ -191,10 +204,10 @@ def apply_boundary_force(system: System, scene: Scene, exc, terms: dict) -> None
     """An applied force (or moment) pulse on the end units; no DOF is held."""
     sc = system.scales
     if exc.amplitude_n_m is not None:  # a moment on the staggered rotation of the end units
-        dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_n_m"), exc.sites)
+        dofs = _end_dofs(system, exc.end, _rotation_field(system, "amplitude_n_m"), _targets(system, exc))
         amp = exc.amplitude_n_m / sc.generalised_force("angle")
     else:
-        dofs = _end_dofs(system, exc.end, sites=exc.sites)
+        dofs = _end_dofs(system, exc.end, sites=_targets(system, exc))
         amp = INWARD[exc.end] * exc.amplitude_n / sc.force
     _drive(system, exc, terms, dofs, MODE_FORCE, SHAPES[exc.shape], _pulse_row(system, exc, amp))
 
@@ -225,7 +238,8 @@ def _drive_components(system: System, exc, dofs: list[int]) -> list[tuple[list[i
     nx, ny = _INWARD_XY[exc.end]
     a = math.radians(angle)
     dx, dy = nx * math.cos(a) - ny * math.sin(a), nx * math.sin(a) + ny * math.cos(a)
-    sites = system.ends[exc.end] if exc.sites is None else exc.sites
+    sites = _targets(system, exc)
+    sites = system.ends[exc.end] if sites is None else sites
     sign = INWARD[exc.end]  # undo the normal's sign already in the amplitude
     return [([system.dof(axes[f], s) for s in sites], sign * comp)
             for f, comp in (("x", dx), ("y", dy)) if abs(comp) > 1e-15]

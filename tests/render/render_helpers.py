@@ -88,3 +88,14 @@ def hinge_points_drawn(poly: np.ndarray) -> np.ndarray:
         return poly
     arms = poly.reshape(len(poly), 4, 3, 2)
     return 0.5 * (arms[:, :, 0] + arms[:, :, 1])
+
+
+def export(*args):
+    """``flexmm export ARGS`` through typer's runner; never a traceback."""
+    from typer.testing import CliRunner
+
+    from flexmm.cli import app
+
+    result = CliRunner().invoke(app, ["export", *[str(a) for a in args]])
+    assert "Traceback" not in result.output, result.output
+    return result

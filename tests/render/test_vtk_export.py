@@ -9,23 +9,14 @@ import numpy as np
 import pytest
 import xarray as xr
 from conftest import LEGO_CHAIN
-from render_helpers import build, random_fields, write_run
-from typer.testing import CliRunner
+from render_helpers import build, export, random_fields, write_run
 
-from flexmm.cli import app
 
 meshio = pytest.importorskip("meshio")
 
 CHAIN = dict(LEGO_CHAIN, n_units=12, theta0_rad=0.1)
 MASSES = {"kind": "mass_chain", "n_units": 10, "spacing_m": 0.01, "mass_kg": 0.01,
           "bond": {"law": "linear", "k_n_per_m": 100.0}}
-runner = CliRunner()
-
-
-def export(*args):
-    result = runner.invoke(app, ["export", *[str(a) for a in args]])
-    assert "Traceback" not in result.output, result.output
-    return result
 
 
 def read_series(pvd):

@@ -57,9 +57,17 @@ def _edge_issue(end: str) -> str | None:
     return None if end in ("left", "right") else f"excitation on the {end} edge is not a wave along x"
 
 
+def _sites_or_units(exc):
+    """At most one of ``sites`` (indices) and ``units`` (a named set)."""
+    if exc.sites is not None and exc.units is not None:
+        raise ValueError("give sites (unit indices) or units (a named unit set), not both")
+    return exc
+
+
 def _end_sources(exc) -> list[int | str] | None:
-    """An end drive starts waves at its end (left/right) or at its listed sites."""
-    if exc.end not in ("left", "right"):
+    """An end drive starts waves at its end (left/right) or at its listed sites (a named unit set:
+    anywhere, for all the config knows)."""
+    if exc.end not in ("left", "right") or exc.units is not None:
         return None
     return [exc.end] if exc.sites is None else list(exc.sites)
 
@@ -86,9 +94,16 @@ class Impact(Excitation):
     sites: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="units hit (a point or a line); default every unit of the end"
     )
+    units: str | None = Field(
+        None, description="instead of sites: a named unit set of the lattice (a rigid network's unit_sets or "
+        "geometry sets); the end still gives the direction"
+    )
 
     @model_validator(mode="after")
     def _one_striker_site(self):
+        _sites_or_units(self)
+        if self.striker is not None and self.units is not None:
+            raise ValueError("a striker hits one unit: give a single site, not units")
         if self.striker is not None and self.sites is not None and len(self.sites) != 1:
             raise ValueError("a striker hits one unit: give a single site (or none)")
         return self
@@ -100,7 +115,7 @@ class Impact(Excitation):
         return abs(self.velocity_m_s)
 
     def planar_issue(self) -> str | None:
-        if self.striker is not None or self.sites is not None:
+        if self.striker is not None or self.sites is not None or self.units is not None:
             return _edge_issue(self.end) or "the impact hits single units, not a whole edge"
         return _edge_issue(self.end)
 
@@ -117,12 +132,20 @@ class EndDrive(Excitation):
     sites: list[Annotated[int, Field(ge=0)]] | None = Field(
         None, description="units driven (a point or a line); default every unit of the end"
     )
+    units: str | None = Field(
+        None, description="instead of sites: a named unit set of the lattice (a rigid network's unit_sets or "
+        "geometry sets); the end still gives the direction"
+    )
+
+    @model_validator(mode="after")
+    def _where(self):
+        return _sites_or_units(self)
 
     def sources(self):
         return _end_sources(self)
 
     def planar_issue(self) -> str | None:
-        return _edge_issue(self.end)
+        return _edge_issue(self.end) or ("the drive acts on a unit set, not a whole edge" if self.units else None)
 
 
 def _along_or_about(exc, along: str, about: str, names: tuple[str, str], tilt: str):
@@ -230,16 +253,21 @@ class Soliton(Excitation):
 
 
 class Kick(Strict):
-    """Initial velocities of chosen units: an end's units, or listed sites."""
+    """Initial velocities of chosen units: an end's units, listed sites, or a named unit set."""
 
     end: End | None = None
     sites: list[Annotated[int, Field(ge=0)]] | None = None
     velocity_x_m_s: Finite = 0.0
     velocity_y_m_s: Finite = Field(0.0, description="2D lattices only")
     angular_velocity_rad_s: Finite = Field(0.0, description="rate of the staggered rotation θ")
+    units: str | None = Field(None, description="instead of end or sites: a named unit set of the lattice")
 
     @model_validator(mode="after")
     def _where(self):
+        if self.units is not None:
+            if self.end is not None or self.sites is not None:
+                raise ValueError("give exactly one of end, sites or units (a named unit set)")
+            return self
         return exactly_one(self, "end", "sites")
 
 
@@ -253,11 +281,13 @@ class Kicks(Excitation):
         return list(self.kicks)
 
     def sources(self):
+        if any(k.units is not None for k in self.kicks):
+            return None
         return [s for k in self.kicks for s in (k.sites if k.sites is not None else [k.end])]
 
     def planar_issue(self) -> str | None:
         for k in self.kicks:
-            if k.sites is not None or k.end not in ("left", "right") or k.velocity_y_m_s:
+            if k.sites is not None or k.units is not None or k.end not in ("left", "right") or k.velocity_y_m_s:
                 return "a kick on listed units, a y edge, or along y is not planar"
         return None
 

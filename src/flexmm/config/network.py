@@ -5,7 +5,12 @@ Rigid polygons joined vertex to vertex by ligaments, each with the paper's three
 comes from a generator: ``rotating_squares`` (the units of ``rotating_squares_sheet``, any θ0 and
 ligament length, rotations unstaggered) or ``random_quads`` (the same lattice with every vertex of
 every unit moved at random by up to ``vertex_jitter`` of a, seeded: the quads of a disordered sheet)
-or ``rotating_triangles`` (the kagome of docs/physics.md §1.6). ``ligament_law`` chooses the
+or ``rotating_triangles`` (the kagome of docs/physics.md §1.6) or ``rotating_hexagons`` (that kagome
+with regular hexagons, joined at alternate vertices) or ``rectangles`` (the squares' sheet with
+rectangles of side ratio ``aspect_ratio``); or from a geometry file (``geometry``,
+``config.geometry``). A ``mask`` cuts a generated sheet to an outline with holes; named unit sets
+(``unit_sets``, and a file's ``sets``) are what ``fixed_units`` clamps and excitations drive
+(``excitation.units``). ``ligament_law`` chooses the
 ligaments' law (the paper's springs, or DifFlexMM's with nonlinear or linearised strains) and
 ``contact`` adds an energy-based contact between units that share a pore.
 """
@@ -13,11 +18,48 @@ ligaments' law (the paper's springs, or DifFlexMM's with nonlinear or linearised
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import ClassVar, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, model_validator
 
 from flexmm.config.base import Finite, GridUnits, NonNegative, Positive, Strict
+from flexmm.config.geometry import Point, UnitSet, raw_geometry, resolved_path, set_names
+
+#: the patterns a generator makes (``models.network.geometry``)
+Pattern = Literal["rotating_squares", "random_quads", "rotating_triangles", "rotating_hexagons", "rectangles"]
+
+
+class Hole(Strict):
+    """A hole of a mask: a circle or a polygon; units whose centre lies inside are removed."""
+
+    circle_m: list[Finite] | None = Field(None, min_length=3, max_length=3, description="[x, y, radius] (m)")
+    polygon_m: list[Point] | None = Field(None, min_length=3, description="vertices in order (m)")
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.circle_m is None) == (self.polygon_m is None):
+            raise ValueError("give exactly one of circle_m or polygon_m")
+        if self.circle_m is not None and not self.circle_m[2] > 0:
+            raise ValueError(f"circle_m {self.circle_m}: the radius must be positive")
+        return self
+
+
+class Mask(Strict):
+    """Cut a generated sheet: keep the units whose reference centre lies inside ``outline_m`` (a
+    polygon; default the whole sheet) and outside every hole, with the ligaments between kept units.
+    The kept units are numbered in grid order; ``lattice.n_units`` still counts the whole grid (the
+    config does not build the geometry), so cost estimates are upper bounds: address units of a
+    masked sheet by named sets (box, circle) rather than by index."""
+
+    outline_m: list[Point] | None = Field(None, min_length=3, description="outline polygon, vertices in order (m)")
+    holes: list[Hole] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _something(self):
+        if self.outline_m is None and not self.holes:
+            raise ValueError("a mask needs an outline_m or holes")
+        return self
 
 
 class UnitContact(Strict):
@@ -37,11 +79,13 @@ class RigidNetwork(GridUnits):
     #: per-site coordinates of the built model, in state order (models.network.FIELDS)
     FIELD_NAMES: ClassVar[tuple[str, ...]] = ("u", "v", "theta")
 
-    pattern: Literal["rotating_squares", "random_quads", "rotating_triangles"] = Field(
+    pattern: Pattern = Field(
         "rotating_squares", description="geometry generator: squares of diagonal a at rest rotations ±θ0 "
-        "(checkerboard), the same with every vertex moved at random (random_quads), or the kagome of "
-        "equilateral triangles of side a twisted by ±θ0 (rotating_triangles)")
-    a_m: Positive = Field(description="vertex-to-vertex size of a unit (m): a square's diagonal, a triangle's side")
+        "(checkerboard), the same with every vertex moved at random (random_quads), the kagome of "
+        "equilateral triangles of side a twisted by ±θ0 (rotating_triangles), that kagome of regular "
+        "hexagons of side a (rotating_hexagons), or rectangles of diagonal a (rectangles)")
+    a_m: Positive = Field(description="vertex-to-vertex size of a unit (m): a square's or rectangle's diagonal, "
+                          "a triangle's or hexagon's side; with a geometry file its default is the units' median size")
     theta0_rad: Finite = Field(0.0, description="rest rotation of the units (rad), alternating in sign")
     ligament_length_m: NonNegative = Field(0.0, description="rest length of every ligament (m)")
     vertex_jitter: NonNegative = Field(
@@ -58,23 +102,94 @@ class RigidNetwork(GridUnits):
     contact: UnitContact | None = Field(
         None, description="energy-based contact between units sharing a pore (none: units may overlap)")
 
+    aspect_ratio: float = Field(1.0, gt=0.0, le=1.0, description="rectangles: short side / long side "
+                                "(1: the squares)")
+    geometry: str | None = Field(None, description="a geometry file (YAML: units, ligaments, sets; "
+                                 "config.geometry) instead of a generator; relative to the config file")
+    mask: Mask | None = Field(None, description="generated sheets: keep the units inside an outline and "
+                              "outside holes")
+    unit_sets: dict[str, UnitSet] = Field(default_factory=dict, description="named unit sets (listed, box, "
+                                          "circle) for fixed_units and excitation.units")
+    fixed_units: list[str] = Field(default_factory=list, description="named unit sets whose units are held "
+                                   "(every DOF)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_file(cls, data, info: ValidationInfo):
+        """A geometry file sets the unit count (one row of N units) and, by default, a_m."""
+        if not isinstance(data, dict) or not isinstance(data.get("geometry"), str):
+            return data
+        path = resolved_path(data["geometry"], (info.context or {}).get("base_dir"))
+        if not Path(path).is_file():
+            raise ValueError(f"geometry file {path!r} not found")
+        units = raw_geometry(path)["units"]
+        n = len(units)
+        data = dict(data, geometry=path)
+        for key, value in (("n_rows", 1), ("n_cols", n)):
+            if data.setdefault(key, value) != value:
+                raise ValueError(f"{key}: the geometry file gives {n} units in one row (n_rows 1, n_cols {n}); "
+                                 "leave n_rows and n_cols out")
+        if "a_m" not in data:
+            try:
+                sizes = sorted(max(math.dist(p, q) for p in u["vertices_m"] for q in u["vertices_m"]) for u in units)
+            except (TypeError, KeyError, ValueError):
+                sizes = None
+            # a malformed unit: a placeholder scale, the file's schema check when it is built says where
+            data["a_m"] = sizes[len(sizes) // 2] if sizes and sizes[len(sizes) // 2] > 0 else 1.0
+        return data
+
+    def unit_set_names(self) -> list[str]:
+        """The names ``fixed_units`` and ``excitation.units`` may use: ``unit_sets`` and the file's ``sets``."""
+        names = list(self.unit_sets)
+        if self.geometry is not None:
+            names += set_names(raw_geometry(self.geometry))
+        return names
+
+    @property
+    def trim_issue(self) -> str | None:
+        """Why the planner may not cut the sheet along x (None: it may)."""
+        if self.geometry is not None:
+            return "the units come from a geometry file"
+        if self.mask is not None:
+            return "the sheet is masked"
+        if self.unit_sets:
+            return "named unit sets are placed on the whole sheet"
+        return None
+
     def small_copy(self, n: int):
-        """The same network cut to at most about ``n`` units (for cheap estimates; not validated)."""
-        return self.grid_copy(n)
+        """The same network cut to at most about ``n`` units (for cheap estimates; not validated); a
+        network whose units are not a full grid, or carry named sets placed on it, whole."""
+        return self if self.trim_issue else self.grid_copy(n)
 
     @model_validator(mode="after")
     def _check(self):
         for a, b in (("left", "right"), ("bottom", "top")):
             if "periodic" in (getattr(self, a), getattr(self, b)):
                 raise ValueError(f"{a}/{b}: a rigid_network's edges are free or fixed (periodic is not supported yet)")
+        if self.geometry is not None:
+            given = [k for k in ("pattern", "theta0_rad", "ligament_length_m", "vertex_jitter", "seed",
+                                 "aspect_ratio", "mask") if getattr(self, k) != type(self).model_fields[k].default]
+            if given:
+                raise ValueError(f"geometry: the file gives the units and ligaments; remove {', '.join(given)}")
+        names = self.unit_set_names()
+        if len(set(names)) != len(names):
+            raise ValueError(f"unit_sets: a name is given twice (here and in the geometry file): {names}")
+        unknown = [s for s in self.fixed_units if s not in names]
+        if unknown:
+            raise ValueError(f"fixed_units {unknown}: not a named unit set (unit_sets"
+                             f"{', geometry sets' if self.geometry else ''}: {', '.join(names) or 'none'})")
+        if self.pattern != "rectangles" and self.aspect_ratio != 1.0:
+            raise ValueError("aspect_ratio shapes the units of rectangles: set pattern: rectangles")
         if self.pattern != "random_quads" and self.vertex_jitter:
             raise ValueError("vertex_jitter moves the vertices of random_quads: set pattern: random_quads")
         if self.ligament_law == "difflexmm" and not self.ligament_length_m:
             raise ValueError("ligament_law difflexmm measures the bond's stretch and angle: it needs "
                              "ligament_length_m > 0")
-        if self.pattern == "rotating_triangles":
+        if self.pattern in ("rotating_triangles", "rotating_hexagons"):
             if self.ligament_length_m:
-                raise ValueError("rotating_triangles are hinged vertex to vertex: ligament_length_m must be 0")
-            if not abs(self.theta0_rad) < math.pi / 3:
-                raise ValueError(f"rotating_triangles: |theta0_rad| < π/3 (the pores close), got {self.theta0_rad}")
+                raise ValueError(f"{self.pattern} are hinged vertex to vertex: ligament_length_m must be 0")
+            limit = math.pi / 3 if self.pattern == "rotating_triangles" else math.pi / 6
+            if not abs(self.theta0_rad) < limit:
+                raise ValueError(f"{self.pattern}: |theta0_rad| < {'π/3' if limit > 1 else 'π/6'} (the pores "
+                                 f"close), got {self.theta0_rad}")
         return self

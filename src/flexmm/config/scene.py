@@ -207,6 +207,12 @@ class Scene(Strict):
             bad = [s for s in (getattr(t, "sites", None) or []) if s >= n]
             if bad:
                 raise ValueError(f"excitation sites {bad} outside 0..{n - 1}")
+            if getattr(t, "units", None) is not None:
+                names = lat.unit_set_names() if hasattr(lat, "unit_set_names") else None
+                if names is None or t.units not in names:
+                    where = f"this lattice's unit sets: {', '.join(names) or 'none'}" if names is not None else \
+                        f"a {lat.kind} lattice has no named unit sets (a rigid_network has)"
+                    raise ValueError(f"excitation units {t.units!r}: not a named unit set ({where})")
         for p in exc.launches():
             if p.center_site >= n:
                 raise ValueError(f"excitation.center_site={p.center_site} is outside 0..{n - 1}")

@@ -19,10 +19,12 @@ hinge joins the two vertices that point along its axis at rest.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from flexmm.config.network import RigidNetwork
+from flexmm.models import geometry as geo
 from flexmm.models import ligaments as lg
 from flexmm.models import unit_contact as uc
 from flexmm.models.base import FieldSpec, System, UnitShapes
@@ -68,32 +70,65 @@ def square_links(n_rows: int, n_cols: int):
     return a, b, va, vb, axis
 
 
-def triangle_geometry(cfg: RigidNetwork):
+def rectangle_vertices(cfg: RigidNetwork) -> np.ndarray:
+    """(N, 4, 2) vertices of rotating rectangles of diagonal a and side ratio ρ = aspect_ratio (units
+    of a; docs/physics.md §1.9): β = atan ρ, a + unit's vertices at σ-angles φ0 + (0, 2β, π, π + 2β)
+    with φ0 = θ0 + π/4 − β, a − unit the + unit mirrored in x; the squares' links (ρ = 1: the squares)."""
+    nr, nc = cfg.n_rows, cfg.n_cols
+    r, c = np.divmod(np.arange(nr * nc), nc)
+    beta = math.atan(cfg.aspect_ratio)
+    phi0 = cfg.theta0_rad + math.pi / 4 - beta
+    up = (r + c) % 2 == 0
+    offsets = np.where(up[:, None], [0.0, 2 * beta, math.pi, math.pi + 2 * beta],
+                       [0.0, math.pi - 2 * beta, math.pi, 2 * math.pi - 2 * beta])
+    ang = np.where(up, phi0, -phi0)[:, None] + offsets
+    ell = cfg.ligament_length_m / cfg.a_m
+    centres = np.stack([c * (math.cos(phi0) + ell), r * (math.sin(phi0 + 2 * beta) + ell)], 1)
+    return centres[:, None, :] + 0.5 * np.stack([np.cos(ang), np.sin(ang)], -1)
+
+
+def kagome_geometry(cfg: RigidNetwork):
     """The kagome of rotating triangles (docs/physics.md §1.6; ``models.rotating_triangles``'s
-    centroids and hinges): (N, 3, 2) vertices in units of the side a, and the links — each hinge
-    joins the vertex of A and the vertex of B that point along its axis at rest."""
+    centroids and hinges), or of regular hexagons of side a on the same sites whose alternate
+    vertices are those triangles' (side √3 a): (N, 3 or 6, 2) vertices in units of a, and the links —
+    each hinge joins the linked vertex of A and that of B that point along its axis at rest."""
     from flexmm.models.rotating_triangles import HALF, centroids, kagome_hinges, sublattice_sign
 
     nr, nc, t0 = cfg.n_rows, cfg.n_cols, cfg.theta0_rad
+    hexagons = cfg.pattern == "rotating_hexagons"
+    side = math.sqrt(3.0) if hexagons else 1.0  # the triangle of linked vertices, in units of a
+    step = [0.0, 60.0] if hexagons else [0.0]  # a hexagon's vertex between two linked ones
     sigma = sublattice_sign(nr, nc)
     x, y = centroids(nr, nc, t0)
-    ang = (np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad([90.0, 210.0, 330.0])[None, :]
-           + (sigma * t0)[:, None])
-    vertices = np.stack([x, y], 1)[:, None, :] + HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
+    centres = side * np.stack([x, y], 1)
+    deg = (np.array([90.0, 210.0, 330.0])[:, None] + np.array(step)[None, :]).ravel()
+    ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad(deg)[None, :] + (sigma * t0)[:, None]
+    vertices = centres[:, None, :] + side * HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
     a, b, beta = kagome_hinges(nr, nc, False, False)
     axis = np.stack([np.cos(beta), np.sin(beta)], 1)
 
-    def towards(unit, direction):  # the vertex of each unit pointing closest to ``direction`` (L, 2)
-        d = vertices[unit] - np.stack([x, y], 1)[unit][:, None, :]
-        return np.argmax(np.einsum("lvk,lk->lv", d, direction), axis=1)
+    def towards(unit, direction):  # the linked vertex of each unit pointing closest to ``direction`` (L,)
+        d = vertices[unit, :: len(step)] - centres[unit][:, None, :]
+        return len(step) * np.argmax(np.einsum("lvk,lk->lv", d, direction), axis=1)
 
     return vertices, (a, b, towards(a, axis), towards(b, -axis), axis)
 
 
+def column_pitch(cfg: RigidNetwork) -> float:
+    """Distance between neighbouring columns of a generated sheet (m)."""
+    if cfg.pattern == "rotating_hexagons":
+        return math.sqrt(3.0) * cfg.a_m * math.cos(cfg.theta0_rad)
+    if cfg.pattern == "rectangles":
+        return cfg.a_m * math.cos(cfg.theta0_rad + math.pi / 4 - math.atan(cfg.aspect_ratio)) + cfg.ligament_length_m
+    return cfg.a_m * math.cos(cfg.theta0_rad) + cfg.ligament_length_m
+
+
 def geometry(cfg: RigidNetwork):
     """(vertices (N, V, 2) in units of a, links (units a, units b, vertex of a, vertex of b, axis))."""
-    if cfg.pattern == "rotating_triangles":
-        return triangle_geometry(cfg)
+    if cfg.pattern in ("rotating_triangles", "rotating_hexagons"):
+        return kagome_geometry(cfg)
+    if cfg.pattern == "rectangles":
+        return rectangle_vertices(cfg), square_links(cfg.n_rows, cfg.n_cols)
     return square_vertices(cfg), square_links(cfg.n_rows, cfg.n_cols)
 
 
@@ -139,35 +174,201 @@ def ligament_table(vertices: np.ndarray, centres: np.ndarray, links, ks: float, 
     return lig
 
 
-def build(cfg: RigidNetwork) -> System:
-    """The network as a System: state (u, v, θ) of its units; edges free or fixed (all DOFs held)."""
-    nr, nc, n, a = cfg.n_rows, cfg.n_cols, cfg.n_units, cfg.a_m
+@dataclass
+class Network:
+    """A network's geometry before assembly, in units of a: polygons (N, V, 2), links, optional SI
+    masses and inertias (N,) (NaN: from the polygon), per-link SI stiffnesses (L, 3) (NaN: the
+    lattice's), rest gaps (L, 2) (NaN: the vertices' separation), and the grid it lies on (None:
+    no full grid)."""
+
+    vertices: np.ndarray
+    links: tuple
+    mass_kg: np.ndarray | None = None
+    inertia_kg_m2: np.ndarray | None = None
+    stiffness: np.ndarray | None = None
+    rest_gap: np.ndarray | None = None
+    grid: tuple[np.ndarray, np.ndarray] | None = None  # (row, col) of every unit
+    full_grid: bool = True
+    sets: dict | None = None  # a geometry file's named unit sets (config.geometry.UnitSet)
+
+
+def generated(cfg: RigidNetwork) -> Network:
+    """The generator's network, cut by the mask if there is one (a cut into pieces is refused);
+    units that overlap (their pores closed: a rest rotation too large for the shape) are refused."""
+    if cfg.pattern != "random_quads":
+        refuse_overlap(cfg)
     vertices, links = geometry(cfg)
+    n = vertices.shape[0]
+    row, col = np.divmod(np.arange(n), cfg.n_cols)
+    net = Network(vertices, links, grid=(row, col))
+    if cfg.mask is None:
+        return net
+    _, centres, _ = polygon_inertia(vertices, 1.0)
+    keep = geo.mask_keep(cfg.mask, centres * cfg.a_m)
+    if not keep.any():
+        raise geo.GeometryError("lattice.mask keeps no unit: the outline holds no unit centre, or the holes cover it")
+    return cut(net, keep)
+
+
+def refuse_overlap(cfg: RigidNetwork) -> None:
+    """GeometryError if the units of a periodic pattern overlap (checked on a 3 × 3 patch, which
+    holds every pair of neighbours of the whole sheet)."""
+    vertices, _ = geometry(cfg.model_copy(update={"n_rows": min(cfg.n_rows, 3), "n_cols": min(cfg.n_cols, 3)}))
+    pairs = geo.overlapping_pairs(list(vertices), 1e-9)
+    if pairs:
+        p, q = pairs[0]
+        raise geo.GeometryError(f"lattice: {cfg.pattern} at theta0_rad = {cfg.theta0_rad:g} overlap (units {p} and {q} "
+                                f"by {geo.overlap_depth(vertices[p], vertices[q]) * cfg.a_m:.3g} m): the pores have "
+                                "closed; use a smaller |theta0_rad| or longer ligaments")
+
+
+def cut(net: Network, keep: np.ndarray) -> Network:
+    """``net`` with only the units ``keep`` (N,) bool and the links between them; refused if the
+    units kept fall into disconnected pieces."""
+    new = np.cumsum(keep) - 1
+    a, b, va, vb, axis = net.links
+    both = keep[a] & keep[b]
+    links = (new[a[both]], new[b[both]], va[both], vb[both], axis[both])
+    groups = geo.pieces(int(keep.sum()), links[0], links[1])
+    if len(groups) > 1:
+        raise geo.GeometryError(f"lattice.mask: {geo.describe_pieces(groups)}; change the outline or holes")
+    grid = None if net.grid is None else (net.grid[0][keep], net.grid[1][keep])
+    return Network(net.vertices[keep], links, grid=grid, full_grid=False)
+
+
+def read_geometry(path: str):
+    """(the validated ``config.geometry.GeometryFile``, its key-path -> line map); ConfigError
+    naming file:line otherwise."""
+    from flexmm.config.geometry import GeometryFile
+    from flexmm.config.loader import read_yaml, validate
+
+    data, lines = read_yaml(path)
+    return validate(GeometryFile, data, lines=lines, source=str(path)), lines
+
+
+def from_file(cfg: RigidNetwork) -> Network:
+    """The network of a geometry file (``config.geometry``), its geometry checked: ConfigError at
+    the file's line of the first unit or ligament at fault."""
+    from flexmm.config.loader import ConfigError, ConfigIssue
+
+    f, lines = read_geometry(cfg.geometry)
+    polys = [np.asarray(u.vertices_m, float) for u in f.units]
+    ligs = f.ligaments
+    a, i, b, j = (np.array([getattr(g, k) for g in ligs], np.int64) for k in "aibj")
+    issues = geo.geometry_issues(polys, a, i, b, j)
+    if issues:
+        def line(path):
+            return next((lines[path[:k]] for k in range(len(path), 0, -1) if path[:k] in lines), None)
+        raise ConfigError([ConfigIssue(cfg.geometry, line(path), ".".join(map(str, path)), msg)
+                           for path, msg in issues])
+    vertices = geo.padded(polys) / cfg.a_m
+    nan = float("nan")
+
+    def column(values):
+        return np.array([nan if v is None else v for v in values], float)
+
+    mass = column([u.mass_kg for u in f.units])
+    inertia = column([u.inertia_kg_m2 for u in f.units])
+    stiffness = np.stack([column([g.k_long_n_per_m for g in ligs]), column([g.k_shear_n_per_m for g in ligs]),
+                          column([g.k_rot_n_m_per_rad for g in ligs])], 1)
+    rest_gap = np.array([[nan, nan] if g.rest_gap_m is None else g.rest_gap_m for g in ligs], float) / cfg.a_m
+    _, centres, _ = polygon_inertia(vertices, 1.0)
+    gap = np.where(np.isnan(rest_gap), vertices[b, j] - vertices[a, i], rest_gap)
+    along = gap / np.maximum(np.hypot(gap[:, 0], gap[:, 1]), 1e-300)[:, None]
+    towards = centres[b] - centres[a]
+    towards /= np.hypot(towards[:, 0], towards[:, 1])[:, None]
+    axis = np.where((np.hypot(gap[:, 0], gap[:, 1]) > 1e-9 * float(np.median(np.ptp(vertices, 1).max(1))))[:, None],
+                    along, towards)
+    for k, g in enumerate(ligs):
+        if g.axis is not None:
+            axis[k] = np.asarray(g.axis) / math.hypot(*g.axis)
+    return Network(vertices, (a, b, i, j, axis), mass, inertia, stiffness, rest_gap, grid=None, full_grid=False,
+                   sets=f.sets)
+
+
+def bounding_ends(centres: np.ndarray, sizes: np.ndarray) -> dict[str, list[int]]:
+    """The units of each side of a network that is not a full grid: those whose centre lies within
+    half the median unit size of the extreme centre on that side (units of a)."""
+    h = 0.5 * float(np.median(sizes))
+    x, y = centres[:, 0], centres[:, 1]
+    return {"left": np.flatnonzero(x <= x.min() + h).tolist(), "right": np.flatnonzero(x >= x.max() - h).tolist(),
+            "bottom": np.flatnonzero(y <= y.min() + h).tolist(), "top": np.flatnonzero(y >= y.max() - h).tolist()}
+
+
+def named_sets(specs: dict, centres_m: np.ndarray) -> dict[str, list[int]]:
+    """Named unit sets (``config.geometry.UnitSet``: the lattice's ``unit_sets``, a geometry file's
+    ``sets``) as unit indices, given the units' centres (N, 2) in m."""
+    n, out = centres_m.shape[0], {}
+    for name, spec in specs.items():
+        units = geo.unit_set(spec, centres_m)
+        if units.size == 0:
+            raise geo.GeometryError(f"unit set {name!r} holds no unit (unit centres span x {centres_m[:, 0].min():.4g}.."
+                             f"{centres_m[:, 0].max():.4g} m, y {centres_m[:, 1].min():.4g}..{centres_m[:, 1].max():.4g} m)")
+        if units.max() >= n:
+            raise geo.GeometryError(f"unit set {name!r}: units {[int(u) for u in units if u >= n]} outside 0..{n - 1}")
+        out[name] = sorted(set(units.tolist()))
+    return out
+
+
+def build(cfg: RigidNetwork) -> System:
+    """The network as a System: state (u, v, θ) of its units; edges free or fixed (all DOFs held),
+    named unit sets held by ``fixed_units``."""
+    a = cfg.a_m
+    net = from_file(cfg) if cfg.geometry is not None else generated(cfg)
+    vertices, links = net.vertices, net.links
+    n = vertices.shape[0]
     mass_si, centres, inertia_si = polygon_inertia(vertices * a, cfg.areal_density_kg_m2)
+    if net.mass_kg is not None:
+        mass_si = np.where(np.isnan(net.mass_kg), mass_si, net.mass_kg)
+        inertia_si = np.where(np.isnan(net.inertia_kg_m2), inertia_si, net.inertia_kg_m2)
     centres = centres / a
     m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
     ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
     law = lg.LAWS[cfg.ligament_law]
     lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law)
+    if net.stiffness is not None:  # per-ligament springs and rest gaps of a geometry file
+        for col, scale, k in ((lg.L_KL, kl, 0), (lg.L_KS, kl, 1), (lg.L_KT, kl * a * a, 2)):
+            lig[:, col] = np.where(np.isnan(net.stiffness[:, k]), lig[:, col], net.stiffness[:, k] / scale)
+        gap = net.rest_gap
+        rows = ~np.isnan(gap[:, 0])
+        lig[np.ix_(rows, [lg.L_OX, lg.L_OY])] = (centres[ub] - centres[ua] - gap)[rows]
     contact = () if cfg.contact is None else uc.contact_pairs(
         vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a)
     args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n), law, *contact)
     mass = np.concatenate([mass_si / m, mass_si / m, inertia_si / (m * a * a)])
     inv_mass = 1.0 / mass
-    ends = edge_sites(nr, nc)
+    if net.full_grid:
+        ends = edge_sites(cfg.n_rows, cfg.n_cols)
+    else:
+        ends = bounding_ends(centres, np.ptp(vertices, 1).max(1))
     hold_fixed_ends(cfg, inv_mass, ends, n)
-    row, col = np.divmod(np.arange(n), nc)
-    x_links = np.arange(nr * (nc - 1))  # the links along the rows come first (both generators)
+    groups = named_sets(dict(cfg.unit_sets) | (net.sets or {}), centres * a)
+    for name in cfg.fixed_units:
+        inv_mass[np.concatenate([np.asarray(groups[name]) + f * n for f in range(3)])] = 0.0
+    if net.full_grid:
+        pairs = np.arange(cfg.n_rows * (cfg.n_cols - 1))  # the links along the rows come first (both generators)
+    else:
+        pairs = np.arange(ua.size)
+    two_d = cfg.n_rows > 1 or not net.full_grid
+    coords = {"x": centres[:, 0] * a}
+    if two_d:
+        coords["y"] = centres[:, 1] * a
+    attrs = {}
+    if net.grid is not None and cfg.n_rows > 1:
+        coords |= {"row": net.grid[0], "col": net.grid[1]}
+        attrs = COORD_ATTRS
+    joined = np.hypot(*(centres[ub] - centres[ua]).T)
+    spacing = column_pitch(cfg) if net.full_grid else a * float(np.median(joined))
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=Scales(a, math.sqrt(m / kl), m),
         mass=mass, inv_mass=inv_mass, args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
-        spacing_m=a * math.cos(cfg.theta0_rad) + cfg.ligament_length_m,
-        site_coords={"x": centres[:, 0] * a} | ({"y": centres[:, 1] * a, "row": row, "col": col} if nr > 1 else {}),
+        spacing_m=spacing, site_coords=coords,
         ends=ends, rotation_field="theta", axis_fields={"x": "u", "y": "v"},
         end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
-        grid_shape=(nr, nc) if nr > 1 else None, site_coord_attrs=COORD_ATTRS if nr > 1 else {},
-        neighbour_pairs=np.stack([ua[x_links], ub[x_links]], 1),
+        grid_shape=(cfg.n_rows, cfg.n_cols) if cfg.n_rows > 1 and net.full_grid else None,
+        site_coord_attrs=attrs, site_groups=groups,
+        neighbour_pairs=np.stack([ua[pairs], ub[pairs]], 1),
         shapes=UnitShapes(centres, vertices - centres[:, None, :], np.ones(n), np.stack([ua, ub], 1),
                           np.stack([lig[:, [lg.L_AX, lg.L_AY]], lig[:, [lg.L_BX, lg.L_BY]]], 1)),
     )

@@ -126,6 +126,8 @@ def _trimmable(scene) -> str | None:
     lat = scene.lattice
     if length_key(lat) is None:
         return f"{lat.kind} has no single length along x"
+    if getattr(lat, "trim_issue", None):
+        return lat.trim_issue
     if getattr(lat, "variation", None) or getattr(lat, "predeform", None):
         return "parameters vary along x or the lattice is predeformed"
     return None

@@ -118,7 +118,7 @@ def describe(src: RunSource, lattice, structure, scale: float) -> tuple[str, str
     images = structure.colour_repeats()
     if images:
         size += f", n_lateral = {images} (mirror row{'s' if images > 1 else ''} shaded)"
-    if n != getattr(lattice, "n_units", n):
+    if n != getattr(lattice, "n_units", n) and getattr(lattice, "mask", None) is None:  # a mask removes units
         size += f" ({n} saved: output.site_stride > 1)"
     what = "displacements and rotations" if isinstance(structure, ShapeStructure) else "displacements"
     scale_txt = "drawn to scale" if scale == 1 else f"{what} ×{scale:g} (exaggerated)"
