@@ -279,7 +279,7 @@ class _Observer:
         add_state(sys_, self.sites, site_vars, coords)  # rest and initial state: analysis never rebuilds the model
         self.site_vars, self.time_vars = site_vars, time_vars
         self.writer = (writer or DatasetWriter)(writer_path, self.sites.size, site_vars, time_vars, coords, n_frames,
-                                                shape_variables(sys_.shapes, self.sites, sc.length_m))
+                                                shape_variables(sys_.unit_shapes(), self.sites, sc.length_m))
         self.sc = sc
 
     def frame(self, st: Stepper) -> None:

@@ -60,7 +60,7 @@ def write_run(run_dir: Path, lattice: dict, system, fields: dict[str, np.ndarray
         add_state(system, sites, site_vars, coords)
     run_dir.mkdir(parents=True, exist_ok=True)
     w = DatasetWriter(run_dir / "dataset.nc", sites.size, site_vars, {}, coords, n_frames=n_frames,
-                      constants=shape_variables(system.shapes, sites, system.scales.length_m))
+                      constants=shape_variables(system.unit_shapes(), sites, system.scales.length_m))
     for k, t in enumerate(times):
         w.append(float(t), {name: v[k][sites] for name, v in fields.items()}, {})
     base = {"config": yaml.safe_dump(scene_of(lattice)), "model": system.model, "title": "render_test",

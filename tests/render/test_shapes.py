@@ -35,7 +35,7 @@ def test_joined_points_meet_at_rest_and_units_keep_their_shape(example_lattice, 
     lat, system = build(lattice)
     fields = random_fields(system, 2, seed=3, amplitude=0.5)
     rest_poly, rest_segs = drawn(tmp_path / "a", lattice, system, fields, 0)
-    sh = system.shapes
+    sh = system.unit_shapes()
     a = system.scales.length_m
     # at rest each drawn joint spans the model's rest gap g0 = X_b − X_a − o (a network's ligament
     # table), or nothing (triangles are hinged at their vertices)
@@ -90,8 +90,8 @@ def test_drawn_joints_give_the_model_energy(example_lattice, tmp_path):
         k = args.hinge_prm[:, [H_KL, H_KS, H_KT]]
     g = ((segs[:, 1] - segs[:, 0]) - (rest_segs[:, 1] - rest_segs[:, 0])) / sc.length_m
     nrm = np.stack([-e[:, 1], e[:, 0]], 1)
-    phi = system.shapes.rotation_sign * fields["theta"][1][:n]
-    ends = system.shapes.links
+    phi = system.unit_shapes().rotation_sign * fields["theta"][1][:n]
+    ends = system.unit_shapes().links
     dphi = phi[ends[:, 1]] - phi[ends[:, 0]]
     energy = 0.5 * np.sum(k[:, 0] * np.sum(g * e, 1) ** 2 + k[:, 1] * np.sum(g * nrm, 1) ** 2 + k[:, 2] * dphi**2)
     q = np.concatenate([fields[f.name][1] / sc.coordinate(f.kind) for f in system.fields])

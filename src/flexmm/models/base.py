@@ -199,8 +199,10 @@ class System:
     """The static equilibrium q0 was relaxed to (``lattice.predeform``); None for a stress-free start."""
     rotating_squares: RotatingSquaresND | None = None
     """Nondimensional rotating-squares parameters (rotating-squares chain and sheet models); else None."""
-    shapes: UnitShapes | None = None
-    """The units' polygons and joints for drawing (models whose render reads them); else None."""
+    shapes: UnitShapes | Callable[[], UnitShapes] | None = None
+    """The units' polygons and joints for drawing (rigid-unit models), or what makes them when a
+    run writes them (so a model built only to be planned never makes them); read them with
+    ``unit_shapes()``; else None."""
     initial_displacement_m: np.ndarray | None = None
     """(n_sites,) SI displacements of the initial (relaxed) state, folded into the element shifts so
     that q = 0 there (mass models); None for other models."""
@@ -210,6 +212,12 @@ class System:
     def __post_init__(self) -> None:
         if not self.axis_fields:
             self.axis_fields = {"x": self.longitudinal_field}
+
+    def unit_shapes(self) -> UnitShapes | None:
+        """``shapes``, made on first use."""
+        if callable(self.shapes):
+            self.shapes = self.shapes()
+        return self.shapes
 
     @property
     def rest_state(self) -> np.ndarray | None:

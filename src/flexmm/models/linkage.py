@@ -19,6 +19,7 @@ Nondimensional: length L (bar length), time sqrt(m/k_pin), mass m.
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
@@ -67,6 +68,6 @@ def build(cfg) -> System:
         ends=ends, longitudinal_field="u", rotation_field="theta", axis_fields={"x": "u", "y": "v"},
         end_fields={"left": "u", "right": "u"}, omega_ref=1.0, grid_shape=(2, nc),
         site_coord_attrs=COORD_ATTRS, neighbour_pairs=np.stack([ha[hax == 0], hb[hax == 0]], 1),
-        shapes=sheet_shapes(2, nc, ha, hb, hax, sigma, theta0, math.cos(cfg.theta0_rad), outline="bars",
-                            link_joints=True),
+        shapes=partial(sheet_shapes, 2, nc, ha, hb, hax, sigma, theta0, math.cos(cfg.theta0_rad), outline="bars",
+                       link_joints=True),
     )

@@ -7,6 +7,7 @@ K_θ = k_θ/(k_l a²), α² = J/(m a²) and speeds are in units of c0 = a sqrt(k
 from __future__ import annotations
 
 import math
+from functools import partial
 from dataclasses import asdict
 
 import numpy as np
@@ -125,7 +126,7 @@ def build(cfg: RotatingSquaresChain) -> System:
         v0=np.zeros(2 * n),
         spacing_m=spacing,
         site_coords={"x": x},
-        shapes=chain_shapes(args, x / cfg.a_m, cfg.n_lateral),
+        shapes=partial(chain_shapes, args, x / cfg.a_m, cfg.n_lateral),
         ends={"left": [0], "right": [n - 1]},
         longitudinal_field="u",
         rotation_field="theta",

@@ -17,6 +17,7 @@ dipoles, joints, loads).
 from __future__ import annotations
 
 import math
+from functools import partial
 from dataclasses import asdict
 
 import numpy as np
@@ -163,7 +164,8 @@ def build(cfg: RotatingSquaresSheet) -> System:
         grid_shape=(nr, nc),
         site_coord_attrs=COORD_ATTRS,
         neighbour_pairs=np.stack([ha[horiz], hb[horiz]], 1),
-        shapes=sheet_shapes(nr, nc, ha, hb, hax, sigma, theta0, h, markers=None if cfg.magnets is None else dip[2]),
+        shapes=partial(sheet_shapes, nr, nc, ha, hb, hax, sigma, theta0, h,
+                       markers=None if cfg.magnets is None else dip[2]),
         rotating_squares=RotatingSquaresND(
             theta0=cfg.theta0_rad, Ks=cfg.k_shear_n_per_m / kl, Ktheta=cfg.k_rot_n_m_per_rad / (kl * a * a),
             alpha2=J / (m * a * a), n_v=2, s_v=1,

@@ -228,10 +228,10 @@ def _built_shapes(source, lattice) -> dict:
 
     builder = MODELS.get(lattice.kind)
     system = builder.build(lattice) if builder is not None else None
-    if system is None or system.shapes is None:
+    if system is None or system.unit_shapes() is None:
         raise UsageError(f"cannot draw model {lattice.kind!r}")
     length = system.scales.length_m
-    return {name: values for name, (_, values, *_) in shape_variables(system.shapes, source.sites, length).items()}
+    return {name: values for name, (_, values, *_) in shape_variables(system.unit_shapes(), source.sites, length).items()}
 
 
 __all__ = ["Drawing", "MassStructure", "ShapeStructure", "make_structure", "outlines", "springs"]
