@@ -30,8 +30,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
 FLEXMM = str(Path(sys.executable).with_name("flexmm"))
 # velocity Verlet fused with the chain force and blocked in time (verlet_chain), no pilots
-VERLET = ["--set", "lattice.n_units=20000", "--set", "solver.duration_s=1.0", "--set", "output.n_frames=51",
-          "--set", "solver.accuracy=null", "--set", "solver.integrator=velocity_verlet", "--set", "solver.dt_s=1e-4",
+VERLET = ["--set", "lattice.n_units=20000", "--set", "solver.duration_s=0.3", "--set", "output.n_frames=31",
+          "--set", "solver.accuracy=null", "--set", "solver.integrator=velocity_verlet", "--set", "solver.dt_s=2.5e-5",
           "--fidelity", "full", "--checkpoint-s", "0.3"]
 # the accuracy pilots choose the method and step (PEFRL, a splitting): the decision is checkpointed
 PILOTED = ["--set", "lattice.n_units=2000", "--set", "solver.duration_s=2.0", "--set", "output.n_frames=101",
@@ -87,7 +87,7 @@ def test_a_killed_run_resumes_bit_identical(tmp_path, uninterrupted) -> None:
     out = tmp_path / "demo"
     proc = start("run", DEMO, "--out", out, "-q", *VERLET)
     wait_for_checkpoint(out, proc)
-    delay = random.Random(os.getpid()).uniform(0.0, 1.0)  # checkpoints every 0.3 s: some kills land in one
+    delay = random.Random(os.getpid()).uniform(0.0, 0.8)  # checkpoints every 0.3 s: some kills land in one
     time.sleep(delay)
     proc.kill()
     proc.communicate()
@@ -157,3 +157,34 @@ def test_extend_equals_the_longer_run_from_the_start(tmp_path) -> None:
     assert open_run(short).sizes["time"] == 51
     res = flexmm("run", "--extend", short, "--set", "solver.duration_s=0.5", "--set", "solver.dt_s=1e-5")
     assert res.returncode == 2 and "solver.dt_s" in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("sig, exc", [(signal.SIGINT, "KeyboardInterrupt"), (signal.SIGTERM, "Terminated")])
+def test_a_signal_waits_for_the_end_of_a_deferred_block(sig, exc) -> None:
+    from flexmm._signals import deferred, stop_on_signals
+
+    seen = []
+    with stop_on_signals(), pytest.raises(KeyboardInterrupt) as caught:
+        with deferred():
+            os.kill(os.getpid(), sig)
+            time.sleep(0.05)
+            seen.append("the block ran to its end")
+        seen.append("not reached")
+    assert seen == ["the block ran to its end"] and type(caught.value).__name__ == exc
+
+
+def test_a_damaged_checkpoint_is_refused_and_the_previous_one_used(tmp_path) -> None:
+    q = np.arange(5.0)
+    ck.write(tmp_path, {"frames_done": 3, "steps": 30}, {"q": q})
+    ck.write(tmp_path, {"frames_done": 4, "steps": 40}, {"q": q + 1})
+    found, refused = ck.best([tmp_path])
+    assert found.meta["steps"] == 40 and np.array_equal(found.arrays["q"], q + 1) and refused == []
+    data = bytearray((tmp_path / ck.NAME).read_bytes())
+    data[-40] ^= 1  # one bit of the arrays flipped
+    (tmp_path / ck.NAME).write_bytes(bytes(data))
+    found, refused = ck.best([tmp_path])
+    assert found.meta["steps"] == 30 and np.array_equal(found.arrays["q"], q)
+    assert len(refused) == 1 and "checksum does not match" in refused[0]
+    (tmp_path / ck.PREVIOUS).write_bytes(bytes(data[:100]))  # cut short
+    with pytest.raises(ck.CheckpointError, match="checksum does not match"):
+        ck.best([tmp_path])

@@ -470,7 +470,9 @@ def run_problem(
             if track.check(st):
                 return True
             if checkpoints is not None and _time.monotonic() - clock[0] >= checkpoints.every_s:
+                t0 = _time.perf_counter()
                 obs.writer.sync()  # the frames a checkpoint counts are on disk before it is written
+                checkpoints.seconds += _time.perf_counter() - t0
                 checkpoint("running", obs.writer.tmp.name)
         except OSError as exc:  # disk full, quota, I/O error: stop, keep the frames written
             write_error.append((st.t, exc))

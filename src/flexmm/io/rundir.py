@@ -16,6 +16,9 @@ directory is refused instead of interleaving its files with the first. ``commit(
   older partial of the same kind); a finished ``<name>`` is never touched, and nothing partial
   sits where a finished result is expected.
 
+A run that writes checkpoints stages in a work directory ``.<name>.work.<pid>`` instead, which
+outlives a killed process for ``flexmm run --resume`` (``RunDirectory``).
+
 Leaving the ``with`` block without a commit (an error, a signal before the run started) removes
 the staging directory. Staging directories and temporary files of processes that no longer run
 (a ``kill -9``, a power cut) are removed by the next run into the same directory.
