@@ -188,3 +188,10 @@ def test_a_damaged_checkpoint_is_refused_and_the_previous_one_used(tmp_path) -> 
     (tmp_path / ck.PREVIOUS).write_bytes(bytes(data[:100]))  # cut short
     with pytest.raises(ck.CheckpointError, match="checksum does not match"):
         ck.best([tmp_path])
+
+
+def test_nothing_to_resume_is_a_user_error(tmp_path) -> None:
+    res = flexmm("run", "--resume", tmp_path / "never_ran")
+    assert res.returncode == 2 and "no checkpoint to continue from" in res.stderr and "Traceback" not in res.stderr
+    res = flexmm("run")
+    assert res.returncode == 2 and "missing the scene" in res.stderr, res.stderr

@@ -18,7 +18,7 @@ from flexmm.checkpoint import DEFAULT_EVERY_S, Checkpointing
 from flexmm.config import Scene, load_scene
 from flexmm.controller import RunResult, run_problem
 from flexmm.io.atomic import write_text_atomic
-from flexmm.io.provenance import config_text
+from flexmm.io.provenance import config_hash, config_text
 from flexmm.io.rundir import RunDirectory
 
 if TYPE_CHECKING:
@@ -93,7 +93,8 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
             ckpt = None if not keep else Checkpointing(rd.stage, checkpoint_s, {
-                "source_config": config_text(scene), "planned_config": config_text(plan.scene),
+                "source_config": config_text(scene), "source_sha256": config_hash(scene),
+                "planned_config": config_text(plan.scene),
                 "plan_attrs": plan.attrs(), "error_check": error_check_of(plan)})
             result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),
                                  on_finish=accuracy_check(plan, problem), in_memory=in_memory, checkpoints=ckpt)
@@ -130,13 +131,14 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
     from flexmm.prepare import whole_run_check
 
     final = Path(run_dir).expanduser()
-    for status in ("interrupted", "failed"):
+    for status in ("interrupted", "failed", "inaccurate"):
         if final.name.endswith("." + status):
             final = final.with_name(final.name[: -len(status) - 1])
     say = log or (lambda _m: None)
     with RunDirectory(final, checkpoints=checkpoint_s is not None, keep_work=True) as rd:
         partial = [final.with_name(f"{final.name}.{status}") for status in ("interrupted", "failed")]
-        sources = [final] if extend else [*rd.work_dirs(), *partial]
+        ended_dirs = [final, final.with_name(f"{final.name}.inaccurate")]  # where a run that ended is published
+        sources = ended_dirs if extend else [*rd.work_dirs(), *partial]
         found, refused = ck.best([d for d in sources if d.is_dir()])
         for note in refused:
             say(note)
@@ -180,7 +182,8 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
         problem.dt = meta["problem_dt"]
         check = meta.get("error_check")
         ckpt = None if checkpoint_s is None else Checkpointing(rd.stage, checkpoint_s, {
-            "source_config": config_text(source), "planned_config": config_text(planned),
+            "source_config": config_text(source), "source_sha256": config_hash(source),
+            "planned_config": config_text(planned),
             "plan_attrs": meta["plan_attrs"], "error_check": check})
         result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=meta["plan_attrs"],
                              on_finish=whole_run_check(problem, **check) if check else None, checkpoints=ckpt,

@@ -443,6 +443,8 @@ def run_problem(
         compile_s = stepper.compile_s
         early = Outcome("interrupted", signal.Signals(signal_of(exc)).name, stepper.t)
     prog = _progress(len(chunks), progress)
+    if prog and start:
+        prog.advance(prog.task_ids[0], start)
     write_error: list[tuple[float, OSError]] = []
     last_line = [_time.monotonic()]
 
