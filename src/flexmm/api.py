@@ -53,7 +53,7 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
               analysis: str | None = None, force_limits: bool = False, atomic: bool = True,
-              in_memory: bool = False, checkpoint_s: float | None = DEFAULT_EVERY_S) -> RunResult:
+              in_memory: bool = False, checkpoint_s: float | None = None) -> RunResult:
     """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
     ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
@@ -67,8 +67,9 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     the directory and publishes its own markers (sweep points). ``in_memory`` keeps the dataset
     in ``result.dataset`` instead of writing dataset.nc (a sweep point measured and dropped; a
     continuum-only run still writes its file). ``checkpoint_s``: seconds of wall time between
-    checkpoints (``flexmm.checkpoint``; also one when the run ends or a signal stops it), which
-    ``continue_run`` continues from; None: none (always none for ``atomic=False`` and ``in_memory``).
+    checkpoints (``flexmm.checkpoint``; also one when the run ends or a signal stops it; ``flexmm
+    run`` gives ``checkpoint.DEFAULT_EVERY_S``), which ``continue_run`` continues from; None (the
+    default: sweep points, fidelity runs): none, and none for ``atomic=False`` or ``in_memory``.
     """
     from flexmm.continuum_run import run_continuum
     from flexmm.plan import make_plan
