@@ -456,7 +456,7 @@ def run_problem(
         w = obs.writer
         meta = {"status": status, "frames_done": done[0], "frames_total": n_frames, "frames_written": w.n_written,
                 "t_written_s": w.t_written, "dataset": dataset, "steps": stepper.steps, "t_s": stepper.t * sc.time_s,
-                "h0": h, "chunks": _runs(chunks), "interval": plan.interval, "problem_dt": problem.dt,
+                "h0": plan.h, "chunks": _runs(chunks), "interval": plan.interval, "problem_dt": problem.dt,
                 "duration": problem.duration, "stepper": scalars, "follower": f_scalars, "log": list(lines),
                 "resumptions": resumptions}
         warned = bool(checkpoints.failed)
