@@ -145,7 +145,8 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
             say(note)
         meta = found.meta
         ended = meta["status"] in ("finished", "inaccurate")
-        if extend != ended:
+        killed_at_end = ended and found.directory in rd.work_dirs()  # stopped between its end and its commit
+        if extend != ended and not (killed_at_end and not extend):
             raise ck.CheckpointError(f"{found.path}: the run {'ended' if ended else 'did not end'} "
                                      f"({meta['status']}): " + ("--extend continues a finished run"
                                                                if extend else "use --extend to continue it"))

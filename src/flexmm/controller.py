@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from flexmm._signals import deferred, signal_of
+from flexmm._signals import signal_of
 from flexmm.assemble import Problem
 from flexmm.checkpoint import Checkpoint, CheckpointError, Checkpointing
 from flexmm.integrators import INTEGRATORS
@@ -572,10 +572,9 @@ def run_problem(
     path = obs.writer.close(attrs)
     if (checkpoints is not None and path is not None and early is None and status != "failed"
             and stepper.steps == at_frame[0] and obs.writer.n_written == done[0]):
-        with deferred():  # the state the run ended in: --resume (interrupted) or --extend (finished) go on from it
-            checkpoint(status, path.name)
-            if status != "interrupted":
-                checkpoints.drop_previous()
+        checkpoint(status, path.name)  # the state the run ended in: --resume (interrupted) or --extend go on from it
+        if status != "interrupted":
+            checkpoints.drop_previous()
     if path is None:  # the file could not be completed: say so, never claim frames that are gone
         status = "failed"
         head = (f"writing frames failed at t = {write_error[0][0] * sc.time_s:.6g} s" if write_error
