@@ -126,8 +126,6 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
     A checkpoint written by another flexmm version or commit is refused unless ``allow_version``.
     """
     from flexmm import checkpoint as ck
-    from flexmm.config.loader import resolve_scene
-    from flexmm.io.provenance import resolved_config
     from flexmm.plan.planner import replace_section
     from flexmm.prepare import whole_run_check
 
@@ -144,36 +142,8 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
         for note in refused:
             say(note)
         meta = found.meta
-        ended = meta["status"] in ("finished", "inaccurate")
-        killed_at_end = ended and found.directory in rd.work_dirs()  # stopped between its end and its commit
-        if extend != ended and not (killed_at_end and not extend):
-            raise ck.CheckpointError(f"{found.path}: the run {'ended' if ended else 'did not end'} "
-                                     f"({meta['status']}): " + ("--extend continues a finished run"
-                                                               if extend else "use --extend to continue it"))
-        changes = ck.version_changes(meta)
-        if changes and not allow_version:
-            raise ck.CheckpointError(f"{found.path} was written by other code ({'; '.join(changes)}): refused, "
-                                     "since a resumed run is bit-identical only with the code that started it "
-                                     "(--force continues anyway)")
-        planned = resolve_scene(meta["planned_config"])
-        source = resolve_scene(meta["source_config"])
-        if extend:
-            if scene is None:
-                raise ck.CheckpointError("--extend needs the longer duration: --set solver.duration_s=...")
-            diff = [c for c in ck.config_changes(resolved_config(planned), resolved_config(scene))
-                    if not c.startswith("solver.duration_s:")]
-            if diff:
-                raise ck.CheckpointError(f"--extend continues the same scene, changing only solver.duration_s; "
-                                         f"also changed: {'; '.join(diff)}")
-            ts_end = meta["t_s"]
-            if not scene.solver.duration_s > ts_end:
-                raise ck.CheckpointError(f"--extend: solver.duration_s {scene.solver.duration_s:g} s does not go "
-                                         f"beyond the run's end at {ts_end:.6g} s")
-            planned = source = scene
-        elif scene is not None:
-            diff = ck.config_changes(resolved_config(source), resolved_config(scene))
-            if diff:
-                raise ck.CheckpointError(f"the scene is not the one {final} was started with: {'; '.join(diff)}")
+        planned, source = ck.continuation(found, scene, extend=extend, allow_version=allow_version,
+                                          from_work=found.directory in rd.work_dirs())
         problem = build_problem(planned)
         if extend:
             every_s = meta["interval"] * problem.system.scales.time_s

@@ -167,6 +167,46 @@ def config_changes(old: dict, new: dict, prefix: str = "") -> list[str]:
     return out
 
 
+def continuation(found: Checkpoint, scene=None, *, extend: bool = False, allow_version: bool = False,
+                 from_work: bool = False) -> tuple:
+    """(scene to run, scene as asked) to continue ``found`` (``api.continue_run``), or
+    ``CheckpointError`` saying why not: a resume continues a run that did not end (or ended but
+    was killed before publishing: ``from_work``), an extension one that did; the code must be the
+    same unless ``allow_version``; ``scene``, if given, must be the one the run was started with
+    (resume) or its planned scene with only a longer ``solver.duration_s`` (extend)."""
+    from flexmm.config.loader import resolve_scene
+    from flexmm.io.provenance import resolved_config
+
+    meta = found.meta
+    ended = meta["status"] in ("finished", "inaccurate")
+    if extend != ended and not (ended and from_work and not extend):
+        raise CheckpointError(f"{found.path}: the run {'ended' if ended else 'did not end'} ({meta['status']}): "
+                              + ("--extend continues a finished run" if extend else "use --extend to continue it"))
+    changes = version_changes(meta)
+    if changes and not allow_version:
+        raise CheckpointError(f"{found.path} was written by other code ({'; '.join(changes)}): refused, since a "
+                              "resumed run is bit-identical only with the code that started it (--force continues "
+                              "anyway)")
+    planned, source = resolve_scene(meta["planned_config"]), resolve_scene(meta["source_config"])
+    if extend:
+        if scene is None:
+            raise CheckpointError("--extend needs the longer duration: --set solver.duration_s=...")
+        diff = [c for c in config_changes(resolved_config(planned), resolved_config(scene))
+                if not c.startswith("solver.duration_s:")]
+        if diff:
+            raise CheckpointError("--extend continues the same scene, changing only solver.duration_s; also "
+                                  f"changed: {'; '.join(diff)}")
+        if not scene.solver.duration_s > meta["t_s"]:
+            raise CheckpointError(f"--extend: solver.duration_s {scene.solver.duration_s:g} s does not go beyond "
+                                  f"the run's end at {meta['t_s']:.6g} s")
+        return scene, scene
+    if scene is not None:
+        diff = config_changes(resolved_config(source), resolved_config(scene))
+        if diff:
+            raise CheckpointError(f"the scene is not the one the run was started with: {'; '.join(diff)}")
+    return planned, source
+
+
 @dataclass
 class Checkpointing:
     """Where and how often a run writes checkpoints (``controller.run_problem``), and what it wrote.
