@@ -28,7 +28,7 @@ FLEXMM = str(Path(sys.executable).with_name("flexmm"))
 SHORT = ["--set", "solver.duration_s=0.02", "--set", "output.n_frames=11", "--fidelity", "full"]
 # fault handling during the time loop: no accuracy pilots before it (they would delay the stepping)
 LONG = ["--set", "solver.duration_s=200", "--set", "output.n_frames=2001", "--fidelity", "full",
-        "--set", "solver.accuracy=null"]
+        "--set", "solver.accuracy=null", "--checkpoint-s", "0.5"]
 
 
 def flexmm(*args, **kw) -> subprocess.CompletedProcess:
@@ -40,12 +40,12 @@ def start(*args) -> subprocess.Popen:
                             preexec_fn=default_sigint)
 
 
-def wait_until_stepping(out: Path, proc: subprocess.Popen, timeout: float = 60.0) -> None:
-    """Until the run's dataset file exists in its staging or work directory (the time loop is next)."""
+def wait_until_stepping(out: Path, proc: subprocess.Popen, timeout: float = 300.0) -> None:
+    """Until the run has written a checkpoint (``LONG`` checkpoints every 0.5 s): it is in its time
+    loop with frames written, whatever compiling took on a loaded machine."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
-        if list(out.parent.glob(f".{out.name}.*.*/.dataset.nc.*.tmp")):  # staging or (checkpointed) work
-            time.sleep(1.0)
+        if list(out.parent.glob(f".{out.name}.work.*/checkpoint.ckpt")):
             return
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.05)

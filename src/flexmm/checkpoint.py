@@ -67,8 +67,11 @@ class Checkpoint:
         return own if own.is_file() else self.directory / "dataset.nc"
 
 
-def write(directory: Path, meta: dict, arrays: dict[str, np.ndarray]) -> int:
-    """Write a checkpoint atomically into ``directory`` (module docstring); returns its size in bytes."""
+def write(directory: Path, meta: dict, arrays: dict[str, np.ndarray], durable: bool = True) -> int:
+    """Write a checkpoint atomically into ``directory`` (module docstring); returns its size in bytes.
+
+    ``durable``: fsync the file and the directory, so the checkpoint survives a power cut or an OS
+    crash, not only the death of the process (which the rename alone survives)."""
     directory = Path(directory)
     target, tmp = directory / NAME, temporary_name(directory / NAME)
     flat = {k: np.ascontiguousarray(a, dtype=np.dtype(a.dtype).newbyteorder("<")) for k, a in arrays.items()}
@@ -86,14 +89,16 @@ def write(directory: Path, meta: dict, arrays: dict[str, np.ndarray]) -> int:
                 fh.write(part)
             fh.write(digest.digest())
             fh.flush()
-            os.fsync(fh.fileno())
+            if durable:
+                os.fsync(fh.fileno())
         if target.exists():
             os.replace(target, directory / PREVIOUS)
         os.replace(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    _sync_directory(directory)
+    if durable:
+        _sync_directory(directory)
     return len(MAGIC) + 8 + len(header) + offset + _DIGEST
 
 
@@ -223,11 +228,11 @@ class Checkpointing:
     seconds: float = 0.0
     failed: str = ""
 
-    def save(self, meta: dict, arrays: dict[str, np.ndarray]) -> bool:
+    def save(self, meta: dict, arrays: dict[str, np.ndarray], durable: bool = True) -> bool:
         """Write one checkpoint (``write``); False when it could not be written (``failed``)."""
         t0 = time.perf_counter()
         try:
-            self.bytes = write(self.directory, {**self.meta, **meta}, arrays)
+            self.bytes = write(self.directory, {**self.meta, **meta}, arrays, durable)
         except OSError as exc:
             if not self.failed:
                 self.failed = f"a checkpoint could not be written in {self.directory} ({exc.strerror or exc})"

@@ -450,7 +450,7 @@ def run_problem(
 
     clock = [_time.monotonic()]  # when the last checkpoint was written
 
-    def checkpoint(status: str, dataset: str) -> None:
+    def checkpoint(status: str, dataset: str, durable: bool = True) -> None:
         arrays, scalars = stepper.snapshot()
         f_arrays, f_scalars = track.snapshot()
         w = obs.writer
@@ -460,25 +460,28 @@ def run_problem(
                 "duration": problem.duration, "stepper": scalars, "follower": f_scalars, "log": list(lines),
                 "resumptions": resumptions}
         warned = bool(checkpoints.failed)
-        if not checkpoints.save(meta, {**arrays, **f_arrays}) and not warned:
+        if not checkpoints.save(meta, {**arrays, **f_arrays}, durable) and not warned:
             say(f"warning: {checkpoints.failed}; the run goes on")
         clock[0] = _time.monotonic()
 
     def on_frame(st: Stepper) -> bool:
         try:
             obs.frame(st)
-            done[0] += 1
-            at_frame[0] = st.steps
-            if track.check(st):
-                return True
-            if checkpoints is not None and _time.monotonic() - clock[0] >= checkpoints.every_s:
-                t0 = _time.perf_counter()
-                obs.writer.sync()  # the frames a checkpoint counts are on disk before it is written
-                checkpoints.seconds += _time.perf_counter() - t0
-                checkpoint("running", obs.writer.tmp.name)
         except OSError as exc:  # disk full, quota, I/O error: stop, keep the frames written
             write_error.append((st.t, exc))
             return True
+        done[0], at_frame[0] = done[0] + 1, st.steps
+        if track.check(st):
+            return True
+        if checkpoints is not None and _time.monotonic() - clock[0] >= checkpoints.every_s:
+            t0 = _time.perf_counter()
+            try:
+                obs.writer.sync()  # the frames a checkpoint counts are on disk before it is written
+            except OSError as exc:
+                write_error.append((st.t, exc))
+                return True
+            checkpoints.seconds += _time.perf_counter() - t0
+            checkpoint("running", obs.writer.tmp.name)
         if prog:
             prog.advance(prog.task_ids[0])
         elif log is not None and _time.monotonic() - last_line[0] >= PROGRESS_EVERY_S:
@@ -572,7 +575,9 @@ def run_problem(
     path = obs.writer.close(attrs)
     if (checkpoints is not None and path is not None and early is None and status != "failed"
             and stepper.steps == at_frame[0] and obs.writer.n_written == done[0]):
-        checkpoint(status, path.name)  # the state the run ended in: --resume (interrupted) or --extend go on from it
+        # the state the run ended in, which --resume (interrupted) or --extend go on from; not fsynced,
+        # like the dataset beside it (a power cut may lose both; the death of the process neither)
+        checkpoint(status, path.name, durable=False)
         if status != "interrupted":
             checkpoints.drop_previous()
     if path is None:  # the file could not be completed: say so, never claim frames that are gone
