@@ -1540,7 +1540,61 @@ def accuracy(names: tuple[str, ...] | None = None, repeats: int = 2, ref_factor:
     return rows
 
 
-SECTIONS = {"startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "throughput": throughput, "bandwidth": bandwidth,
+def checkpoints(n_units: int = 1_000_000, steps: int = 400, n_frames: int = 21, every_s: float = 2.0) -> dict:
+    """Checkpoint cost on a large chain (velocity Verlet, fused; frames of every 1000th site, so the
+    stepping dominates): a run without checkpoints against one checkpointing every ``every_s`` s of
+    wall time; the cost per checkpoint gives the overhead at the default cadence (one per
+    ``checkpoint.DEFAULT_EVERY_S``). Also the checkpoint's size against the state (q, v: 16 bytes per
+    DOF), and a resume's start-up: reading the newest checkpoint, rebuilding nothing, copying the
+    frames and restoring the state (``run_problem(resume=...)`` of the finished run's checkpoint)."""
+    import shutil
+    import tempfile
+
+    from flexmm import checkpoint as ck
+    from flexmm.assemble import build_problem
+    from flexmm.config import load_scene
+    from flexmm.controller import run_problem
+
+    dt_s = 1e-4
+    scene = load_scene(LEGO, [f"lattice.n_units={n_units}", "solver.accuracy=null", "solver.integrator=velocity_verlet",
+                              f"solver.dt_s={dt_s}", f"solver.duration_s={steps * dt_s}", f"output.n_frames={n_frames}",
+                              "output.site_stride=1000"])
+    problem = build_problem(scene)
+    root = Path(tempfile.mkdtemp(prefix="flexmm-bench-ckpt-", dir=RESULTS))
+    try:
+        run_problem(problem, root / "warm")  # compile (or load) the kernel once
+        t0 = time.perf_counter()
+        plain = run_problem(problem, root / "plain")
+        plain_s = time.perf_counter() - t0
+        policy = ck.Checkpointing(root / "ckpt", every_s)
+        t0 = time.perf_counter()
+        run_problem(problem, root / "ckpt", checkpoints=policy)
+        with_s = time.perf_counter() - t0
+        per = policy.seconds / max(policy.count, 1)
+        state = 16 * problem.system.ndof
+        t0 = time.perf_counter()
+        found, _ = ck.best([root / "ckpt"])
+        read_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        run_problem(problem, root / "resumed", resume=found)  # resumes at the end: start-up and close only
+        resume_s = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    row = {"n_units": n_units, "ndof": problem.system.ndof, "steps": steps, "run_s": plain_s,
+           "run_with_checkpoints_s": with_s, "checkpoints": policy.count, "s_per_checkpoint": per,
+           "overhead_default_cadence_pct": 100 * per / ck.DEFAULT_EVERY_S,
+           "overhead_measured_pct": 100 * (with_s - plain_s) / plain_s, "every_s": every_s,
+           "checkpoint_MiB": policy.bytes / 2**20, "size_over_state": policy.bytes / state,
+           "read_checkpoint_s": read_s, "resume_startup_s": read_s + resume_s, "load": _load()}
+    print(f"checkpoints, {n_units:,d}-unit chain ({problem.system.ndof:,d} DOFs): {per:.3f} s per checkpoint of "
+          f"{row['checkpoint_MiB']:.1f} MiB ({row['size_over_state']:.2f} x q + v) -> {row['overhead_default_cadence_pct']:.2f} % "
+          f"at one per {ck.DEFAULT_EVERY_S:g} s; measured {policy.count} in {with_s:.1f} s against {plain_s:.1f} s without "
+          f"({row['overhead_measured_pct']:+.1f} %, every {every_s:g} s); resume start-up {row['resume_startup_s']:.2f} s "
+          f"(reading {read_s:.2f} s) ({row['load']})")
+    return row
+
+
+SECTIONS = {"checkpoints": checkpoints, "startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,

@@ -60,7 +60,7 @@ def run(config, out, *extra, fidelity="full"):
 def test_run_writes_outputs_and_prints_dataset_path(short_lego, tmp_path):
     out = tmp_path / "run"
     result, ds = run(short_lego, out, fidelity="auto")  # the default
-    assert {p.name for p in out.iterdir()} == RUN_FILES  # nothing else: no temporary files left
+    assert {p.name for p in out.iterdir()} == RUN_FILES | {"checkpoint.ckpt"}  # no temporary files left
     assert f"dataset: {out / 'dataset.nc'}" in result.output
     assert ds.attrs["status"] == "finished"
     assert ds.sizes["time"] >= 2 and ds.attrs["n_steps"] > 0

@@ -28,7 +28,7 @@ FLEXMM = str(Path(sys.executable).with_name("flexmm"))
 SHORT = ["--set", "solver.duration_s=0.02", "--set", "output.n_frames=11", "--fidelity", "full"]
 # fault handling during the time loop: no accuracy pilots before it (they would delay the stepping)
 LONG = ["--set", "solver.duration_s=200", "--set", "output.n_frames=2001", "--fidelity", "full",
-        "--set", "solver.accuracy=null"]
+        "--set", "solver.accuracy=null", "--checkpoint-s", "0.5"]
 
 
 def flexmm(*args, **kw) -> subprocess.CompletedProcess:
@@ -40,12 +40,12 @@ def start(*args) -> subprocess.Popen:
                             preexec_fn=default_sigint)
 
 
-def wait_until_stepping(out: Path, proc: subprocess.Popen, timeout: float = 60.0) -> None:
-    """Until the run's dataset file exists in its staging directory (the time loop is next)."""
+def wait_until_stepping(out: Path, proc: subprocess.Popen, timeout: float = 300.0) -> None:
+    """Until the run has written a checkpoint (``LONG`` checkpoints every 0.5 s): it is in its time
+    loop with frames written, whatever compiling took on a loaded machine."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout:
-        if list(out.parent.glob(f".{out.name}.staging.*/.dataset.nc.*.tmp")):
-            time.sleep(1.0)
+        if list(out.parent.glob(f".{out.name}.work.*/checkpoint.ckpt")):
             return
         assert proc.poll() is None, proc.communicate()
         time.sleep(0.05)
@@ -53,7 +53,7 @@ def wait_until_stepping(out: Path, proc: subprocess.Popen, timeout: float = 60.0
 
 
 def leftovers(parent: Path) -> list[str]:
-    return sorted(p.name for p in parent.iterdir() if ".staging." in p.name or p.name.endswith(".tmp"))
+    return sorted(p.name for p in parent.iterdir() if ".staging." in p.name or ".work." in p.name or p.name.endswith(".tmp"))
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
@@ -73,7 +73,8 @@ def test_a_signal_during_a_rerun_keeps_the_finished_result(tmp_path, sig, code) 
     partial = open_run(tmp_path / "demo.interrupted")
     assert partial.attrs["status"] == "interrupted" and signal.Signals(sig).name in partial.attrs["status_reason"]
     assert 1 < partial.sizes["time"] < 2001 and np.isfinite(partial["theta"].values).all()
-    assert {p.name for p in (tmp_path / "demo.interrupted").iterdir()} == {"dataset.nc", "config.yaml", "run.log"}
+    assert {p.name for p in (tmp_path / "demo.interrupted").iterdir()} - {"checkpoint.prev.ckpt"} == {
+        "dataset.nc", "config.yaml", "run.log", "checkpoint.ckpt"}  # the checkpoint --resume continues from
     assert leftovers(tmp_path) == []
     res = flexmm("analyze", tmp_path / "demo.interrupted", "--no-save")
     assert res.returncode == 1 and "interrupted run" in res.stdout + res.stderr  # refused, not silently measured
@@ -85,7 +86,7 @@ def test_sigkill_leftovers_are_cleaned_by_the_next_run(tmp_path) -> None:
     wait_until_stepping(out, proc)
     proc.kill()
     proc.wait()
-    assert leftovers(tmp_path) and not out.exists()  # killed: nothing published, staging left behind
+    assert leftovers(tmp_path) and not out.exists()  # killed: nothing published, its work directory left behind
     assert flexmm("run", DEMO, "--out", out, "-q", *SHORT).returncode == 0
     assert leftovers(tmp_path) == [] and open_run(out).attrs["status"] == "finished"
 

@@ -46,3 +46,37 @@ def stop_on_signals() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+class _Deferred:
+    """The handlers ``deferred`` installs: a signal is noted, and acted on when the block ends."""
+
+    def __init__(self) -> None:
+        self.noted: list[int] = []
+
+    def __call__(self, signum, frame) -> None:
+        self.noted.append(signum)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """SIGINT and SIGTERM wait until the block ends (main thread only; elsewhere a no-op).
+
+    Inside, a signal is only noted; when the block ends the handlers in force before it are back
+    and the first signal noted is raised again (``signal.raise_signal``), so it acts as it would
+    have: a ``KeyboardInterrupt`` or ``Terminated`` — after the block, never inside it. The
+    ``Stepper`` wraps each compiled call (state, time and counters change together) and each
+    frame's checks and observers in one, so an interruption leaves a state a checkpoint can
+    continue from bit for bit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    note = _Deferred()
+    previous = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        if note.noted:
+            signal.raise_signal(note.noted[0])

@@ -14,10 +14,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 from flexmm.assemble import build_problem
+from flexmm.checkpoint import DEFAULT_EVERY_S, Checkpointing
 from flexmm.config import Scene, load_scene
 from flexmm.controller import RunResult, run_problem
 from flexmm.io.atomic import write_text_atomic
-from flexmm.io.provenance import config_text
+from flexmm.io.provenance import config_hash, config_text
 from flexmm.io.rundir import RunDirectory
 
 if TYPE_CHECKING:
@@ -52,7 +53,7 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
               analysis: str | None = None, force_limits: bool = False, atomic: bool = True,
-              in_memory: bool = False) -> RunResult:
+              in_memory: bool = False, checkpoint_s: float | None = None) -> RunResult:
     """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
     ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
@@ -65,7 +66,10 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     ``force_limits``. ``atomic=False`` writes straight into ``run_dir`` for a caller that owns
     the directory and publishes its own markers (sweep points). ``in_memory`` keeps the dataset
     in ``result.dataset`` instead of writing dataset.nc (a sweep point measured and dropped; a
-    continuum-only run still writes its file).
+    continuum-only run still writes its file). ``checkpoint_s``: seconds of wall time between
+    checkpoints (``flexmm.checkpoint``; also one when the run ends or a signal stops it; ``flexmm
+    run`` gives ``checkpoint.DEFAULT_EVERY_S``), which ``continue_run`` continues from; None (the
+    default: sweep points, fidelity runs): none, and none for ``atomic=False`` or ``in_memory``.
     """
     from flexmm.continuum_run import run_continuum
     from flexmm.plan import make_plan
@@ -73,8 +77,15 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     from flexmm.plan.output import parse_analysis
     from flexmm.prepare import accuracy_check, prepare
 
+    from flexmm.prepare import error_check_of
+
     out = run_dir_for(scene, run_dir)
-    with (RunDirectory(out) if atomic else _InPlace(out)) as rd:
+    keep = atomic and not in_memory and checkpoint_s is not None
+    with (RunDirectory(out, checkpoints=keep) if atomic else _InPlace(out)) as rd:
+        for old in getattr(rd, "discarded", []):
+            if log:
+                log(f"discarded the checkpoints of an earlier run into {out} ({old.name}; flexmm run --resume "
+                    "would have continued it)")
         plan = make_plan(scene, fidelity, parse_analysis(analysis))
         if plan.skip_discrete:
             result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=plan.attrs(), log=log)
@@ -82,12 +93,83 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
             problem = prepare(plan, lambda steps, dt_s, n: check_steps(steps, dt_s, n, force_limits))
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
+            ckpt = None if not keep else Checkpointing(rd.stage, checkpoint_s, {
+                "source_config": config_text(scene), "source_sha256": config_hash(scene),
+                "planned_config": config_text(plan.scene),
+                "plan_attrs": plan.attrs(), "error_check": error_check_of(plan)})
             result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),
-                                 on_finish=accuracy_check(plan, problem), in_memory=in_memory)
+                                 on_finish=accuracy_check(plan, problem), in_memory=in_memory, checkpoints=ckpt)
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
         where = rd.commit(result.status)
     result.path = None if result.dataset is not None or result.path is None else where / "dataset.nc"
+    return result
+
+
+def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: bool = False, progress: bool = False,
+                 log: Callable[[str], None] | None = None, allow_version: bool = False,
+                 checkpoint_s: float | None = DEFAULT_EVERY_S) -> RunResult:
+    """Continue the run in ``run_dir`` from its newest valid checkpoint (``flexmm run --resume/--extend``).
+
+    Resume (``extend=False``): the run was interrupted, failed or killed; its checkpoints are in
+    ``<run_dir>.interrupted``, ``<run_dir>.failed`` or the work directory a killed run left. The
+    run goes on from the checkpoint and publishes what an uninterrupted run would have (the same
+    frames and state, bit for bit; ``resumed`` in the dataset attrs). ``scene``, if given, must be
+    the scene the run was started with (``CheckpointError`` listing what changed otherwise).
+
+    Extend (``extend=True``): ``run_dir`` is a finished run and ``scene`` its config.yaml (the scene
+    that ran) with a longer ``solver.duration_s``, the only change allowed. The run goes on from
+    its end on the same time axis with the same step and frame interval, and replaces
+    ``run_dir``: the result equals that scene run from t = 0 with ``output.every_s`` set to the
+    run's frame interval.
+
+    A checkpoint written by another flexmm version or commit is refused unless ``allow_version``.
+    """
+    from flexmm import checkpoint as ck
+    from flexmm.plan.planner import replace_section
+    from flexmm.prepare import whole_run_check
+
+    final = Path(run_dir).expanduser()
+    for status in ("interrupted", "failed", "inaccurate"):
+        if final.name.endswith("." + status):
+            final = final.with_name(final.name[: -len(status) - 1])
+    say = log or (lambda _m: None)
+    with RunDirectory(final, checkpoints=checkpoint_s is not None, keep_work=True) as rd:
+        partial = [final.with_name(f"{final.name}.{status}") for status in ("interrupted", "failed")]
+        ended_dirs = [final, final.with_name(f"{final.name}.inaccurate")]  # where a run that ended is published
+        sources = ended_dirs if extend else [*rd.work_dirs(), *partial]
+        found, refused = ck.best([d for d in sources if d.is_dir()])
+        for note in refused:
+            say(note)
+        meta = found.meta
+        planned, source = ck.continuation(found, scene, extend=extend, allow_version=allow_version,
+                                          from_work=found.directory in rd.work_dirs())
+        problem = build_problem(planned)
+        if extend:
+            every_s = meta["interval"] * problem.system.scales.time_s
+            planned = source = replace_section(planned, "output", every_s=every_s)
+            problem = build_problem(planned, built=(problem.system, problem.terms))
+        else:
+            problem.duration = meta["duration"]
+        problem.dt = meta["problem_dt"]
+        check = meta.get("error_check")
+        ckpt = None if checkpoint_s is None else Checkpointing(rd.stage, checkpoint_s, {
+            "source_config": config_text(source), "source_sha256": config_hash(source),
+            "planned_config": config_text(planned),
+            "plan_attrs": meta["plan_attrs"], "error_check": check})
+        result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=meta["plan_attrs"],
+                             on_finish=whole_run_check(problem, **check) if check else None, checkpoints=ckpt,
+                             resume=found)
+        write_text_atomic(rd.stage / "config.yaml", config_text(planned))
+        write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
+        where = rd.commit(result.status)
+        if (where / ck.NAME).is_file():  # the run's own checkpoint supersedes the ones it came from
+            for old in rd.work_dirs():
+                shutil.rmtree(old, ignore_errors=True)
+            if result.status == "finished":
+                for old in partial:
+                    shutil.rmtree(old, ignore_errors=True)
+    result.path = None if result.path is None else where / "dataset.nc"
     return result
 
 
@@ -250,5 +332,5 @@ def render(run: xr.Dataset | str | Path | Result, t: float | None = None, **opti
     return figure(run, t, **options)
 
 
-__all__ = ["Measurements", "Result", "analyze", "build_problem", "load_scene", "render", "run", "run_dir_for",
-           "run_scene"]
+__all__ = ["Measurements", "Result", "analyze", "build_problem", "continue_run", "load_scene", "render", "run",
+           "run_dir_for", "run_scene"]

@@ -17,6 +17,7 @@ import numpy as np
 
 from flexmm._signals import signal_of
 from flexmm.assemble import Problem
+from flexmm.checkpoint import Checkpoint, CheckpointError, Checkpointing
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.parallel import available_threads
@@ -227,6 +228,20 @@ class _StepFollower:
         self.say(f"step reduced: {at}; dt {self.h0 * ts:.4g} s -> {st.h * ts:.4g} s (h0/{m}) from here on")
         return False
 
+    def snapshot(self) -> tuple[dict, dict]:
+        """(arrays, scalars) of the follower for a checkpoint: its reduction, counters, and the
+        stiffness tracker's warm-start vector."""
+        scalars = {"m": self.m, "w_top": self.w_top, "checks": self.checks, "reductions": self.reductions,
+                   "tracker_s": self.tracker.seconds if self.tracker else 0.0}
+        return ({"tracker_x": self.tracker.x} if self.tracker else {}), scalars
+
+    def restore(self, arrays: dict, scalars: dict) -> None:
+        self.m, self.w_top = int(scalars["m"]), float(scalars["w_top"])
+        self.checks, self.reductions = int(scalars["checks"]), int(scalars["reductions"])
+        if self.tracker is not None:
+            self.tracker.x = np.array(arrays["tracker_x"])
+            self.tracker.seconds = float(scalars["tracker_s"])
+
     def summary(self) -> None:
         if self.on and self.checks:
             ts = self.problem.system.scales.time_s
@@ -305,6 +320,43 @@ class _Observer:
         self.writer.append(st.t * sc.time_s, site_vals, time_vals)
 
 
+def _runs(chunks: list[int]) -> list[list[int]]:
+    """``chunks`` as [value, count] runs (a checkpoint's record of the schedule)."""
+    out: list[list[int]] = []
+    for n in chunks:
+        if out and out[-1][0] == n:
+            out[-1][1] += 1
+        else:
+            out.append([int(n), 1])
+    return out
+
+
+def _resume(ck: Checkpoint, stepper: Stepper, track: _StepFollower, obs: _Observer, plan: Schedule,
+            lines: list[str], say: Callable[[str], None]) -> tuple[int, list[str]]:
+    """Put the run where checkpoint ``ck`` left it: state, follower, frames, log. Returns the
+    chunks done and the resumptions (its own noted). A longer schedule than the checkpoint's
+    (``--extend``) must begin with the same step and chunks."""
+    m = ck.meta
+    done = m["frames_done"] - 1
+    ts = stepper.system.scales.time_s
+    before = [n for n, k in m["chunks"] for _ in range(k)][:done]
+    if m["h0"] != plan.h or plan.chunks[:done] != before or m["frames_written"] != m["frames_done"]:
+        raise CheckpointError(f"{ck.path}: its schedule (step {m['h0'] * ts:.6g} s, {m['frames_total']} frames) is not "
+                              f"the start of this run's (step {plan.h * ts:.6g} s, {len(plan.chunks) + 1} frames)")
+    stepper.restore(ck.arrays, m["stepper"])
+    track.restore(ck.arrays, m["follower"])
+    try:
+        obs.writer.copy_frames(ck.dataset(), m["frames_written"], m["t_written_s"])
+    except OSError as exc:
+        raise CheckpointError(f"the frames of {ck.path} cannot be continued: {ck.dataset()}: "
+                              f"{exc.strerror or exc}") from None
+    lines[:] = m["log"]
+    note = (f"resumed at t = {m['t_s']:.6g} s (frame {done}, step {m['steps']}) from {ck.path} "
+            f"(written {m['written']} by flexmm {m['flexmm_version']}, {m['git_commit']})")
+    say(note)
+    return done, [*m.get("resumptions", []), note]
+
+
 def _progress(total: int, enabled: bool):
     if not enabled:
         return None
@@ -321,12 +373,17 @@ def run_problem(
     problem: Problem, run_dir: Path, *, progress: bool = False,
     log: Callable[[str], None] | None = None, extra_attrs: dict | None = None,
     on_finish: Callable | None = None, in_memory: bool = False,
+    checkpoints: Checkpointing | None = None, resume: Checkpoint | None = None,
 ) -> RunResult:
     """Integrate ``problem`` and write ``run_dir/dataset.nc``; never raises on a blow-up.
 
     ``on_finish(q, v, h, say, t) -> dict`` (if given) sees the final state of a finished run
     and returns extra attrs (used by flexmm.plan for its accuracy check). ``in_memory``: no
     dataset file; ``result.dataset`` holds what it would have held (``io.run_dataset.MemoryWriter``).
+    ``checkpoints``: write checkpoints (``flexmm.checkpoint``) into ``run_dir`` at frames, every
+    ``checkpoints.every_s`` of wall time, when the run ends (finished: for ``--extend``) and
+    when a signal stops it. ``resume``: continue from that checkpoint instead of t = 0 (its frames
+    copied from its dataset; ``CheckpointError`` when it does not fit this problem's schedule).
     """
     scene, s = problem.scene, problem.system
     spec = INTEGRATORS[scene.solver.integrator]
@@ -369,16 +426,43 @@ def run_problem(
         + (f", {threads} threads" if threads > 1 else ""))
 
     track = _StepFollower(problem, spec, stepper, say)
+    start, resumptions = 0, []  # chunks done before (a resumed run), and the resumptions noted
+    if resume is not None:
+        try:
+            start, resumptions = _resume(resume, stepper, track, obs, plan, lines, say)
+        except BaseException:
+            obs.writer.abort()
+            raise
+    done, at_frame = [start + 1], [stepper.steps]  # frames appended (frame 0 included); steps at the last
     early: Outcome | None = None  # a signal while compiling or writing frame 0: the run stops there
     try:
         compile_s = stepper.warm_up()
-        obs.frame(stepper)
+        if resume is None:
+            obs.frame(stepper)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM under _signals.stop_on_signals
         compile_s = stepper.compile_s
         early = Outcome("interrupted", signal.Signals(signal_of(exc)).name, stepper.t)
     prog = _progress(len(chunks), progress)
+    if prog and start:
+        prog.advance(prog.task_ids[0], start)
     write_error: list[tuple[float, OSError]] = []
     last_line = [_time.monotonic()]
+
+    clock = [_time.monotonic()]  # when the last checkpoint was written
+
+    def checkpoint(status: str, dataset: str, durable: bool = True) -> None:
+        arrays, scalars = stepper.snapshot()
+        f_arrays, f_scalars = track.snapshot()
+        w = obs.writer
+        meta = {"status": status, "frames_done": done[0], "frames_total": n_frames, "frames_written": w.n_written,
+                "t_written_s": w.t_written, "dataset": dataset, "steps": stepper.steps, "t_s": stepper.t * sc.time_s,
+                "h0": plan.h, "chunks": _runs(chunks), "interval": plan.interval, "problem_dt": problem.dt,
+                "duration": problem.duration, "stepper": scalars, "follower": f_scalars, "log": list(lines),
+                "resumptions": resumptions}
+        warned = bool(checkpoints.failed)
+        if not checkpoints.save(meta, {**arrays, **f_arrays}, durable) and not warned:
+            say(f"warning: {checkpoints.failed}; the run goes on")
+        clock[0] = _time.monotonic()
 
     def on_frame(st: Stepper) -> bool:
         try:
@@ -386,8 +470,18 @@ def run_problem(
         except OSError as exc:  # disk full, quota, I/O error: stop, keep the frames written
             write_error.append((st.t, exc))
             return True
+        done[0], at_frame[0] = done[0] + 1, st.steps
         if track.check(st):
             return True
+        if checkpoints is not None and _time.monotonic() - clock[0] >= checkpoints.every_s:
+            t0 = _time.perf_counter()
+            try:
+                obs.writer.sync()  # the frames a checkpoint counts are on disk before it is written
+            except OSError as exc:
+                write_error.append((st.t, exc))
+                return True
+            checkpoints.seconds += _time.perf_counter() - t0
+            checkpoint("running", obs.writer.tmp.name)
         if prog:
             prog.advance(prog.task_ids[0])
         elif log is not None and _time.monotonic() - last_line[0] >= PROGRESS_EVERY_S:
@@ -399,7 +493,7 @@ def run_problem(
         return False
 
     try:
-        outcome = early or stepper.run(track.chunks(chunks), on_frame)
+        outcome = early or stepper.run(track.chunks(chunks[start:]), on_frame)
     finally:
         if prog:
             prog.stop()
@@ -434,6 +528,9 @@ def run_problem(
     if reason and not write_error:  # what a write failure kept is known once the file is closed
         say(reason)
     track.summary()
+    if checkpoints is not None and checkpoints.count:
+        say(f"checkpoints: {checkpoints.count} written ({checkpoints.bytes / 2**20:.3g} MiB each), "
+            f"{checkpoints.seconds:.3g} s")
     if on_finish is not None and status == "finished":
         extra_attrs = {**(extra_attrs or {}), **on_finish(stepper.q, stepper.v, h, say, t)}
     if status == "finished":
@@ -472,9 +569,17 @@ def run_problem(
         "mass_scale_kg": sc.mass_kg,
         "spacing_m": s.spacing_m,
         "log": "\n".join(lines),
+        **({"resumed": "\n".join(resumptions), "n_resumptions": len(resumptions)} if resumptions else {}),
         **(extra_attrs or {}),
     }
     path = obs.writer.close(attrs)
+    if (checkpoints is not None and path is not None and early is None and status != "failed"
+            and stepper.steps == at_frame[0] and obs.writer.n_written == done[0]):
+        # the state the run ended in, which --resume (interrupted) or --extend go on from; not fsynced,
+        # like the dataset beside it (a power cut may lose both; the death of the process neither)
+        checkpoint(status, path.name, durable=False)
+        if status != "interrupted":
+            checkpoints.drop_previous()
     if path is None:  # the file could not be completed: say so, never claim frames that are gone
         status = "failed"
         head = (f"writing frames failed at t = {write_error[0][0] * sc.time_s:.6g} s" if write_error

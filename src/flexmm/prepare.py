@@ -134,10 +134,20 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
 def accuracy_check(plan: Plan, problem: Problem) -> Callable | None:
     """Callback for ``run_problem(on_finish=...)``: step doubling over the whole run
     (``solver.error_check: run``), at the step the run used."""
+    check = error_check_of(plan)
+    return None if check is None else whole_run_check(problem, **check)
+
+
+def error_check_of(plan: Plan) -> dict | None:
+    """What ``whole_run_check`` needs to be made again without the plan (a resumed run), or None."""
     if plan.choice is None or plan.error_check != "run" or plan.accuracy is None:
         return None
-    target = plan.accuracy
-    spec = INTEGRATORS[plan.choice.integrator]
+    return {"target": plan.accuracy, "integrator": plan.choice.integrator}
+
+
+def whole_run_check(problem: Problem, target: float, integrator: str) -> Callable:
+    """``accuracy_check``'s callback for ``problem`` run with ``integrator``, against ``target``."""
+    spec = INTEGRATORS[integrator]
 
     def on_finish(q, v, h, say, t) -> dict:
         est = acc.estimate(problem, spec, h, whole_run=True)

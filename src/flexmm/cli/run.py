@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import signal
 
 import typer
+
+from flexmm.checkpoint import DEFAULT_EVERY_S
+from flexmm.errors import UsageError
 
 from flexmm.cli.common import (
     EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, stderr_is_tty, writing,
@@ -13,7 +17,8 @@ from flexmm.cli.plan import AnalysisOption, FidelityOption, check_fidelity
 
 
 def run(
-    config: str = typer.Argument(..., help="Scene YAML file."),
+    config: str = typer.Argument(None, help="Scene YAML file (with --resume: optional, checked against the "
+                                            "run's; with --extend: default RUN_DIR/config.yaml)."),
     overrides: list[str] = OverrideOption,
     out: str = typer.Option(None, "--out", "-o", help="Run directory (default output.directory/name)."),
     force: bool = typer.Option(False, "--force", help="Run even if dt exceeds the stable limit or the run "
@@ -26,12 +31,22 @@ def run(
     analysis: str = AnalysisOption,
     from_run: str = typer.Option(None, "--from", help="Continue RUN: start from its last frame "
                                                       "(sets initial.from_run; the config records it)."),
+    resume: str = typer.Option(None, "--resume", metavar="RUN_DIR",
+                               help="Continue the interrupted, failed or killed run RUN_DIR from its last "
+                                    "checkpoint; publishes what an uninterrupted run would have."),
+    extend: str = typer.Option(None, "--extend", metavar="RUN_DIR",
+                               help="Continue the finished run RUN_DIR to the longer duration given by "
+                                    "--set solver.duration_s=... (same step and frame interval)."),
+    checkpoint_s: float = typer.Option(DEFAULT_EVERY_S, "--checkpoint-s", metavar="SECONDS",
+                                       help="Wall time between checkpoints (0: only when the run ends or a "
+                                            "signal stops it)."),
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
 
     Outputs are committed together when the run ends: a finished run replaces runs/<name>; a
     failed or interrupted one (Ctrl-C: exit 130, SIGTERM: exit 143) is kept in
-    runs/<name>.failed or runs/<name>.interrupted.
+    runs/<name>.failed or runs/<name>.interrupted. A run writes checkpoints (every --checkpoint-s
+    of wall time, when it ends, on Ctrl-C/SIGTERM); --resume continues one, --extend a finished run.
     """
     from flexmm._signals import exit_status, signal_of, stop_on_signals
     from flexmm.api import run_dir_for, run_scene
@@ -45,6 +60,14 @@ def run(
                 ov.append("solver.allow_unstable=true")
             check_fidelity(fidelity)
             analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
+            every = checkpoint_s if checkpoint_s > 0 else math.inf
+            if resume or extend:
+                result = _continue(config, ov, resume, extend, every, quiet, force)
+                ended.append(result)
+                _report(result, quiet, strict, analysis)
+                return
+            if config is None:
+                raise UsageError("missing the scene: flexmm run CONFIG (or --resume/--extend RUN_DIR)")
             scene = load_or_exit(config, ov, {"initial.from_run": ("--from", from_run)} if from_run else None)
             run_dir = check_output_dir(run_dir_for(scene, out))
             refuse_inputs_inside(run_dir, [config])  # a finished run replaces its directory: never the user's input
@@ -59,28 +82,57 @@ def run(
                     log(line)
             with writing(run_dir):
                 result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
-                                   fidelity=fidelity, analysis=analysis, force_limits=force)
+                                   fidelity=fidelity, analysis=analysis, force_limits=force, checkpoint_s=every)
             ended.append(result)
-            if result.path is not None:
-                typer.echo(result.path if quiet else f"dataset: {result.path}")
-            if not result.ok:
-                typer.echo(f"status: {result.status}: {result.reason}", err=True)
-                if result.status == "inaccurate":  # went to its end, published as <name>.inaccurate
-                    _print_error_estimate(result.accuracy, quiet)
-                    raise typer.Exit(EXIT_INACCURATE)
-                raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
-            _print_error_estimate(result.accuracy, quiet)
-            if strict and result.accuracy_missed:
-                raise typer.Exit(EXIT_INACCURATE)
-            if quiet:
-                return
-            _print_summary(result.path, analysis)
+            _report(result, quiet, strict, analysis)
         except KeyboardInterrupt as exc:  # outside the time loop (which keeps its frames itself)
             sig = signal_of(exc)
             name = signal.Signals(sig).name
             typer.echo(f"interrupted by {name} after the run ended: its outputs are kept ({ended[0].path})"
                        if ended else f"interrupted by {name} before the run started: nothing written", err=True)
             raise typer.Exit(exit_status(sig)) from None
+
+
+def _continue(config: str | None, overrides: list[str], resume: str | None, extend: str | None, every: float,
+              quiet: bool, force: bool):
+    """``--resume`` / ``--extend``: the scene to check or extend with, then ``api.continue_run``."""
+    from pathlib import Path
+
+    from flexmm.api import continue_run
+    from flexmm.cli.common import writing
+
+    if resume and extend:
+        raise UsageError("--resume and --extend: give one")
+    target = Path(resume or extend)
+    if extend:
+        config = config or str(target / "config.yaml")  # the scene that ran: step and method fixed
+    elif overrides and config is None:
+        raise UsageError("--set with --resume needs CONFIG (the scene the run was started with)")
+    scene = load_or_exit(config, overrides) if config else None
+    log = None if quiet else (lambda m: typer.echo(m, err=True))
+    with writing(target):
+        return continue_run(target, scene, extend=bool(extend), progress=stderr_is_tty() and not quiet, log=log,
+                            allow_version=force, checkpoint_s=every)
+
+
+def _report(result, quiet: bool, strict: bool, analysis: str | None) -> None:
+    """The dataset's path, the status and exit code, the error estimate and the summary of a run."""
+    from flexmm._signals import exit_status
+
+    if result.path is not None:
+        typer.echo(result.path if quiet else f"dataset: {result.path}")
+    if not result.ok:
+        typer.echo(f"status: {result.status}: {result.reason}", err=True)
+        if result.status == "inaccurate":  # went to its end, published as <name>.inaccurate
+            _print_error_estimate(result.accuracy, quiet)
+            raise typer.Exit(EXIT_INACCURATE)
+        raise typer.Exit(exit_status(result.signal) if result.signal else EXIT_FAILED_RUN)
+    _print_error_estimate(result.accuracy, quiet)
+    if strict and result.accuracy_missed:
+        raise typer.Exit(EXIT_INACCURATE)
+    if quiet:
+        return
+    _print_summary(result.path, analysis)
 
 
 #: exit status of an 'inaccurate' run (an error estimate over 10x its target, or the energy of a

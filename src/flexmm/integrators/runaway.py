@@ -82,6 +82,16 @@ class RunawayGuard:
                 f"imbalance of {r:.3g} of the energy budget, beyond the {self.drift_tol:.3g} the integrator's error "
                 "allows: the step does not resolve the motion")
 
+    def state(self) -> dict:
+        """What ``restore`` needs to continue exactly (plain numbers, for a checkpoint)."""
+        return {"e0": self.e0, "e_max": self.e_max, "over_since": self.over_since,
+                "over_checks": self.over_checks, "recent": [list(r) for r in self.recent]}
+
+    def restore(self, state: dict) -> None:
+        self.e0, self.e_max = float(state["e0"]), float(state["e_max"])
+        self.over_since, self.over_checks = state["over_since"], int(state["over_checks"])
+        self.recent = deque((int(s), float(e)) for s, e in state["recent"])
+
     def record(self, step: int, energy: float) -> None:
         """Remember a good frame's |E| at cumulative step count ``step``."""
         self.recent.append((step, abs(energy)))

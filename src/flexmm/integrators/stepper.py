@@ -22,7 +22,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from flexmm._signals import signal_of
+from flexmm._signals import deferred, signal_of
 from flexmm.integrators import INTEGRATORS, IntegratorSpec
 from flexmm.integrators.common import Accumulators, Terms, apply_prescribed, contact_energy
 from flexmm.integrators.parallel import advance_kernel, choose_threads, keep_tables
@@ -127,7 +127,8 @@ class Stepper:
         cap = self.max_call_steps if self.max_call_steps and not self.adaptive else max(left, 1)
         while True:
             k = min(cap, left)
-            self.t = self._call(self.q, self.v, self.f, k, self.acc)
+            with deferred():  # a signal waits for the call: q, v, f, acc and t change together
+                self.t = self._call(self.q, self.v, self.f, k, self.acc)
             left -= k
             if left <= 0:
                 break
@@ -142,6 +143,30 @@ class Stepper:
         call: the fused closing and opening half kicks). Returns the stepper."""
         self.max_call_steps = max(1, int(work // max(self.system.n_sites, 1)))
         return self
+
+    # -- checkpoints -----------------------------------------------------------------------------
+    def snapshot(self) -> tuple[dict[str, np.ndarray], dict]:
+        """(arrays, scalars) from which ``restore`` continues this stepper bit for bit: the state
+        q, v, the total force f (a fused or FSAL method's opening kick uses it), the accumulator
+        (ledger, counters, an adaptive or implicit method's state slots), t, h, the time spent
+        and the runaway guard's references. Taken between compiled calls (``run`` lets a signal
+        in only there), where nothing else carries over from one call to the next."""
+        arrays = {"q": self.q, "v": self.v, "f": self.f, "acc": self.acc}
+        scalars = {"t": self.t, "h": self.h, "wall_s": self.wall_s, "cpu_s": self.cpu_s,
+                   "guard": self.guard.state()}
+        return arrays, scalars
+
+    def restore(self, arrays: dict[str, np.ndarray], scalars: dict) -> None:
+        """Continue from a ``snapshot`` of a stepper of the same problem, method and step."""
+        for name in ("q", "v", "f", "acc"):
+            mine = getattr(self, name)
+            if arrays[name].shape != mine.shape:
+                raise ValueError(f"{name} has shape {arrays[name].shape}, not {mine.shape}")
+            mine[...] = arrays[name]
+        self.t, self.h = float(scalars["t"]), float(scalars["h"])
+        self.wall_s, self.cpu_s = float(scalars["wall_s"]), float(scalars["cpu_s"])
+        self.guard.restore(scalars["guard"])
+        self.last_energies = None
 
     # -- observations ------------------------------------------------------------------------
     @property
@@ -198,13 +223,19 @@ class Stepper:
     def _run(self, chunks, on_frame) -> Outcome:
         self._t_good = self.t
         for nsteps in chunks:
-            self.advance(nsteps)
-            why = self.failure()
-            if why is not None:
-                return Outcome("failed", why, self._t_good)
-            self._t_good = self.t
-            if on_frame is not None and on_frame(self):
-                break
+            if self.max_call_steps:  # bounded calls: a signal stops the chunk between two of them
+                self.advance(nsteps)
+            # else the chunk's one call, its checks and observers run whole: a signal stops the run
+            # at a frame, which a checkpoint continues from (it waits for the compiled call anyway)
+            with deferred():
+                if not self.max_call_steps:
+                    self.advance(nsteps)
+                why = self.failure()
+                if why is not None:
+                    return Outcome("failed", why, self._t_good)
+                self._t_good = self.t
+                if on_frame is not None and on_frame(self):
+                    break
         return Outcome("finished", "", self._t_good)
 
 

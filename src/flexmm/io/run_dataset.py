@@ -239,6 +239,40 @@ class DatasetWriter:
         self.t_written = self._buf[-1][0]
         self._buf.clear()
 
+    def sync(self) -> None:
+        """Write the buffered frames and make them durable (HDF5 flush, then fsync): ``n_written``
+        frames survive a crash of the process from here on (a checkpoint counts on it)."""
+        self.flush()
+        if self.file is None:
+            return
+        self.file._h5file.flush()
+        fd = os.open(self.tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    def copy_frames(self, src: Path, n: int, t_last: float) -> None:
+        """Start with the first ``n`` frames of the dataset ``src`` (a run continued from a checkpoint,
+        whose frame ``n − 1`` is at ``t_last`` s). ``OSError`` when ``src`` does not hold them."""
+        step = max(1, BUFFER_BYTES // (8 * max(1, self.n_site * max(1, len(self.site_names)))))
+        try:
+            with h5netcdf.File(src, "r") as f:
+                times = f.variables["time"]
+                if times.shape[0] < n or (n and float(times[n - 1]) != t_last):
+                    found = times.shape[0] if times.shape[0] < n else f"time {float(times[n - 1])!r} s at frame {n - 1}"
+                    raise OSError(errno.EINVAL, f"it does not hold the checkpoint's {n} frames to t = {t_last!r} s "
+                                                f"(it holds {found})", str(src))
+                if self.n_frames is None:
+                    self.file.resize_dimension("time", n)
+                for i in range(0, n, step):
+                    j = min(i + step, n)
+                    for name in ("time", *self.site_names, *self.time_names):
+                        self.file.variables[name][i:j] = f.variables[name][i:j]
+        except (RuntimeError, KeyError) as exc:  # HDF5 cannot read it (a file cut short by a kill)
+            raise OSError(errno.EIO, f"it cannot be read ({_first_line(exc)})", str(src)) from None
+        self.n_written, self.t_written = n, (t_last if n else None)
+
     def _release_reserve(self) -> None:
         if self.reserve is not None:
             self.reserve.unlink(missing_ok=True)

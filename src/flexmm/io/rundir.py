@@ -16,6 +16,9 @@ directory is refused instead of interleaving its files with the first. ``commit(
   older partial of the same kind); a finished ``<name>`` is never touched, and nothing partial
   sits where a finished result is expected.
 
+A run that writes checkpoints stages in a work directory ``.<name>.work.<pid>`` instead, which
+outlives a killed process for ``flexmm run --resume`` (``RunDirectory``).
+
 Leaving the ``with`` block without a commit (an error, a signal before the run started) removes
 the staging directory. Staging directories and temporary files of processes that no longer run
 (a ``kill -9``, a power cut) are removed by the next run into the same directory.
@@ -229,7 +232,8 @@ def exclusive(lock_path: Path, what: str):
 #: the path is not a run directory, and replacing it could destroy unrelated files
 #: files only a flexmm run directory holds (one of them at least)
 RUN_MARKERS = ("dataset.nc", "run.log")
-RUN_FILE_SUFFIXES = (".nc", ".yaml", ".log", ".json", ".csv", ".png", ".svg", ".pdf", ".gif", ".mp4", ".lock", ".tmp")
+RUN_FILE_SUFFIXES = (".nc", ".yaml", ".log", ".json", ".csv", ".png", ".svg", ".pdf", ".gif", ".mp4", ".lock", ".tmp",
+                     ".ckpt")
 
 
 def foreign_contents(directory: Path) -> list[str]:
@@ -263,17 +267,38 @@ def refuse_inputs_inside(run_dir: Path, inputs) -> None:
                                   "writes over its inputs)")
 
 
-class RunDirectory:
-    """Lock ``final``, give a staging directory to write in, commit it (module docstring)."""
+#: a file that makes a staging directory worth keeping when its run dies (``flexmm.checkpoint.NAME``)
+CHECKPOINT_FILE = "checkpoint.ckpt"
 
-    def __init__(self, final: str | Path):
+
+class RunDirectory:
+    """Lock ``final``, give a staging directory to write in, commit it (module docstring).
+
+    ``checkpoints``: the run writes checkpoints into its staging directory, so it is a *work*
+    directory ``.<name>.work.<pid>`` that outlives the process when the run dies (a ``kill -9``
+    leaves it for ``flexmm run --resume``; leaving the block uncommitted keeps it if it holds a
+    checkpoint). A new run discards the work directories of earlier ones (``discarded``) unless
+    ``keep_work`` (a resume, which reads them: ``work_dirs``).
+    """
+
+    def __init__(self, final: str | Path, *, checkpoints: bool = False, keep_work: bool = False):
         self.final = Path(final).expanduser()
         self.parent = self.final.parent
         name = self.final.name
         self.lock_path = self.parent / f".{name}.lock"
-        self.stage = self.parent / f".{name}.staging.{os.getpid()}"
+        kind = "work" if checkpoints else "staging"
+        self.stage = self.parent / f".{name}.{kind}.{os.getpid()}"
+        self.keep_work = keep_work
+        self.discarded: list[Path] = []
         self.committed: Path | None = None
         self._lock = exclusive(self.lock_path, f"run directory {self.final}")
+
+    def work_dirs(self) -> list[Path]:
+        """Work directories of earlier runs into ``final`` (their processes ended: the lock is ours)."""
+        pattern = re.compile(rf"^\.{re.escape(self.final.name)}\.work\.(\d+)$")
+        if not self.parent.is_dir():
+            return []
+        return sorted(p for p in self.parent.iterdir() if p != self.stage and pattern.match(p.name) and p.is_dir())
 
     def __enter__(self) -> RunDirectory:
         for status in ("", *PARTIAL):  # every directory a commit may replace
@@ -287,6 +312,10 @@ class RunDirectory:
         clean_stale(self.parent)
         if self.final.is_dir():
             clean_stale(self.final)
+        if not self.keep_work:
+            for old in self.work_dirs():
+                shutil.rmtree(old, ignore_errors=True)
+                self.discarded.append(old)
         if self.stage.exists():
             shutil.rmtree(self.stage)
         self.stage.mkdir()
@@ -317,6 +346,6 @@ class RunDirectory:
         return target
 
     def __exit__(self, *exc) -> None:
-        if self.committed is None and self.stage.exists():
+        if self.committed is None and self.stage.exists() and not (self.stage / CHECKPOINT_FILE).is_file():
             shutil.rmtree(self.stage, ignore_errors=True)
         self._lock.__exit__(*exc)
