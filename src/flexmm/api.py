@@ -52,12 +52,15 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
               analysis: str | None = None, force_limits: bool = False, atomic: bool = True,
-              in_memory: bool = False) -> RunResult:
+              in_memory: bool = False, announce: Callable[[list[str]], None] | None = None) -> RunResult:
     """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
-    ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
-    declared; the CLI uses 'auto'); the plan is logged and stored in the dataset attrs, and
-    config.yaml holds the scene that actually ran. The outputs are written in a private staging
+    The plan is ``prepare.resolve(scene, fidelity, analysis)`` ('full' runs the scene as declared;
+    the CLI uses 'auto'), the one every verb shows: ``announce(lines)`` (if given) receives its
+    lines — method, step, stable limit, frames, domain, cost and every change to what the scene
+    asked — before the run; they open run.log, the planner's decisions are logged, and the dataset
+    attrs hold both (``plan_summary``, ``plan_changes``, ``plan``); config.yaml holds the scene
+    that actually ran. The outputs are written in a private staging
     directory and committed with one rename (``io.rundir.RunDirectory``): a finished run becomes
     ``run_dir``; a failed or interrupted one goes to ``run_dir.failed`` / ``run_dir.interrupted``
     and never replaces a finished result. ``result.path`` is the committed dataset. A run of
@@ -68,22 +71,27 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     continuum-only run still writes its file).
     """
     from flexmm.continuum_run import run_continuum
-    from flexmm.plan import make_plan
     from flexmm.plan.cost import check_steps
     from flexmm.plan.output import parse_analysis
-    from flexmm.prepare import accuracy_check, prepare
+    from flexmm.prepare import accuracy_check, resolve
 
     out = run_dir_for(scene, run_dir)
     with (RunDirectory(out) if atomic else _InPlace(out)) as rd:
-        plan = make_plan(scene, fidelity, parse_analysis(analysis))
+        rp = resolve(scene, fidelity, parse_analysis(analysis),
+                     lambda steps, dt_s, n: check_steps(steps, dt_s, n, force_limits))
+        summary = rp.lines()
+        if announce is not None:
+            announce(summary)
+        plan = rp.plan
         if plan.skip_discrete:
-            result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=plan.attrs(), log=log)
+            result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=rp.attrs(), log=log)
         else:
-            problem = prepare(plan, lambda steps, dt_s, n: check_steps(steps, dt_s, n, force_limits))
+            problem = rp.problem
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
-            result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),
+            result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=rp.attrs(),
                                  on_finish=accuracy_check(plan, problem), in_memory=in_memory)
+        result.log[:0] = summary
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
         where = rd.commit(result.status)

@@ -29,7 +29,8 @@ def run(
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
 
-    Outputs are committed together when the run ends: a finished run replaces runs/<name>; a
+    The plan (`flexmm plan`'s lines: method, step, stable limit, frames, domain, cost and any change
+    made to what the scene asked) is printed first. Outputs are committed together when the run ends: a finished run replaces runs/<name>; a
     failed or interrupted one (Ctrl-C: exit 130, SIGTERM: exit 143) is kept in
     runs/<name>.failed or runs/<name>.interrupted.
     """
@@ -57,9 +58,14 @@ def run(
             for line in enforce(scene, run_dir, force, step=big).lines():  # ResourceError unless --force
                 if log and big:
                     log(line)
+            def announce(lines: list[str]) -> None:  # the plan, before the run: stdout (stderr with -q)
+                for line in lines:
+                    if not quiet or line.startswith("plan: change:"):
+                        typer.echo(line, err=quiet)
+
             with writing(run_dir):
                 result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
-                                   fidelity=fidelity, analysis=analysis, force_limits=force)
+                                   fidelity=fidelity, analysis=analysis, force_limits=force, announce=announce)
             ended.append(result)
             if result.path is not None:
                 typer.echo(result.path if quiet else f"dataset: {result.path}")
