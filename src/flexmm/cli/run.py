@@ -7,7 +7,8 @@ import signal
 import typer
 
 from flexmm.cli.common import (
-    EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, stderr_is_tty, writing,
+    EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, print_plan, stderr_is_tty,
+    writing,
 )
 from flexmm.cli.plan import AnalysisOption, FidelityOption, check_fidelity
 
@@ -58,14 +59,10 @@ def run(
             for line in enforce(scene, run_dir, force, step=big).lines():  # ResourceError unless --force
                 if log and big:
                     log(line)
-            def announce(lines: list[str]) -> None:  # the plan, before the run: stdout (stderr with -q)
-                for line in lines:
-                    if not quiet or line.startswith("plan: change:"):
-                        typer.echo(line, err=quiet)
-
             with writing(run_dir):
                 result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
-                                   fidelity=fidelity, analysis=analysis, force_limits=force, announce=announce)
+                                   fidelity=fidelity, analysis=analysis, force_limits=force,
+                                   announce=lambda lines: print_plan(lines, quiet))
             ended.append(result)
             if result.path is not None:
                 typer.echo(result.path if quiet else f"dataset: {result.path}")
