@@ -18,7 +18,7 @@ def validate(
     sweep spec (its schema and every point's scene; nothing is built).
 
     The plan is `flexmm plan`'s (its accuracy pilots run; nothing is written). A lattice of more
-    than 4096 units is not built: its step comes from a small copy of the lattice, so any size
+    than 200,000 units is not built: its step comes from a small copy of the lattice, so any size
     validates in about a second, and the pilots choose the step when it runs. A run beyond the
     limits on memory, output size, free disk or steps is reported as an error (flexmm.plan.cost).
     """
@@ -34,10 +34,10 @@ def validate(
         return
     from flexmm.api import run_dir_for
     from flexmm.cli.common import check_output_dir
-    from flexmm.plan.cost import EXACT_SITES, ResourceError, check, estimate
+    from flexmm.plan.cost import PLANNED_SITES, ResourceError, check, estimate
 
     check_output_dir(run_dir_for(scene))  # OutputError if the output could not be written there
-    if scene.lattice.n_sites > EXACT_SITES:
+    if scene.lattice.n_sites > PLANNED_SITES:
         cost = estimate(scene)
         lines = cost.lines() + ["cost: method and step: chosen when the run starts (flexmm plan builds the "
                                 "lattice and runs the accuracy pilots)"]

@@ -38,6 +38,9 @@ from flexmm.errors import FlexmmError
 
 PROBE_SITES = 256  # largest lattice built to find the step
 EXACT_SITES = 4096  # up to this size the scene itself is built (exact step, strikers included)
+#: up to this size ``flexmm validate`` shows the run's own plan (``prepare.resolve``: the lattice built,
+#: the accuracy pilots run, seconds); above it the estimate from a small copy (under a second)
+PLANNED_SITES = 200_000
 BYTES_PER_DOF = 40 * 8
 BASE_BYTES = 200 * 2**20
 CALIBRATION = "throughput.csv"  # in flexmm/data: kind, method, n_units, threads, unit_steps_per_s, scene
