@@ -58,8 +58,8 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     The plan is ``prepare.resolve(scene, fidelity, analysis)`` ('full' runs the scene as declared;
     the CLI uses 'auto'), the one every verb shows: ``announce(lines)`` (if given) receives its
     lines — method, step, stable limit, frames, domain, cost and every change to what the scene
-    asked — before the run; they open run.log, the planner's decisions are logged, and the dataset
-    attrs hold both (``plan_summary``, ``plan_changes``, ``plan``); config.yaml holds the scene
+    asked — before the run; the planner's decisions are logged, and the dataset attrs hold both
+    (``plan_summary``, ``plan_changes``, ``plan``); config.yaml holds the scene
     that actually ran. The outputs are written in a private staging
     directory and committed with one rename (``io.rundir.RunDirectory``): a finished run becomes
     ``run_dir``; a failed or interrupted one goes to ``run_dir.failed`` / ``run_dir.interrupted``
@@ -91,7 +91,6 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
                         problem.system.n_sites, force_limits)
             result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=rp.attrs(),
                                  on_finish=accuracy_check(plan, problem), in_memory=in_memory)
-        result.log[:0] = summary
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
         where = rd.commit(result.status)
