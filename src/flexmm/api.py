@@ -153,6 +153,8 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     None runs in a temporary directory that is removed once the dataset is loaded.
     ``fidelity`` and ``analysis`` are ``flexmm run``'s options of the same names.
 
+    Any change the plan makes to what was asked (a lattice trimmed, a step shortened to the frame
+    times) is printed as a ``plan: change: ...`` line and stored in ``dataset.attrs["plan_changes"]``.
     A mistake in the scene or an override raises ``flexmm.errors.FlexmmError`` (``ConfigError``
     naming the source, the dotted field and what was expected); a run that fails or is
     interrupted returns with ``status`` and ``message`` saying so.
@@ -168,7 +170,8 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     try:
         run_dir = Path(out).expanduser() if out is not None else tmp / sc.name
         enforce(sc, run_dir, step=sc.lattice.n_sites > EXACT_SITES)
-        res = run_scene(sc, run_dir=run_dir, progress=progress, fidelity=fidelity, analysis=analysis)
+        res = run_scene(sc, run_dir=run_dir, progress=progress, fidelity=fidelity, analysis=analysis,
+                        announce=_print_changes)
         ds = open_dataset(res.path)
     finally:
         if tmp is not None:
@@ -176,6 +179,14 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     return Result(dataset=ds, status=res.status, message=res.reason,
                   error_estimate=res.accuracy.get("accuracy_estimate"), accuracy=dict(res.accuracy),
                   path=res.path if out is not None else None, scene=sc, log=list(res.log))
+
+
+def _print_changes(lines: list[str]) -> None:
+    """The plan's changes to what the scene asked, printed (never silent; the whole plan is the
+    dataset's ``plan_summary``)."""
+    for line in lines:
+        if line.startswith("plan: change:"):
+            print(line)
 
 
 @dataclass

@@ -31,6 +31,7 @@ class Observed:
     compile_s: float = math.nan
     plan_s: float = math.nan
     dof_steps: float = math.nan
+    estimate_s: float = math.nan  # the plan's estimated integration time (``plan_estimated_s``)
     n_units: int = 0
     note: str = ""
 
@@ -71,6 +72,8 @@ class Comparison:
         rows.append(f"  {'solve + plan (s)':<22}{a.wall_s + a.plan_s:>14.4g}{b.wall_s + b.plan_s:>14.4g}"
                     f"{self.cost_ratio:>13.1f}x")
         rows.append(f"  {'  of which plan (s)':<22}{a.plan_s:>14.3g}{b.plan_s:>14.3g}")
+        rows.append(f"  {'integration (s)':<22}{a.wall_s:>14.4g}{b.wall_s:>14.4g}")
+        rows.append(f"  {'  planned estimate (s)':<22}{a.estimate_s:>14.4g}{b.estimate_s:>14.4g}")
         rows.append(f"  {'work (DOF-steps)':<22}{a.dof_steps:>14.4g}{b.dof_steps:>14.4g}{self.work_ratio:>13.1f}x")
         rows.append(f"  {'compile (s)':<22}{a.compile_s:>14.3g}{b.compile_s:>14.3g}")
         for r in self.runs:
@@ -140,6 +143,7 @@ def run_fidelity(scene, fidelity: str, run_dir: Path, request: AnalysisRequest, 
                    n_units=res.n_units)
     ds = open_run(res.path)
     obs.plan_s = float(ds.attrs.get("plan_time_s", 0.0))
+    obs.estimate_s = float(ds.attrs.get("plan_estimated_s", math.nan))
     n_fields = len(model_fields(ds.attrs.get("model", scene.lattice.kind)))
     obs.dof_steps = float(res.n_steps) * res.n_units * n_fields
     if not res.ok:
