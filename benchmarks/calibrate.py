@@ -7,14 +7,17 @@
     python benchmarks/calibrate.py check    # run every shipped scene (auto fidelity, as `flexmm run`)
                                             # and compare the estimate with the integration time
 
-The table holds unit-steps per second of the compiled stepper (compile excluded; the minimum time
-of ``REPEATS`` fresh steppers, each advancing the same steps from the scene's initial state) for
+The table holds unit-steps per CPU second of the compiled stepper (compile excluded; the minimum
+of ``REPEATS`` fresh steppers, each advancing the same steps from the scene's initial state) and
+the CPU seconds of a call beyond its steps (a run makes one per frame) for
 the model kind, the method, the lattice size and the threads the run would use: the planned
 problem of each shipped scene (``prepare.resolve``: its trimmed domain, its method and step), with
 the method it runs and with velocity Verlet, and the chains at 8× and 64× their size (not the
 predeformed ones, whose relaxation at that size takes longer than the timing). Regenerate
 it after a change to the kernels or on another machine (the estimate is then that machine's).
-``check`` writes benchmarks/results/calibration_check.json with the load average.
+``check`` compares with the integration's CPU time (``cpu_time_s``; on a shared machine its wall
+time is that stretched by the load) and writes benchmarks/results/calibration_check.json with the
+load average.
 """
 
 from __future__ import annotations
@@ -35,14 +38,26 @@ REPEATS = 3
 TIMED_S = 0.15  # at least this long per timed advance
 SCALES = (8, 64)  # larger copies of the 1D lattices
 MAX_UNITS = 100_000
+CALLS = 200  # single-step calls timed for the cost of a call (one per frame in a run)
 
 
 def _load() -> str:
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def _rate(problem, method: str, max_steps: int) -> tuple[float, int]:
-    """(unit-steps per second, threads) of ``method`` on ``problem`` at a stable step."""
+def _advance_cpu(problem, spec, h: float, steps: int) -> float:
+    """CPU seconds of a fresh stepper advancing ``steps`` steps in one call (compile excluded)."""
+    from flexmm.integrators.stepper import make_stepper
+
+    st = make_stepper(problem, spec, h=h, check_energy=False)
+    st.advance(steps)
+    return st.cpu_s
+
+
+def _rate(problem, method: str, max_steps: int) -> tuple[float, float, int]:
+    """(unit-steps per CPU second, CPU seconds per call beyond its steps, threads) of ``method`` on
+    ``problem`` at a stable step. CPU time, not wall time: on a shared machine the wall time of a
+    run is its CPU time stretched by the load, which the estimate cannot know."""
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import make_stepper
 
@@ -53,20 +68,22 @@ def _rate(problem, method: str, max_steps: int) -> tuple[float, int]:
     n = problem.system.n_sites
     steps = max(1, min(max_steps, int(2e5 // n) or 1))
     while True:  # grow the window until one advance takes TIMED_S (or the run's own steps)
-        st = make_stepper(problem, spec, h=h, check_energy=False)
-        t0 = time.perf_counter()
-        st.advance(steps)
-        dt = time.perf_counter() - t0
-        if dt >= TIMED_S or steps >= max_steps:
+        cpu = _advance_cpu(problem, spec, h, steps)
+        if cpu >= TIMED_S or steps >= max_steps:
             break
-        steps = min(max_steps, int(steps * max(2.0, 1.2 * TIMED_S / max(dt, 1e-6))))
-    best = dt
-    for _ in range(REPEATS - 1):
-        st = make_stepper(problem, spec, h=h, check_energy=False)
-        t0 = time.perf_counter()
-        st.advance(steps)
-        best = min(best, time.perf_counter() - t0)
-    return steps * n / best, st.threads
+        steps = min(max_steps, int(steps * max(2.0, 1.2 * TIMED_S / max(cpu, 1e-6))))
+    best = min([cpu] + [_advance_cpu(problem, spec, h, steps) for _ in range(REPEATS - 1)])
+    st = make_stepper(problem, spec, h=h, check_energy=False)
+    threads = max(st.threads, 1)
+    rate = steps * n / best * threads  # CPU seconds of all threads: the wall time of an idle machine
+    calls = max(1, min(CALLS, max_steps))
+    st.advance(calls)
+    one = st.cpu_s
+    st.cpu_s = 0.0
+    for _ in range(calls):
+        st.advance(1)
+    call_s = max(0.0, (st.cpu_s - one) / calls) / threads
+    return rate, call_s, threads
 
 
 def _scaled(scene, factor: int):
@@ -113,12 +130,13 @@ def calibrate(resume: bool = False) -> None:
                     print(f"  {path.stem} x{k}: not built ({exc})", file=sys.stderr)
         for pb, max_steps in cases:
             for m in dict.fromkeys((method, "velocity_verlet")):
-                rate, threads = _rate(pb, m, max_steps)
+                rate, call_s, threads = _rate(pb, m, max_steps)
                 row = {"kind": pb.scene.lattice.kind, "method": m, "n_units": pb.system.n_sites,
-                       "threads": threads, "unit_steps_per_s": f"{rate:.4g}", "scene": path.stem}
+                       "threads": threads, "unit_steps_per_s": f"{rate:.4g}", "call_s": f"{call_s:.3g}",
+                       "scene": path.stem}
                 rows.append(row)
                 print(f"{row['scene']:<40} {row['kind']:<28} {m:<16} {row['n_units']:>8} units "
-                      f"{rate / 1e6:8.3g} M unit-steps/s (load {_load()})", flush=True)
+                      f"{rate / 1e6:8.3g} M unit-steps/s, {call_s * 1e6:6.3g} µs a call (load {_load()})", flush=True)
         partial.write_text(json.dumps(rows, indent=0))
     with open(TABLE, "w", newline="") as fh:
         fh.write(f"# unit-steps per second of the compiled stepper; python benchmarks/calibrate.py; "
@@ -144,13 +162,14 @@ def check(names: list[str]) -> None:
         est = res.dataset.attrs.get("plan_estimated_s") if res.dataset is not None else None
         if est is None:
             continue
-        ratio = est / res.wall_s if res.wall_s > 0 else float("nan")
+        cpu = float(res.dataset.attrs["cpu_time_s"]) / max(int(res.dataset.attrs.get("threads", 1)), 1)
+        ratio = est / cpu if cpu > 0 else float("nan")
         worst = max(worst, ratio, 1 / ratio)
-        row = {"scene": path.stem, "estimate_s": est, "integration_s": res.wall_s, "ratio": ratio,
-               "status": res.status, "load": _load()}
+        row = {"scene": path.stem, "estimate_s": est, "integration_cpu_s": cpu, "integration_wall_s": res.wall_s,
+               "ratio": ratio, "status": res.status, "load": _load()}
         out.append(row)
-        print(f"{path.stem:<40} estimate {est:9.3g} s  integration {res.wall_s:9.3g} s  ratio {ratio:6.3g}  "
-              f"(load {row['load']})", flush=True)
+        print(f"{path.stem:<40} estimate {est:9.3g} s  integration {cpu:9.3g} s CPU ({res.wall_s:9.3g} s wall)  "
+              f"ratio {ratio:6.3g}  (load {row['load']})", flush=True)
     print(f"worst ratio (max of estimate/actual and actual/estimate): {worst:.3g}")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "calibration_check.json").write_text(json.dumps({"rows": out, "worst": worst}, indent=1))

@@ -13,8 +13,9 @@ The memory figure is a model, not a measurement: ``BYTES_PER_DOF`` for state, sc
 tables and the frame buffer (a streamed 10⁶-unit chain peaked at 0.67 GiB, ≈ 35 doubles per DOF
 above the interpreter's ≈ 0.15 GiB), plus ``BASE_BYTES``.
 
-The time is steps × units over a measured throughput (``throughput``): unit-steps per second of the
-compiled stepper for the model kind, the method and the lattice size, from the calibration table
+The time is steps × units over a measured throughput (``throughput``) plus a measured cost per call
+(one per frame): unit-steps per CPU second of the compiled stepper for the model kind, the method
+and the lattice size, and its CPU seconds per call, from the calibration table
 ``flexmm/data/throughput.csv`` (written by ``python benchmarks/calibrate.py``, which times the
 stepper on every shipped scene and on larger copies of the chains; ``calibrate.py check`` runs the
 shipped scenes and compares). Sizes between calibrated ones are interpolated in log–log, sizes
@@ -43,7 +44,7 @@ EXACT_SITES = 4096  # up to this size the scene itself is built (exact step, str
 PLANNED_SITES = 200_000
 BYTES_PER_DOF = 40 * 8
 BASE_BYTES = 200 * 2**20
-CALIBRATION = "throughput.csv"  # in flexmm/data: kind, method, n_units, threads, unit_steps_per_s, scene
+CALIBRATION = "throughput.csv"  # in flexmm/data: kind, method, n_units, threads, unit_steps_per_s, call_s, scene
 GIB = 2**30
 
 
@@ -77,18 +78,23 @@ class Cost:
     notes: list[str] = field(default_factory=list)
     stable_dt_s: float | None = None
     rate: float = math.nan  # unit-steps per second (``throughput``)
+    call_s: float = 0.0  # seconds per call into the stepper beyond its steps (one call per frame)
     rate_note: str = ""
 
     @property
     def seconds(self) -> float | None:
-        """Integration time at the calibrated throughput ``rate`` (compile, pilots and writing apart)."""
-        return None if self.steps is None else self.steps * self.n_sites / self.rate
+        """Integration time at the calibrated throughput ``rate`` and cost of a call, one per frame
+        (compile, pilots and writing apart): the time on an idle machine (a loaded one stretches it)."""
+        if self.steps is None:
+            return None
+        return self.steps * self.n_sites / self.rate + max(self.frames - 1, 0) * self.call_s
 
     def time_line(self) -> str:
-        """'≈ 0.05 s at 2.3 M unit-steps/s (calibrated: ...)' (empty without steps)."""
+        """'≈ 0.05 s at 2.3 M unit-steps/s and 20 µs a frame (calibrated ...)' (empty without steps)."""
         if self.steps is None:
             return ""
-        return f"≈ {_duration(self.seconds)} at {self.rate / 1e6:.3g} M unit-steps/s ({self.rate_note})"
+        return (f"≈ {_duration(self.seconds)} at {self.rate / 1e6:.3g} M unit-steps/s and {self.call_s * 1e6:.2g} µs "
+                f"a frame ({self.rate_note})")
 
     def lines(self) -> list[str]:
         steps = ("steps unknown" if self.steps is None
@@ -105,7 +111,7 @@ def calibration() -> tuple[dict, ...]:
     rows = []
     for r in csv.DictReader(line for line in text.splitlines() if not line.startswith("#")):
         rows.append({**r, "n_units": int(r["n_units"]), "threads": int(r["threads"]),
-                     "unit_steps_per_s": float(r["unit_steps_per_s"])})
+                     "unit_steps_per_s": float(r["unit_steps_per_s"]), "call_s": float(r.get("call_s") or 0.0)})
     return tuple(rows)
 
 
@@ -128,23 +134,28 @@ def _interpolate(points: list[tuple[int, float]], n: int) -> float:
     return math.exp(ys[-1])  # not reached
 
 
-def throughput(kind: str, method: str, n_units: int) -> tuple[float, str]:
-    """(unit-steps per second, where it comes from) of ``method`` on a ``kind`` lattice of ``n_units``
-    (module docstring)."""
+def throughput(kind: str, method: str, n_units: int) -> tuple[float, float, str]:
+    """(unit-steps per second, seconds per call, where they come from) of ``method`` on a ``kind``
+    lattice of ``n_units`` (module docstring)."""
     from flexmm.integrators import INTEGRATORS
 
     rows = calibration()
     same = [r for r in rows if r["kind"] == kind]
-    exact = [(r["n_units"], r["unit_steps_per_s"]) for r in same if r["method"] == method]
+    exact = [r for r in same if r["method"] == method]
     if exact:
-        return _interpolate(exact, n_units), f"calibrated for {kind}, {method}"
+        return (_interpolate([(r["n_units"], r["unit_steps_per_s"]) for r in exact], n_units),
+                _interpolate([(r["n_units"], max(r["call_s"], 1e-9)) for r in exact], n_units),
+                f"calibrated for {kind}, {method}")
     evals = INTEGRATORS[method].force_evals
-    scaled = [(r["n_units"], r["unit_steps_per_s"] * INTEGRATORS[r["method"]].force_evals / evals)
-              for r in (same or rows) if r["method"] in INTEGRATORS]
+    pool = [r for r in (same or rows) if r["method"] in INTEGRATORS]
+    scaled = [(r["n_units"], r["unit_steps_per_s"] * INTEGRATORS[r["method"]].force_evals / evals) for r in pool]
+    calls = [(r["n_units"], max(r["call_s"], 1e-9)) for r in pool]
     if same:
-        return _interpolate(scaled, n_units), f"calibrated for {kind}, scaled to {method} by force evaluations"
-    rates = sorted(rate for _, rate in scaled)
-    return rates[len(rates) // 2], f"{kind} not calibrated: the table's median, scaled to {method}"
+        return (_interpolate(scaled, n_units), _interpolate(calls, n_units),
+                f"calibrated for {kind}, scaled to {method} by force evaluations")
+    rates, per_call = sorted(rate for _, rate in scaled), sorted(c for _, c in calls)
+    return (rates[len(rates) // 2], per_call[len(per_call) // 2],
+            f"{kind} not calibrated: the table's median, scaled to {method}")
 
 
 def _duration(seconds: float) -> str:
@@ -216,10 +227,10 @@ def estimate(scene, step: bool = True) -> Cost:
     output = 8 * frames * (saved * site_vars + 8)
     memory = BASE_BYTES + BYTES_PER_DOF * ndof
     dt, stable, note = _step(scene) if step else (scene.solver.dt_s, None, None)
-    rate, how = throughput(lat.kind, scene.solver.integrator, n)
+    rate, call_s, how = throughput(lat.kind, scene.solver.integrator, n)
     cost = Cost(n, ndof, frames, saved, output, memory, dt,
                 None if dt is None else math.ceil(scene.solver.duration_s / dt - 1e-9), stable_dt_s=stable,
-                rate=rate, rate_note=how)
+                rate=rate, call_s=call_s, rate_note=how)
     if note:
         cost.notes.append(note)
     return cost
