@@ -30,6 +30,7 @@ from flexmm.config.scene import DEFAULT_METHOD
 from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
 from flexmm.plan.cost import Cost, estimate
+from flexmm.plan.cost import check_steps as cost_check_steps
 from flexmm.plan.frames import FrameTimes, frame_times
 from flexmm.plan.planner import Plan, PlanStep, make_plan, replace_section
 
@@ -144,7 +145,12 @@ def changes(plan: Plan) -> list[str]:
 def resolve(scene, fidelity: str = "auto", analysis=None, check_steps: Callable | None = None) -> RunPlan:
     """The plan of ``scene`` as every verb shows and ``flexmm run`` runs it (module docstring):
     ``plan.make_plan``, then ``prepare`` (build, accuracy pilots, frames), then the cost of what runs.
-    ``check_steps`` as for ``prepare``; PlanError for a request that cannot be met."""
+    ``check_steps`` as for ``prepare`` (default ``plan.cost.check_steps``: a run beyond FLEXMM_MAX_STEPS
+    is refused before the pilots run); PlanError for a request that cannot be met."""
+    check_steps = check_steps or cost_check_steps
+    if scene.solver.dt_s is not None:  # a given step: its steps are known before anything is built or piloted
+        check_steps(math.ceil(scene.solver.duration_s / scene.solver.dt_s - 1e-9), scene.solver.dt_s,
+                    scene.lattice.n_sites)
     try:
         plan = make_plan(scene, fidelity, analysis)
     except ValueError as exc:  # the planner's plain ValueErrors (e.g. an absorbing layer wider than the lattice)

@@ -257,7 +257,8 @@ def check(cost: Cost, out_dir: str | Path | None = None) -> list[str]:
         if free is not None and cost.output_bytes > 0.95 * free:
             problems.append(f"writes ≈ {cost.output_bytes / GIB:.3g} GiB but {probe} has {free / GIB:.3g} GiB free")
     if cost.steps is not None and cost.steps > lim["steps"]:
-        problems.append(f"takes {cost.steps:.3g} steps (≈ {_duration(cost.seconds)}), above the limit of "
+        when = f" (≈ {_duration(cost.seconds)})" if math.isfinite(cost.seconds) else ""
+        problems.append(f"takes {cost.steps:.3g} steps{when}, above the limit of "
                         f"{lim['steps']:.3g} (FLEXMM_MAX_STEPS; check solver.duration_s and solver.dt_s)")
     return problems
 
