@@ -82,7 +82,8 @@ def test_every_verb_prints_the_same_plan(path, tmp_path, quick_pilots, stopped):
     planned = plan_lines(["plan", cfg])
     assert any(ln.startswith("plan: method ") for ln in planned)
     assert any(ln.startswith("plan: frames ") for ln in planned)
-    assert any(ln.startswith("plan: cost: integration ≈ ") for ln in planned)
+    cost = next(ln for ln in planned if ln.startswith("plan: cost: integration ≈ "))
+    assert "(calibrated for " in cost, cost  # every shipped model kind and method is in the calibration table
     assert plan_lines(["validate", cfg]) == planned
     assert plan_lines(["run", cfg, "--out", str(tmp_path / "run")]) == planned
     assert plan_lines(["bench", cfg, "--out", str(tmp_path / "bench")]) == planned
@@ -99,3 +100,26 @@ def test_lego_validate_plan_run_agree(tmp_path, stopped):
     assert plan_lines(["run", str(LEGO), "--out", str(tmp_path / "run")]) == planned
     method = next(ln for ln in planned if ln.startswith("plan: method "))
     assert method.startswith("plan: method pefrl, dt 0.000142857 s (chosen by the accuracy pilots)"), method
+
+
+def test_throughput_interpolates_the_calibration_table(monkeypatch):
+    """log–log between calibrated sizes, the nearest outside, a geometric mean at one size; an
+    uncalibrated method scaled by force evaluations per step, an unknown kind from the median."""
+    import math
+
+    from flexmm.plan import cost
+
+    rows = ({"kind": "k", "method": "velocity_verlet", "n_units": 100, "threads": 1, "unit_steps_per_s": 1e6,
+             "call_s": 1e-5, "scene": "a"},
+            {"kind": "k", "method": "velocity_verlet", "n_units": 10_000, "threads": 1, "unit_steps_per_s": 4e6,
+             "call_s": 1e-5, "scene": "a"},
+            {"kind": "k", "method": "velocity_verlet", "n_units": 10_000, "threads": 1, "unit_steps_per_s": 16e6,
+             "call_s": 1e-5, "scene": "b"})
+    monkeypatch.setattr(cost, "calibration", lambda: rows)
+    rate, call_s, how = cost.throughput("k", "velocity_verlet", 1000)
+    assert math.isclose(rate, math.sqrt(1e6 * 8e6)) and math.isclose(call_s, 1e-5) and "calibrated for k" in how
+    assert math.isclose(cost.throughput("k", "velocity_verlet", 10)[0], 1e6)
+    assert math.isclose(cost.throughput("k", "velocity_verlet", 10**6)[0], 8e6)
+    rate, _, how = cost.throughput("k", "pefrl", 100)  # 4 force evaluations a step against 1
+    assert math.isclose(rate, 0.25e6) and "scaled to pefrl" in how
+    assert "not calibrated" in cost.throughput("other", "velocity_verlet", 100)[2]
