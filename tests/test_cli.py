@@ -153,9 +153,9 @@ def test_unstable_dt_exits_2_and_forced_blow_up_exits_1(short_lego, tmp_path):
     result = invoke("run", short_lego, "--out", tmp_path / "r", "--fidelity", "full", "--set", "solver.dt_s=1e-3")
     assert result.exit_code == 2 and "stable limit" in result.output
     assert not (tmp_path / "r" / "dataset.nc").exists()
-    # one frame at the end, so the step is not shortened to fit frequent frames
+    # one frame at the end, so the step (shortened to divide the duration) stays far above the limit
     result = invoke("run", short_lego, "--out", tmp_path / "f", "--fidelity", "full", "--set", "solver.dt_s=1e-3",
-                    "--set", "output.n_frames=2", "--force")
+                    "--set", "output.n_frames=2", "--set", "output.exact_frame_times=true", "--force")
     assert result.exit_code == 1 and "failed" in result.output
     assert not (tmp_path / "f").exists()  # a failed run is kept aside, never where a finished one goes
     ds = xr.open_dataset(tmp_path / "f.failed" / "dataset.nc", engine="h5netcdf")

@@ -45,16 +45,20 @@ def small_hertz():
 
 
 def test_requested_step_is_the_step_in_attrs_and_log(tmp_path, small_hertz) -> None:
+    """A given step that divides the frame interval is the step used; one that does not is refused
+    with the nearest that do (it used to round the frame interval: frames off the requested times)."""
     from flexmm.api import run_scene
+    from flexmm.errors import PlanError
     from flexmm.io.run_dataset import open_run
     from flexmm.plan.planner import replace_section
 
-    scene = replace_section(small_hertz, "solver", dt_s=3e-7)
-    res = run_scene(scene, run_dir=tmp_path / "r")
+    with pytest.raises(PlanError, match=r"solver.dt_s = 3e-07 s does not divide the frame interval 2.5e-06 s.*"
+                                        r"2.77778e-07 s \(9 steps per frame\) or 3.125e-07 s \(8 steps per frame\)"):
+        run_scene(replace_section(small_hertz, "solver", dt_s=3e-7), run_dir=tmp_path / "r")
+    res = run_scene(replace_section(small_hertz, "solver", dt_s=2.5e-7), run_dir=tmp_path / "r")
     ds = open_run(res.path)
-    assert ds.attrs["dt_s"] == pytest.approx(3e-7, rel=1e-12)
-    assert res.dt_s == pytest.approx(3e-7, rel=1e-12)
-    assert "steps of 3e-07 s" in ds.attrs["log"]
-    t = ds["time"].values
-    assert all(abs(x / 3e-7 - round(x / 3e-7)) < 1e-6 for x in t)  # frames at multiples of the step
-    assert ds.attrs["frame_interval_s"] == pytest.approx(2.4e-6)  # 2.5e-6 -> 8 steps of 3e-7
+    assert ds.attrs["dt_s"] == pytest.approx(2.5e-7, rel=1e-12)
+    assert res.dt_s == pytest.approx(2.5e-7, rel=1e-12)
+    assert "steps of 2.5e-07 s" in ds.attrs["log"]
+    assert ds["time"].values == pytest.approx([k * 2.5e-6 for k in range(9)], abs=1e-15)
+    assert ds.attrs["frame_interval_s"] == pytest.approx(2.5e-6) and ds.attrs["plan_changes"] == ""

@@ -53,12 +53,16 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
               analysis: str | None = None, force_limits: bool = False, atomic: bool = True,
-              in_memory: bool = False, checkpoint_s: float | None = None) -> RunResult:
+              in_memory: bool = False, checkpoint_s: float | None = None,
+              announce: Callable[[list[str]], None] | None = None) -> RunResult:
     """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
-    ``fidelity`` and ``analysis`` go to ``flexmm.plan.make_plan`` ('full' runs the scene as
-    declared; the CLI uses 'auto'); the plan is logged and stored in the dataset attrs, and
-    config.yaml holds the scene that actually ran. The outputs are written in a private staging
+    The plan is ``prepare.resolve(scene, fidelity, analysis)`` ('full' runs the scene as declared;
+    the CLI uses 'auto'), the one every verb shows: ``announce(lines)`` (if given) receives its
+    lines — method, step, stable limit, frames, domain, cost and every change to what the scene
+    asked — before the run; the planner's decisions are logged, and the dataset attrs hold both
+    (``plan_summary``, ``plan_changes``, ``plan``); config.yaml holds the scene
+    that actually ran. The outputs are written in a private staging
     directory and committed with one rename (``io.rundir.RunDirectory``): a finished run becomes
     ``run_dir``; a failed or interrupted one goes to ``run_dir.failed`` / ``run_dir.interrupted``
     and never replaces a finished result. ``result.path`` is the committed dataset. A run of
@@ -72,10 +76,9 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     default: sweep points, fidelity runs): none, and none for ``atomic=False`` or ``in_memory``.
     """
     from flexmm.continuum_run import run_continuum
-    from flexmm.plan import make_plan
     from flexmm.plan.cost import check_steps
     from flexmm.plan.output import parse_analysis
-    from flexmm.prepare import accuracy_check, prepare
+    from flexmm.prepare import accuracy_check, resolve
 
     from flexmm.prepare import error_check_of
 
@@ -86,18 +89,23 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
             if log:
                 log(f"discarded the checkpoints of an earlier run into {out} ({old.name}; flexmm run --resume "
                     "would have continued it)")
-        plan = make_plan(scene, fidelity, parse_analysis(analysis))
+        rp = resolve(scene, fidelity, parse_analysis(analysis),
+                     lambda steps, dt_s, n: check_steps(steps, dt_s, n, force_limits))
+        summary = rp.lines()
+        if announce is not None:
+            announce(summary)
+        plan = rp.plan
         if plan.skip_discrete:
-            result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=plan.attrs(), log=log)
+            result = run_continuum(plan.scene, plan.prediction, rd.stage, extra_attrs=rp.attrs(), log=log)
         else:
-            problem = prepare(plan, lambda steps, dt_s, n: check_steps(steps, dt_s, n, force_limits))
+            problem = rp.problem
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
             ckpt = None if not keep else Checkpointing(rd.stage, checkpoint_s, {
                 "source_config": config_text(scene), "source_sha256": config_hash(scene),
                 "planned_config": config_text(plan.scene),
-                "plan_attrs": plan.attrs(), "error_check": error_check_of(plan)})
-            result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=plan.attrs(),
+                "plan_attrs": rp.attrs(), "error_check": error_check_of(plan)})
+            result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=rp.attrs(),
                                  on_finish=accuracy_check(plan, problem), in_memory=in_memory, checkpoints=ckpt)
         write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
@@ -228,6 +236,8 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     None runs in a temporary directory that is removed once the dataset is loaded.
     ``fidelity`` and ``analysis`` are ``flexmm run``'s options of the same names.
 
+    Any change the plan makes to what was asked (a lattice trimmed, a step shortened to the frame
+    times) is printed as a ``plan: change: ...`` line and stored in ``dataset.attrs["plan_changes"]``.
     A mistake in the scene or an override raises ``flexmm.errors.FlexmmError`` (``ConfigError``
     naming the source, the dotted field and what was expected); a run that fails or is
     interrupted returns with ``status`` and ``message`` saying so.
@@ -243,7 +253,8 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     try:
         run_dir = Path(out).expanduser() if out is not None else tmp / sc.name
         enforce(sc, run_dir, step=sc.lattice.n_sites > EXACT_SITES)
-        res = run_scene(sc, run_dir=run_dir, progress=progress, fidelity=fidelity, analysis=analysis)
+        res = run_scene(sc, run_dir=run_dir, progress=progress, fidelity=fidelity, analysis=analysis,
+                        announce=_print_changes)
         ds = open_dataset(res.path)
     finally:
         if tmp is not None:
@@ -251,6 +262,14 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     return Result(dataset=ds, status=res.status, message=res.reason,
                   error_estimate=res.accuracy.get("accuracy_estimate"), accuracy=dict(res.accuracy),
                   path=res.path if out is not None else None, scene=sc, log=list(res.log))
+
+
+def _print_changes(lines: list[str]) -> None:
+    """The plan's changes to what the scene asked, printed (never silent; the whole plan is the
+    dataset's ``plan_summary``)."""
+    for line in lines:
+        if line.startswith("plan: change:"):
+            print(line)
 
 
 @dataclass

@@ -562,6 +562,7 @@ def run_problem(
         **track.attrs(wall),
         "compile_time_s": compile_s,
         "wall_time_s": wall,
+        "cpu_time_s": stepper.cpu_s,
         "status": status,
         "status_reason": reason,
         "length_scale_m": sc.length_m,

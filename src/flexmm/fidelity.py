@@ -31,6 +31,7 @@ class Observed:
     compile_s: float = math.nan
     plan_s: float = math.nan
     dof_steps: float = math.nan
+    estimate_s: float = math.nan  # the plan's estimated integration time (``plan_estimated_s``)
     n_units: int = 0
     note: str = ""
 
@@ -71,6 +72,8 @@ class Comparison:
         rows.append(f"  {'solve + plan (s)':<22}{a.wall_s + a.plan_s:>14.4g}{b.wall_s + b.plan_s:>14.4g}"
                     f"{self.cost_ratio:>13.1f}x")
         rows.append(f"  {'  of which plan (s)':<22}{a.plan_s:>14.3g}{b.plan_s:>14.3g}")
+        rows.append(f"  {'integration (s)':<22}{a.wall_s:>14.4g}{b.wall_s:>14.4g}")
+        rows.append(f"  {'  planned estimate (s)':<22}{a.estimate_s:>14.4g}{b.estimate_s:>14.4g}")
         rows.append(f"  {'work (DOF-steps)':<22}{a.dof_steps:>14.4g}{b.dof_steps:>14.4g}{self.work_ratio:>13.1f}x")
         rows.append(f"  {'compile (s)':<22}{a.compile_s:>14.3g}{b.compile_s:>14.3g}")
         for r in self.runs:
@@ -127,21 +130,22 @@ def measure(path, kind: str, field_spec: str, x_range: tuple[float, float] | Non
     return dict(speed_m_s=abs(p.speed_m_s), amplitude=p.amplitude, width_m=p.fwhm_m, units=p.amplitude_units)
 
 
-def run_fidelity(scene, fidelity: str, run_dir: Path, request: AnalysisRequest, log=None) -> Observed:
-    """Run one fidelity of a scene into ``run_dir`` and measure it."""
+def run_fidelity(scene, fidelity: str, run_dir: Path, request: AnalysisRequest, log=None,
+                 announce=None) -> Observed:
+    """Run one fidelity of a scene into ``run_dir`` and measure it; ``announce(lines)`` receives its
+    plan (``prepare.resolve``, as ``flexmm plan --fidelity`` prints it) before the run."""
     from flexmm.api import run_scene
     from flexmm.io.run_dataset import open_run
     from flexmm.models import model_fields
 
-    res = run_scene(scene, run_dir=run_dir, fidelity=fidelity, analysis=str(request), log=log)
+    res = run_scene(scene, run_dir=run_dir, fidelity=fidelity, analysis=str(request), log=log, announce=announce)
     obs = Observed(fidelity, res.path, res.status, wall_s=res.wall_s, compile_s=res.compile_s,
                    n_units=res.n_units)
     ds = open_run(res.path)
     obs.plan_s = float(ds.attrs.get("plan_time_s", 0.0))
+    obs.estimate_s = float(ds.attrs.get("plan_estimated_s", math.nan))
     n_fields = len(model_fields(ds.attrs.get("model", scene.lattice.kind)))
     obs.dof_steps = float(res.n_steps) * res.n_units * n_fields
-    if fidelity != "full":
-        obs.note = str(ds.attrs.get("plan", "")).replace("\n", " |")
     if not res.ok:
         obs.note = f"{res.status}: {res.reason}"
     return obs
@@ -157,14 +161,16 @@ def _x_extent(path) -> tuple[float, float]:
 
 
 def compare_fidelities(scene, fidelities: tuple[str, str], out_dir, request: AnalysisRequest | None = None,
-                       log=None) -> Comparison:
-    """Run ``scene`` at both fidelities under ``out_dir/<fidelity>`` and compare them."""
+                       log=None, announce=None) -> Comparison:
+    """Run ``scene`` at both fidelities under ``out_dir/<fidelity>`` and compare them; ``announce(fidelity,
+    lines)`` receives each fidelity's plan before its run."""
     request = request or AnalysisRequest("pulse")
     fld = default_field(request, _fields(scene))
     request = AnalysisRequest(request.kind, fld)
     cmp = Comparison(scene.name, request.kind, fld)
     for fid in fidelities:
-        cmp.runs.append(run_fidelity(scene, fid, Path(out_dir) / fid, request, log))
+        say = None if announce is None else (lambda lines, fid=fid: announce(fid, lines))
+        cmp.runs.append(run_fidelity(scene, fid, Path(out_dir) / fid, request, log, say))
     done = [r for r in cmp.runs if r.status == "finished"]
     if len(done) == 2:
         (a0, a1), (b0, b1) = (_x_extent(r.path) for r in done)

@@ -10,12 +10,18 @@ steps and choice are updated so the recorded config reproduces the run. The erro
 the pilot's step doubling extrapolated to the duration (``error_check: pilot``, the default for
 the default target, in the plan attrs) or ``accuracy_check(plan, problem)``, the whole run
 repeated at 2 dt after it (``error_check: run``, the default when the scene sets the target or
-the step).
+the step). Then the frames: the step is fitted to the frame times (``plan.frames``: shortened to
+divide the frame interval, or the request refused).
+
+``resolve(scene, fidelity, analysis)`` is the one plan every verb shows — ``validate``, ``plan``,
+``run``, ``compare``, ``bench`` and ``stability`` print its ``lines()`` (method, step, stable limit,
+frame times, domain, cost and every change made to what the scene asked) and run its problem.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Callable
 
 from flexmm import accuracy as acc
@@ -23,9 +29,10 @@ from flexmm.assemble import Problem, build_problem, scene_notes
 from flexmm.config.scene import DEFAULT_METHOD
 from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
-from flexmm.plan.planner import Plan, PlanStep, replace_section
-
-
+from flexmm.plan.cost import Cost, estimate
+from flexmm.plan.cost import check_steps as cost_check_steps
+from flexmm.plan.frames import FrameTimes, frame_times
+from flexmm.plan.planner import Plan, PlanStep, make_plan, replace_section
 
 
 def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
@@ -43,8 +50,121 @@ def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
         check_steps(problem.duration / h, h * problem.system.scales.time_s, problem.system.n_sites)
     if plan.scene.solver.accuracy is not None:
         problem = _accuracy(plan, problem)
+    _frames(plan, problem)
     problem.notes[:0] = plan.lines()
     return problem
+
+
+def _frames(plan: Plan, problem: Problem) -> FrameTimes:
+    """Fit the step to the frame times (``plan.frames.frame_times``); the plan and problem follow a
+    shortened step, and a ``frames`` plan step records the frames and any change."""
+    scene, ts = plan.scene, problem.system.scales.time_s
+    spec, out = INTEGRATORS[scene.solver.integrator], scene.output
+    frames, changes = frame_times(scene.solver.duration_s, out.n_frames, out.every_s,
+                                  None if spec.adaptive else problem.dt * ts,
+                                  given=plan.source.solver.dt_s is not None, exact=out.exact_frame_times,
+                                  stable_dt_s=problem.stable_dt * ts)
+    if changes:
+        planned = replace_section(scene, "solver", dt_s=frames.dt_s)
+        plan.scene = problem.scene = planned
+        problem.dt = frames.dt_s / ts
+    steps = "" if frames.dt_s is None else f", {frames.steps_per_frame} steps of {frames.dt_s:.6g} s each"
+    notes = [f"{frames.n_frames} frames every {frames.interval_s:.6g} s from 0 to {frames.t_end_s:.6g} s{steps}"]
+    attrs = {"plan_frames": frames.n_frames, "plan_frame_interval_s": frames.interval_s}
+    plan.steps.append(PlanStep("frames", "changed" if changes else "kept", notes + changes, attrs))
+    plan.frames = frames
+    return frames
+
+
+#: plan steps whose action changes what the scene asked, with the notes that say how
+CHANGES = {"dimension": ("reduced",), "domain": ("trimmed",), "output": ("pruned",),
+           "accuracy": ("not applied",), "frames": ("changed",)}
+
+
+@dataclass
+class RunPlan:
+    """The one plan of a scene (``resolve``): the planner's decisions, the problem that runs, its
+    frames and cost, and the changes made to what the scene asked."""
+
+    plan: Plan
+    problem: Problem | None  # None: the continuum replaces the run
+    cost: Cost | None
+    changes: list[str] = field(default_factory=list)
+
+    @property
+    def frames(self) -> FrameTimes | None:
+        return self.plan.frames
+
+    def lines(self) -> list[str]:
+        """What runs, one 'plan: ...' line per item; the same numbers in every verb."""
+        p, src = self.plan, self.plan.source
+        if self.problem is None:
+            return [f"plan: no discrete run: the continuum wave replaces it (--fidelity {p.fidelity})"] + [
+                f"plan: change: {c}" for c in self.changes]
+        s, ts = self.problem.system, self.problem.system.scales.time_s
+        lat, solver = p.scene.lattice, p.scene.solver
+        size = ("as declared" if lat.n_sites == src.lattice.n_sites and lat.kind == src.lattice.kind
+                else f"declared: {src.lattice.kind}, {src.lattice.n_sites:,} units")
+        acc = p.step("accuracy")
+        how = ("chosen by the accuracy pilots" if acc is not None and acc.action == "chosen"
+               else "solver.dt_s" if src.solver.dt_s is not None
+               else f"solver.dt_fraction {solver.dt_fraction:g} of the stable limit")
+        spec = INTEGRATORS[solver.integrator]
+        f = self.frames
+        step = (f"adaptive steps (rtol {solver.rtol or 1e-6:g})" if spec.adaptive
+                else f"dt {f.dt_s:.6g} s ({how})")
+        steps = "" if f.n_steps is None else f"; {f.n_steps:,} steps, {f.steps_per_frame:,} per frame"
+        c = self.cost
+        out = [f"plan: lattice {lat.kind}: {lat.n_sites:,} units ({size}), {s.ndof:,} DOFs",
+               f"plan: method {spec.name}, {step}, stable limit {self.problem.stable_dt * ts:.6g} s",
+               f"plan: frames {f.n_frames:,} every {f.interval_s:.6g} s from 0 to {f.t_end_s:.6g} s{steps}",
+               f"plan: cost: integration {c.time_line() or 'time unknown (adaptive steps)'}; memory ≈ "
+               f"{c.memory_bytes / 2**30:.2g} GiB; output {c.frames:,} frames × {c.saved_sites:,} sites ≈ "
+               f"{c.output_bytes / 2**30:.3g} GiB"]
+        return out + [f"plan: change: {c}" for c in self.changes]
+
+    def attrs(self) -> dict:
+        """The planner's attrs (``Plan.attrs``) with the changes (``plan_changes``, one per line, '' for
+        none), these lines (``plan_summary``) and the estimated integration time."""
+        a = {**self.plan.attrs(), "plan_changes": "\n".join(self.changes), "plan_summary": "\n".join(self.lines())}
+        if self.cost is not None and self.cost.seconds is not None:
+            a.update(plan_estimated_s=self.cost.seconds, plan_unit_steps_per_s=self.cost.rate)
+        return a
+
+
+def changes(plan: Plan) -> list[str]:
+    """What the plan changed of what the scene asked (``CHANGES``), one line each."""
+    out = []
+    for s in plan.steps:
+        if s.action.startswith(CHANGES.get(s.name, ("-",))):
+            notes = s.notes[1:] if s.name in ("domain", "frames") and len(s.notes) > 1 else s.notes
+            out += [f"{s.name}: {n}" for n in notes]
+    return out
+
+
+def resolve(scene, fidelity: str = "auto", analysis=None, check_steps: Callable | None = None) -> RunPlan:
+    """The plan of ``scene`` as every verb shows and ``flexmm run`` runs it (module docstring):
+    ``plan.make_plan``, then ``prepare`` (build, accuracy pilots, frames), then the cost of what runs.
+    ``check_steps`` as for ``prepare`` (default ``plan.cost.check_steps``: a run beyond FLEXMM_MAX_STEPS
+    is refused before the pilots run); PlanError for a request that cannot be met."""
+    check_steps = check_steps or cost_check_steps
+    if scene.solver.dt_s is not None:  # a given step: its steps are known before anything is built or piloted
+        check_steps(math.ceil(scene.solver.duration_s / scene.solver.dt_s - 1e-9), scene.solver.dt_s,
+                    scene.lattice.n_sites)
+    try:
+        plan = make_plan(scene, fidelity, analysis)
+    except ValueError as exc:  # the planner's plain ValueErrors (e.g. an absorbing layer wider than the lattice)
+        raise PlanError(str(exc)) from None
+    if plan.skip_discrete:
+        return RunPlan(plan, None, None, changes(plan))
+    problem = prepare(plan, check_steps)
+    ts = problem.system.scales.time_s
+    cost = estimate(plan.scene, step=False)
+    f = plan.frames
+    cost.dt_s, cost.stable_dt_s = (None, problem.stable_dt * ts) if f.dt_s is None else (f.dt_s, problem.stable_dt * ts)
+    cost.steps = f.n_steps
+    cost.frames = f.n_frames
+    return RunPlan(plan, problem, cost, changes(plan))
 
 
 def _accuracy(plan: Plan, problem: Problem) -> Problem:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from flexmm.cli.common import OverrideOption, check_output_dir, error, load_or_exit, output_dir, writing
+from flexmm.cli.common import OverrideOption, check_output_dir, error, load_or_exit, output_dir, planned, writing
 
 FILES = ("workprecision.nc", "workprecision.csv", "workprecision.png")
 
@@ -29,10 +29,12 @@ def bench(
     out: str = typer.Option(None, "--out", "-o", help="Output directory (default runs/<name>/bench)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
 ) -> None:
-    """Chart error against cost for each integrator and for solve_ivp on the same equations."""
+    """Chart error against cost for each integrator and for solve_ivp on the same equations.
+
+    The equations are those `flexmm run` would integrate (its plan, printed first: trimmed domain,
+    pruned output, frames); the plan's method and step are one point of the chart's ladders."""
     from flexmm.diagnostics import baseline
     from flexmm.diagnostics import workprecision as wp
-    from flexmm.assemble import build_problem
     from flexmm.integrators import INTEGRATORS
     from flexmm.io.cf import write_netcdf
     from flexmm.io.provenance import provenance_attrs
@@ -44,9 +46,9 @@ def bench(
         raise error(f"unknown method(s) {bad}; integrators: {', '.join(INTEGRATORS)}; "
                     f"solve_ivp: {', '.join(baseline.METHODS)}")
     scene = load_or_exit(config, list(overrides or []))
-    problem = build_problem(scene)
+    problem = planned(scene, quiet)  # the run's plan: its domain, method, step and frames
     folder = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "bench")
-    n_frames = frames or scene.output.n_frames  # a frame interval also caps the largest step
+    n_frames = frames or scene.output.n_frames  # a frame interval also caps the largest step (the plan's frames)
     say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
     rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s, log=say)
     attrs = {**provenance_attrs(scene), "reference": f"dopri5 rtol {ref.rtol:g}",

@@ -175,3 +175,20 @@ def stderr_is_tty() -> bool:
 __all__ = ["EXIT_FAILED_RUN", "EXIT_INTERRUPTED", "EXIT_USER_ERROR", "FlexmmGroup", "OverrideOption",
            "UserErrorCommand", "analysis_request", "check_output_dir", "error", "load_or_exit", "output_dir",
            "stderr_is_tty", "user_error_message", "user_errors", "writing"]
+
+
+def print_plan(lines: list[str], quiet: bool = False) -> None:
+    """The plan's lines (``prepare.RunPlan.lines``) on stdout; with ``-q`` only its changes, on stderr."""
+    for line in lines:
+        if not quiet or line.startswith("plan: change:"):
+            typer.echo(line, err=quiet)
+
+
+def planned(scene: Scene, quiet: bool = False):
+    """The problem ``flexmm run`` would integrate for ``scene`` (``prepare.resolve``, auto fidelity),
+    its plan printed first (``print_plan``)."""
+    from flexmm.prepare import resolve
+
+    rp = resolve(scene, "auto")
+    print_plan(rp.lines(), quiet)
+    return rp.problem

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import typer
 
-from flexmm.cli.common import OverrideOption, analysis_request, check_output_dir, error, load_or_exit, writing
+from flexmm.cli.common import (
+    OverrideOption, analysis_request, check_output_dir, error, load_or_exit, print_plan, writing,
+)
 
 
 def compare(
@@ -17,7 +19,9 @@ def compare(
     out: str = typer.Option(None, "--out", "-o", help="Directory for the runs (default output.directory/NAME/compare)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the comparison."),
 ) -> None:
-    """Run a scene at two fidelities and report differences in speed, amplitude, width and cost."""
+    """Run a scene at two fidelities and report differences in speed, amplitude, width and cost.
+
+    Each fidelity's plan (`flexmm plan --fidelity F`'s lines) is printed before its run."""
     from flexmm.fidelity import compare_fidelities
     from flexmm.plan import FIDELITIES
 
@@ -30,7 +34,12 @@ def compare(
     scene = load_or_exit(config, overrides)
     root = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "compare")
     log = None if quiet else (lambda m: typer.echo(m, err=True))
+    def announce(fid: str, lines: list[str]) -> None:  # with -q only the changes, on stderr
+        if not quiet or any(ln.startswith("plan: change:") for ln in lines):
+            typer.echo(f"fidelity {fid}:", err=quiet)
+        print_plan(lines, quiet)
+
     with writing(root):
-        cmp = compare_fidelities(scene, pair, root, request, log=log)
+        cmp = compare_fidelities(scene, pair, root, request, log=log, announce=announce)
     for line in cmp.table():
         typer.echo(line)

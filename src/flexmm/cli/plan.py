@@ -34,30 +34,18 @@ def plan(
 ) -> None:
     """Plan a scene: domain reach and trimming, planar chain, continuum, output, integrator and dt,
     and what the planned run would cost (steps, memory, output size; flexmm.plan.cost)."""
-    from flexmm.errors import FlexmmError
     from flexmm.io.provenance import config_text
-    from flexmm.plan import PlanError, make_plan
+    from flexmm.plan.cost import check
+    from flexmm.prepare import resolve
 
     check_fidelity(fidelity)
     request = analysis_request(analysis)
     scene = load_or_exit(config, overrides)
-    try:
-        p = make_plan(scene, fidelity, request)
-    except FlexmmError:
-        raise
-    except ValueError as exc:  # the planner's plain ValueErrors (e.g. an absorbing layer wider than the lattice)
-        raise PlanError(str(exc)) from None
-    if p.scene.solver.accuracy is not None and not p.skip_discrete:
-        from flexmm.prepare import prepare
-
-        prepare(p)  # the accuracy pilots choose integrator and dt (they run; nothing is written)
-    for line in p.lines():
+    rp = resolve(scene, fidelity, request)  # the accuracy pilots run to choose the step; nothing is written
+    for line in rp.plan.lines() + rp.lines():
         typer.echo(line)
-    if not p.skip_discrete:
-        from flexmm.plan.cost import check, estimate
-
-        cost = estimate(p.scene)  # the planned scene: what a run would cost
-        for line in cost.lines() + [f"cost: WARNING: {w}" for w in check(cost)]:
-            typer.echo(line)
+    if rp.cost is not None:
+        for w in check(rp.cost):
+            typer.echo(f"plan: WARNING: {w}")
     if show_config:
-        typer.echo(config_text(p.scene))
+        typer.echo(config_text(rp.plan.scene))

@@ -11,7 +11,8 @@ from flexmm.checkpoint import DEFAULT_EVERY_S
 from flexmm.errors import UsageError
 
 from flexmm.cli.common import (
-    EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, stderr_is_tty, writing,
+    EXIT_FAILED_RUN, OverrideOption, analysis_request, check_output_dir, load_or_exit, print_plan, stderr_is_tty,
+    writing,
 )
 from flexmm.cli.plan import AnalysisOption, FidelityOption, check_fidelity
 
@@ -43,7 +44,8 @@ def run(
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
 
-    Outputs are committed together when the run ends: a finished run replaces runs/<name>; a
+    The plan (`flexmm plan`'s lines: method, step, stable limit, frames, domain, cost and any change
+    made to what the scene asked) is printed first. Outputs are committed together when the run ends: a finished run replaces runs/<name>; a
     failed or interrupted one (Ctrl-C: exit 130, SIGTERM: exit 143) is kept in
     runs/<name>.failed or runs/<name>.interrupted. A run writes checkpoints (every --checkpoint-s
     of wall time, when it ends, on Ctrl-C/SIGTERM); --resume continues one, --extend a finished run.
@@ -82,7 +84,8 @@ def run(
                     log(line)
             with writing(run_dir):
                 result = run_scene(scene, run_dir=out, progress=stderr_is_tty() and not quiet, log=log,
-                                   fidelity=fidelity, analysis=analysis, force_limits=force, checkpoint_s=every)
+                                   fidelity=fidelity, analysis=analysis, force_limits=force, checkpoint_s=every,
+                                   announce=lambda lines: print_plan(lines, quiet))
             ended.append(result)
             _report(result, quiet, strict, analysis)
         except KeyboardInterrupt as exc:  # outside the time loop (which keeps its frames itself)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import typer
 
-from flexmm.cli.common import OverrideOption, check_output_dir, error, load_or_exit, output_dir, writing
+from flexmm.cli.common import OverrideOption, check_output_dir, error, load_or_exit, output_dir, planned, writing
 
 FILES = ("stability.txt", "stability.json", "stability.png")
 
@@ -32,9 +32,11 @@ def stability(
     out: str = typer.Option(None, "--out", "-o", help="Output directory (default runs/<name>/stability)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
 ) -> None:
-    """Measure each integrator's largest stable dt on a scene and compare with the prediction."""
+    """Measure each integrator's largest stable dt on a scene and compare with the prediction.
+
+    The scene is the one `flexmm run` would integrate (its plan, printed first: domain, method,
+    step, stable limit, frames)."""
     from flexmm.diagnostics import stability_scan
-    from flexmm.assemble import build_problem
     from flexmm.integrators import INTEGRATORS
 
     names = [m.strip() for m in (methods or ",".join(INTEGRATORS)).split(",") if m.strip()]
@@ -44,7 +46,7 @@ def stability(
     if growth_threshold is not None and not linear:
         raise error("--growth-threshold applies only with --linear")
     scene = load_or_exit(config, list(overrides or []) + ["solver.allow_unstable=true"])
-    problem = build_problem(scene)
+    problem = planned(scene, quiet)  # the run's plan: its domain, method, step and frames
     folder = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "stability")
     ts = problem.system.scales.time_s
     t_end = duration_s / ts if duration_s else problem.duration

@@ -143,11 +143,13 @@ class Output(Strict):
     directory: str = "runs"
     fields: list[str] | None = Field(None, description="coordinates to save; default all")
     velocities: bool = True
-    every_s: Positive | None = Field(None, description="output interval; default from n_frames")
+    every_s: Positive | None = Field(None, description="output interval, dividing solver.duration_s (the last frame "
+                                     "is the run's end); default from n_frames")
     n_frames: int = Field(201, ge=2, le=1_000_000, description="frames saved (at most 10⁶; every_s for more)")
     exact_frame_times: bool = Field(
-        False, description="keep frames exactly at every_s (or duration/(n_frames-1)) by shortening the step to "
-        "divide the interval; default: the step is kept and the interval rounded to whole steps (both reported)")
+        False, description="frames always land at every_s (or duration/(n_frames-1)): a step flexmm chooses is "
+        "shortened to divide the interval; true: a given solver.dt_s too (reported as a plan change), false: a given "
+        "dt_s that does not divide the interval is refused, naming the nearest that do")
     site_stride: int = Field(1, ge=1, description="save every k-th unit; less than lattice.n_units, so at "
                              "least two units are saved")
     energy: bool = True
