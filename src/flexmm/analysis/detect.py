@@ -123,32 +123,39 @@ def link(time: np.ndarray, detections: list[list[tuple[float, float]]], gate: fl
     return done + live
 
 
+JOIN_POINTS = 32
+
+
 def _joinable(a: Track, b: Track, gate: float, rel_speed: float) -> float | None:
     """Mismatch (m) of continuing track ``a`` by track ``b``, or None if they cannot be one."""
     if a.polarity != b.polarity or b.time[0] <= a.time[-1] or len(a.pos) < 3 or len(b.pos) < 3:
         return None
-    va, vb = a.velocity(), Track(b.polarity, b.frames[:8], b.time[:8], b.pos[:8], b.height[:8]).velocity()
+    # velocities over up to JOIN_POINTS positions: a breathing peak near the threshold is seen in
+    # short, jittery pieces whose last 8 positions misjudge the speed by more than rel_speed
+    k = JOIN_POINTS
+    va, vb = a.velocity(k), Track(b.polarity, b.frames[:k], b.time[:k], b.pos[:k], b.height[:k]).velocity(k)
     if abs(va - vb) > rel_speed * max(abs(va), abs(vb)) or va * vb <= 0:
         return None
     ha, hb = np.median(np.abs(a.height[-8:])), np.median(np.abs(b.height[:8]))
     if not (1 - rel_speed) * ha <= hb <= ha / (1 - rel_speed):
         return None
     gap = b.time[0] - a.time[-1]
-    miss = abs(a.predict(b.time[0]) - b.pos[0])
+    miss = abs(a.pos[-1] + va * gap - b.pos[0])
     return miss if miss <= gate + rel_speed * abs(va) * gap else None
 
 
 def merge_tracks(tracks: list[Track], gate: float, rel_speed: float = 0.25) -> list[Track]:
-    """Join tracks interrupted by a collision: same polarity, similar velocity and height
-    (within ``rel_speed``), aligned in space-time."""
+    """Join tracks interrupted by a collision or by a peak that dips below the threshold: same
+    polarity, similar velocity and height (within ``rel_speed``), aligned in space-time; each
+    track is continued by the joinable piece that starts first (then the best aligned)."""
     tracks = sorted(tracks, key=lambda tr: tr.time[0])
     changed = True
     while changed:
         changed = False
         for a in tracks:
             cands = [(m, b) for b in tracks if b is not a and (m := _joinable(a, b, gate, rel_speed)) is not None]
-            if cands:
-                _, b = min(cands, key=lambda mb: mb[0])
+            if cands:  # the piece that starts first: a later one would strand the pieces between
+                _, b = min(cands, key=lambda mb: (mb[1].time[0], mb[0]))
                 for args in zip(b.frames, b.time, b.pos, b.height):
                     a.add(*args)
                 tracks.remove(b)

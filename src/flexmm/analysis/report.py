@@ -146,7 +146,7 @@ def analyze_dataset(ds, *, path: str | Path | None = None, field_spec: str | Non
         pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
         t_end, line = float(view.time[-1]), (float(view.x.min()), float(view.x.max()))
         out.collisions, pulses, out.overlap_artefacts = find_collisions(pulses, view.spacing_m, t_end, line)
-        out.pulses = mark_transients(pulses, out.collisions, view.spacing_m, t_end, line)
+        out.pulses = mark_transients(pulses, out.collisions, view.spacing_m, t_end, line, view)
         for p in out.pulses:
             out.comparisons += compare_transient(p) if p.transient else compare_pulse(ctx, p)
         for c in out.collisions:
