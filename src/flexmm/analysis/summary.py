@@ -135,9 +135,12 @@ def summary_lines(res) -> list[str]:
                  f"({_num(m.speed_c0)} c0), polarisation {_num(m.polarisation_deg, 3)}°, "
                  f"{_num(100 * m.energy_fraction, 3)} % of the energy"]
     else:
+        far = (f"at far end {_num(m.amplitude_far)} {m.units}, transmission {_num(m.transmission)}"
+               if getattr(m, "far_reached", True) else
+               f"steady over {m.reached_sites} sites from the drive; the far end is not reached within the "
+               "run (no transmission)")
         lines = [f"driven at {_num(m.frequency_hz)} Hz in {m.field}: amplitude at drive "
-                 f"{_num(m.amplitude_drive)} {m.units}, at far end {_num(m.amplitude_far)} {m.units}, "
-                 f"transmission {_num(m.transmission)}, decay {_num(m.decay_per_site)} per site"]
+                 f"{_num(m.amplitude_drive)} {m.units}, {far}, decay {_num(m.decay_per_site)} per site"]
     if res.kind == "pulse":
         lines += [_other_line(res, p) for p in res.pulses if not getattr(p, "transient", False) and p is not m]
         lines += [_transient_line(res, p) for p in res.pulses if getattr(p, "transient", False) and p is not m]

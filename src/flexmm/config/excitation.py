@@ -122,6 +122,8 @@ class EndDrive(Excitation):
         return _end_sources(self)
 
     def planar_issue(self) -> str | None:
+        if self.sites is not None:
+            return _edge_issue(self.end) or "the drive moves listed units, not a whole edge"
         return _edge_issue(self.end)
 
 
