@@ -28,7 +28,7 @@ SMALL = ["lattice.n_units=100", "solver.duration_s=0.2", "output.n_frames=201"]
 def test_demo_estimate_bounds_the_error_against_a_4x_finer_step(tmp_path):
     res = run_scene(load_scene(DEMO, SMALL), run_dir=tmp_path / "run", fidelity="full", in_memory=True)
     attrs = res.dataset.attrs
-    assert res.status == "finished", res.message
+    assert res.status == "finished", res.reason
     estimate, dt_s = float(attrs["accuracy_estimate"]), float(attrs["dt_s"])
     assert "whole run" in attrs["accuracy_check"] and estimate <= 1e-4
     fine = run_scene(load_scene(DEMO, SMALL + ["solver.accuracy=null", "solver.integrator=pefrl",

@@ -500,10 +500,10 @@ def estimate(problem, spec, h: float, whole_run: bool = False, window: float | N
     return Estimate(err, amp, speed, t_w, how, time.perf_counter() - t0, _growth(a, b, spec.order, err))
 
 
-def whole_run_cheap(problem, spec, h: float) -> bool:
-    """Whether a whole-run check at h (``run_estimate``) costs at most WHOLE_RUN_WORK."""
+def whole_run_cheap(problem, spec, h: float, budget: float = WHOLE_RUN_WORK) -> bool:
+    """Whether a whole-run check at h (``run_estimate``) costs at most ``budget`` unit force evaluations."""
     evals = force_evals(spec) or 1.0
-    return 7 * math.ceil(problem.duration / h) * evals * problem.system.n_sites <= WHOLE_RUN_WORK
+    return 7 * math.ceil(problem.duration / h) * evals * problem.system.n_sites <= budget
 
 
 def run_estimate(problem, spec, h: float, pilot: Estimate) -> Estimate:
@@ -517,14 +517,19 @@ def run_estimate(problem, spec, h: float, pilot: Estimate) -> Estimate:
     T = problem.duration
     if pilot.window >= T * (1 - 1e-9):
         return pilot
-    if not whole_run_cheap(problem, spec, h):
-        f = (T / pilot.window) ** pilot.growth
-        how = (f"{pilot.method}, extrapolated to the whole run as t^{pilot.growth:.2g}," if pilot.growth > 0
-               else f"{pilot.method}, an error that does not grow along it,")
-        return Estimate(pilot.error * f, pilot.amplitude * f, pilot.speed * f, pilot.window, how,
-                        pilot.wall_s, pilot.growth)
+    if whole_run_cheap(problem, spec, h):
+        return _whole_run(problem, spec, h, pilot)
+    f = (T / pilot.window) ** pilot.growth
+    how = (f"{pilot.method}, extrapolated to the whole run as t^{pilot.growth:.2g}," if pilot.growth > 0
+           else f"{pilot.method}, an error that does not grow along it,")
+    return Estimate(pilot.error * f, pilot.amplitude * f, pilot.speed * f, pilot.window, how,
+                    pilot.wall_s, pilot.growth)
+
+
+def _whole_run(problem, spec, h: float, pilot: Estimate) -> Estimate:
+    """Step doubling over the whole run at h, with the h/4 trace for ``converges``."""
     t0 = time.perf_counter()
-    n, n_samples, t_w = window_grid(T, h)
+    n, n_samples, t_w = window_grid(problem.duration, h)
     a, b, c = (trace(problem, spec, k * n, t_w, n_samples) for k in (1, 2, 4))
     d, d2 = quantity_error(a, b), quantity_error(b, c)
     amp, speed = richardson(d.amplitude, spec.order), richardson(d.speed, spec.order)
@@ -546,9 +551,9 @@ def shorten_for_run(problem, choice: Choice, est: Estimate, accuracy: float, eve
             break
         law = h * (SAFETY * accuracy / est.error) ** (1.0 / p)
         h_new = divides(max(min(h / 1.2, law), h / 4, floor), every)
-        if not whole_run_cheap(problem, spec, h_new):
+        if not whole_run_cheap(problem, spec, h_new, 4 * WHOLE_RUN_WORK):
             break
-        h, est = h_new, run_estimate(problem, spec, h_new, choice.estimate)
+        h, est = h_new, _whole_run(problem, spec, h_new, choice.estimate)
     if h != choice.dt:
         choice.dt, choice.predicted_error = h, est.error
         choice.cost = force_evals(spec) * math.ceil(problem.duration / h)
@@ -556,4 +561,7 @@ def shorten_for_run(problem, choice: Choice, est: Estimate, accuracy: float, eve
         for row in choice.table:
             if row["integrator"] == choice.integrator:
                 row.update(dt=h, cost=choice.cost, predicted_error=est.error)
+                if not choice.reachable:
+                    row["why"] = (f"over the whole run the error at the shortest step tried, {h:.3g} "
+                                  f"(nondimensional), is {est.error:.2g}")
     return est

@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def _run(tmp_path, config, overrides):
     sc = load_scene(ROOT / "configs" / config, overrides)
     res = run_scene(sc, run_dir=tmp_path / "run", fidelity="full")
-    assert res.status == "finished", res.message
+    assert res.status == "finished", res.reason
     return tmp_path / "run"
 
 

@@ -26,7 +26,7 @@ def _run(tmp_path, lattice: dict, fields: list[dict], duration_s: float):
                           "solver": {"duration_s": duration_s, "accuracy": 1e-8},
                           "output": {"n_frames": 11}})
     res = run_scene(sc, run_dir=tmp_path / "ring", fidelity="auto", in_memory=True)
-    assert res.status == "finished", res.message
+    assert res.status == "finished", res.reason
     ds = res.dataset
     tot = np.asarray(ds["total_energy"].values)
     assert np.max(np.abs(tot - tot[0])) <= 1e-9 * tot[0]  # energy conserved on the ring

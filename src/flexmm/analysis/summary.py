@@ -140,7 +140,8 @@ def summary_lines(res) -> list[str]:
                f"steady over {m.reached_sites} sites from the drive; the far end is not reached within the "
                "run (no transmission)")
         lines = [f"driven at {_num(m.frequency_hz)} Hz in {m.field}: amplitude at drive "
-                 f"{_num(m.amplitude_drive)} {m.units}, {far}, decay {_num(m.decay_per_site)} per site"]
+                 f"{_num(m.amplitude_drive)} {m.units}, {far}, decay {_num(m.decay_per_site)} per site"
+                 f"{_theory(res, 'driven', 'decay per site')}"]
     if res.kind == "pulse":
         lines += [_other_line(res, p) for p in res.pulses if not getattr(p, "transient", False) and p is not m]
         lines += [_transient_line(res, p) for p in res.pulses if getattr(p, "transient", False) and p is not m]
