@@ -70,7 +70,7 @@ def test_localised_push_keeps_the_sheet():
 def test_linkage_transition_wave_is_a_front(tmp_path, recwarn):
     """configs/k_linkage_transition_wave.yaml: the bistable linkage's wave is a front in θ (it was
     summarised as 5 pulses with OptimizeWarnings)."""
-    res = analyze_run(_run(tmp_path, "k_linkage_transition_wave.yaml", ["solver.duration_s=0.1",
+    res = analyze_run(_run(tmp_path, "k_linkage_transition_wave.yaml", ["solver.duration_s=0.1", "solver.accuracy=null",
                                                                         "output.n_frames=101"]))
     assert res.kind == "front" and res.view.spec == "theta"
     assert res.fronts[0].n_switched > 40 and res.fronts[0].direction > 0
