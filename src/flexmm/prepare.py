@@ -66,7 +66,7 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
         if mode == "pilot":
             est = acc.run_estimate(problem, spec, problem.dt, acc.estimate(problem, spec, problem.dt))
             attrs = _estimate_attrs(solver.accuracy, est, problem.system.scales.time_s)
-            if est.converges is False:
+            if est.converges is False and est.error > solver.accuracy:
                 attrs["accuracy_converges"] = 0
                 notes.append(_not_converging(est))
             notes.append(_estimate_line(solver.accuracy, est, problem.system.scales.time_s))
@@ -135,7 +135,7 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     if est is not None:  # the pilot's step doubling at the step used, over the whole run (run_estimate)
         attrs.update(_estimate_attrs(target, est, ts))
         notes.append(_estimate_line(target, est, ts))
-        if est.converges is False:
+        if est.converges is False and est.error > target:
             attrs["accuracy_converges"] = 0
             notes.append(_not_converging(est))
     plan.error_check = mode
