@@ -88,7 +88,7 @@ def _estimate_attrs(target: float, est: acc.Estimate, time_s: float) -> dict:
     return {"accuracy_requested": target, "accuracy_estimate": est.error, "accuracy_met": int(est.error <= target),
             "accuracy_estimate_amplitude": est.amplitude, "accuracy_estimate_speed": est.speed,
             "accuracy_check": est.method, "accuracy_window_s": est.window * time_s,
-            "accuracy_check_wall_s": est.wall_s}
+            "accuracy_check_wall_s": est.wall_s, "accuracy_extrapolated": int("extrapolated" in est.method)}
 
 
 def _estimate_line(target: float, est: acc.Estimate, time_s: float) -> str:
