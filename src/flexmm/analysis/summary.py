@@ -11,8 +11,8 @@ for ``flexmm run``, ``flexmm analyze`` and sweeps:
 - oblique plane waves: the fastest group; driven runs: the steady response.
 
 ``summary_lines(res)`` turns it into text with the theory's prediction where one applies, plus
-one line per other persistent pulse (speed and amplitude), one per formation transient (distance and time; no theory) and per collision
-(``analysis.collisions``).
+one line per other persistent pulse (speed and amplitude), one per formation transient (distance
+and time; no theory) and per collision (``analysis.collisions``).
 """
 
 from __future__ import annotations
