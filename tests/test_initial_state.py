@@ -212,3 +212,33 @@ def test_launched_damped_front_runs_at_its_predicted_speed(tmp_path):
     assert not f.arrested and f.n_switched > 90
     k = next(c for c in res.comparisons if c.item == item and c.quantity == "kinetic energy")
     assert abs(k.rel_diff) < 0.02
+
+
+def test_seeded_random_fields_are_frozen_noise_per_site(lego_config):
+    """``normal(seed)``/``random(seed)``: numpy's default generator seeded with the integer (the
+    documented contract), one value per site in site order: reproducible, independent between
+    seeds, a site's value independent of the chain's length, and the right statistics."""
+    n = np.arange(20000.0)
+    z = evaluate("normal(7)", n.size, n=n)
+    assert np.array_equal(z, np.random.default_rng(7).standard_normal(n.size))
+    assert np.array_equal(evaluate("normal(7)", 50, n=n[:50]), z[:50])
+    assert abs(z.mean()) < 4 / math.sqrt(n.size) and abs(z.std() - 1) < 0.03
+    w = evaluate("random(8)", n.size, n=n)
+    assert w.min() >= 0 and w.max() < 1 and abs(w.mean() - 0.5) < 0.01
+    assert abs(np.corrcoef(z, evaluate("normal(8)", n.size, n=n))[0, 1]) < 0.03
+    lego_config["initial"] = {"fields": [{"field": "theta", "value": "1e-3 * normal(7)", "rate": "2 * random(1)"}]}
+    lego_config["excitation"] = {"kind": "none"}
+    lego_config["lattice"]["left"] = "free"
+    system, _ = build_system(scene_from_dict(lego_config))
+    k = system.field_index("theta") * system.n_sites
+    theta = system.q0[k : k + system.n_sites]
+    assert np.array_equal(theta, 1e-3 * np.random.default_rng(7).standard_normal(system.n_sites))
+    assert np.allclose(system.v0[k : k + system.n_sites] / system.scales.time_s,
+                       2 * np.random.default_rng(1).random(system.n_sites), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("text", ["normal(1.5)", "normal(x)", "random()", "random(-1)", "normal(1, 2)",
+                                  "random(seed=1)", "normal"])
+def test_random_field_needs_one_integer_seed(text):
+    with pytest.raises(ValueError, match="seed|must be called"):
+        parse_expression(text)

@@ -19,9 +19,13 @@ off by δc/c arrives at every site late by t δc/c, and e_c = δc/c. Sites below
 the field's largest peak (tails ahead of the waves) and sites already displaced at t = 0 are left
 out, and so is the ``TRIM`` tenth of the sites with the largest deviation (a site at a collision
 or at a snapping threshold has an ill-conditioned timing; an integration error moves every site
-alike). err = max_f max(e_A, e_c). Both are intensive — a steady pulse's speed error does not grow
-along the run — so the window is a pilot of ``PILOT_FRACTION`` of the run (at least
-``PILOT_MIN_STEPS`` steps and past the drives) and no extrapolation in time is needed.
+alike). err = max_f max(e_A, e_c). For a steady pulse both are intensive — its speed error does
+not grow along the run — so the step is chosen on a pilot of ``PILOT_FRACTION`` of the run (at
+least ``PILOT_MIN_STEPS`` steps and past the drives). They are not intensive for a breathing
+pulse or a standing wave, whose phase error keeps growing: the estimate a run reports
+(``run_estimate``) is therefore measured over the whole run when that is cheap (step doubling,
+with a trace at h/4 that tells whether the quantities converge in the step at all), and
+otherwise extrapolated from the pilot with the error's growth measured over its window.
 
 For a method of order p, err(h) ≈ C h^p. A pilot runs each candidate at h₁ = h_stab/3 (``PILOT_STEP``) and h₁/2
 over the window; Richardson gives err(h₁) ≈ d(h₁, h₁/2) 2^p/(2^p − 1), d the error of one trace
@@ -443,19 +447,48 @@ def verify(problem, accuracy: float, choice: Choice, row: dict, every: float | N
 
 @dataclass
 class Estimate:
-    """Step-doubling estimate of the error of the reported quantities of a run with step h."""
+    """Step-doubling estimate of the error of the reported quantities of a run with step h.
+
+    ``growth``: the exponent γ of the error's growth over the window, err(t) ∝ t^γ (from its
+    first half to the whole, clipped to [0, MAX_GROWTH]); ``converges``: False when a whole-run
+    check found the difference of h/2 and h/4 not below half that of h and h/2 (the quantities do
+    not converge in the step: a chaotic field, a threshold's timing), None when not checked."""
 
     error: float
     amplitude: float
     speed: float
     window: float  # nondimensional duration the estimate covers
-    method: str  # 'step doubling on a pilot' or '... over the whole run'
+    method: str  # 'step doubling on a pilot', '... extrapolated to the run', '... over the whole run'
     wall_s: float
+    growth: float = 0.0
+    converges: bool | None = None
+
+
+#: largest growth exponent of the error in time taken from a pilot (a phase error grows like t,
+#: its effect on a breathing pulse's sampled peaks like t²)
+MAX_GROWTH = 2.0
+#: a whole-run check (traces at h, h/2 and h/4: 7 runs' worth of steps) is made instead of an
+#: extrapolation when it costs at most this many unit force evaluations (~1–5 s on one core)
+WHOLE_RUN_WORK = 5e7
+
+
+def _growth(a: Trace, b: Trace, order: float, err: float) -> float:
+    """γ of err(t) ∝ t^γ from the error over the first half of the traces' window and the whole."""
+    half = a.x.shape[0] // 2
+    if half < 8 or not err > 0:
+        return 0.0
+    cut = [Trace(t.x[: half + 1], t.dt, t.steps, t.finite) for t in (a, b)]
+    d = quantity_error(*cut)
+    e_half = max(richardson(d.amplitude, order), richardson(d.speed, order))
+    if not (e_half > 0 and math.isfinite(e_half)):
+        return MAX_GROWTH if math.isfinite(err) else 0.0
+    return float(min(max(math.log(err / e_half) / math.log(2.0), 0.0), MAX_GROWTH))
 
 
 def estimate(problem, spec, h: float, whole_run: bool = False, window: float | None = None) -> Estimate:
     """Step doubling at h: traces at h and h/2 over ``pilot_window`` (or the whole run, or
-    ``window``), Richardson with the method's order (module docstring). Costs 3 × window/h steps."""
+    ``window``), Richardson with the method's order (module docstring), and the error's growth
+    over the window (``Estimate.growth``). Costs 3 × window/h steps."""
     t0 = time.perf_counter()
     t_w = problem.duration if whole_run else window if window is not None else pilot_window(problem, h)
     n, n_samples, t_w = window_grid(t_w, h)
@@ -463,4 +496,72 @@ def estimate(problem, spec, h: float, whole_run: bool = False, window: float | N
     d = quantity_error(a, b)
     amp, speed = richardson(d.amplitude, spec.order), richardson(d.speed, spec.order)
     how = "step doubling over the whole run" if whole_run else "step doubling on a pilot"
-    return Estimate(max(amp, speed), amp, speed, t_w, how, time.perf_counter() - t0)
+    err = max(amp, speed)
+    return Estimate(err, amp, speed, t_w, how, time.perf_counter() - t0, _growth(a, b, spec.order, err))
+
+
+def whole_run_cheap(problem, spec, h: float, budget: float = WHOLE_RUN_WORK) -> bool:
+    """Whether a whole-run check at h (``run_estimate``) costs at most ``budget`` unit force evaluations."""
+    evals = force_evals(spec) or 1.0
+    return 7 * math.ceil(problem.duration / h) * evals * problem.system.n_sites <= budget
+
+
+def run_estimate(problem, spec, h: float, pilot: Estimate) -> Estimate:
+    """The error of the reported quantities over the whole run at step h (issue: a pilot covers a
+    tenth of the run, and a phase error keeps growing after it).
+
+    When cheap (``whole_run_cheap``), measured: step doubling over the whole run, plus a trace at
+    h/4 that tells whether the difference shrinks with the step (``converges``). Otherwise the
+    pilot's estimate extrapolated to the run's duration T: err · (T / T_w)^γ with the growth γ
+    measured over the pilot window (γ = 0 for an intensive error: a steady pulse's speed)."""
+    T = problem.duration
+    if pilot.window >= T * (1 - 1e-9):
+        return pilot
+    if whole_run_cheap(problem, spec, h):
+        return _whole_run(problem, spec, h, pilot)
+    f = (T / pilot.window) ** pilot.growth
+    how = (f"{pilot.method}, extrapolated to the whole run as t^{pilot.growth:.2g}," if pilot.growth > 0
+           else f"{pilot.method}, an error that does not grow along it,")
+    return Estimate(pilot.error * f, pilot.amplitude * f, pilot.speed * f, pilot.window, how,
+                    pilot.wall_s, pilot.growth)
+
+
+def _whole_run(problem, spec, h: float, pilot: Estimate) -> Estimate:
+    """Step doubling over the whole run at h, with the h/4 trace for ``converges``."""
+    t0 = time.perf_counter()
+    n, n_samples, t_w = window_grid(problem.duration, h)
+    a, b, c = (trace(problem, spec, k * n, t_w, n_samples) for k in (1, 2, 4))
+    d, d2 = quantity_error(a, b), quantity_error(b, c)
+    amp, speed = richardson(d.amplitude, spec.order), richardson(d.speed, spec.order)
+    converges = not (d.total > 0 and d2.total > 0.5 * d.total)
+    return Estimate(max(amp, speed), amp, speed, t_w, "step doubling over the whole run (cheap enough to check)",
+                    pilot.wall_s + time.perf_counter() - t0, pilot.growth, converges)
+
+
+def shorten_for_run(problem, choice: Choice, est: Estimate, accuracy: float, every: float | None) -> Estimate:
+    """Shorten the chosen step while the whole-run estimate (``run_estimate``) misses ``accuracy``
+    and is measured (cheap) and converging: at most VERIFY_TRIES steps, each as the h^p law asks
+    but between 1.2× and 4× shorter, never below FLOOR × the stable step. Updates ``choice``
+    (dt, cost, estimate, predicted error); returns the estimate at the step kept."""
+    spec = INTEGRATORS[choice.integrator]
+    p, h = spec.order, choice.dt
+    floor = FLOOR * stable_step(problem, spec)
+    for _ in range(VERIFY_TRIES):
+        if est.error <= accuracy or est.converges is not True or h <= floor:
+            break
+        law = h * (SAFETY * accuracy / est.error) ** (1.0 / p)
+        h_new = divides(max(min(h / 1.2, law), h / 4, floor), every)
+        if not whole_run_cheap(problem, spec, h_new, 4 * WHOLE_RUN_WORK):
+            break
+        h, est = h_new, _whole_run(problem, spec, h_new, choice.estimate)
+    if h != choice.dt:
+        choice.dt, choice.predicted_error = h, est.error
+        choice.cost = force_evals(spec) * math.ceil(problem.duration / h)
+        choice.reachable = est.error <= accuracy
+        for row in choice.table:
+            if row["integrator"] == choice.integrator:
+                row.update(dt=h, cost=choice.cost, predicted_error=est.error)
+                if not choice.reachable:
+                    row["why"] = (f"over the whole run the error at the shortest step tried, {h:.3g} "
+                                  f"(nondimensional), is {est.error:.2g}")
+    return est

@@ -47,7 +47,10 @@ def inaccuracy(attrs: dict, stepper: Stepper, problem: Problem) -> str | None:
     # an estimate the pilots found not to shrink with the step measures a threshold's or a
     # collision's timing, not the integration error: the plan's warning says so, the status does not
     converges = attrs.get("accuracy_converges", 1)
-    if est is not None and target and converges and not est <= INACCURATE_FACTOR * target:
+    # an estimate extrapolated past the pilot (its error's growth, capped at t²) warns; only a
+    # measured one decides the status
+    measured = not attrs.get("accuracy_extrapolated", 0)
+    if est is not None and target and converges and measured and not est <= INACCURATE_FACTOR * target:
         return (f"the error estimate {est:.3g} misses the target {target:g} by more than {INACCURATE_FACTOR:g}x "
                 f"({est / target:.3g}x): the run is not resolved (smaller solver.dt_s, a higher-order method, or a "
                 "gentler scene)")

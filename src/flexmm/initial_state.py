@@ -42,10 +42,22 @@ def _slice(system: System, field: str) -> slice:
 
 def site_variables(system: System, spacing_m: float) -> dict[str, np.ndarray]:
     """x, y (rest positions, m), n (site index), i, j (column, row) of every site."""
-    ix, iy = system.site_grid()
+    return grid_variables(*system.site_grid(), spacing_m)
+
+
+def grid_variables(ix: np.ndarray, iy: np.ndarray, spacing_m: float) -> dict[str, np.ndarray]:
+    """The expression variables of sites with column ``ix`` and row ``iy`` (n_sites,), in site order."""
     ix, iy = np.asarray(ix, float), np.asarray(iy, float)
-    return {"x": ix * spacing_m, "y": iy * spacing_m, "n": np.arange(system.n_sites, dtype=float),
-            "i": ix, "j": iy}
+    return {"x": ix * spacing_m, "y": iy * spacing_m, "n": np.arange(ix.size, dtype=float), "i": ix, "j": iy}
+
+
+def field_values(f, variables: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(value, rate) of one ``initial.fields`` entry on ``n`` sites (SI); ValueError if it fails."""
+    if f.table is not None:
+        return _table(f.table, variables, n)
+    value = evaluate(f.value, n, **variables) if f.value is not None else np.zeros(n)
+    rate = evaluate(f.rate, n, **variables) if f.rate is not None else np.zeros(n)
+    return value, rate
 
 
 def _table(path: str, variables: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -72,7 +84,8 @@ def _table(path: str, variables: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
     return out[0], (out[1] if len(out) > 1 else np.zeros(n))
 
 
-def _spacing(lat) -> float:
+def spacing(lat) -> float:
+    """The spacing (m) that turns column and row indices into the expression variables x and y."""
     return float(getattr(lat, "spacing_m", None) or getattr(lat, "a_m"))
 
 
@@ -139,17 +152,13 @@ def apply_initial(system: System, scene) -> list[str]:
     notes = []
     if init.from_run is not None:
         notes.append(_from_run(system, init.from_run))
-    variables = site_variables(system, _spacing(scene.lattice))
+    variables = site_variables(system, spacing(scene.lattice))
     n = system.n_sites
     for k, f in enumerate(init.fields):
         sl = _slice(system, f.field)
         vs, rs = _scale(system, f.field)
         try:
-            if f.table is not None:
-                value, rate = _table(f.table, variables, n)
-            else:
-                value = evaluate(f.value, n, **variables) if f.value is not None else np.zeros(n)
-                rate = evaluate(f.rate, n, **variables) if f.rate is not None else np.zeros(n)
+            value, rate = field_values(f, variables, n)
         except ValueError as exc:
             raise InitialStateError(f"initial.fields.{k}: {exc}") from None
         system.q0[sl] += value / vs

@@ -7,8 +7,9 @@ the scene sets the target, the scene's integrator when it names one, else ``DEFA
 or, when the scene gives ``solver.dt_s``, honours it and estimates its error (with the scene's
 integrator, else ``DEFAULT_METHOD``, which the plan already set: ``plan.planner.method``). The plan's scene,
 steps and choice are updated so the recorded config reproduces the run. The error estimate is
-the pilot's step doubling extrapolated to the duration (``error_check: pilot``, the default for
-the default target, in the plan attrs) or ``accuracy_check(plan, problem)``, the whole run
+the pilot's step doubling, over the whole run when that is cheap and else extrapolated to the
+duration with the error's growth over the pilot (``accuracy.run_estimate``; ``error_check: pilot``,
+the default for the default target, in the plan attrs) or ``accuracy_check(plan, problem)``, the whole run
 repeated at 2 dt after it (``error_check: run``, the default when the scene sets the target or
 the step). Then the frames: the step is fitted to the frame times (``plan.frames``: shortened to
 divide the frame interval, or the request refused).
@@ -183,8 +184,11 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
         notes = [f"accuracy {solver.accuracy:g}: solver.dt_s = {solver.dt_s:.4g} s honoured ({spec.name})"]
         attrs = {}
         if mode == "pilot":
-            est = acc.estimate(problem, spec, problem.dt)
+            est = acc.run_estimate(problem, spec, problem.dt, acc.estimate(problem, spec, problem.dt))
             attrs = _estimate_attrs(solver.accuracy, est, problem.system.scales.time_s)
+            if est.converges is False and est.error > solver.accuracy:
+                attrs["accuracy_converges"] = 0
+                notes.append(_not_converging(est))
             notes.append(_estimate_line(solver.accuracy, est, problem.system.scales.time_s))
         plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "checked", notes, attrs)]
         return problem
@@ -204,7 +208,7 @@ def _estimate_attrs(target: float, est: acc.Estimate, time_s: float) -> dict:
     return {"accuracy_requested": target, "accuracy_estimate": est.error, "accuracy_met": int(est.error <= target),
             "accuracy_estimate_amplitude": est.amplitude, "accuracy_estimate_speed": est.speed,
             "accuracy_check": est.method, "accuracy_window_s": est.window * time_s,
-            "accuracy_check_wall_s": est.wall_s}
+            "accuracy_check_wall_s": est.wall_s, "accuracy_extrapolated": int("extrapolated" in est.method)}
 
 
 def _estimate_line(target: float, est: acc.Estimate, time_s: float) -> str:
@@ -213,6 +217,12 @@ def _estimate_line(target: float, est: acc.Estimate, time_s: float) -> str:
     if est.error <= target:
         return f"estimated error {est.error:.3g} meets the target {target:g} ({how})"
     return f"WARNING: estimated error {est.error:.3g} exceeds the target {target:g} ({how})"
+
+
+def _not_converging(est: acc.Estimate) -> str:
+    return (f"WARNING: over the whole run the reported quantities do not converge in the step (halving it "
+            f"changes them as much again): the estimate {est.error:.3g} is their spread, not an integration error "
+            "that a smaller step removes (a chaotic late field, a threshold's or a collision's timing)")
 
 
 def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Problem:
@@ -226,6 +236,10 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
         choice = acc.choose(problem, target, only, every=every)
     except ValueError as exc:
         raise PlanError(f"solver.accuracy: {exc}") from None
+    est = acc.run_estimate(problem, INTEGRATORS[choice.integrator], choice.dt, choice.estimate) \
+        if mode == "pilot" else None
+    if est is not None and est.method != choice.estimate.method:
+        est = acc.shorten_for_run(problem, choice, est, target, every)
     planned = replace_section(scene, "solver", integrator=choice.integrator, dt_s=choice.dt * ts, accuracy=None)
     rows = "; ".join(f"{r['integrator']}: dt {r['dt'] * ts:.3g} s, {r['cost']:.3g} force evals"
                      for r in choice.table)
@@ -238,9 +252,12 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     attrs = {"accuracy_integrator": choice.integrator, "accuracy_predicted_error": choice.predicted_error,
              "accuracy_pilot_s": choice.pilot_time * ts, "accuracy_reachable": int(choice.reachable),
              "accuracy_converges": int(row.get("converges", True))}
-    if mode == "pilot":  # step doubling over the pilot window at the step used is the estimate
-        attrs.update(_estimate_attrs(target, choice.estimate, ts))
-        notes.append(_estimate_line(target, choice.estimate, ts))
+    if est is not None:  # the pilot's step doubling at the step used, over the whole run (run_estimate)
+        attrs.update(_estimate_attrs(target, est, ts))
+        notes.append(_estimate_line(target, est, ts))
+        if est.converges is False and est.error > target:
+            attrs["accuracy_converges"] = 0
+            notes.append(_not_converging(est))
     plan.error_check = mode
     plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [PlanStep("accuracy", "chosen", notes, attrs)]
     plan.scene, plan.choice = planned, choice

@@ -36,7 +36,7 @@ def test_error_control_on_a_strongly_struck_chain_meets_its_target() -> None:
     assert err.total < DEFAULT_ACCURACY
     attrs = plan.attrs()
     assert attrs["accuracy_requested"] == DEFAULT_ACCURACY and attrs["accuracy_met"] == 1
-    assert attrs["accuracy_check"] == "step doubling on a pilot"
+    assert attrs["accuracy_check"].startswith("step doubling")
     assert err.total / 10 < attrs["accuracy_estimate"] < 10 * max(err.total, 1e-6)  # the estimate is informative
 
 
@@ -48,7 +48,7 @@ def test_explicit_step_is_honoured_and_checked(tmp_path) -> None:
     res = run_scene(scene, run_dir=tmp_path / "r", fidelity="full")
     ds = open_run(res.path)
     assert ds.attrs["dt_s"] == pytest.approx(2.5e-5, rel=1e-12) and ds.attrs["integrator"] == "pefrl"
-    assert ds.attrs["plan_accuracy"] == "checked" and ds.attrs["accuracy_check"] == "step doubling on a pilot"
+    assert ds.attrs["plan_accuracy"] == "checked" and ds.attrs["accuracy_check"].startswith("step doubling")
     prob = build_problem(scene)
     pefrl = INTEGRATORS["pefrl"]
     T = ds.attrs["accuracy_window_s"] / prob.system.scales.time_s

@@ -74,3 +74,47 @@ def test_not_planar(change, why):
         return
     reduced, note = reduce_dimension(sc)
     assert reduced is None and why in note
+
+
+def initial_scene(fields, pinned=()):
+    data = sheet_scene().model_dump(mode="json")
+    data["excitation"] = {"kind": "none"}
+    data["lattice"]["left"] = "free"
+    data["initial"] = {"fields": fields, "pinned": list(pinned)}
+    return scene_from_dict(data)
+
+
+def test_initial_fields_not_uniform_across_rows_keep_the_sheet():
+    """A 2D initial disturbance (issue #32, item 1) is not silently run as the strip."""
+    bump = "0.01 * exp(-((x - 0.2)**2 + (y - 0.05)**2) / 0.0004)"
+    for fields in ([{"field": "theta", "value": bump}], [{"field": "u", "rate": "0.1 * cos(pi * j / 3)"}]):
+        reduced, note = reduce_dimension(initial_scene(fields), "strip")
+        assert reduced is None and "initial.fields.0" in note
+
+
+def test_initial_fields_with_period_two_run_on_the_strip():
+    fields = [{"field": "theta", "value": "0.01 * exp(-(x - 0.2)**2 / 0.0004)"},
+              {"field": "v", "value": "1e-5 * cos(pi * j) * exp(-(x - 0.2)**2 / 0.0004)"}]
+    sc = initial_scene(fields, pinned=[{"field": "u", "sites": [r * 40 + 39 for r in range(6)]}])
+    strip, note = reduce_dimension(sc, "strip")
+    assert strip is not None and strip.lattice.n_rows == 2, note
+    assert strip.initial.pinned[0].sites == [39, 79]
+    full, red = build_problem(sc), build_problem(strip)
+    spec = INTEGRATORS["velocity_verlet"]
+    h = 0.2 / full.omega_max
+    q, *_ = integrate(full, spec, h, 0.002)
+    qs, *_ = integrate(red, spec, h, 0.002)
+    n, m = full.system.n_sites, red.system.n_sites
+    for f in range(3):
+        rows = q[f * n : (f + 1) * n].reshape(6, 40)
+        strip_rows = qs[f * m : (f + 1) * m].reshape(2, 40)
+        assert np.allclose(rows[0::2], strip_rows[0], atol=1e-12, rtol=0)
+        assert np.allclose(rows[1::2], strip_rows[1], atol=1e-12, rtol=0)
+    chain, note = reduce_dimension(sc, "chain")
+    assert chain is None and "no lateral displacement" in note
+
+
+def test_initial_from_elsewhere_keeps_the_sheet():
+    sc = initial_scene([], pinned=[{"field": "u", "sites": [39]}])
+    reduced, note = reduce_dimension(sc, "strip")
+    assert reduced is None and "whole columns" in note

@@ -77,7 +77,8 @@ class ModelTheory:
     collision(ctx, Collision) -> [Comparison] (e.g. the Toda head-on shifts);
     reference_lines(ctx) -> {name: value}, scalar thresholds sweeps store and draw (``theory_*``);
     pulse_field: the field whose pulses the theory predicts, measured when none is asked (None:
-    θ for models with rotations, else the strain).
+    θ for models with rotations, else the strain); front_field: the field a front switches,
+    measured when none is asked (None: the displacement).
     """
 
     pulse: Predictor | None = None
@@ -90,3 +91,4 @@ class ModelTheory:
     collision: Predictor | None = None
     reference_lines: Callable[..., dict] | None = None
     pulse_field: str | None = None
+    front_field: str | None = None

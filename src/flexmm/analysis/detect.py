@@ -123,32 +123,60 @@ def link(time: np.ndarray, detections: list[list[tuple[float, float]]], gate: fl
     return done + live
 
 
-def _joinable(a: Track, b: Track, gate: float, rel_speed: float) -> float | None:
-    """Mismatch (m) of continuing track ``a`` by track ``b``, or None if they cannot be one."""
+JOIN_POINTS = 32
+NEAR = 1.25  # a piece whose median peak is within this factor of the detection level breathes around it
+
+
+def _joinable(a: Track, b: Track, gate: float, rel_speed: float, k: int = 8) -> float | None:
+    """Mismatch (m) of continuing track ``a`` by track ``b``, or None if they cannot be one
+    (velocities over the last and first ``k`` positions)."""
     if a.polarity != b.polarity or b.time[0] <= a.time[-1] or len(a.pos) < 3 or len(b.pos) < 3:
         return None
-    va, vb = a.velocity(), Track(b.polarity, b.frames[:8], b.time[:8], b.pos[:8], b.height[:8]).velocity()
+    va, vb = a.velocity(k), Track(b.polarity, b.frames[:k], b.time[:k], b.pos[:k], b.height[:k]).velocity(k)
     if abs(va - vb) > rel_speed * max(abs(va), abs(vb)) or va * vb <= 0:
         return None
     ha, hb = np.median(np.abs(a.height[-8:])), np.median(np.abs(b.height[:8]))
     if not (1 - rel_speed) * ha <= hb <= ha / (1 - rel_speed):
         return None
     gap = b.time[0] - a.time[-1]
-    miss = abs(a.predict(b.time[0]) - b.pos[0])
+    miss = abs(a.pos[-1] + va * gap - b.pos[0])
     return miss if miss <= gate + rel_speed * abs(va) * gap else None
 
 
-def merge_tracks(tracks: list[Track], gate: float, rel_speed: float = 0.25) -> list[Track]:
-    """Join tracks interrupted by a collision: same polarity, similar velocity and height
-    (within ``rel_speed``), aligned in space-time."""
+def merge_tracks(tracks: list[Track], gate: float, rel_speed: float = 0.25,
+                 levels: tuple[float, float] | None = None) -> list[Track]:
+    """Join tracks interrupted by a collision: same polarity, similar velocity and height (within
+    ``rel_speed``, velocities over 8 positions), aligned in space-time, the best aligned first.
+
+    With the detection ``levels`` (positive, negative), pieces of a pulse whose peak breathes
+    around its level (median height within NEAR of it, both pieces) are joined apart, after the
+    others: such a pulse is seen in short, jittery pieces, so their velocities are judged over
+    JOIN_POINTS positions, and each piece is continued by the one that starts first (the best
+    aligned would strand the pieces between)."""
+    if levels is None:
+        return _merge(tracks, gate, rel_speed, 8, lambda mb: mb[0])
+
+    def near(tr: Track) -> bool:
+        level = levels[0] if tr.polarity > 0 else levels[1]
+        return bool(np.median(np.abs(tr.height)) <= NEAR * level)
+
+    tracks = _merge(tracks, gate, rel_speed, 8, lambda mb: mb[0], lambda a, b: not (near(a) and near(b)))
+    return _merge(tracks, gate, rel_speed, JOIN_POINTS, lambda mb: (mb[1].time[0], mb[0]),
+                  lambda a, b: near(a) and near(b))
+
+
+def _merge(tracks: list[Track], gate: float, rel_speed: float, k: int, order, allowed=None) -> list[Track]:
+    """Join joinable tracks (``_joinable`` with velocities over ``k`` positions, and ``allowed``),
+    the candidate first in ``order`` each time, until none is left."""
     tracks = sorted(tracks, key=lambda tr: tr.time[0])
     changed = True
     while changed:
         changed = False
         for a in tracks:
-            cands = [(m, b) for b in tracks if b is not a and (m := _joinable(a, b, gate, rel_speed)) is not None]
+            cands = [(m, b) for b in tracks if b is not a and (allowed is None or allowed(a, b))
+                     and (m := _joinable(a, b, gate, rel_speed, k)) is not None]
             if cands:
-                _, b = min(cands, key=lambda mb: mb[0])
+                _, b = min(cands, key=order)
                 for args in zip(b.frames, b.time, b.pos, b.height):
                     a.add(*args)
                 tracks.remove(b)
@@ -199,4 +227,5 @@ def track_peaks(values: np.ndarray, time: np.ndarray, x: np.ndarray, *, threshol
     up, down = local_maxima_rows(values), local_maxima_rows(-values)
     dets = [[(p, h) for p, h, _ in frame_peaks(values[j], x, threshold, (up[j], down[j]))]
             for j in range(values.shape[0])]
-    return merge_tracks(link(time, dets, gate, max_gap), gate)
+    levels = (threshold, threshold) if np.isscalar(threshold) else tuple(threshold)
+    return merge_tracks(link(time, dets, gate, max_gap), gate, levels=levels)

@@ -185,5 +185,26 @@ def front(ctx, f_meas) -> list[Comparison]:
     return rows
 
 
+def _linear_stiffness(law) -> float:
+    """The stiffness (N/m) of a law's linear part at zero elongation; ValueError if not linear there."""
+    if law.law == "linear":
+        return law.k_n_per_m
+    if law.law == "polynomial" and law.k1_n_per_m > 0:
+        return law.k1_n_per_m
+    raise ValueError(f"no linear theory for a {law.law} law")
+
+
+def driven(ctx, d) -> list[Comparison]:
+    """The linear evanescent decay per site of a drive outside the pass band of an undamped uniform
+    chain (one linear or polynomial bond, at most one linear on-site spring; ``th.evanescent_decay``)."""
+    lat = _chain(ctx)
+    if ctx.scene().damping.viscous is not None or len(lat.onsite) > 1:
+        raise ValueError("the evanescent law is the undamped chain's with at most one on-site spring")
+    k_on = _linear_stiffness(lat.onsite[0]) if lat.onsite else 0.0
+    kappa, _ = th.evanescent_decay(_linear_stiffness(lat.bond), lat.mass_kg, 2 * math.pi * d.frequency_hz, k_on)
+    return [Comparison("", "decay per site", d.decay_per_site, kappa, "1/site",
+                       "linear chain outside its pass band: evanescent decay (docs/physics.md §2)")]
+
+
 #: the ``theory`` hook of the chain of masses (``flexmm.config.lattice.MODELS``)
-MASS_CHAIN = ModelTheory(pulse=pulse, front=front, analysis=analysis, collision=collision)
+MASS_CHAIN = ModelTheory(pulse=pulse, front=front, analysis=analysis, collision=collision, driven=driven)

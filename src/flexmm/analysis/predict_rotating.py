@@ -25,7 +25,8 @@ def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
     """(nondimensional parameters, length unit a [m], time unit sqrt(m/k_l) [s]) of the run.
 
     A chain gives its own n_v, s_v. A sheet periodic across the rows carries planar waves, which
-    are the chain with n_v = 2, s_v = 1 (docs/physics.md §1.2); other sheets: ValueError.
+    are the chain with n_v = 2, s_v = 1 (docs/physics.md §1.2), when the excitation is planar
+    (``planar_issue``); other sheets and localised drives: ValueError.
     """
     if "rot" not in ctx.cache:
         lat = ctx.scene().lattice
@@ -35,6 +36,9 @@ def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
             plain = lat.ligament_length_m == 0 and lat.magnets is None and not lat.variation
             if not (plain and lat.top == lat.bottom == "periodic"):
                 raise ValueError("chain theory applies to planar waves of a plain, row-periodic sheet only")
+            issue = ctx.scene().excitation.planar_issue()
+            if issue is not None:  # a localised push: its wave is not the planar wave the chain theory is
+                raise ValueError(f"chain theory applies to planar waves only: {issue}")
             m, J, n_v, s_v = lat.unit_mass_kg, lat.unit_inertia_kg_m2, 2, 1
         else:
             raise ValueError(f"no rotating-squares theory for {lat.kind}")

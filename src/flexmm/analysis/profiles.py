@@ -177,10 +177,14 @@ def fit_profile(x: np.ndarray, y: np.ndarray, shape: str, guess: tuple[float, fl
         else:
             sol = None
     if sol is None:  # at a bound or not converged: the bounded solver
-        from scipy.optimize import curve_fit
+        import warnings
+
+        from scipy.optimize import OptimizeWarning, curve_fit
 
         try:
-            popt, pcov = curve_fit(func, x, y, p0=p0, bounds=(lo, hi), maxfev=4000)
+            with warnings.catch_warnings():  # a covariance it cannot estimate is inf: the error is NaN below
+                warnings.simplefilter("ignore", OptimizeWarning)
+                popt, pcov = curve_fit(func, x, y, p0=p0, bounds=(lo, hi), maxfev=4000)
         except (RuntimeError, ValueError):
             return ProfileFit.failed(shape)
     err = np.sqrt(np.clip(np.diag(pcov), 0, None)) if np.all(np.isfinite(pcov)) else np.full(len(popt), np.nan)

@@ -95,18 +95,24 @@ def choose_kind(ctx: RunContext) -> str:
 
 
 def default_field_for(kind: str, ds, ctx=None) -> str | None:
-    """Field used when none is given: displacement for fronts and drives; for pulses the field
-    the model's theory predicts (``ModelTheory.pulse_field``), else θ or strain."""
+    """Field used when none is given: for fronts the field the model's units switch
+    (``ModelTheory.front_field``), else the displacement; the displacement for drives; for pulses
+    the field the model's theory predicts (``ModelTheory.pulse_field``), else θ or strain."""
     from flexmm.analysis.fields import displacement_field
     from flexmm.config import ConfigError
 
+    theory = None
+    if ctx is not None:
+        try:
+            theory = theory_for(ctx)
+        except (ConfigError, ValueError, AttributeError, KeyError):  # a stored config this version cannot read
+            theory = None
+    if kind == "front" and theory is not None and theory.front_field is not None:
+        return theory.front_field
     if kind in ("front", "driven"):
         return displacement_field(ds)
-    if kind == "pulse" and ctx is not None:
-        try:
-            return theory_for(ctx).pulse_field
-        except (ConfigError, ValueError, AttributeError, KeyError):  # a stored config this version cannot read
-            return None
+    if kind == "pulse" and theory is not None:
+        return theory.pulse_field
     return None
 
 
@@ -146,7 +152,7 @@ def analyze_dataset(ds, *, path: str | Path | None = None, field_spec: str | Non
         pulses = measure_pulses(view, threshold_fraction=threshold_fraction)
         t_end, line = float(view.time[-1]), (float(view.x.min()), float(view.x.max()))
         out.collisions, pulses, out.overlap_artefacts = find_collisions(pulses, view.spacing_m, t_end, line)
-        out.pulses = mark_transients(pulses, out.collisions, view.spacing_m, t_end, line)
+        out.pulses = mark_transients(pulses, out.collisions, view.spacing_m, t_end, line, view)
         for p in out.pulses:
             out.comparisons += compare_transient(p) if p.transient else compare_pulse(ctx, p)
         for c in out.collisions:

@@ -11,8 +11,8 @@ for ``flexmm run``, ``flexmm analyze`` and sweeps:
 - oblique plane waves: the fastest group; driven runs: the steady response.
 
 ``summary_lines(res)`` turns it into text with the theory's prediction where one applies, plus
-one line per formation transient (distance and time; no theory) and per collision
-(``analysis.collisions``).
+one line per other persistent pulse (speed and amplitude), one per formation transient (distance
+and time; no theory) and per collision (``analysis.collisions``).
 """
 
 from __future__ import annotations
@@ -92,6 +92,14 @@ def _pulse_lines(res, item, p) -> list[str]:
     return lines
 
 
+def _other_line(res, p) -> str:
+    """One line for a persistent pulse that is not the headline (a reflection, a second soliton)."""
+    item, units = f"pulse {p.index}", "" if p.units == "1" else f" {p.units}"
+    return (f"  also pulse {p.index} ({p.polarity_label}, moving {'right' if p.direction > 0 else 'left'}): speed "
+            f"{_num(p.speed_m_s, 5)} m/s{_theory(res, item, 'speed')}, amplitude {_num(p.amplitude)}{units}, "
+            f"sites {p.first_site:g}-{p.last_site:g}")
+
+
 def _transient_line(res, p) -> str:
     h = res.view.spacing_m
     then = f"turns into pulse {p.continues_as}" if p.continues_as >= 0 else "dies out"
@@ -127,10 +135,15 @@ def summary_lines(res) -> list[str]:
                  f"({_num(m.speed_c0)} c0), polarisation {_num(m.polarisation_deg, 3)}°, "
                  f"{_num(100 * m.energy_fraction, 3)} % of the energy"]
     else:
+        far = (f"at far end {_num(m.amplitude_far)} {m.units}, transmission {_num(m.transmission)}"
+               if getattr(m, "far_reached", True) else
+               f"steady over {m.reached_sites} sites from the drive; the far end is not reached within the "
+               "run (no transmission)")
         lines = [f"driven at {_num(m.frequency_hz)} Hz in {m.field}: amplitude at drive "
-                 f"{_num(m.amplitude_drive)} {m.units}, at far end {_num(m.amplitude_far)} {m.units}, "
-                 f"transmission {_num(m.transmission)}, decay {_num(m.decay_per_site)} per site"]
+                 f"{_num(m.amplitude_drive)} {m.units}, {far}, decay {_num(m.decay_per_site)} per site"
+                 f"{_theory(res, 'driven', 'decay per site')}"]
     if res.kind == "pulse":
+        lines += [_other_line(res, p) for p in res.pulses if not getattr(p, "transient", False) and p is not m]
         lines += [_transient_line(res, p) for p in res.pulses if getattr(p, "transient", False) and p is not m]
     for c in getattr(res, "collisions", []) or []:
         theory = [f"pulse {pulse} {_num(r.predicted * 1e3)} mm ({100 * r.rel_diff:+.2f} %)"

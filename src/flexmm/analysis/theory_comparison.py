@@ -26,11 +26,14 @@ def theory_for(ctx: RunContext) -> ModelTheory:
 
 
 def _rows(item: str, measured: dict, predicted: list[Comparison]) -> list[Comparison]:
-    """Measured rows (units given), with predictions merged in by quantity name."""
+    """Measured rows (units given), with predictions merged in by quantity name; a quantity that
+    was not measured (NaN) gets no prediction: there is nothing to compare it with."""
     pred = {c.quantity: c for c in predicted}
     rows = []
     for q, (value, units) in measured.items():
         c = pred.pop(q, None)
+        if value is None or not math.isfinite(value):
+            c = None
         rows.append(Comparison(item, q, value, c.predicted if c else None, units, c.note if c else ""))
     rows.extend(Comparison(item, c.quantity, c.measured, c.predicted, c.units, c.note) for c in pred.values())
     return rows

@@ -20,6 +20,17 @@ EndCondition = Literal["free", "fixed", "driven"]
 EdgeCondition = Literal[EndCondition, "periodic"]
 
 
+def check_periodic(cfg, a: str, b: str, n: int, what: str, even: str | None = None) -> bool:
+    """Whether edges ``a``/``b`` of ``cfg`` wrap around (both 'periodic'); ValueError if only one
+    does, or, when the units alternate (``even``: why), if the ``n`` units (``what``) are odd."""
+    pa, pb = getattr(cfg, a) == "periodic", getattr(cfg, b) == "periodic"
+    if pa != pb:
+        raise ValueError(f"{a} and {b} must both be periodic or neither")
+    if pa and even is not None and (n < 2 or n % 2):
+        raise ValueError(f"periodic {a}/{b} needs an even {what} ≥ 2 ({even}), got {n}")
+    return pa
+
+
 def _scalar_types(annotation) -> set:
     """The plain types an annotation admits (through Optional/Union, Annotated, list, tuple)."""
     origin = typing.get_origin(annotation)

@@ -145,7 +145,11 @@ class EndDrive(Excitation):
         return _end_sources(self)
 
     def planar_issue(self) -> str | None:
-        return _edge_issue(self.end) or ("the drive acts on a unit set, not a whole edge" if self.units else None)
+        if self.units:
+            return _edge_issue(self.end) or "the drive acts on a unit set, not a whole edge"
+        if self.sites is not None:
+            return _edge_issue(self.end) or "the drive moves listed units, not a whole edge"
+        return _edge_issue(self.end)
 
 
 def _along_or_about(exc, along: str, about: str, names: tuple[str, str], tilt: str):

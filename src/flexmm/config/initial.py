@@ -14,8 +14,11 @@ initial:
 
 Expressions are a small, safe language (``Expression``): numbers, the site variables ``x`` and
 ``y`` (rest position, m), ``n`` (site index), ``i``/``j`` (column/row of a 2D lattice), the
-operators + − * / ** and unary −, comparisons, ``a if c else b``, and the functions of
-``FUNCTIONS`` and constants ``pi``, ``e``. Text is parsed with ``ast`` and only whitelisted nodes
+operators + − * / ** and unary −, comparisons, ``a if c else b``, the functions of
+``FUNCTIONS``, constants ``pi``, ``e``, and the seeded random fields of ``RANDOM``:
+``random(seed)`` (uniform on [0, 1)) and ``normal(seed)`` (standard normal), one independent
+value per site, the same for the same integer seed (``"1e-3 * normal(7)"``: a frozen noise of
+1 mrad standard deviation). Text is parsed with ``ast`` and only whitelisted nodes
 are accepted; it is evaluated by walking that tree with numpy — no ``eval``/``exec``, no names
 or attributes beyond the whitelist, no calls of anything else.
 """
@@ -39,6 +42,11 @@ FUNCTIONS = {
     "sech": lambda z: 1.0 / np.cosh(z), "heaviside": lambda z: np.heaviside(z, 0.5),
     "minimum": np.minimum, "maximum": np.maximum, "where": np.where,
 }
+#: seeded random fields: ``random(seed)`` uniform on [0, 1), ``normal(seed)`` standard normal, one
+#: independent value per site in site order (numpy's default generator seeded with the integer
+#: ``seed``: the same seed gives the same field, and a site's value does not depend on how many
+#: sites follow it)
+RANDOM = {"random": lambda rng, n: rng.random(n), "normal": lambda rng, n: rng.standard_normal(n)}
 CONSTANTS = {"pi": math.pi, "e": math.e}
 VARIABLES = ("x", "y", "n", "i", "j")
 MAX_LENGTH = 2000
@@ -70,20 +78,35 @@ def parse_expression(text: str) -> ast.Expression:
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
                 and not isinstance(node.value, bool):
             continue
-        if isinstance(node, ast.Name) and (node.id in VARIABLES or node.id in CONSTANTS or node.id in FUNCTIONS):
+        if isinstance(node, ast.Name) and (node.id in VARIABLES or node.id in CONSTANTS or node.id in FUNCTIONS
+                                           or node.id in RANDOM):
             continue
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS \
                 and not node.keywords:
             continue
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in RANDOM:
+            _seed(node)
+            continue
         what = node.id if isinstance(node, ast.Name) else type(node).__name__
         raise ValueError(f"{what!r} is not allowed in an expression (allowed: numbers, {', '.join(VARIABLES)}, "
-                         f"{', '.join(CONSTANTS)}, + - * / **, comparisons, 'a if c else b', and the "
-                         f"functions {', '.join(sorted(FUNCTIONS))})")
+                         f"{', '.join(CONSTANTS)}, + - * / **, comparisons, 'a if c else b', the "
+                         f"functions {', '.join(sorted(FUNCTIONS))}, and the random fields "
+                         f"{', '.join(f'{r}(seed)' for r in RANDOM)})")
     for node in ast.walk(tree):  # a function name only as the callee, a variable never called
-        if isinstance(node, ast.Name) and node.id in FUNCTIONS:
+        if isinstance(node, ast.Name) and (node.id in FUNCTIONS or node.id in RANDOM):
             if not any(isinstance(p, ast.Call) and p.func is node for p in ast.walk(tree)):
                 raise ValueError(f"function {node.id!r} must be called")
     return tree
+
+
+def _seed(call: ast.Call) -> int:
+    """The seed of ``random(seed)``/``normal(seed)``: one non-negative integer literal."""
+    args = call.args
+    if call.keywords or len(args) != 1 or not isinstance(args[0], ast.Constant) \
+            or type(args[0].value) is not int or args[0].value < 0:
+        raise ValueError(f"{call.func.id}(seed) takes one seed, a non-negative integer such as "
+                         f"{call.func.id}(7)")
+    return args[0].value
 
 
 def _eval(node, env: dict):
@@ -107,6 +130,8 @@ def _eval(node, env: dict):
         return out
     if isinstance(node, ast.IfExp):
         return np.where(_eval(node.test, env), _eval(node.body, env), _eval(node.orelse, env))
+    if isinstance(node, ast.Call) and node.func.id in RANDOM:
+        return RANDOM[node.func.id](np.random.default_rng(_seed(node)), np.size(env["n"]))
     if isinstance(node, ast.Call):
         return FUNCTIONS[node.func.id](*(_eval(a, env) for a in node.args))
     raise ValueError(f"cannot evaluate {type(node).__name__}")  # parse_expression let nothing else in

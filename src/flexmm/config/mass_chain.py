@@ -14,7 +14,8 @@ from typing import ClassVar, Annotated, Literal, Union
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
-from flexmm.config.base import EndCondition, Finite, NonNegative, Positive, Strict, exactly_one
+from flexmm.config.base import (EdgeCondition, EndCondition, Finite, NonNegative, Positive, Strict, check_periodic,
+                                exactly_one)
 from flexmm.config.variation import Variation, check_variations
 
 
@@ -238,11 +239,22 @@ class MassChain(_MassLattice):
 
     kind: Literal["mass_chain"]
     n_units: int = Field(ge=2, le=20_000_000)
-    left: EndCondition = "free"
-    right: EndCondition = "free"
+    left: EdgeCondition = Field("free", description="free, fixed, driven, or periodic (with right: a ring, "
+                                "the last mass bonded to the first)")
+    right: EdgeCondition = "free"
     static_load_n: Finite = Field(
         0.0, description="compressive force on both free ends (holds a precompression)"
     )
+
+    @model_validator(mode="after")
+    def _ring(self):
+        if check_periodic(self, "left", "right", self.n_units, "n_units"):
+            if self.n_units < (5 if self.bond2 is not None else 3):
+                raise ValueError(f"a periodic chain (ring) needs n_units ≥ {5 if self.bond2 is not None else 3} "
+                                 f"(got {self.n_units}): every bond must join two different units once")
+            if self.static_load_n:
+                raise ValueError("static_load_n acts on free ends; a periodic chain (ring) has none")
+        return self
 
     @property
     def n_sites(self) -> int:

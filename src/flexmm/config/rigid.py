@@ -15,7 +15,8 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import EdgeCondition, EndCondition, Finite, NonNegative, Positive, Strict, exactly_one
+from flexmm.config.base import (EdgeCondition, EndCondition, Finite, NonNegative, Positive, Strict, check_periodic,
+                                exactly_one)
 from flexmm.config.variation import Variation, check_variations
 
 #: parameters a variation may target (flexmm.config.variation): per unit, and per hinge
@@ -110,13 +111,15 @@ class RotatingSquaresChain(RigidOptions):
     lateral_stretch: bool = Field(
         False, description="s_v: lateral hinges resist stretching (lateral contraction blocked)"
     )
-    left: EndCondition = "free"
-    right: EndCondition = "free"
+    left: EdgeCondition = Field("free", description="free, fixed, driven, or periodic (with right: a ring)")
+    right: EdgeCondition = "free"
 
     @model_validator(mode="after")
     def _geometry(self):
         if not abs(self.theta0_rad) < math.pi / 4:
             raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
+        if check_periodic(self, "left", "right", self.n_units, "n_units", "checkerboard") and self.predeform:
+            raise ValueError("a periodic chain (ring) cannot be predeformed by end loads or strains")
         check_variations(self.variation, n_cols=self.n_units, n_rows=1, site_targets=SITE_TARGETS,
                          bond_targets=HINGE_TARGETS)
         return self
@@ -174,11 +177,7 @@ class RotatingSquaresSheet(RigidOptions):
             raise ValueError(f"theta0_rad must satisfy |θ0| < π/4 (got {self.theta0_rad})")
         exactly_one(self, "mass_kg", "areal_density_kg_m2")
         for a, b, n, what in (("left", "right", self.n_cols, "n_cols"), ("bottom", "top", self.n_rows, "n_rows")):
-            pa, pb = getattr(self, a) == "periodic", getattr(self, b) == "periodic"
-            if pa != pb:
-                raise ValueError(f"{a} and {b} must both be periodic or neither")
-            if pa and (n < 2 or n % 2):
-                raise ValueError(f"periodic {a}/{b} needs an even {what} ≥ 2 (checkerboard), got {n}")
+            check_periodic(self, a, b, n, what, "checkerboard")
         if self.skew_cols:
             if self.bottom != "periodic":
                 raise ValueError("skew_cols shifts the bottom/top periodic wrap: set bottom and top to periodic")

@@ -12,7 +12,7 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, model_validator
 
-from flexmm.config.base import EdgeCondition, Finite, GridUnits, NonNegative, Positive, Strict
+from flexmm.config.base import EdgeCondition, Finite, GridUnits, NonNegative, Positive, Strict, check_periodic
 from flexmm.config.rigid import HINGE_TARGETS
 from flexmm.config.variation import Variation, check_variations
 
@@ -51,12 +51,7 @@ class _TriangleUnits(Strict):
                          bond_targets=HINGE_TARGETS)
 
 
-def _check_periodic(cfg, a: str, b: str, n: int, what: str) -> None:
-    pa, pb = getattr(cfg, a) == "periodic", getattr(cfg, b) == "periodic"
-    if pa != pb:
-        raise ValueError(f"{a} and {b} must both be periodic or neither")
-    if pa and (n < 2 or n % 2):
-        raise ValueError(f"periodic {a}/{b} needs an even {what} ≥ 2 (up and down triangles alternate), got {n}")
+_ALTERNATE = "up and down triangles alternate"
 
 
 class RotatingTrianglesChain(_TriangleUnits):
@@ -83,7 +78,7 @@ class RotatingTrianglesChain(_TriangleUnits):
     @model_validator(mode="after")
     def _check(self):
         self._check_twist()
-        _check_periodic(self, "left", "right", self.n_units, "n_units")
+        check_periodic(self, "left", "right", self.n_units, "n_units", _ALTERNATE)
         self._check_variation(self.n_units, 1)
         return self
 
@@ -105,7 +100,7 @@ class RotatingTrianglesSheet(_TriangleUnits, GridUnits):
     @model_validator(mode="after")
     def _check(self):
         self._check_twist()
-        _check_periodic(self, "left", "right", self.n_cols, "n_cols")
-        _check_periodic(self, "bottom", "top", self.n_rows, "n_rows")
+        check_periodic(self, "left", "right", self.n_cols, "n_cols", _ALTERNATE)
+        check_periodic(self, "bottom", "top", self.n_rows, "n_rows", _ALTERNATE)
         self._check_variation(self.n_cols, self.n_rows)
         return self

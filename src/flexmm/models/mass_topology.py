@@ -35,12 +35,14 @@ def second_neighbours(n_sites: int, bonds: np.ndarray) -> np.ndarray:
     return np.array(pairs, np.int64).reshape(-1, 2)
 
 
-def chain(n: int, spacing_m: float) -> Topology:
-    """n sites in a row; ends 'left' = [0], 'right' = [n − 1]."""
-    i = np.arange(n - 1, dtype=np.int64)
-    bonds = np.stack([i, i + 1], axis=1)
-    j = np.arange(max(n - 2, 0), dtype=np.int64)
-    return Topology(n, bonds, np.stack([j, j + 2], axis=1), {"left": [0], "right": [n - 1]},
+def chain(n: int, spacing_m: float, periodic: bool = False) -> Topology:
+    """n sites in a row; ends 'left' = [0], 'right' = [n − 1]. ``periodic``: a ring, the bonds
+    (n − 1, 0) and second-neighbour bonds (n − 2, 0), (n − 1, 1) close it (elongation u_0 − u_{n−1}:
+    site 0 sits one spacing beyond site n − 1)."""
+    i = np.arange(n if periodic else n - 1, dtype=np.int64)
+    bonds = np.stack([i, (i + 1) % n], axis=1)
+    j = np.arange(n if periodic else max(n - 2, 0), dtype=np.int64)
+    return Topology(n, bonds, np.stack([j, (j + 2) % n], axis=1), {"left": [0], "right": [n - 1]},
                     {"x": np.arange(n) * spacing_m})
 
 
@@ -89,7 +91,7 @@ def grid(nx: int, ny: int, spacing_m: float) -> Topology:
 def build_topology(cfg) -> Topology:
     """The topology of a MassChain, MassNetwork or MassGrid config."""
     if cfg.kind == "mass_chain":
-        return chain(cfg.n_units, cfg.spacing_m)
+        return chain(cfg.n_units, cfg.spacing_m, cfg.left == "periodic")
     if cfg.kind == "mass_network":
         return network(cfg)
     if cfg.kind == "mass_grid":

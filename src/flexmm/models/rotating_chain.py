@@ -42,19 +42,25 @@ def nondimensional(cfg: RotatingSquaresChain) -> dict[str, float]:
     }
 
 
+def hinge_pairs(n: int, periodic: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(hinge_a, hinge_b) of an n-unit chain: h joins h and h + 1; a ring adds (n − 1, 0)."""
+    ha = np.arange(n if periodic else n - 1, dtype=np.int64)
+    return ha, (ha + 1) % n
+
+
 def chain_tables(
     n: int, theta0: np.ndarray, Ks: np.ndarray | float, Ktheta: np.ndarray | float,
-    n_lateral: int, lateral_stretch: bool,
+    n_lateral: int, lateral_stretch: bool, periodic: bool = False,
 ) -> tuple:
     """Connectivity and parameter tables of an n-unit chain (nondimensional, a = 1).
 
-    ``theta0`` may vary per site; ``Ks``, ``Ktheta`` per hinge (scalars broadcast).
+    ``theta0`` may vary per site; ``Ks``, ``Ktheta`` per hinge (scalars broadcast). ``periodic``:
+    a ring of an even n (the hinge signs alternate), closed by the hinge (n − 1, 0).
     Returns the ``args`` tuple of ``chain_force``.
     """
     theta0 = np.broadcast_to(np.asarray(theta0, float), (n,))
-    ha = np.arange(n - 1, dtype=np.int64)
-    hb = ha + 1
-    hprm = np.empty((n - 1, N_HINGE_PARAMS))
+    ha, hb = hinge_pairs(n, periodic)
+    hprm = np.empty((ha.size, N_HINGE_PARAMS))
     hprm[:, 0] = 0.5 * (np.cos(theta0[ha]) + np.cos(theta0[hb]))
     hprm[:, 1] = 0.5
     hprm[:, 2] = 0.5
@@ -65,7 +71,7 @@ def chain_tables(
     sprm = np.empty((n, N_SITE_PARAMS))
     sprm[:, 0] = theta0
     sprm[:, 1] = n_lateral * (1.0 if lateral_stretch else 0.0) * 0.5
-    sprm[:, 2] = 2.0 * n_lateral * np.broadcast_to(np.asarray(Ktheta, float), (n - 1,)).mean()
+    sprm[:, 2] = 2.0 * n_lateral * np.broadcast_to(np.asarray(Ktheta, float), (ha.size,)).mean()
     return ChainArgs(ha, hb, hprm, sprm, np.zeros(n), np.zeros(n))
 
 
@@ -78,25 +84,26 @@ def varied_tables(cfg: RotatingSquaresChain) -> tuple[tuple, np.ndarray, np.ndar
     base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": cfg.inertia_kg_m2,
             "k_long_n_per_m": kl, "k_shear_n_per_m": cfg.k_shear_n_per_m,
             "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}
-    ha = np.arange(n - 1)
-    site, hinge = variation.parameter_arrays(base, cfg.variation, np.arange(n), np.zeros(n, int), ha, ha + 1)
+    periodic = cfg.left == "periodic"
+    ha, hb = hinge_pairs(n, periodic)
+    site, hinge = variation.parameter_arrays(base, cfg.variation, np.arange(n), np.zeros(n, int), ha, hb)
     kt = hinge["k_rot_n_m_per_rad"] / (kl * a * a)
     args = chain_tables(n, site["theta0_rad"], hinge["k_shear_n_per_m"] / kl, kt,
-                        cfg.n_lateral, cfg.lateral_stretch)
+                        cfg.n_lateral, cfg.lateral_stretch, periodic)
     hprm, sprm = args[2], args[3]
     hprm[:, H_KL] = hinge["k_long_n_per_m"] / kl
-    deg = np.bincount(ha, minlength=n) + np.bincount(ha + 1, minlength=n)
-    local_kl = (np.bincount(ha, hprm[:, H_KL], n) + np.bincount(ha + 1, hprm[:, H_KL], n)) / deg
-    local_kt = (np.bincount(ha, kt, n) + np.bincount(ha + 1, kt, n)) / deg
+    deg = np.bincount(ha, minlength=n) + np.bincount(hb, minlength=n)
+    local_kl = (np.bincount(ha, hprm[:, H_KL], n) + np.bincount(hb, hprm[:, H_KL], n)) / deg
+    local_kt = (np.bincount(ha, kt, n) + np.bincount(hb, kt, n)) / deg
     sprm[:, S_KG] = cfg.n_lateral * float(cfg.lateral_stretch) * 0.5 * local_kl
     sprm[:, S_KR] = 2.0 * cfg.n_lateral * local_kt
     mass = np.concatenate([site["mass_kg"], site["inertia_kg_m2"] / a**2]) / m
-    x = np.concatenate([[0.0], np.cumsum(hprm[:, H_REST])]) * a
+    x = np.concatenate([[0.0], np.cumsum(hprm[: n - 1, H_REST])]) * a
     return args, mass, x
 
 
 def build(cfg: RotatingSquaresChain) -> System:
-    """The chain as a System: state (u_0..u_{N−1}, θ_0..θ_{N−1}), ends free or fixed.
+    """The chain as a System: state (u_0..u_{N−1}, θ_0..θ_{N−1}), ends free or fixed, or a ring.
 
     ``cfg.variation`` makes parameters vary by unit or hinge; ``cfg.predeform`` starts the
     dynamics from the static equilibrium under an applied strain or load (``predeform.relax``).
@@ -104,7 +111,8 @@ def build(cfg: RotatingSquaresChain) -> System:
     n = cfg.n_units
     nd = nondimensional(cfg)
     scales = Scales(cfg.a_m, math.sqrt(cfg.mass_kg / cfg.k_long_n_per_m), cfg.mass_kg)
-    args = chain_tables(n, cfg.theta0_rad, nd["Ks"], nd["Ktheta"], cfg.n_lateral, cfg.lateral_stretch)
+    args = chain_tables(n, cfg.theta0_rad, nd["Ks"], nd["Ktheta"], cfg.n_lateral, cfg.lateral_stretch,
+                        cfg.left == "periodic")
     mass = np.concatenate([np.ones(n), np.full(n, nd["alpha2"])])
     x = np.arange(n) * cfg.a_m * math.cos(cfg.theta0_rad)
     if cfg.variation:

@@ -13,6 +13,11 @@ the rows, and two reductions follow:
   with stiff shear (K_s ~ 0.2) the chain's θ pulse differs at first order; with K_s ~ 0.02 the
   rotational band shifts by ~0.5 %. ``flexmm compare --fidelity full,chain`` measures it.
 
+The whole scene must have that symmetry, the initial state (``initial``) included: its fields
+are evaluated on every unit of the sheet and must repeat every two rows (every row for the
+chain, which has no v), pins must hold whole columns, and a state read from another run or a
+launched wave keeps the sheet.
+
 Reducers are the ``reducers`` hooks of a kind's ``ModelSpec`` (``flexmm.config.lattice.MODELS``);
 each takes the scene as a plain dict and its lattice config and returns the reduced scene dict,
 or raises ``NotPlanar``.
@@ -43,8 +48,54 @@ def _columns_of(sites: list[int], n_rows: int, n_cols: int, what: str) -> list[i
     return cols
 
 
-def _check_planar(data: dict, lat) -> None:
-    """NotPlanar unless the sheet scene keeps every column uniform (see module docstring)."""
+def _check_initial(data: dict, lat, period: int) -> None:
+    """NotPlanar unless ``initial`` repeats every ``period`` rows: each ``fields`` entry is evaluated
+    on the whole sheet (value and rate), pins hold whole columns, nothing comes from another run."""
+    import numpy as np
+
+    from flexmm.initial_state import field_values, grid_variables, spacing
+
+    init = data.get("initial") or {}
+    if init.get("from_run"):
+        raise NotPlanar("initial.from_run: the state of another run is not checked to be uniform across rows")
+    if init.get("launch"):
+        raise NotPlanar("initial.launch: launched waves are not checked to be uniform across rows")
+    for k, pin in enumerate(init.get("pinned") or []):
+        _columns_of(pin["sites"], lat.n_rows, lat.n_cols, f"initial.pinned.{k}.sites")
+    if not init.get("fields"):
+        return
+    from flexmm.config.initial import FieldInit
+
+    row, col = np.divmod(np.arange(lat.n_rows * lat.n_cols), lat.n_cols)
+    variables = grid_variables(col, row, spacing(lat))
+    for k, f in enumerate(init["fields"]):
+        if period == 1 and f["field"] == "v":
+            raise NotPlanar(f"initial.fields.{k}: the chain has no lateral displacement v")
+        try:
+            values = field_values(FieldInit.model_validate(f), variables, row.size)
+        except ValueError:
+            raise NotPlanar(f"initial.fields.{k} cannot be evaluated on the sheet") from None
+        for what, arr in zip(("value", "rate"), values):
+            grid = arr.reshape(lat.n_rows, lat.n_cols)
+            repeated = grid[np.arange(lat.n_rows) % period]
+            if np.max(np.abs(grid - repeated), initial=0.0) > 1e-12 * np.max(np.abs(grid), initial=0.0):
+                across = "alike in every row" if period == 1 else "periodic with period 2 across the rows"
+                raise NotPlanar(f"initial.fields.{k} ({f['field']} {what}) is not {across}")
+
+
+def _pinned_rows(data: dict, lat, rows) -> list | None:
+    """``initial.pinned`` with the sites of whole columns remapped onto ``rows`` (None: no pins)."""
+    pins = (data.get("initial") or {}).get("pinned") or []
+    out = []
+    for pin in pins:
+        cols = _columns_of(pin["sites"], lat.n_rows, lat.n_cols, "initial.pinned.sites")
+        out.append({**pin, "sites": [r * lat.n_cols + c for r in rows for c in cols]})
+    return out
+
+
+def _check_planar(data: dict, lat, period: int = 2) -> None:
+    """NotPlanar unless the sheet scene keeps every column uniform (see module docstring) and its
+    initial state repeats every ``period`` rows."""
     if lat.bottom != "periodic":
         raise NotPlanar(f"bottom/top edges are {lat.bottom}/{lat.top}, not periodic: the wave does not "
                         "stay planar near them")
@@ -69,6 +120,7 @@ def _check_planar(data: dict, lat) -> None:
         if imp["kind"] != "rotation_seed":
             raise NotPlanar(f"imperfection {imp['kind']!r} is not uniform across rows")
         _columns_of(imp["sites"], lat.n_rows, lat.n_cols, "imperfection.sites")
+    _check_initial(data, lat, period)
 
 
 def _scaled_loads(pre, factor: float) -> dict:
@@ -87,12 +139,14 @@ def sheet_to_strip(data: dict, lat) -> dict:
     if imp is not None:
         cols = _columns_of(imp["sites"], lat.n_rows, lat.n_cols, "imperfection.sites")
         out["imperfection"] = {**imp, "sites": [r * lat.n_cols + c for r in (0, 1) for c in cols]}
+    if data.get("initial"):
+        out["initial"] = {**data["initial"], "pinned": _pinned_rows(data, lat, (0, 1))}
     return out
 
 
 def sheet_to_chain(data: dict, lat) -> dict:
     """The planar scene as the n_lateral = 2, lateral_stretch chain (suppresses v; see docstring)."""
-    _check_planar(data, lat)
+    _check_planar(data, lat, period=1)
     if "periodic" in (lat.left, lat.right):
         raise NotPlanar("left/right periodic has no chain equivalent")
     if lat.ligament_length_m != 0:
@@ -109,6 +163,8 @@ def sheet_to_chain(data: dict, lat) -> dict:
         chain["predeform"] = _scaled_loads(lat.predeform, 1 / lat.n_rows)
     out = {**data, "lattice": chain}
     out["excitation"] = dict(data.get("excitation") or {"kind": "none"})
+    if data.get("initial"):
+        out["initial"] = {**data["initial"], "pinned": _pinned_rows(data, lat, (0,))}
     imp = data.get("imperfection")
     if imp is not None:
         out["imperfection"] = {**imp, "sites": _columns_of(imp["sites"], lat.n_rows, lat.n_cols, "")}

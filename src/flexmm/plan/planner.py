@@ -131,6 +131,8 @@ def _trimmable(scene) -> str | None:
         return lat.trim_issue
     if getattr(lat, "variation", None) or getattr(lat, "predeform", None):
         return "parameters vary along x or the lattice is predeformed"
+    if getattr(lat, "left", None) == "periodic":
+        return "the lattice is periodic along x (a ring): waves come round"
     return None
 
 
