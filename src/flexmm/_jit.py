@@ -18,11 +18,13 @@ are reached through ``flexmm.models.kernels``, dispatched on the type of their a
 every kernel, integrator loops included, is cached across processes. The cache directory is
 
 1. ``$NUMBA_CACHE_DIR`` when set (numba's own variable; flexmm only checks it is writable);
-2. otherwise ``$XDG_CACHE_HOME/flexmm/numba/<key>`` (``~/.cache/flexmm/numba/<key>``), where
-   ``<key>`` hashes flexmm's version, the kernel sources and the numba version — numba checks
-   only the timestamp of a cached function's own file, not of the kernels it inlined, so a
-   key per source state keeps a changed hinge law from being served from a stale integrator.
-   keys unused for a week are removed (``prune_cache``);
+2. otherwise one directory per module, ``$XDG_CACHE_HOME/flexmm/numba/<module>-<key>``
+   (``~/.cache/flexmm/numba/…``), where ``<key>`` hashes the sources of the module and of every
+   flexmm module it imports, directly or not, and numba's and Python's versions
+   (``module_key``) — numba checks only the timestamp of a cached function's own file, not of
+   the kernels it inlined, so the key keeps a changed hinge law from being served from a stale
+   integrator, and a change recompiles only the modules that import the changed one.
+   Directories unused for a week are removed (``prune_cache``);
 3. if that cannot be written, a per-user directory under the system's temporary directory, with
    a warning; if nothing is writable, caching is off (every process compiles) and a warning
    says so.
@@ -30,6 +32,7 @@ every kernel, integrator loops included, is cached across processes. The cache d
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import os
 import shutil
@@ -108,26 +111,76 @@ if not NO_JIT:
         return lambda a, b, c: _fma(a, b, c)
 
 _PACKAGE = Path(__file__).resolve().parent
-#: packages and modules whose source is compiled (their text keys the cache directory)
-_KERNEL_SOURCES = ("_jit.py", "_trig.py", "stability.py", "models", "integrators",
-                   "design/kernels.py", "design/kernels_extra.py", "design/terms.py", "design/sweeps.py",
-                   "design/splitting.py", "design/midpoint.py")
-#: cache directories of other source states are removed once unused this long
+#: cache directories unused this long are removed
 PRUNE_AGE_S = 7 * 86400.0
 
 
-def source_key() -> str:
-    """A short hash of flexmm's compiled sources, its version and numba's version."""
+def _module_path(module: str) -> Path | None:
+    """The source file of module ``module`` (a flexmm module, or one already imported), else None."""
+    parts = module.split(".")
+    if parts[0] == "flexmm":
+        base = _PACKAGE.joinpath(*parts[1:])
+        for path in (base.with_suffix(".py"), base / "__init__.py"):
+            if path.is_file():
+                return path
+        return None
+    file = getattr(sys.modules.get(module), "__file__", None)
+    return Path(file) if file and file.endswith(".py") else None
+
+
+def module_imports(module: str, source: bytes, is_package: bool = False) -> set[str]:
+    """The flexmm modules that the source of ``module`` imports, at any depth of its text.
+
+    ``from flexmm.p import n`` counts as ``flexmm.p.n`` when that is a module, else as ``flexmm.p``
+    (where ``n`` is defined); relative imports are resolved against ``module``.
+    """
+    found = set()
+    package = module if is_package else module.rpartition(".")[0]
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{base}.{node.module}" if node.module else base
+            else:
+                base = node.module or ""
+            for alias in node.names:
+                sub = f"{base}.{alias.name}"
+                found.add(sub if _module_path(sub) is not None else base)
+    return {m for m in found if m.split(".")[0] == "flexmm" and _module_path(m) is not None}
+
+
+_SOURCES: dict[str, tuple[bytes, set[str]]] = {}
+
+
+def _source_and_imports(module: str) -> tuple[bytes, set[str]]:
+    if module not in _SOURCES:
+        path = _module_path(module)
+        source = path.read_bytes() if path is not None else b""
+        _SOURCES[module] = source, module_imports(module, source, path is not None and path.name == "__init__.py")
+    return _SOURCES[module]
+
+
+def module_key(module: str, sources=_source_and_imports) -> str:
+    """A short hash of the sources of ``module`` and of every flexmm module it imports, directly or
+    through others, with numba's and Python's versions: the key of ``module``'s cache directory.
+
+    A compiled function can call (and inline) only what its module reaches through imports, so
+    a changed source changes the keys of the modules that import it, directly or not, and of no
+    other. ``sources(name) -> (source bytes, imported module names)`` (tests pass edited texts).
+    """
+    seen, todo = set(), [module]
+    while todo:
+        name = todo.pop()
+        if name not in seen:
+            seen.add(name)
+            todo.extend(sources(name)[1])
     h = hashlib.sha256()
     h.update(numba.__version__.encode())
     h.update(sys.version.encode())
-    for name in _KERNEL_SOURCES:
-        path = _PACKAGE / name
-        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
-        for f in files:
-            if f.exists():
-                h.update(f.relative_to(_PACKAGE).as_posix().encode())
-                h.update(f.read_bytes())
+    for name in sorted(seen):
+        h.update(name.encode() + b"\0" + sources(name)[0] + b"\0")
     return h.hexdigest()[:16]
 
 
@@ -146,50 +199,59 @@ def _user_cache_root() -> Path:
     return Path(base) / "flexmm" / "numba"
 
 
-def prune_cache(root: Path, keep: str, max_age_s: float = PRUNE_AGE_S) -> None:
-    """Remove cache directories of other source states under ``root`` unused for ``max_age_s``.
-
-    The kept directory's time stamp is refreshed at each start, so a directory another
-    installation still uses survives (best effort: errors are ignored).
-    """
+def prune_cache(root: Path, max_age_s: float = PRUNE_AGE_S) -> None:
+    """Remove cache directories under ``root`` unused for ``max_age_s`` (best effort: errors are
+    ignored). A module's directory has its time stamp refreshed by each process that uses it."""
     now = time.time()
     try:
-        os.utime(root / keep)
         for d in root.iterdir():
-            if d.is_dir() and d.name != keep and now - d.stat().st_mtime > max_age_s:
+            if d.is_dir() and now - d.stat().st_mtime > max_age_s:
                 shutil.rmtree(d, ignore_errors=True)
     except OSError:
         pass
 
 
-def _choose_cache_dir() -> tuple[Path | None, str]:
-    """(cache directory or None when caching is off, a note when it is not the usual one)."""
+def _choose_cache_dir() -> tuple[Path | None, bool, str]:
+    """(cache directory or None when caching is off, whether each module gets a subdirectory
+    keyed by its sources there, a note when it is not the usual one)."""
     env = os.environ.get("NUMBA_CACHE_DIR")
     if env:
         if _writable(Path(env)):
-            return Path(env), ""
+            return Path(env), False, ""
         note = f"NUMBA_CACHE_DIR={env} is not writable"
     else:
-        key = source_key()
         root = _user_cache_root()
-        if _writable(root / key):
-            prune_cache(root, key)
-            return root / key, ""
+        if _writable(root):
+            prune_cache(root)
+            return root, True, ""
         note = f"{root} is not writable"
-        env = None
     uid = os.getuid() if hasattr(os, "getuid") else "user"
-    fallback = Path(tempfile.gettempdir()) / f"flexmm-numba-{uid}" / source_key()
+    fallback = Path(tempfile.gettempdir()) / f"flexmm-numba-{uid}"
     if _writable(fallback):
-        return fallback, f"{note}; compiled kernels are cached in {fallback} instead"
-    return None, (f"{note} and neither is {fallback}: compiled kernels are not cached, so every "
-                  "process compiles them again (set NUMBA_CACHE_DIR to a writable directory)")
+        return fallback, True, f"{note}; compiled kernels are cached in {fallback} instead"
+    return None, False, (f"{note} and neither is {fallback}: compiled kernels are not cached, so every "
+                         "process compiles them again (set NUMBA_CACHE_DIR to a writable directory)")
 
 
-CACHE_DIR, CACHE_NOTE = (None, "") if NO_JIT else _choose_cache_dir()
+CACHE_DIR, CACHE_KEYED, CACHE_NOTE = (None, False, "") if NO_JIT else _choose_cache_dir()
 if CACHE_DIR is not None:
-    numba.config.CACHE_DIR = str(CACHE_DIR)  # read when each kernel below enables caching
+    numba.config.CACHE_DIR = str(CACHE_DIR)
 if CACHE_NOTE:
     warnings.warn(f"flexmm: {CACHE_NOTE}", RuntimeWarning, stacklevel=2)
+
+
+def module_cache_dir(module: str) -> Path | None:
+    """Where the compiled functions of ``module`` are cached: ``CACHE_DIR/<module>-<module_key>``
+    (its time stamp refreshed), or ``CACHE_DIR`` itself when set by ``NUMBA_CACHE_DIR``."""
+    if CACHE_DIR is None or not CACHE_KEYED:
+        return CACHE_DIR
+    path = CACHE_DIR / f"{module}-{module_key(module)}"
+    try:
+        path.mkdir(exist_ok=True)
+        os.utime(path)
+    except OSError:
+        return None
+    return path
 
 
 def jit(fn=None, *, parallel: bool = False):
@@ -198,6 +260,13 @@ def jit(fn=None, *, parallel: bool = False):
     def wrap(f):
         if NO_JIT:
             return f
-        return numba.njit(f, cache=CACHE_DIR is not None, parallel=parallel, **JIT_OPTIONS)
+        where = module_cache_dir(f.__module__)
+        if where is None:
+            return numba.njit(f, cache=False, parallel=parallel, **JIT_OPTIONS)
+        saved, numba.config.CACHE_DIR = numba.config.CACHE_DIR, str(where)  # read by numba right here
+        try:
+            return numba.njit(f, cache=True, parallel=parallel, **JIT_OPTIONS)
+        finally:
+            numba.config.CACHE_DIR = saved
 
     return wrap if fn is None else wrap(fn)
