@@ -68,9 +68,10 @@ def _install(rec: _Recorder) -> None:
 class _Plugin:
     """pytest plugin: names the running test for the recorder."""
 
-    def __init__(self, rec: _Recorder):
+    def __init__(self, rec: _Recorder, dump):
         self.rec = rec
         self.test_cpu: dict[str, float] = {}
+        self.dump, self.dumped = dump, time.perf_counter()
 
     def pytest_runtest_protocol(self, item, nextitem):
         self.rec.test = item.nodeid
@@ -78,6 +79,9 @@ class _Plugin:
 
     def pytest_runtest_logfinish(self, nodeid, location):
         self.test_cpu[nodeid] = time.process_time() - self._c0
+        if time.perf_counter() - self.dumped > 30.0:  # a partial record while the run goes on
+            self.dump()
+            self.dumped = time.perf_counter()
 
 
 def _short(sig: str, n: int = 110) -> str:
@@ -127,15 +131,18 @@ def main(argv: list[str]) -> int:
     rec = _Recorder()
     _install(rec)
     c0, w0 = time.process_time(), time.perf_counter()
-    plugin = _Plugin(rec)
+    out = os.environ.get("COMPILE_PROFILE_OUT", "compile_profile.json")
+
+    def dump():
+        with open(out + ".tmp", "w") as f:
+            json.dump({"argv": argv, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - w0,
+                       "load": os.getloadavg(), "compilations": rec.rows, "test_cpu_s": plugin.test_cpu}, f)
+        os.replace(out + ".tmp", out)
+
+    plugin = _Plugin(rec, dump)
     code = pytest.main(argv, plugins=[plugin])
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    out = os.environ.get("COMPILE_PROFILE_OUT", "compile_profile.json")
-    with open(out + ".tmp", "w") as f:
-        json.dump({"argv": argv, "cpu_s": cpu, "wall_s": wall, "load": os.getloadavg(),
-                   "compilations": rec.rows,
-                   "test_cpu_s": plugin.test_cpu}, f)
-    os.replace(out + ".tmp", out)
+    dump()
     report(rec.rows, plugin.test_cpu)
     print(f"\npytest: {cpu:.0f} CPU-s, {wall:.0f} s wall, load {os.getloadavg()[0]:.1f}; record in {out}")
     return int(code)
