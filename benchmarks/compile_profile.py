@@ -3,12 +3,12 @@
     python benchmarks/compile_profile.py [pytest args ...]      # run pytest, record, print the top costs
     python benchmarks/compile_profile.py --report FILE.json     # print the top costs of a recorded run
 
-Runs pytest in this process (pass ``-p no:xdist``) with a listener on numba's ``numba:compile``
-event, so each compilation of a kernel for a new argument-type signature (a cache miss) is
+Runs pytest in this process (pass ``-p no:xdist``; CPU time of subprocesses is not counted)
+with a listener on numba's ``numba:compile`` event, so each compilation of a kernel for a new argument-type signature (a cache miss) is
 recorded with its wall and CPU seconds, inclusive and exclusive of the compilations it set off
 (an integrator loop compiles the kernels it calls), and the test that paid for it. Loads from the
-numba cache are not compilations and are not recorded; use an empty ``NUMBA_CACHE_DIR`` to see
-what a fresh clone pays. The record is written to ``$COMPILE_PROFILE_OUT``
+numba cache are not compilations; their CPU time is summed per test (a warm run's cost). Use an
+empty ``NUMBA_CACHE_DIR`` to see what a fresh clone pays. The record is written to ``$COMPILE_PROFILE_OUT``
 (default ``compile_profile.json``) and summarised: the top compilations by exclusive CPU time,
 the functions with the most signatures, and compile CPU time per test file and per test.
 """
@@ -31,6 +31,7 @@ class _Recorder:
         self.rows: list[dict] = []
         self.stack: list[list] = []
         self.test = "(collection)"
+        self.loads: dict[str, float] = defaultdict(float)  # CPU-s loading from numba's cache, per test
 
     def on_start(self, data) -> None:
         self.stack.append([time.perf_counter(), time.process_time(), 0.0, 0.0, data])
@@ -64,6 +65,19 @@ def _install(rec: _Recorder) -> None:
 
     event.register("numba:compile", Listener())
 
+    from numba.core import caching
+
+    load = caching.Cache.load_overload
+
+    def timed_load(self, sig, target_context):  # a warm run's cost: loading compiled code
+        c0 = time.process_time()
+        try:
+            return load(self, sig, target_context)
+        finally:
+            rec.loads[rec.test] += time.process_time() - c0
+
+    caching.Cache.load_overload = timed_load
+
 
 class _Plugin:
     """pytest plugin: names the running test for the recorder."""
@@ -88,8 +102,8 @@ def _short(sig: str, n: int = 110) -> str:
     return sig if len(sig) <= n else sig[: n - 3] + "..."
 
 
-def report(rows: list[dict], test_cpu: dict[str, float], top: int = TOP) -> None:
-    """Print the summary of recorded compile rows and of the CPU time of each test."""
+def report(rows: list[dict], test_cpu: dict[str, float], loads: dict[str, float], top: int = TOP) -> None:
+    """Print the summary of recorded compile rows, cache loads and the CPU time of each test."""
     total = sum(r["self_cpu_s"] for r in rows)
     print(f"\n{len(rows)} compilations, {total:.0f} CPU-s "
           f"(wall {sum(r['self_wall_s'] for r in rows):.0f} s, exclusive of nested ones)")
@@ -112,9 +126,13 @@ def report(rows: list[dict], test_cpu: dict[str, float], top: int = TOP) -> None
     file_cpu: dict[str, float] = defaultdict(float)
     for name, c in test_cpu.items():
         file_cpu[name.split("::")[0]] += c
-    print("\n-- CPU-s per test file: all, of which compiling")
+    file_load: dict[str, float] = defaultdict(float)
+    for name, c in loads.items():
+        file_load[name.split("::")[0]] += c
+    print(f"\n-- CPU-s per test file: all, compiling, loading from the cache "
+          f"(totals {sum(test_cpu.values()):.0f}, {total:.0f}, {sum(loads.values()):.0f})")
     for name in sorted(set(by_file) | set(file_cpu), key=lambda n: -max(file_cpu.get(n, 0), by_file.get(n, 0))):
-        print(f"{file_cpu.get(name, 0.0):7.1f} {by_file.get(name, 0.0):7.1f}  {name}")
+        print(f"{file_cpu.get(name, 0.0):7.1f} {by_file.get(name, 0.0):7.1f} {file_load.get(name, 0.0):7.1f}  {name}")
     print(f"\n-- top {top} tests by compile CPU-s")
     for name, c in sorted(by_test.items(), key=lambda kv: -kv[1])[:top]:
         print(f"{c:7.1f}  {name}")
@@ -124,7 +142,7 @@ def main(argv: list[str]) -> int:
     if argv[:1] == ["--report"]:
         with open(argv[1]) as f:
             rec = json.load(f)
-        report(rec["compilations"], rec["test_cpu_s"])
+        report(rec["compilations"], rec["test_cpu_s"], rec.get("load_cpu_s", {}))
         return 0
     import pytest
 
@@ -136,14 +154,15 @@ def main(argv: list[str]) -> int:
     def dump():
         with open(out + ".tmp", "w") as f:
             json.dump({"argv": argv, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - w0,
-                       "load": os.getloadavg(), "compilations": rec.rows, "test_cpu_s": plugin.test_cpu}, f)
+                       "load": os.getloadavg(), "compilations": rec.rows, "test_cpu_s": plugin.test_cpu,
+                       "load_cpu_s": rec.loads}, f)
         os.replace(out + ".tmp", out)
 
     plugin = _Plugin(rec, dump)
     code = pytest.main(argv, plugins=[plugin])
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     dump()
-    report(rec.rows, plugin.test_cpu)
+    report(rec.rows, plugin.test_cpu, rec.loads)
     print(f"\npytest: {cpu:.0f} CPU-s, {wall:.0f} s wall, load {os.getloadavg()[0]:.1f}; record in {out}")
     return int(code)
 
