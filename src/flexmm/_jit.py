@@ -24,7 +24,7 @@ every kernel, integrator loops included, is cached across processes. The cache d
    (``module_key``) — numba checks only the timestamp of a cached function's own file, not of
    the kernels it inlined, so the key keeps a changed hinge law from being served from a stale
    integrator, and a change recompiles only the modules that import the changed one.
-   Directories unused for a week are removed (``prune_cache``);
+   A module's other versions unused for a week are removed when it is used (``prune_cache``);
 3. if that cannot be written, a per-user directory under the system's temporary directory, with
    a warning; if nothing is writable, caching is off (every process compiles) and a warning
    says so.
@@ -217,16 +217,23 @@ def _user_cache_root() -> Path:
     return Path(base) / "flexmm" / "numba"
 
 
-def prune_cache(root: Path, max_age_s: float = PRUNE_AGE_S) -> None:
-    """Remove cache directories under ``root`` unused for ``max_age_s`` (best effort: errors are
-    ignored). A module's directory has its time stamp refreshed by each process that uses it."""
+def prune_cache(root: Path, keep=lambda name: False, max_age_s: float = PRUNE_AGE_S) -> None:
+    """Remove the directories under ``root`` unused for ``max_age_s`` except those whose name
+    ``keep`` accepts (best effort: errors are ignored)."""
     now = time.time()
     try:
         for d in root.iterdir():
-            if d.is_dir() and now - d.stat().st_mtime > max_age_s:
+            if d.is_dir() and not keep(d.name) and now - d.stat().st_mtime > max_age_s:
                 shutil.rmtree(d, ignore_errors=True)
     except OSError:
         pass
+
+
+def _current_module(name: str) -> bool:
+    """Whether ``name`` is a directory name ``<module>-<key>`` of an existing flexmm module (its
+    stale versions are pruned when the module is used: ``module_cache_dir``)."""
+    module, _, key = name.rpartition("-")
+    return len(key) == 16 and module.split(".")[0] == "flexmm" and _module_path(module) is not None
 
 
 def _choose_cache_dir() -> tuple[Path | None, bool, str]:
@@ -240,7 +247,7 @@ def _choose_cache_dir() -> tuple[Path | None, bool, str]:
     else:
         root = _user_cache_root()
         if _writable(root):
-            prune_cache(root)
+            prune_cache(root, keep=_current_module)  # old layouts, removed modules
             return root, True, ""
         note = f"{root} is not writable"
     uid = os.getuid() if hasattr(os, "getuid") else "user"
@@ -263,12 +270,14 @@ def module_cache_dir(module: str) -> Path | None:
     (its time stamp refreshed), or ``CACHE_DIR`` itself when set by ``NUMBA_CACHE_DIR``."""
     if CACHE_DIR is None or not CACHE_KEYED:
         return CACHE_DIR
-    path = CACHE_DIR / f"{module}-{module_key(module)}"
+    name = f"{module}-{module_key(module)}"
+    path = CACHE_DIR / name
     try:
         path.mkdir(exist_ok=True)
         os.utime(path)
     except OSError:
         return None
+    prune_cache(CACHE_DIR, keep=lambda d: d == name or not d.startswith(f"{module}-"))  # its other versions
     return path
 
 

@@ -118,8 +118,15 @@ def test_default_cache_directory_is_one_per_module_keyed_by_its_sources(tmp_path
     monkeypatch.setattr(_jit, "CACHE_DIR", where)
     monkeypatch.setattr(_jit, "CACHE_KEYED", True)
     module = "flexmm.models.hinge"
+    stale, recent, other = (root / f"{module}-{'0' * 16}", root / f"{module}-{'1' * 16}",
+                            root / f"flexmm.models.laws-{'0' * 16}")
+    for d in (stale, recent, other):
+        d.mkdir()
+    os.utime(stale, (0, 0))
+    os.utime(other, (0, 0))
     assert _jit.module_cache_dir(module) == root / f"{module}-{_jit.module_key(module)}"
     assert (root / f"{module}-{_jit.module_key(module)}").is_dir()
+    assert not stale.exists() and recent.exists() and other.exists()  # only the module's own old versions
 
 
 #: every module with compiled kernels, and which of them a change to one module's source must
