@@ -23,7 +23,8 @@ every kernel, integrator loops included, is cached across processes. The cache d
    flexmm module it imports, directly or not, and numba's and Python's versions
    (``module_key``) — numba checks only the timestamp of a cached function's own file, not of
    the kernels it inlined, so the key keeps a changed hinge law from being served from a stale
-   integrator, and a change recompiles only the modules that import the changed one.
+   integrator, and a change recompiles only the modules that import the changed one; every
+   checkout or installation of the same sources shares these directories (``_ModuleDirLocator``).
    A module's other versions unused for a week are removed when it is used (``prune_cache``);
 3. if that cannot be written, a per-user directory under the system's temporary directory, with
    a warning; if nothing is writable, caching is off (every process compiles) and a warning
@@ -45,7 +46,7 @@ from pathlib import Path
 
 import llvmlite.binding
 import numba
-from numba.core import types
+from numba.core import caching, types
 from numba.extending import intrinsic, overload
 
 NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
@@ -281,6 +282,28 @@ def module_cache_dir(module: str) -> Path | None:
     return path
 
 
+class _ModuleDirLocator(getattr(caching, "UserProvidedCacheLocator", None)
+                        or caching._UserProvidedCacheLocator):
+    """numba's locator for a cache directory of its own, without the subdirectory numba adds per
+    source directory path: a module's keyed directory already names the module and the version of
+    its sources, so every checkout or installation of the same sources shares its compiled code
+    (numba checks a function's own file by a hash of its text, and its signatures in the index)."""
+
+    active = False  # set by ``jit`` while it decorates a function of a keyed module directory
+
+    def __init__(self, py_func, py_file):
+        super().__init__(py_func, py_file)
+        self._cache_path = numba.config.CACHE_DIR
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        return super().from_function(py_func, py_file) if cls.active else None
+
+
+_CACHE_IMPL = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+_CACHE_IMPL._locator_classes = [_ModuleDirLocator, *_CACHE_IMPL._locator_classes]
+
+
 def jit(fn=None, *, parallel: bool = False):
     """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT)."""
 
@@ -291,9 +314,11 @@ def jit(fn=None, *, parallel: bool = False):
         if where is None:
             return numba.njit(f, cache=False, parallel=parallel, **JIT_OPTIONS)
         saved, numba.config.CACHE_DIR = numba.config.CACHE_DIR, str(where)  # read by numba right here
+        _ModuleDirLocator.active = CACHE_KEYED
         try:
             return numba.njit(f, cache=True, parallel=parallel, **JIT_OPTIONS)
         finally:
             numba.config.CACHE_DIR = saved
+            _ModuleDirLocator.active = False
 
     return wrap if fn is None else wrap(fn)

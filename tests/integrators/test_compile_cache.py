@@ -177,3 +177,33 @@ def later():
     assert module_imports("flexmm.models.fake", source) == {
         "flexmm._trig", "flexmm.models.laws", "flexmm.models.hinge", "flexmm.integrators.common",
         "flexmm.models.kernels", "flexmm._jit"}
+
+
+TWICE = """
+from flexmm._jit import jit
+
+
+@jit
+def scaled(x):
+    return {factor} * x
+"""
+PROBE = ("import json, ctmod; ctmod.scaled(1.0); s = ctmod.scaled.stats; "
+         "print(json.dumps([sum(s.cache_hits.values()), sum(s.cache_misses.values())]))")
+
+
+def test_checkouts_of_the_same_sources_share_the_compiled_code(tmp_path) -> None:
+    """Two copies of a module in different directories (two checkouts, or a checkout and an
+    installation) use one keyed directory: the second loads what the first compiled; a copy whose
+    text differs compiles its own."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    counts = []
+    for name, factor in (("a", "2.0"), ("b", "2.0"), ("c", "3.0")):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "ctmod.py").write_text(TWICE.format(factor=factor))
+        out = subprocess.run([sys.executable, "-c", PROBE], cwd=tmp_path / name, env=env, capture_output=True,
+                             text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        counts.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert counts == [[0, 1], [1, 0], [0, 1]]  # (hits, misses): compiled, loaded, compiled
+    assert len(list((tmp_path / "xdg" / "flexmm" / "numba").glob("ctmod-*"))) == 2
