@@ -4,8 +4,8 @@
     python benchmarks/compile_profile.py --report FILE.json     # print the top costs of a recorded run
 
 Runs pytest in this process (pass ``-p no:xdist``; CPU time of subprocesses is not counted)
-with a listener on numba's ``numba:compile`` event, so each compilation of a kernel for a new argument-type signature (a cache miss) is
-recorded with its wall and CPU seconds, inclusive and exclusive of the compilations it set off
+with a listener on numba's ``numba:compile`` event, so each compilation of a kernel for a new
+argument-type signature (a cache miss) is recorded with its wall and CPU seconds, inclusive and exclusive of the compilations it set off
 (an integrator loop compiles the kernels it calls), and the test that paid for it. Loads from the
 numba cache are not compilations; their CPU time is summed per test (a warm run's cost). Use an
 empty ``NUMBA_CACHE_DIR`` to see what a fresh clone pays. The record is written to ``$COMPILE_PROFILE_OUT``

@@ -56,7 +56,7 @@ GRADED = dict(LEGO_CHAIN, n_units=12, theta0_rad=0.1, lateral_stretch=True, vari
 def _run(integrator: str, env: dict, model: str = "chain") -> dict:
     chain = json.dumps(GRADED if model == "graded" else dict(LEGO_CHAIN, n_units=12))
     out = subprocess.run([sys.executable, "-c", SCRIPT, integrator, model, chain], env=env, capture_output=True,
-                         text=True, timeout=600)
+                         text=True, timeout=1800)  # a hang guard: a cold compile takes minutes on a loaded machine
     assert out.returncode == 0, out.stderr[-3000:]
     return {**json.loads(out.stdout.strip().splitlines()[-1]), "stderr": out.stderr}
 
