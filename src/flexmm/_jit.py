@@ -18,11 +18,14 @@ are reached through ``flexmm.models.kernels``, dispatched on the type of their a
 every kernel, integrator loops included, is cached across processes. The cache directory is
 
 1. ``$NUMBA_CACHE_DIR`` when set (numba's own variable; flexmm only checks it is writable);
-2. otherwise ``$XDG_CACHE_HOME/flexmm/numba/<key>`` (``~/.cache/flexmm/numba/<key>``), where
-   ``<key>`` hashes flexmm's version, the kernel sources and the numba version — numba checks
-   only the timestamp of a cached function's own file, not of the kernels it inlined, so a
-   key per source state keeps a changed hinge law from being served from a stale integrator.
-   keys unused for a week are removed (``prune_cache``);
+2. otherwise one directory per module, ``$XDG_CACHE_HOME/flexmm/numba/<module>-<key>``
+   (``~/.cache/flexmm/numba/…``), where ``<key>`` hashes the sources of the module and of every
+   flexmm module it imports, directly or not, and numba's and Python's versions
+   (``module_key``) — numba checks only the timestamp of a cached function's own file, not of
+   the kernels it inlined, so the key keeps a changed hinge law from being served from a stale
+   integrator, and a change recompiles only the modules that import the changed one; every
+   checkout or installation of the same sources shares these directories (``_ModuleDirLocator``).
+   A module's other versions unused for a week are removed when it is used (``prune_cache``);
 3. if that cannot be written, a per-user directory under the system's temporary directory, with
    a warning; if nothing is writable, caching is off (every process compiles) and a warning
    says so.
@@ -30,8 +33,10 @@ every kernel, integrator loops included, is cached across processes. The cache d
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -41,7 +46,7 @@ from pathlib import Path
 
 import llvmlite.binding
 import numba
-from numba.core import types
+from numba.core import caching, types
 from numba.extending import intrinsic, overload
 
 NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
@@ -108,26 +113,93 @@ if not NO_JIT:
         return lambda a, b, c: _fma(a, b, c)
 
 _PACKAGE = Path(__file__).resolve().parent
-#: packages and modules whose source is compiled (their text keys the cache directory)
-_KERNEL_SOURCES = ("_jit.py", "_trig.py", "stability.py", "models", "integrators",
-                   "design/kernels.py", "design/kernels_extra.py", "design/terms.py", "design/sweeps.py",
-                   "design/splitting.py", "design/midpoint.py")
-#: cache directories of other source states are removed once unused this long
+#: cache directories unused this long are removed
 PRUNE_AGE_S = 7 * 86400.0
 
 
-def source_key() -> str:
-    """A short hash of flexmm's compiled sources, its version and numba's version."""
+def _module_path(module: str) -> Path | None:
+    """The source file of module ``module`` (a flexmm module, or one already imported), else None."""
+    parts = module.split(".")
+    if parts[0] == "flexmm":
+        base = _PACKAGE.joinpath(*parts[1:])
+        for path in (base.with_suffix(".py"), base / "__init__.py"):
+            if path.is_file():
+                return path
+        return None
+    file = getattr(sys.modules.get(module), "__file__", None)
+    return Path(file) if file and file.endswith(".py") else None
+
+
+#: an import statement at the start of a line (a parenthesised name list may span lines)
+_IMPORT_LINE = re.compile(rb"^[ \t]*(?:from[ \t]+\.*[\w.]*[ \t]+import[ \t]*(?:\([^)]*\)|[^\n]*)|import[ \t]+[^\n]*)",
+                          re.MULTILINE)
+
+
+def _import_statements(source: bytes) -> list:
+    """The import statements of ``source`` (parsing only them is ~20 times faster than the whole
+    text; a line in a string that reads as an import only adds a dependency)."""
+    nodes = []
+    for match in _IMPORT_LINE.finditer(source):
+        try:
+            nodes.extend(ast.parse(match.group(0).strip()).body)
+        except SyntaxError:
+            pass
+    return nodes
+
+
+def module_imports(module: str, source: bytes, is_package: bool = False) -> set[str]:
+    """The flexmm modules that the source of ``module`` imports, at any depth of its text.
+
+    ``from flexmm.p import n`` counts as ``flexmm.p.n`` when that is a module, else as ``flexmm.p``
+    (where ``n`` is defined); relative imports are resolved against ``module``.
+    """
+    found = set()
+    package = module if is_package else module.rpartition(".")[0]
+    for node in _import_statements(source):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{base}.{node.module}" if node.module else base
+            else:
+                base = node.module or ""
+            for alias in node.names:
+                sub = f"{base}.{alias.name}"
+                found.add(sub if _module_path(sub) is not None else base)
+    return {m for m in found if m.split(".")[0] == "flexmm" and _module_path(m) is not None}
+
+
+_SOURCES: dict[str, tuple[bytes, set[str]]] = {}
+
+
+def _source_and_imports(module: str) -> tuple[bytes, set[str]]:
+    if module not in _SOURCES:
+        path = _module_path(module)
+        source = path.read_bytes() if path is not None else b""
+        _SOURCES[module] = source, module_imports(module, source, path is not None and path.name == "__init__.py")
+    return _SOURCES[module]
+
+
+def module_key(module: str, sources=_source_and_imports) -> str:
+    """A short hash of the sources of ``module`` and of every flexmm module it imports, directly or
+    through others, with numba's and Python's versions: the key of ``module``'s cache directory.
+
+    A compiled function can call (and inline) only what its module reaches through imports, so
+    a changed source changes the keys of the modules that import it, directly or not, and of no
+    other. ``sources(name) -> (source bytes, imported module names)`` (tests pass edited texts).
+    """
+    seen, todo = set(), [module]
+    while todo:
+        name = todo.pop()
+        if name not in seen:
+            seen.add(name)
+            todo.extend(sources(name)[1])
     h = hashlib.sha256()
     h.update(numba.__version__.encode())
     h.update(sys.version.encode())
-    for name in _KERNEL_SOURCES:
-        path = _PACKAGE / name
-        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
-        for f in files:
-            if f.exists():
-                h.update(f.relative_to(_PACKAGE).as_posix().encode())
-                h.update(f.read_bytes())
+    for name in sorted(seen):
+        h.update(name.encode() + b"\0" + sources(name)[0] + b"\0")
     return h.hexdigest()[:16]
 
 
@@ -146,50 +218,90 @@ def _user_cache_root() -> Path:
     return Path(base) / "flexmm" / "numba"
 
 
-def prune_cache(root: Path, keep: str, max_age_s: float = PRUNE_AGE_S) -> None:
-    """Remove cache directories of other source states under ``root`` unused for ``max_age_s``.
-
-    The kept directory's time stamp is refreshed at each start, so a directory another
-    installation still uses survives (best effort: errors are ignored).
-    """
+def prune_cache(root: Path, keep=lambda name: False, max_age_s: float = PRUNE_AGE_S) -> None:
+    """Remove the directories under ``root`` unused for ``max_age_s`` except those whose name
+    ``keep`` accepts (best effort: errors are ignored)."""
     now = time.time()
     try:
-        os.utime(root / keep)
         for d in root.iterdir():
-            if d.is_dir() and d.name != keep and now - d.stat().st_mtime > max_age_s:
+            if d.is_dir() and not keep(d.name) and now - d.stat().st_mtime > max_age_s:
                 shutil.rmtree(d, ignore_errors=True)
     except OSError:
         pass
 
 
-def _choose_cache_dir() -> tuple[Path | None, str]:
-    """(cache directory or None when caching is off, a note when it is not the usual one)."""
+def _current_module(name: str) -> bool:
+    """Whether ``name`` is a directory name ``<module>-<key>`` of an existing flexmm module (its
+    stale versions are pruned when the module is used: ``module_cache_dir``)."""
+    module, _, key = name.rpartition("-")
+    return len(key) == 16 and module.split(".")[0] == "flexmm" and _module_path(module) is not None
+
+
+def _choose_cache_dir() -> tuple[Path | None, bool, str]:
+    """(cache directory or None when caching is off, whether each module gets a subdirectory
+    keyed by its sources there, a note when it is not the usual one)."""
     env = os.environ.get("NUMBA_CACHE_DIR")
     if env:
         if _writable(Path(env)):
-            return Path(env), ""
+            return Path(env), False, ""
         note = f"NUMBA_CACHE_DIR={env} is not writable"
     else:
-        key = source_key()
         root = _user_cache_root()
-        if _writable(root / key):
-            prune_cache(root, key)
-            return root / key, ""
+        if _writable(root):
+            prune_cache(root, keep=_current_module)  # old layouts, removed modules
+            return root, True, ""
         note = f"{root} is not writable"
-        env = None
     uid = os.getuid() if hasattr(os, "getuid") else "user"
-    fallback = Path(tempfile.gettempdir()) / f"flexmm-numba-{uid}" / source_key()
+    fallback = Path(tempfile.gettempdir()) / f"flexmm-numba-{uid}"
     if _writable(fallback):
-        return fallback, f"{note}; compiled kernels are cached in {fallback} instead"
-    return None, (f"{note} and neither is {fallback}: compiled kernels are not cached, so every "
-                  "process compiles them again (set NUMBA_CACHE_DIR to a writable directory)")
+        return fallback, True, f"{note}; compiled kernels are cached in {fallback} instead"
+    return None, False, (f"{note} and neither is {fallback}: compiled kernels are not cached, so every "
+                         "process compiles them again (set NUMBA_CACHE_DIR to a writable directory)")
 
 
-CACHE_DIR, CACHE_NOTE = (None, "") if NO_JIT else _choose_cache_dir()
+CACHE_DIR, CACHE_KEYED, CACHE_NOTE = (None, False, "") if NO_JIT else _choose_cache_dir()
 if CACHE_DIR is not None:
-    numba.config.CACHE_DIR = str(CACHE_DIR)  # read when each kernel below enables caching
+    numba.config.CACHE_DIR = str(CACHE_DIR)
 if CACHE_NOTE:
     warnings.warn(f"flexmm: {CACHE_NOTE}", RuntimeWarning, stacklevel=2)
+
+
+def module_cache_dir(module: str) -> Path | None:
+    """Where the compiled functions of ``module`` are cached: ``CACHE_DIR/<module>-<module_key>``
+    (its time stamp refreshed), or ``CACHE_DIR`` itself when set by ``NUMBA_CACHE_DIR``."""
+    if CACHE_DIR is None or not CACHE_KEYED:
+        return CACHE_DIR
+    name = f"{module}-{module_key(module)}"
+    path = CACHE_DIR / name
+    try:
+        path.mkdir(exist_ok=True)
+        os.utime(path)
+    except OSError:
+        return None
+    prune_cache(CACHE_DIR, keep=lambda d: d == name or not d.startswith(f"{module}-"))  # its other versions
+    return path
+
+
+class _ModuleDirLocator(getattr(caching, "UserProvidedCacheLocator", None)
+                        or caching._UserProvidedCacheLocator):
+    """numba's locator for a cache directory of its own, without the subdirectory numba adds per
+    source directory path: a module's keyed directory already names the module and the version of
+    its sources, so every checkout or installation of the same sources shares its compiled code
+    (numba checks a function's own file by a hash of its text, and its signatures in the index)."""
+
+    active = False  # set by ``jit`` while it decorates a function of a keyed module directory
+
+    def __init__(self, py_func, py_file):
+        super().__init__(py_func, py_file)
+        self._cache_path = numba.config.CACHE_DIR
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        return super().from_function(py_func, py_file) if cls.active else None
+
+
+_CACHE_IMPL = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+_CACHE_IMPL._locator_classes = [_ModuleDirLocator, *_CACHE_IMPL._locator_classes]
 
 
 def jit(fn=None, *, parallel: bool = False, inline: bool = False):
@@ -200,7 +312,16 @@ def jit(fn=None, *, parallel: bool = False, inline: bool = False):
     def wrap(f):
         if NO_JIT:
             return f
-        return numba.njit(f, cache=CACHE_DIR is not None, parallel=parallel, inline="always" if inline else "never",
-                          **JIT_OPTIONS)
+        how = "always" if inline else "never"
+        where = module_cache_dir(f.__module__)
+        if where is None:
+            return numba.njit(f, cache=False, parallel=parallel, inline=how, **JIT_OPTIONS)
+        saved, numba.config.CACHE_DIR = numba.config.CACHE_DIR, str(where)  # read by numba right here
+        _ModuleDirLocator.active = CACHE_KEYED
+        try:
+            return numba.njit(f, cache=True, parallel=parallel, inline=how, **JIT_OPTIONS)
+        finally:
+            numba.config.CACHE_DIR = saved
+            _ModuleDirLocator.active = False
 
     return wrap if fn is None else wrap(fn)

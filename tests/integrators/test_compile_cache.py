@@ -56,20 +56,27 @@ GRADED = dict(LEGO_CHAIN, n_units=12, theta0_rad=0.1, lateral_stretch=True, vari
 def _run(integrator: str, env: dict, model: str = "chain") -> dict:
     chain = json.dumps(GRADED if model == "graded" else dict(LEGO_CHAIN, n_units=12))
     out = subprocess.run([sys.executable, "-c", SCRIPT, integrator, model, chain], env=env, capture_output=True,
-                         text=True, timeout=600)
+                         text=True, timeout=1800)  # a hang guard: a cold compile takes minutes on a loaded machine
     assert out.returncode == 0, out.stderr[-3000:]
     return {**json.loads(out.stdout.strip().splitlines()[-1]), "stderr": out.stderr}
 
 
-@pytest.mark.parametrize(("integrator", "model"), [("velocity_verlet", "graded"),
-                                                   pytest.param("velocity_verlet", "chain", marks=pytest.mark.slow),
-                                                   pytest.param("pefrl", "chain", marks=pytest.mark.slow),
-                                                   pytest.param("velocity_verlet", "sheet", marks=pytest.mark.slow)])
-def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator, model, tmp_path) -> None:
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+@pytest.mark.parametrize(("integrator", "model", "where"), [
+    ("velocity_verlet", "graded", "default"),
+    pytest.param("velocity_verlet", "chain", "NUMBA_CACHE_DIR", marks=pytest.mark.slow),
+    pytest.param("pefrl", "chain", "NUMBA_CACHE_DIR", marks=pytest.mark.slow),
+    pytest.param("velocity_verlet", "sheet", "NUMBA_CACHE_DIR", marks=pytest.mark.slow)])
+def test_second_process_loads_the_stepper_from_cache_bit_identically(integrator, model, where, tmp_path) -> None:
+    """``default``: the per-module directories under ``$XDG_CACHE_HOME``; else ``$NUMBA_CACHE_DIR``."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update({"XDG_CACHE_HOME": str(tmp_path / "xdg")} if where == "default" else
+               {"NUMBA_CACHE_DIR": str(tmp_path / "cache")})
     cold = _run(integrator, env, model)
     warm = _run(integrator, env, model)
-    assert cold["misses"] >= 1 and cold["cache_dir"] == str(tmp_path / "cache")
+    root = tmp_path / "xdg" / "flexmm" / "numba" if where == "default" else tmp_path / "cache"
+    assert cold["misses"] >= 1 and cold["cache_dir"] == str(root)
+    if where == "default":  # the stepper's kernels are saved under their modules' keyed directories
+        assert any(root.glob("flexmm.integrators.verlet*-*/**/*.nbi"))
     assert warm["misses"] == 0 and warm["hits"] >= 1
     assert warm["q"] == cold["q"] and warm["v"] == cold["v"]  # bit for bit
     assert model != "sheet" or cold["kernel"] == "sheet_verlet_advance"
@@ -88,21 +95,115 @@ def test_unwritable_cache_location_falls_back_then_turns_caching_off(tmp_path, m
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(blocked / "cache"))
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
     (tmp_path / "tmp").mkdir()
-    where, note = _jit._choose_cache_dir()
-    assert str(where).startswith(str(tmp_path / "tmp")) and "is not writable" in note and "cached in" in note
+    where, keyed, note = _jit._choose_cache_dir()
+    assert str(where).startswith(str(tmp_path / "tmp")) and keyed
+    assert "is not writable" in note and "cached in" in note
     monkeypatch.setattr(tempfile, "tempdir", str(blocked))
-    where, note = _jit._choose_cache_dir()
+    where, keyed, note = _jit._choose_cache_dir()
     assert where is None and "not cached" in note and "NUMBA_CACHE_DIR" in note
 
 
-def test_default_cache_directory_is_keyed_by_the_kernel_sources(tmp_path, monkeypatch) -> None:
+def test_default_cache_directory_is_one_per_module_keyed_by_its_sources(tmp_path, monkeypatch) -> None:
     from flexmm import _jit
 
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    old = tmp_path / "flexmm" / "numba" / "0000"
+    root = tmp_path / "flexmm" / "numba"
+    old = root / "0000"
     old.mkdir(parents=True)
     os.utime(old, (0, 0))  # unused for decades: pruned
-    where, note = _jit._choose_cache_dir()
-    assert where == tmp_path / "flexmm" / "numba" / _jit.source_key() and note == ""
+    where, keyed, note = _jit._choose_cache_dir()
+    assert where == root and keyed and note == ""
     assert not old.exists()
+    monkeypatch.setattr(_jit, "CACHE_DIR", where)
+    monkeypatch.setattr(_jit, "CACHE_KEYED", True)
+    module = "flexmm.models.hinge"
+    stale, recent, other = (root / f"{module}-{'0' * 16}", root / f"{module}-{'1' * 16}",
+                            root / f"flexmm.models.laws-{'0' * 16}")
+    for d in (stale, recent, other):
+        d.mkdir()
+    os.utime(stale, (0, 0))
+    os.utime(other, (0, 0))
+    assert _jit.module_cache_dir(module) == root / f"{module}-{_jit.module_key(module)}"
+    assert (root / f"{module}-{_jit.module_key(module)}").is_dir()
+    assert not stale.exists() and recent.exists() and other.exists()  # only the module's own old versions
+
+
+#: every module with compiled kernels, and which of them a change to one module's source must
+#: recompile (read off their imports: the chain laws reach the integrators through
+#: models.kernels; the hinge law reaches the sheet, the loads and the gradient kernels)
+COMPILED = ["flexmm._trig", "flexmm.models.laws", "flexmm.models.mass_kernels", "flexmm.models.hinge",
+            "flexmm.models.sheet_kernels", "flexmm.models.ligaments", "flexmm.models.loads",
+            "flexmm.models.kernels", "flexmm.integrators.rk4", "flexmm.integrators.verlet",
+            "flexmm.integrators.verlet_chain", "flexmm.design.kernels", "flexmm.design.kernels_extra",
+            "flexmm.design.sweeps"]
+EDITS = {
+    "flexmm.models.laws": {"flexmm.models.laws", "flexmm.models.mass_kernels", "flexmm.models.kernels",
+                           "flexmm.integrators.rk4", "flexmm.integrators.verlet", "flexmm.integrators.verlet_chain",
+                           "flexmm.design.kernels", "flexmm.design.sweeps"},
+    "flexmm.integrators.rk4": {"flexmm.integrators.rk4"},
+    "flexmm.integrators.verlet": {"flexmm.integrators.verlet", "flexmm.integrators.verlet_chain"},
+    "flexmm.design.kernels_extra": {"flexmm.design.kernels_extra", "flexmm.design.kernels", "flexmm.design.sweeps"},
+    "flexmm._jit": set(COMPILED),
+}
+
+
+@pytest.mark.parametrize("edited", sorted(EDITS))
+def test_editing_one_module_changes_the_cache_keys_of_its_importers_only(edited) -> None:
+    from flexmm import _jit
+
+    def edit(name):
+        source, imports = _jit._source_and_imports(name)
+        return (source + b"\n# edited\n" if name == edited else source), imports
+
+    before = {m: _jit.module_key(m) for m in COMPILED}
+    after = {m: _jit.module_key(m, sources=edit) for m in COMPILED}
+    assert {m for m in COMPILED if after[m] != before[m]} == EDITS[edited]
+
+
+def test_module_imports_resolves_relative_and_submodule_imports() -> None:
+    from flexmm._jit import module_imports
+
+    source = b"""
+import numpy as np
+import flexmm._trig
+from . import laws
+from .hinge import param
+from ..integrators import common
+from flexmm.models import kernels as k
+def later():
+    from flexmm._jit import fma
+"""
+    assert module_imports("flexmm.models.fake", source) == {
+        "flexmm._trig", "flexmm.models.laws", "flexmm.models.hinge", "flexmm.integrators.common",
+        "flexmm.models.kernels", "flexmm._jit"}
+
+
+TWICE = """
+from flexmm._jit import jit
+
+
+@jit
+def scaled(x):
+    return {factor} * x
+"""
+PROBE = ("import json, ctmod; ctmod.scaled(1.0); s = ctmod.scaled.stats; "
+         "print(json.dumps([sum(s.cache_hits.values()), sum(s.cache_misses.values())]))")
+
+
+def test_checkouts_of_the_same_sources_share_the_compiled_code(tmp_path) -> None:
+    """Two copies of a module in different directories (two checkouts, or a checkout and an
+    installation) use one keyed directory: the second loads what the first compiled; a copy whose
+    text differs compiles its own."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    counts = []
+    for name, factor in (("a", "2.0"), ("b", "2.0"), ("c", "3.0")):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "ctmod.py").write_text(TWICE.format(factor=factor))
+        out = subprocess.run([sys.executable, "-c", PROBE], cwd=tmp_path / name, env=env, capture_output=True,
+                             text=True, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        counts.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert counts == [[0, 1], [1, 0], [0, 1]]  # (hits, misses): compiled, loaded, compiled
+    assert len(list((tmp_path / "xdg" / "flexmm" / "numba").glob("ctmod-*"))) == 2
