@@ -17,7 +17,7 @@ from test_sweep_shard import SPEC, points_run
 from flexmm.sweep.store import CODE, FINISHED, SweepStore
 
 N_TASKS = 4
-VALUES = [round(0.3 + 0.05 * i, 2) for i in range(8)]
+VALUES = [round(0.3 + 0.03 * i, 2) for i in range(8)]
 
 
 @pytest.fixture(scope="module")
