@@ -80,8 +80,9 @@ def sweep(
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the points with their state; run nothing."),
     reanalyse: bool = typer.Option(False, "--reanalyse", help="Measure finished points again (no re-run)."),
     plot: str = typer.Option(None, "--plot", help="Also plot the finished sweep to this PNG."),
-    keep: str = typer.Option(None, "--keep", help="Points that keep their full run directory: all, none "
-                             "or 'every N' (default: the spec's keep:, else none)."),
+    keep: str = typer.Option(None, "--keep", help="Points that keep their full run directory: all, none, "
+                             "'every N' or 'where CONDITION' on observables, e.g. 'where speed > 2' "
+                             "(default: the spec's keep:, else none)."),
     shard: str = typer.Option(None, "--shard", help="Run slice K of N of the points (K = 0..N-1) into the "
                               "sweep directory; shards run at once share one store. E.g. --shard $SLURM_ARRAY_TASK_ID/4."),
     cluster: str = typer.Option(None, "--cluster", help="'slurm': submit the sweep as a job array of --shards "
@@ -105,12 +106,10 @@ def sweep(
     sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
     if keep is not None:
         import dataclasses
-        import re
 
-        from flexmm.config.sweep import KEEP_PATTERN
+        from flexmm.sweep.spec import check_keep
 
-        if not re.match(KEEP_PATTERN, keep):
-            raise error(f"--keep {keep!r}: expected all, none or 'every N' (N ≥ 1)")
+        check_keep(keep, "--keep")
         sw = dataclasses.replace(sw, keep=keep)
     base = sw.base_scene()
     sweep_dir = check_output_dir(Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name)

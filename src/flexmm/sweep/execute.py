@@ -343,8 +343,9 @@ def reanalyse(plan: SweepPlan, on_outcome: OnOutcome | None = None) -> int:
 
     n = 0
     plan.status = plan.store.status() if plan.store.exists() else plan.status
+    observables = plan.store.read()["observables"] if plan.store.exists() else None
     for i in np.flatnonzero(plan.status == CODE[FINISHED]):
-        if not plan.spec.keeps(int(i)):
+        if not plan.spec.keeps(int(i), observables[i]):
             continue
         d = plan.store.point_dir(plan.spec.point_at(int(i)).hash)
         values, labels, note = measure(d / "dataset.nc", plan.spec.analysis)
