@@ -111,7 +111,7 @@ def test_the_same_shard_twice_at_once_and_a_whole_sweep_during_shards_are_refuse
         with pytest.raises(OutputError, match="shard 0/2 of .* is already running"):
             with sweep_lock(root, Shard(0, 2)):
                 pass
-        with pytest.raises(OutputError, match="in use by another flexmm sweep"):
+        with pytest.raises(OutputError, match="in use by another flexmm process"):
             with sweep_lock(root):
                 pass
     with sweep_lock(root):

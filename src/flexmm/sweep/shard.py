@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Iterator
 
 from flexmm.errors import OutputError, UsageError
+from flexmm.io.rundir import NO_FLOCK, exclusive
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,9 @@ def parse_shard(text: str) -> Shard:
 
 
 @contextmanager
-def _flock(path: Path, how: int, busy: str | None) -> Iterator[None]:
-    """Hold flock ``how`` on ``path``; non-blocking with OutputError ``busy`` if given, else wait."""
+def _flock(path: Path, how: int, busy: str | None) -> Iterator[bool]:
+    """Hold flock ``how`` on ``path``; non-blocking with OutputError ``busy`` if given, else wait.
+    Yields False (and holds nothing) where the filesystem has no flock."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
@@ -63,7 +65,12 @@ def _flock(path: Path, how: int, busy: str | None) -> Iterator[None]:
             fcntl.flock(fd, how | (fcntl.LOCK_NB if busy else 0))
         except BlockingIOError:
             raise OutputError(busy) from None
-        yield
+        except OSError as exc:
+            if exc.errno not in NO_FLOCK:
+                raise
+            yield False
+            return
+        yield True
     finally:
         os.close(fd)  # releases the lock
 
@@ -72,16 +79,17 @@ def _flock(path: Path, how: int, busy: str | None) -> Iterator[None]:
 def sweep_lock(root: Path, shard: Shard | None = None) -> Iterator[None]:
     """One sweep of every point per directory, or any number of distinct shards (module docstring)."""
     with ExitStack() as stack:
-        if shard is None:
-            stack.enter_context(_flock(root / ".sweep.lock", fcntl.LOCK_EX,
-                                       f"sweep directory {root} is in use by another flexmm sweep "
-                                       "(or shards of it); wait for it to finish or choose another --out"))
+        if shard is None:  # the run directories' lock (with its fallback where there is no flock)
+            stack.enter_context(exclusive(root / ".sweep.lock", f"sweep directory {root}"))
         else:
-            stack.enter_context(_flock(root / ".sweep.lock", fcntl.LOCK_SH,
-                                       f"sweep directory {root} is in use by a flexmm sweep of every point; "
-                                       "wait for it to finish"))
-            stack.enter_context(_flock(root / f".shard-{shard.k}-of-{shard.n}.lock", fcntl.LOCK_EX,
-                                       f"shard {shard} of {root} is already running"))
+            held = [stack.enter_context(_flock(root / ".sweep.lock", fcntl.LOCK_SH,
+                                               f"sweep directory {root} is in use by a flexmm sweep of every "
+                                               "point; wait for it to finish")),
+                    stack.enter_context(_flock(root / f".shard-{shard.k}-of-{shard.n}.lock", fcntl.LOCK_EX,
+                                               f"shard {shard} of {root} is already running"))]
+            if not all(held):
+                raise OutputError(f"{root} is on a filesystem without file locks (flock), which shards "
+                                  "need: run the sweep there without --shard")
         yield
 
 
