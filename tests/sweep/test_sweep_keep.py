@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import math
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
 import xarray as xr
+from test_sweep_store import BASE
 
 from flexmm.config.condition import Condition
 from flexmm.config.loader import ConfigError
 from flexmm.sweep import load_sweep, run_sweep
 from flexmm.sweep.store import SweepStore
 
-REPO = Path(__file__).resolve().parents[2]
-LEGO = REPO / "configs" / "lego_vector_soliton.yaml"
 
 
 @pytest.mark.parametrize(("text", "values", "expected"), [
@@ -52,19 +50,11 @@ def test_anything_else_is_refused(text, message):
         Condition.parse(text)
 
 
-SPEC = f"""\
-    name: keep_where
-    base: {LEGO}
-    set:
-      lattice.left: free
-      excitation: {{kind: soliton, amplitude_rad: 0.4, center_site: 8}}
-      solver.duration_s: 0.02
-      solver.dt_fraction: 0.5
-      output.n_frames: 21
+SPEC = textwrap.dedent(BASE) + textwrap.dedent("""\
     vary:
       grid:
         excitation.amplitude_rad: [0.3, 0.35, 0.4, 0.45]
-    """
+    """)
 
 
 def test_spec_errors_name_the_keep_line(tmp_path):

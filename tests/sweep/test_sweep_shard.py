@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from test_sweep_store import BASE
 
 from flexmm.errors import OutputError, UsageError
 from flexmm.sweep import load_sweep
@@ -20,24 +21,14 @@ from flexmm.sweep.execute import prepare
 from flexmm.sweep.shard import Shard, parse_shard, sweep_lock
 from flexmm.sweep.store import CODE, FINISHED, SweepStore
 
-REPO = Path(__file__).resolve().parents[2]
-LEGO = REPO / "configs" / "lego_vector_soliton.yaml"
 N_POINTS = 6
 VALUES = [round(0.3 + 0.05 * i, 2) for i in range(N_POINTS)]
 
-SPEC = f"""\
-    name: shard_test
-    base: {LEGO}
-    set:
-      lattice.left: free
-      excitation: {{kind: soliton, amplitude_rad: 0.4, center_site: 8}}
-      solver.duration_s: 0.02
-      solver.dt_fraction: 0.5
-      output.n_frames: 21
+SPEC = textwrap.dedent(BASE) + textwrap.dedent(f"""\
     vary:
       grid:
         excitation.amplitude_rad: {VALUES}
-    """
+    """)
 CLI = [sys.executable, "-c", "from flexmm.cli import main; main()", "sweep"]
 
 
