@@ -517,11 +517,11 @@ def _as_stored(groups: dict[str, dict]) -> dict[str, dict]:
     def key(v):
         return (type(v), v) if isinstance(v, (str, bool, int, float, np.generic)) else None
 
+    if len(_STORED) > _STORED_MAX:  # before choosing what to convert: what is not converted is looked up
+        _STORED.clear()
     todo = {(name, k): v for name, attrs in groups.items() for k, v in attrs.items()
             if key(v) is None or key(v) not in _STORED}
     if todo:
-        if len(_STORED) > _STORED_MAX:
-            _STORED.clear()
         with h5py.File(io.BytesIO(), "w") as f:
             for i, ((name, k), v) in enumerate(todo.items()):
                 f.attrs[str(i)] = v
