@@ -895,11 +895,15 @@ TINY_SWEEP = ["--set", "lattice.n_units=20", "--set", "solver.duration_s=0.002"]
 
 
 def _child(cmd: list[str]) -> tuple[float, float, int]:
-    """(wall s, peak resident MB, exit code) of one subprocess, its output discarded."""
+    """(wall s, peak resident MB, exit code) of one subprocess, its output discarded; the CPU
+    seconds it and its worker processes used are in ``_child.cpu_s`` afterwards."""
     t0 = time.perf_counter()
+    before = os.times()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
+    after = os.times()  # children's user + system time: the command and the workers it waited for
+    _child.cpu_s = (after.children_user - before.children_user) + (after.children_system - before.children_system)
     return time.perf_counter() - t0, usage.ru_maxrss / 1024, proc.returncode
 
 
@@ -941,19 +945,26 @@ def sweep_scale(plan_sizes=(10_000, 100_000, 1_000_000), n_points: int = 10_000,
             out["planning"].append({"points": n, "wall_s": wall, "peak_mb": mb, "exit": code})
             print(f"plan + dry-run of {n:>9,d} points: {wall:6.2f} s, peak {mb:6.1f} MB (exit {code}, "
                   f"load {os.getloadavg()[0]:.2f})")
-        rates = {}
+        rates, cpus = {}, {}
         for n in (max(2, n_points // 10), n_points):
             d = root / f"run{n}"
             cmd = [FLEXMM, "sweep", str(LEGO), *TINY_SWEEP, "--vary", f"excitation.velocity_m_s=0.5:3:{n}",
                    "--out", str(d), "--workers", str(workers), "--quiet"]
             wall, mb, code = _child(cmd)
-            rates[n] = wall
-            print(f"sweep of {n:>6,d} tiny points on {workers} workers: {wall:7.2f} s, {n / wall:6.1f} points/s "
-                  f"(exit {code}, load {os.getloadavg()[0]:.2f})")
+            rates[n], cpus[n] = wall, _child.cpu_s
+            print(f"sweep of {n:>6,d} tiny points on {workers} workers: {wall:7.2f} s, {n / wall:6.1f} points/s, "
+                  f"{1e3 * cpus[n] / n:5.1f} ms CPU per point (whole command; exit {code}, "
+                  f"load {os.getloadavg()[0]:.2f})")
         few, many = sorted(rates)
         out["sweep"] = {"points": many, "wall_s": rates[many], "points_per_s": many / rates[many],
-                        "marginal_points_per_s": (many - few) / max(1e-9, rates[many] - rates[few])}
-        print(f"marginal rate (start-up taken out): {out['sweep']['marginal_points_per_s']:.1f} points/s")
+                        "marginal_points_per_s": (many - few) / max(1e-9, rates[many] - rates[few]),
+                        "cpu_s_per_point": cpus[many] / many,
+                        "marginal_cpu_s_per_point": (cpus[many] - cpus[few]) / (many - few)}
+        # on a shared machine the wall time depends on the load; the CPU time per point does not:
+        # `workers` cores kept busy would run workers / marginal CPU s per point
+        print(f"marginal rate (start-up taken out): {out['sweep']['marginal_points_per_s']:.1f} points/s; "
+              f"{1e3 * out['sweep']['marginal_cpu_s_per_point']:.1f} ms CPU per point, i.e. "
+              f"{workers / out['sweep']['marginal_cpu_s_per_point']:.1f} points/s on {workers} free cores")
         store = root / f"run{many}" / "store"
         files = [p for p in store.iterdir() if p.is_file()]
         out["bytes_per_point"] = sum(p.stat().st_size for p in files) / many

@@ -93,3 +93,32 @@ def test_a_run_kept_in_memory_is_the_dataset_its_file_would_hold(tmp_path) -> No
     assert all(type(a.attrs[k]) is type(b.attrs[k]) for k in a.attrs)
     assert all(a[k].dtype == b[k].dtype and type(a[k].attrs.get("units")) is type(b[k].attrs.get("units"))
                for k in a.variables)
+
+
+def test_attributes_as_stored_are_what_hdf5_gives_back_with_and_without_the_cache(monkeypatch) -> None:
+    """``_as_stored`` converts each distinct scalar once; what it returns is what an HDF5 file
+    gives back (type and value), also when its cache fills up and is emptied mid-run."""
+    import io
+
+    import h5py
+
+    from flexmm.io import run_dataset
+
+    def through_hdf5(attrs: dict) -> dict:
+        with h5py.File(io.BytesIO(), "w") as f:
+            for k, v in attrs.items():
+                f.attrs[k] = v
+            return {k: run_dataset._attr_value(f.attrs[k]) for k in attrs}
+
+    monkeypatch.setattr(run_dataset, "_STORED", {})
+    monkeypatch.setattr(run_dataset, "_STORED_MAX", 5)  # emptied every few calls
+    for i in range(12):
+        attrs = {"Conventions": "CF-1.10", "units": "m", "n": i, "x": 0.5 * i, "ok": i % 2 == 0,
+                 "f32": np.float32(i), "vec": [1.0, float(i)], "s": f"point {i}"}
+        got = run_dataset._as_stored({"": attrs, "u": {"units": "m", "long_name": "displacement"}})
+        want = {"": through_hdf5(attrs), "u": through_hdf5({"units": "m", "long_name": "displacement"})}
+        for group in want:
+            assert list(got[group]) == list(want[group])
+            for k in want[group]:
+                assert type(got[group][k]) is type(want[group][k]), (k, got[group][k], want[group][k])
+                np.testing.assert_array_equal(got[group][k], want[group][k])

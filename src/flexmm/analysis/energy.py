@@ -42,7 +42,8 @@ class EnergyBudget:
 def _displacement_drive(ds) -> bool:
     import yaml
 
-    exc = (yaml.safe_load(ds.attrs.get("config", "")) or {}).get("excitation") or {}
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's where there is one: 10x faster
+    exc = (yaml.load(ds.attrs.get("config", ""), Loader=loader) or {}).get("excitation") or {}
     return exc.get("kind") == "boundary_displacement" or (
         exc.get("kind") == "shaker" and exc.get("amplitude_n") is None)
 

@@ -80,34 +80,48 @@ def sweep(
     dry_run: bool = typer.Option(False, "--dry-run", help="Validate and list the points with their state; run nothing."),
     reanalyse: bool = typer.Option(False, "--reanalyse", help="Measure finished points again (no re-run)."),
     plot: str = typer.Option(None, "--plot", help="Also plot the finished sweep to this PNG."),
-    keep: str = typer.Option(None, "--keep", help="Points that keep their full run directory: all, none "
-                             "or 'every N' (default: the spec's keep:, else none)."),
+    keep: str = typer.Option(None, "--keep", help="Points that keep their full run directory: all, none, "
+                             "'every N' or 'where CONDITION' on observables, e.g. 'where speed > 2' "
+                             "(default: the spec's keep:, else none)."),
+    shard: str = typer.Option(None, "--shard", help="Run slice K of N of the points (K = 0..N-1) into the "
+                              "sweep directory; shards run at once share one store. E.g. --shard $SLURM_ARRAY_TASK_ID/4."),
+    cluster: str = typer.Option(None, "--cluster", help="'slurm': submit the sweep as a job array of --shards "
+                                "tasks (with --dry-run: print its batch script)."),
+    shards: int = typer.Option(4, "--shards", min=1, help="Tasks of the --cluster job array."),
+    sbatch: list[str] = typer.Option(None, "--sbatch", help="Extra #SBATCH option of the job array, e.g. "
+                                     "--sbatch=--partition=short --sbatch=--time=2:00:00 (repeatable)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths written (sweep dataset, figure)."),
 ) -> None:
     """Run every point of a sweep (skipping finished ones) and combine them into SWEEP_DIR/sweep.nc."""
-    from flexmm.io.rundir import exclusive
-    from flexmm.sweep.combine import write_combined
-    from flexmm.sweep.execute import execute, prepare
+    from flexmm.sweep.execute import combine_if_done, execute, prepare
     from flexmm.sweep.execute import reanalyse as measure_again
+    from flexmm.sweep.shard import parse_shard, sweep_lock
 
     if scheduler and local_dask:
         raise error("give --scheduler or --local-dask, not both")
+    part = parse_shard(shard) if shard is not None else None
+    if cluster is not None and (cluster != "slurm" or part is not None):
+        raise error(f"--cluster {cluster!r}: expected slurm (and no --shard: the job array gives each task its own)"
+                    if cluster != "slurm" else "--cluster slurm makes the shards itself: give --shards N, not --shard")
     sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
     if keep is not None:
         import dataclasses
-        import re
 
-        from flexmm.config.sweep import KEEP_PATTERN
+        from flexmm.sweep.spec import check_keep
 
-        if not re.match(KEEP_PATTERN, keep):
-            raise error(f"--keep {keep!r}: expected all, none or 'every N' (N ≥ 1)")
+        check_keep(keep, "--keep")
         sw = dataclasses.replace(sw, keep=keep)
     base = sw.base_scene()
     sweep_dir = check_output_dir(Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name)
-    with exclusive(Path(sweep_dir) / ".sweep.lock", f"sweep directory {sweep_dir}"):  # one sweep per directory
-        plan = prepare(sw, sweep_dir, retry_failed=retry_failed)
+    if cluster:
+        _job_array(sw, spec, vary, zip_axes, overrides, keep, retry_failed, Path(sweep_dir), shards, workers,
+                   tuple(sbatch or ()), dry_run, quiet)
+        return
+    with sweep_lock(Path(sweep_dir), part):  # one sweep per directory, or distinct shards of it
+        plan = prepare(sw, sweep_dir, retry_failed=retry_failed, shard=part)
         say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
-        say(f"sweep {sw.name}: {sw.n_points} points ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
+        what = f"shard {part} ({len(plan.scope)} of {sw.n_points} points)" if part else f"{sw.n_points} points"
+        say(f"sweep {sw.name}: {what} ({sw.mode} of {', '.join(a.path for a in sw.axes)}), "
             f"{plan.count('finished')} finished, {plan.count('failed')} failed before, {len(plan.tasks)} to run"
             + f" -> {sweep_dir}")
         if dry_run:
@@ -135,7 +149,14 @@ def sweep(
         if report.n_pending:
             raise typer.Exit(EXIT_FAILED_RUN)
         with writing(sweep_dir):
-            path = write_combined(plan)
+            path = combine_if_done(plan)
+        if path is None:  # a shard done before the others: the last one to finish writes sweep.nc
+            say(f"shard {part} done; {plan.count('pending', everywhere=True)} points of the sweep are pending "
+                "in other shards (the last shard to finish writes sweep.nc)")
+            if report.n_failed:
+                _list_failed(plan)
+                raise typer.Exit(EXIT_FAILED_RUN)
+            return
         typer.echo(path if quiet else f"sweep dataset: {path}")
         if plot:
             from flexmm.sweep.plot import plot_sweep
@@ -146,6 +167,26 @@ def sweep(
         if report.n_failed:
             _list_failed(plan)
             raise typer.Exit(EXIT_FAILED_RUN)
+
+
+def _job_array(sw, spec: str, vary, zip_axes: bool, overrides, keep, retry_failed: bool, sweep_dir: Path,
+               shards: int, workers: int, sbatch: tuple, dry_run: bool, quiet: bool) -> None:
+    """Print (--dry-run) or submit the sweep as a SLURM job array of ``shards`` tasks."""
+    from flexmm.sweep.execute import prepare
+    from flexmm.sweep.slurm import ArrayJob, job_script, submit
+
+    prepare(sw, sweep_dir)  # the spec checked, a store of another spec refused, before anything is queued
+    args = [str(Path(spec).resolve())]
+    args += [f"--vary={v}" for v in vary or []] + (["--zip"] if zip_axes else [])
+    args += [f"--set={o}" for o in overrides or []] + ([f"--keep={keep}"] if keep is not None else [])
+    args += ["--retry-failed"] if retry_failed else []
+    job = ArrayJob(sw.name, tuple(args), sweep_dir.resolve(), shards, workers or 1, sbatch)
+    if dry_run:
+        typer.echo(job_script(job), nl=False)
+        return
+    script, job_id = submit(job)
+    typer.echo(job_id if quiet else f"submitted SLURM job array {job_id} ({shards} tasks, script {script}; "
+               f"logs in {sweep_dir / 'slurm'}); sweep.nc is written by the last task to finish")
 
 
 def _list_points(plan) -> None:
@@ -160,7 +201,8 @@ def _list_points(plan) -> None:
     width = len(str(spec.n_points - 1))
     status = plan.status.tolist()
     write = sys.stdout.write
-    for i, combo in enumerate(combos):
+    r = plan.scope  # a shard's points, or all
+    for i, combo in enumerate(itertools.islice(combos, r.start, r.stop), start=r.start):
         write(f"{i:>{width}}  {states[status[i]]}  {', '.join(combo)}\n")
     sys.stdout.flush()
 

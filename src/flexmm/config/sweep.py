@@ -29,19 +29,29 @@ from pydantic import (
 
 from flexmm.config.analysis import AnalysisOptions
 from flexmm.config.base import Strict
+from flexmm.config.condition import Condition
 from flexmm.config.loader import parse_overrides
 
 #: how a plot spaces the axis of a varied parameter
 Scale = Literal["linear", "log"]
 INLINE_FORMS = "start:stop:num, log:start:stop:num or a,b,c"
 _NAME = r"^[A-Za-z0-9_.-]+$"
-#: ``keep:`` of a sweep: all, none or every N (points 0, N, 2N, ... in C order keep their dataset)
-KEEP_PATTERN = r"^(all|none|every [1-9][0-9]*)$"
+#: ``keep:`` of a sweep: all, none, every N (points 0, N, 2N, ... in C order keep their dataset)
+#: or ``where <condition>`` on the point's observables (``flexmm.config.condition``)
+KEEP_PATTERN = r"^(all|none|every [1-9][0-9]*|where .+)$"
+KEEP_FORMS = "all, none, 'every N' (N ≥ 1) or 'where <condition on observables>'"
 
 
 def keep_every(keep: str) -> int:
-    """The stride of a ``keep:`` value: 1 for all, 0 for none, N for 'every N'."""
+    """The stride of a ``keep:`` value: 1 for all, 0 for none (and where), N for 'every N'."""
+    if keep.startswith("where "):
+        return 0
     return {"all": 1, "none": 0}.get(keep) if keep in ("all", "none") else int(keep.split()[1])
+
+
+def keep_condition(keep: str) -> Condition | None:
+    """The condition of ``keep: where <condition>`` (ValueError if malformed), else None."""
+    return Condition.parse(keep[len("where "):]) if keep.startswith("where ") else None
 
 
 def _number(value: Any) -> int | float:
@@ -177,9 +187,16 @@ class SweepFile(Strict):
     vary: Vary
     analysis: AnalysisOptions = Field(default_factory=AnalysisOptions, description="how each point is measured")
     keep: str = Field("none", pattern=KEEP_PATTERN,
-                      description="which points keep their full run directory: all, none or 'every N'")
+                      description="which points keep their full run directory: all, none, 'every N' or "
+                                  "'where <condition on observables>'")
 
     _set_paths = field_validator("set")(_check_paths)
+
+    @field_validator("keep")
+    @classmethod
+    def _keep_condition(cls, keep: str) -> str:
+        keep_condition(keep)  # a malformed condition: ValueError, reported at the line of keep:
+        return keep
 
     @field_validator("base", mode="before")
     @classmethod

@@ -23,7 +23,15 @@ def resolved_config(scene) -> dict:
 
 
 def config_text(scene) -> str:
-    return yaml.safe_dump(resolved_config(scene), sort_keys=False)
+    """The resolved config as YAML text (the last scene's text is reused: a run asks for it
+    several times, and a frozen scene's text never changes)."""
+    last = _LAST_TEXT[0]  # (scene, text), read once: threads may replace it meanwhile
+    if last[0] is not scene:
+        last = _LAST_TEXT[0] = (scene, yaml.safe_dump(resolved_config(scene), sort_keys=False))
+    return last[1]
+
+
+_LAST_TEXT: list = [(None, "")]
 
 
 def config_hash(scene) -> str:

@@ -565,16 +565,31 @@ class MemoryWriter:
 
 def _as_stored(groups: dict[str, dict]) -> dict[str, dict]:
     """Attributes as a netCDF file gives them back: written into an HDF5 file held in memory
-    (never on disk) and read as ``load_run_quickly`` reads them (types included)."""
+    (never on disk) and read as ``load_run_quickly`` reads them (types included). What a
+    scalar or string becomes depends on its type and value only: those seen before (units,
+    long names: most of a run's attributes) are taken from ``_STORED``."""
     import io
 
     import h5py
 
-    with h5py.File(io.BytesIO(), "w") as f:
-        out = {}
-        for name, attrs in groups.items():
-            node = f if name == "" else f.create_group(name)
-            for k, v in attrs.items():
-                node.attrs[k] = v
-            out[name] = {k: _attr_value(v) for k, v in node.attrs.items()}
-    return out
+    def key(v):
+        return (type(v), v) if isinstance(v, (str, bool, int, float, np.generic)) else None
+
+    if len(_STORED) > _STORED_MAX:  # before choosing what to convert: what is not converted is looked up
+        _STORED.clear()
+    todo = {(name, k): v for name, attrs in groups.items() for k, v in attrs.items()
+            if key(v) is None or key(v) not in _STORED}
+    if todo:
+        with h5py.File(io.BytesIO(), "w") as f:
+            for i, ((name, k), v) in enumerate(todo.items()):
+                f.attrs[str(i)] = v
+                todo[name, k] = _attr_value(f.attrs[str(i)])
+                if key(v) is not None:
+                    _STORED[key(v)] = todo[name, k]
+    return {name: {k: todo[name, k] if (name, k) in todo else _STORED[key(v)] for k, v in attrs.items()}
+            for name, attrs in groups.items()}
+
+
+#: (type, value) -> the attribute value read back from HDF5 (see ``_as_stored``)
+_STORED: dict = {}
+_STORED_MAX = 10_000

@@ -66,8 +66,9 @@ def combine(plan):
     values = {k: np.array(arrays["observables"][:, j]).reshape(shape) for j, k in enumerate(OBSERVABLES)}
     run = np.full(spec.n_points, "", dtype=object)
     for i in np.flatnonzero(code == CODE[FINISHED]):
-        if spec.keeps(int(i)):
-            run[i] = str(plan.store.point_dir(spec.point_at(int(i)).hash).relative_to(plan.store.root))
+        if spec.keeps(int(i), arrays["observables"][i]):
+            d = plan.store.point_dir(spec.point_at(int(i)).hash)
+            run[i] = str(d.relative_to(plan.store.root)) if d.exists() else ""
     run = run.reshape(shape)
     units = {}
     done = np.flatnonzero(code == CODE[FINISHED])

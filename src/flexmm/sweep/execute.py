@@ -31,6 +31,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from flexmm.errors import UsageError
+from flexmm.sweep.shard import Shard, store_lock
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import CODE, FAILED, FINISHED, PENDING, SweepStore, spec_fingerprint, write_json_atomic
 from flexmm.sweep.worker import INTERRUPTED, ONE_THREAD, Batch, init_worker, run_batch
@@ -54,13 +55,21 @@ class SweepPlan:
     status: np.ndarray  # status byte per point (flexmm.sweep.store.STATES)
     tasks: np.ndarray  # numbers of the points to run
     retry_failed: bool = False
+    shard: Shard | None = None  # the slice of the points this plan runs (all if None)
 
     @property
     def n_points(self) -> int:
         return self.spec.n_points
 
-    def count(self, state: str) -> int:
-        return int(np.count_nonzero(self.status == CODE[state]))
+    @property
+    def scope(self) -> range:
+        """The point numbers this plan is about: its shard's, or all."""
+        return self.shard.range(self.n_points) if self.shard else range(self.n_points)
+
+    def count(self, state: str, everywhere: bool = False) -> int:
+        """Points in ``state`` in the plan's scope (in the whole sweep with ``everywhere``)."""
+        r = range(self.n_points) if everywhere else self.scope
+        return int(np.count_nonzero(self.status[r.start:r.stop] == CODE[state]))
 
     def state(self, index: int) -> str:
         return (PENDING, FINISHED, FAILED)[int(self.status[index])]
@@ -121,19 +130,22 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def prepare(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = False) -> SweepPlan:
+def prepare(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = False,
+            shard: Shard | None = None) -> SweepPlan:
     """Check the spec (ConfigError with every problem found up front) and read the sweep's
-    status array (a store of another spec is refused); nothing is written."""
+    status array (a store of another spec is refused); nothing is written. With ``shard``, only
+    the points of that slice are run (``flexmm.sweep.shard``)."""
     spec.check()
     store = SweepStore(sweep_dir)
-    plan = SweepPlan(spec, store, np.zeros(spec.n_points, np.uint8), np.zeros(0, np.int64), retry_failed)
+    plan = SweepPlan(spec, store, np.zeros(spec.n_points, np.uint8), np.zeros(0, np.int64), retry_failed, shard)
     if store.exists():
         store.check(plan.fingerprint, spec.n_points)
         plan.status = store.status()
-    todo = plan.status == CODE[PENDING]
+    r = plan.scope
+    todo = plan.status[r.start:r.stop] == CODE[PENDING]
     if retry_failed:
-        todo |= plan.status == CODE[FAILED]
-    plan.tasks = np.flatnonzero(todo)
+        todo |= plan.status[r.start:r.stop] == CODE[FAILED]
+    plan.tasks = np.flatnonzero(todo) + r.start
     return plan
 
 
@@ -157,12 +169,14 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
     t0 = time.perf_counter()
     store = plan.store
     store.root.mkdir(parents=True, exist_ok=True)
-    store.create_or_check(plan.fingerprint, plan.n_points, list(OBSERVABLES), plan.spec.name)
-    write_json_atomic(store.root / "spec.json", spec_summary(plan.spec))
+    with store_lock(store.root):  # shards running at once: the first lays the store out
+        store.create_or_check(plan.fingerprint, plan.n_points, list(OBSERVABLES), plan.spec.name)
+        write_json_atomic(store.root / "spec.json", spec_summary(plan.spec))
     report = SweepReport(store.root, plan.n_points, plan.count(FINISHED),
                          0 if plan.retry_failed else plan.count(FAILED))
     if len(plan.tasks):
-        store.result_path.unlink(missing_ok=True)  # sweep.nc exists only after a complete run
+        with store_lock(store.root):
+            store.result_path.unlink(missing_ok=True)  # sweep.nc exists only after a complete run
     n_workers = workers or default_workers()
     seen: list[Outcome] = []
 
@@ -292,23 +306,34 @@ def _run_dask(spec, work: Iterator[Batch], scheduler, n_workers, processes, reco
 
 
 def run_sweep(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = False,
-              **options) -> SweepReport:
-    """Prepare, execute and (when no point is left pending) write SWEEP_DIR/sweep.nc.
+              shard: Shard | None = None, **options) -> SweepReport:
+    """Prepare, execute and (when no point of the sweep is left pending) write SWEEP_DIR/sweep.nc.
 
-    ``options`` go to ``execute`` (workers, batch_size, scheduler, local_dask, dask_processes,
-    on_outcome).
+    ``shard`` runs one slice of the points (``flexmm.sweep.shard``); the shard that finds the
+    whole sweep done writes sweep.nc. ``options`` go to ``execute`` (workers, batch_size,
+    scheduler, local_dask, dask_processes, on_outcome).
     """
-    from flexmm.sweep.combine import write_combined
-
-    from flexmm.io.rundir import exclusive
+    from flexmm.sweep.shard import sweep_lock
 
     root = Path(sweep_dir).expanduser()
-    with exclusive(root / ".sweep.lock", f"sweep directory {root}"):  # one sweep per directory
-        plan = prepare(spec, root, retry_failed=retry_failed)
+    with sweep_lock(root, shard):  # one sweep per directory, or distinct shards of it
+        plan = prepare(spec, root, retry_failed=retry_failed, shard=shard)
         report = execute(plan, **options)
         if not report.interrupted and report.n_pending == 0:
-            report.result_path = write_combined(plan)
+            report.result_path = combine_if_done(plan)
     return report
+
+
+def combine_if_done(plan: SweepPlan) -> Path | None:
+    """Write SWEEP_DIR/sweep.nc if no point of the whole sweep is pending (other shards may
+    still be running: the last one to finish writes it); its path, or None."""
+    from flexmm.sweep.combine import write_combined
+
+    with store_lock(plan.store.root):
+        plan.status = plan.store.status()
+        if plan.count(PENDING, everywhere=True):
+            return None
+        return write_combined(plan)
 
 
 def reanalyse(plan: SweepPlan, on_outcome: OnOutcome | None = None) -> int:
@@ -318,8 +343,9 @@ def reanalyse(plan: SweepPlan, on_outcome: OnOutcome | None = None) -> int:
 
     n = 0
     plan.status = plan.store.status() if plan.store.exists() else plan.status
+    observables = plan.store.read()["observables"] if plan.store.exists() else None
     for i in np.flatnonzero(plan.status == CODE[FINISHED]):
-        if not plan.spec.keeps(int(i)):
+        if not plan.spec.keeps(int(i), observables[i]):
             continue
         d = plan.store.point_dir(plan.spec.point_at(int(i)).hash)
         values, labels, note = measure(d / "dataset.nc", plan.spec.analysis)

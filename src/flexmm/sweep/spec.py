@@ -49,7 +49,7 @@ from flexmm.config.loader import (
     validate,
 )
 from flexmm.config.scene import Scene
-from flexmm.config.sweep import INLINE_FORMS, SweepFile, Vary, VaryValues, keep_every
+from flexmm.config.sweep import INLINE_FORMS, KEEP_FORMS, SweepFile, Vary, VaryValues, keep_condition, keep_every
 from flexmm.io.provenance import config_hash
 
 
@@ -166,10 +166,24 @@ class SweepSpec:
         scene = scene_from_dict(data, lines=lines, source=self.base_source)
         return Point(self.index_of(flat), params, scene, flat)
 
-    def keeps(self, flat: int) -> bool:
-        """Whether point number ``flat`` keeps its full run directory (``keep:``)."""
+    def keeps(self, flat: int, observables=None) -> bool:
+        """Whether point number ``flat`` keeps its full run directory (``keep:``); for ``keep:
+        where <condition>``, whether its ``observables`` (in ``OBSERVABLES`` order; None: not
+        measured yet) meet the condition."""
         every = keep_every(self.keep)
-        return every > 0 and flat % every == 0
+        if every:
+            return flat % every == 0
+        where = self.keep_where
+        if where is None or observables is None:
+            return False
+        from flexmm.sweep.observe import OBSERVABLES
+
+        return where(dict(zip(OBSERVABLES, (float(v) for v in observables))))
+
+    @functools.cached_property
+    def keep_where(self):
+        """The condition of ``keep: where <condition>`` (a ``flexmm.config.condition.Condition``), or None."""
+        return keep_condition(self.keep)
 
     def check(self) -> None:
         """The up-front validation of a sweep: the base with the fixed overrides, and each of
@@ -276,6 +290,7 @@ def load_sweep(path: str | Path, *, overrides: list[str] | None = None) -> Sweep
     base_data, base_lines, base_source = _base(data.get("base"), lines, Path(path), issues)
     if issues:
         raise ConfigError(in_line_order(issues))
+    check_keep(spec.keep, src, _line(lines, ("keep",)))
     mode = spec.vary.mode
     axes = tuple(Axis(key, vals.expand(), f"{src}:{_line(lines, ('vary', mode, key))}", vals.scale)
                  for key, vals in spec.vary.axes.items())
@@ -286,6 +301,26 @@ def load_sweep(path: str | Path, *, overrides: list[str] | None = None) -> Sweep
         base_source=base_source, axes=axes, mode=mode, fixed=fixed + _fixed_from_strings(overrides or []),
         description=spec.description, analysis=spec.analysis, keep=spec.keep,
     )
+
+
+def check_keep(keep: str, source: str, line: int | None = None) -> None:
+    """ConfigError at ``source``:``line`` unless ``keep`` is a valid ``keep:`` whose condition
+    (``where ...``) reads only observables."""
+    import re
+
+    from flexmm.config.sweep import KEEP_PATTERN
+    from flexmm.sweep.observe import OBSERVABLES
+
+    try:
+        if not re.match(KEEP_PATTERN, keep):
+            raise ValueError(f"got {keep!r}; expected {KEEP_FORMS}")
+        where = keep_condition(keep)
+    except ValueError as exc:
+        raise ConfigError([ConfigIssue(source, line, "keep", str(exc))]) from None
+    unknown = sorted(where.names - set(OBSERVABLES)) if where else []
+    if unknown:
+        raise ConfigError([ConfigIssue(source, line, "keep", f"unknown observable(s) {', '.join(unknown)} in the "
+                                       f"condition; expected some of: {', '.join(OBSERVABLES)}")])
 
 
 def _line(lines: dict, keys: tuple) -> int | None:

@@ -198,7 +198,21 @@ def _compute(spec, index: int, store, scratch: Path, outcome: dict):
     if result.status != FINISHED:
         return {**info, "status": FAILED}, None, ("", "", "")
     values, labels, note = measure(result.path if result.dataset is None else result.dataset, spec.analysis)
+    if not keep and spec.keeps(index, values):  # keep: where <condition>, met
+        info["kept"] = _keep_run(point, store.point_dir(point.hash))
     return {**info, "reason": note}, values, labels
+
+
+def _keep_run(point, run_dir: Path) -> bool:
+    """Run a point whose observables met ``keep: where ...`` again, into its run directory (its
+    run is deterministic: the same dataset ``keep: all`` would have kept). False if that run
+    did not finish (the point's observables stand; it has no directory)."""
+    from flexmm.api import run_scene
+
+    try:
+        return run_scene(point.scene, run_dir=run_dir, atomic=True).status == FINISHED
+    except Exception:  # noqa: BLE001 - the point was measured; only its copy is missing
+        return False
 
 
 def measure(path, options) -> tuple[list[float], tuple[str, str, str], str]:
