@@ -44,6 +44,9 @@ def quick_pilots(monkeypatch):
         return acc.Choice(spec.name, h, accuracy / 2, 0.0, problem.duration / 10, [row], estimate=est)
 
     monkeypatch.setattr(acc, "choose", choose)
+    # and no whole-run check of the quick choice (it would integrate the scene three times)
+    monkeypatch.setattr(acc, "run_estimate", lambda problem, spec, h, pilot: pilot)
+    monkeypatch.setattr(acc, "shorten_for_run", lambda problem, choice, est, accuracy, every: est)
 
 
 @pytest.fixture
