@@ -7,7 +7,6 @@ import signal
 
 import typer
 
-from flexmm.checkpoint import DEFAULT_EVERY_S
 from flexmm.errors import UsageError
 
 from flexmm.cli.common import (
@@ -38,9 +37,9 @@ def run(
     extend: str = typer.Option(None, "--extend", metavar="RUN_DIR",
                                help="Continue the finished run RUN_DIR to the longer duration given by "
                                     "--set solver.duration_s=... (same step and frame interval)."),
-    checkpoint_s: float = typer.Option(DEFAULT_EVERY_S, "--checkpoint-s", metavar="SECONDS",
-                                       help="Wall time between checkpoints (0: only when the run ends or a "
-                                            "signal stops it)."),
+    checkpoint_s: float = typer.Option(None, "--checkpoint-s", metavar="SECONDS", show_default=False,
+                                       help="Wall time between checkpoints (default 60; 0: only when the run "
+                                            "ends or a signal stops it)."),
 ) -> None:
     """Run a scene and write runs/<name>/dataset.nc (netCDF4, SI units).
 
@@ -62,7 +61,10 @@ def run(
                 ov.append("solver.allow_unstable=true")
             check_fidelity(fidelity)
             analysis_request(analysis)  # an unknown --analysis is a usage error before anything runs
-            every = checkpoint_s if checkpoint_s > 0 else math.inf
+            from flexmm.checkpoint import DEFAULT_EVERY_S  # numpy: not at start-up (--help)
+
+            seconds = DEFAULT_EVERY_S if checkpoint_s is None else checkpoint_s
+            every = seconds if seconds > 0 else math.inf
             if resume or extend:
                 result = _continue(config, ov, resume, extend, every, quiet, force)
                 ended.append(result)
