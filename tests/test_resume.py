@@ -164,13 +164,19 @@ def test_extend_equals_the_longer_run_from_the_start(tmp_path) -> None:
 def test_a_signal_waits_for_the_end_of_a_deferred_block(sig, exc) -> None:
     from flexmm._signals import deferred, stop_on_signals
 
+    # Python's own Ctrl-C handler, also where the suite was started with SIGINT ignored (a
+    # background job of a script inherits SIG_IGN, and Python then installs no handler)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     seen = []
-    with stop_on_signals(), pytest.raises(KeyboardInterrupt) as caught:
-        with deferred():
-            os.kill(os.getpid(), sig)
-            time.sleep(0.05)
-            seen.append("the block ran to its end")
-        seen.append("not reached")
+    try:
+        with stop_on_signals(), pytest.raises(KeyboardInterrupt) as caught:
+            with deferred():
+                os.kill(os.getpid(), sig)
+                time.sleep(0.05)
+                seen.append("the block ran to its end")
+            seen.append("not reached")
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert seen == ["the block ran to its end"] and type(caught.value).__name__ == exc
 
 
