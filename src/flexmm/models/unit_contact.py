@@ -139,6 +139,19 @@ def _variation(dq, n, iv, ie, ppx, ppy, p0x, p0y, sx, sy):
 
 
 @jit
+def pair_contact(dx, dy, d2, prm):
+    """(touching, d, E'(d), E''(d), n̂, F = E' n̂) of a pair at separation δ = (dx, dy), d² = |δ|²
+    (``pair_frame``); not touching (and zeros) at or beyond the cutoff."""
+    cut = prm[C_CUT]
+    if d2 >= cut * cut:
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    d = math.sqrt(d2)
+    _, de, dde = barrier(d, prm[C_K], cut)
+    nx, ny = dx / d, dy / d
+    return True, d, de, dde, nx, ny, de * nx, de * ny
+
+
+@jit
 def contacts_hvp(q, n, cs, sn, units, table, dq, out):
     """∇²E dq of the contact pairs added to ``out``: ``pair_second`` along the variations of w and
     s, then the chain rule through them, with their second derivatives in the rotations
@@ -147,12 +160,9 @@ def contacts_hvp(q, n, cs, sn, units, table, dq, out):
         prm = table[c]
         iv, ie = units[c, 0], units[c, 1]
         ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
-        if d2 >= prm[C_CUT] * prm[C_CUT]:
+        touching, d, de, dde, nx, ny, fx, fy = pair_contact(dx, dy, d2, prm)
+        if not touching:
             continue
-        d = math.sqrt(d2)
-        _, de, dde = barrier(d, prm[C_K], prm[C_CUT])
-        nx, ny = dx / d, dy / d
-        fx, fy = de * nx, de * ny
         tp, te = dq[2 * n + iv], dq[2 * n + ie]
         dwx, dwy, dsx, dsy = _variation(dq, n, iv, ie, ppx, ppy, p0x, p0y, sx, sy)
         dfx, dfy, dgx, dgy = pair_second(nx, ny, d, de, dde, t, inside, wx, wy, sx, sy, dwx, dwy, dsx, dsy)
@@ -182,14 +192,10 @@ def contacts_adjoint(q, n, cs, sn, units, table, lam, g2):
         prm = table[c]
         iv, ie = units[c, 0], units[c, 1]
         ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
-        cut = prm[C_CUT]
-        if d2 >= cut * cut:
+        touching, d, de, dde, nx, ny, fx, fy = pair_contact(dx, dy, d2, prm)
+        if not touching:
             continue
-        d = math.sqrt(d2)
-        k = prm[C_K]
-        _, de, dde = barrier(d, k, cut)
-        nx, ny = dx / d, dy / d
-        fx, fy = de * nx, de * ny
+        cut, k = prm[C_CUT], prm[C_K]
         hx, hy = -t * fx, -t * fy  # F_s
         tp, te = lam[2 * n + iv], lam[2 * n + ie]
         dwx, dwy, dsx, dsy = _variation(lam, n, iv, ie, ppx, ppy, p0x, p0y, sx, sy)
@@ -222,14 +228,10 @@ def contacts_tangent(q, n, cs, sn, units, table, d2tab, out):
         dp = d2tab[c]
         iv, ie = units[c, 0], units[c, 1]
         ppx, ppy, p0x, p0y, sx, sy, wx, wy, t, inside, dx, dy, d2 = pair_frame(q, n, cs, sn, iv, ie, prm)
-        cut = prm[C_CUT]
-        if d2 >= cut * cut:
+        touching, d, de, dde, nx, ny, fx, fy = pair_contact(dx, dy, d2, prm)
+        if not touching:
             continue
-        d = math.sqrt(d2)
-        k = prm[C_K]
-        _, de, dde = barrier(d, k, cut)
-        nx, ny = dx / d, dy / d
-        fx, fy = de * nx, de * ny
+        cut, k = prm[C_CUT], prm[C_K]
         hx, hy = -t * fx, -t * fy
         dppx, dppy = _turn(cs[iv], sn[iv], dp[C_PX], dp[C_PY])
         dp0x, dp0y = _turn(cs[ie], sn[ie], dp[C_0X], dp[C_0Y])

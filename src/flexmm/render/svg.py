@@ -1,8 +1,8 @@
 """``flexmm export RUN --format svg``: a run's reference geometry as an SVG drawing for fabrication.
 
 Read from the units' shapes the dataset stores (``io.run_dataset.shape_variables``: centres,
-polygons, ligaments and their attachment points, any model that gives ``System.shapes``), so no
-model is rebuilt and no kind is named. One ``<polygon>`` per unit (its distinct vertices, in order)
+polygons, ligaments and their attachment points), as ``render.structure.ShapeStructure`` reads them
+for every rigid-unit model, so no kind is named. One ``<polygon>`` per unit (its distinct vertices, in order)
 in a group ``units``, one ``<line>`` per ligament between its two attachment points in a group
 ``ligaments`` (a zero-length ligament is a line of zero length), each carrying its ``data-site`` /
 ``data-sites``. Coordinates are millimetres with y pointing up (the SVG's y is flipped by the
@@ -20,7 +20,9 @@ import numpy as np
 from flexmm.errors import OutputError, UsageError
 from flexmm.io.atomic import write_text_atomic
 from flexmm.models.geometry import distinct_vertices
+from flexmm.render.api import load_lattice
 from flexmm.render.source import RunSource
+from flexmm.render.structure import ShapeStructure, make_structure
 
 
 def _num(x: float) -> str:
@@ -52,21 +54,18 @@ def svg_text(polygons: list[np.ndarray], segments: np.ndarray, sites: np.ndarray
 def export_svg(run, out: str | Path | None = None, log: Callable[[str], None] | None = None) -> Path:
     """Write the reference geometry of ``run`` as SVG (default ``RUN/<name>.svg``); the path written."""
     with RunSource(run) as src:
-        shapes, sites = src.shapes, src.sites
-        if "unit_vertex_x" not in shapes:
+        sites = src.sites
+        structure = make_structure(src, load_lattice(src), "polygon", 1.0)
+        if not isinstance(structure, ShapeStructure):
             raise UsageError(f"{src.path}: model {src.model!r} stores no unit shapes; --format svg draws the "
-                             "rigid units of models that store them (rigid networks, rotating triangles)")
+                             "rigid units of the models that store them")
         if not np.array_equal(sites, np.arange(sites.size)):
             raise UsageError(f"{src.path}: the run saved every {int(sites[1] - sites[0])}-th unit only "
                              "(output.site_stride); the drawing would miss units: run it with site_stride 1")
         target = Path(out) if out is not None else src.path.parent / f"{src.name}.svg"
-        centre = np.stack([shapes["unit_centre_x"], shapes["unit_centre_y"]], 1) * 1e3
-        body = np.stack([shapes["unit_vertex_x"], shapes["unit_vertex_y"]], -1) * 1e3
-        polygons = [distinct_vertices(centre[k] + body[k]) for k in range(sites.size)]
-        links = np.asarray(shapes.get("link_site", np.zeros((0, 2))), np.int64)
-        points = np.stack([shapes.get("link_point_x", np.zeros((0, 2))),
-                           shapes.get("link_point_y", np.zeros((0, 2)))], -1) * 1e3
-        segments = centre[links] + points if links.size else np.zeros((0, 2, 2))
+        centre, links = structure.rest_xy * 1e3, structure.links
+        polygons = [distinct_vertices(centre[k] + 1e3 * structure.vertices[k]) for k in range(sites.size)]
+        segments = centre[links] + 1e3 * structure.link_points if links.size else np.zeros((0, 2, 2))
         text = svg_text(polygons, segments, sites, links)
     try:
         write_text_atomic(target, text)
