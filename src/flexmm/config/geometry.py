@@ -13,6 +13,14 @@ A geometry file is YAML, lengths in metres::
       - {a: 0, i: 2, b: 1, j: 3, rest_gap_m: [0.001, 0], axis: [1, 0], k_shear_n_per_m: 500}
     sets:                       # named unit sets for lattice.fixed_units and excitation.units
       left: {box_m: [-1, -1, 0.005, 1]}
+    lattice_vectors_m: [[0.022, 0]]   # optional: the file is one cell of a periodic network
+
+With ``lattice_vectors_m`` (one or two vectors, m) the file's units are one cell repeated by those
+vectors, and a ligament with ``shift: [s]`` (or ``[s1, s2]``, each −1, 0 or 1) joins vertex i of a
+to vertex j of the copy of b in the cell displaced by s1 times the first vector plus s2 times the
+second: the links that cross the cell's boundary, which wrap around in a run (a unit may be linked
+to its own copy). The network is then periodic: its runs wrap and ``linear.network`` gives its
+Bloch bands.
 
 A ligament's ``rest_gap_m`` is its rest vector from vertex i of a to vertex j of b (default: the
 two vertices' separation in the file, so the file's geometry is stress-free); its ``axis`` the
@@ -87,13 +95,17 @@ class GeometryLigament(Strict):
     k_long_n_per_m: Positive | None = None
     k_shear_n_per_m: NonNegative | None = None
     k_rot_n_m_per_rad: NonNegative | None = None
+    shift: list[Annotated[int, Field(ge=-1, le=1)]] | None = Field(
+        None, min_length=1, max_length=2, description="periodic files: the cell of b, in lattice vectors, "
+        "relative to a's (default: the same cell)")
 
     @model_validator(mode="after")
     def _axis(self):
         if self.axis is not None and self.axis[0] == 0 and self.axis[1] == 0:
             raise ValueError("axis [0, 0] has no direction")
-        if self.a == self.b:
-            raise ValueError(f"a ligament joins two units: a = b = {self.a}")
+        if self.a == self.b and not any(self.shift or ()):
+            raise ValueError(f"a ligament joins two units (or a unit to its copy in another cell: shift): "
+                             f"a = b = {self.a}")
         return self
 
 
@@ -103,6 +115,24 @@ class GeometryFile(Strict):
     units: list[GeometryUnit] = Field(min_length=2)
     ligaments: list[GeometryLigament] = Field(min_length=1)
     sets: dict[str, UnitSet] = Field(default_factory=dict)
+    lattice_vectors_m: list[Point] | None = Field(
+        None, min_length=1, max_length=2, description="the periods of a periodic network (m): the units are one cell")
+
+    @model_validator(mode="after")
+    def _periods(self):
+        p = 0 if self.lattice_vectors_m is None else len(self.lattice_vectors_m)
+        if p == 2:
+            (x1, y1), (x2, y2) = self.lattice_vectors_m
+            if abs(x1 * y2 - x2 * y1) <= 1e-12 * (x1 * x1 + y1 * y1 + x2 * x2 + y2 * y2):
+                raise ValueError(f"lattice_vectors_m {self.lattice_vectors_m}: the two vectors are parallel")
+        elif p == 1 and self.lattice_vectors_m[0] == [0, 0]:
+            raise ValueError("lattice_vectors_m [[0, 0]] has no length")
+        for k, g in enumerate(self.ligaments):
+            if g.shift is not None and len(g.shift) != p:
+                raise ValueError(f"ligaments.{k}.shift {g.shift}: give one entry per lattice vector "
+                                 f"({p} in lattice_vectors_m)" if p else
+                                 f"ligaments.{k}.shift: only a periodic file (lattice_vectors_m) has other cells")
+        return self
 
 
 _RAW: dict[tuple, dict] = {}

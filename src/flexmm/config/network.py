@@ -23,7 +23,7 @@ from typing import ClassVar, Literal
 
 from pydantic import Field, ValidationInfo, model_validator
 
-from flexmm.config.base import Finite, GridUnits, NonNegative, Positive, Strict
+from flexmm.config.base import Finite, GridUnits, NonNegative, Positive, Strict, check_periodic
 from flexmm.config.geometry import Point, UnitSet, raw_geometry, resolved_path, set_names
 
 #: the patterns a generator makes (``models.network.geometry``)
@@ -154,7 +154,14 @@ class RigidNetwork(GridUnits):
             return "the sheet is masked"
         if self.unit_sets:
             return "named unit sets are placed on the whole sheet"
+        if self.periodic_axes:
+            return "the sheet is periodic"
         return None
+
+    @property
+    def periodic_axes(self) -> tuple[str, ...]:
+        """The directions a generated sheet wraps around in (``x``: left/right periodic, ``y``: bottom/top)."""
+        return tuple(ax for ax, end in (("x", self.left), ("y", self.bottom)) if end == "periodic")
 
     def small_copy(self, n: int):
         """The same network cut to at most about ``n`` units (for cheap estimates; not validated); a
@@ -163,9 +170,14 @@ class RigidNetwork(GridUnits):
 
     @model_validator(mode="after")
     def _check(self):
-        for a, b in (("left", "right"), ("bottom", "top")):
-            if "periodic" in (getattr(self, a), getattr(self, b)):
-                raise ValueError(f"{a}/{b}: a rigid_network's edges are free or fixed (periodic is not supported yet)")
+        for a, b, n, what in (("left", "right", self.n_cols, "n_cols"), ("bottom", "top", self.n_rows, "n_rows")):
+            if check_periodic(self, a, b, n, what, "the units alternate"):
+                why = ("the geometry file gives its periods (lattice_vectors_m)" if self.geometry is not None
+                       else "a mask cuts the sheet" if self.mask is not None
+                       else "contact between units across the wrap is not supported" if self.contact is not None
+                       else None)
+                if why:
+                    raise ValueError(f"{a}/{b} periodic: {why}")
         if self.geometry is not None:
             given = [k for k in ("pattern", "theta0_rad", "ligament_length_m", "vertex_jitter", "seed",
                                  "aspect_ratio", "mask") if getattr(self, k) != type(self).model_fields[k].default]

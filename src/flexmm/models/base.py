@@ -139,6 +139,17 @@ class RotatingSquaresND:
     """1 if lateral contraction is blocked, else 0."""
 
 
+@dataclass(frozen=True)
+class PeriodicCell:
+    """The periods of a network whose links wrap around: ``vectors`` (P, 2) its lattice vectors
+    (nondimensional lengths; P = 1 or 2 periodic directions), ``link_shifts`` (L, P) int for each
+    link the cell, in lattice vectors, of its second unit relative to its first (0 for a link inside
+    the cell)."""
+
+    vectors: np.ndarray
+    link_shifts: np.ndarray
+
+
 @dataclass
 class System:
     """A model ready to integrate (nondimensional).
@@ -208,6 +219,9 @@ class System:
     that q = 0 there (mass models); None for other models."""
     relax_residual: float | None = None
     """Max residual force (nondimensional) of that initial relaxation (mass models with relax); else None."""
+    periodic: PeriodicCell | None = None
+    """The lattice vectors and link shifts of a network with periodic boundaries (its links wrap: the
+    Bloch cell of ``linear.network``); None for a network without, and for other models."""
 
     def __post_init__(self) -> None:
         if not self.axis_fields:

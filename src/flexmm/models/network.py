@@ -27,7 +27,7 @@ from flexmm.config.network import RigidNetwork
 from flexmm.models import geometry as geo
 from flexmm.models import ligaments as lg
 from flexmm.models import unit_contact as uc
-from flexmm.models.base import FieldSpec, System, UnitShapes
+from flexmm.models.base import FieldSpec, PeriodicCell, System, UnitShapes
 from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
 from flexmm.units import Scales
 
@@ -58,10 +58,15 @@ def square_vertices(cfg: RigidNetwork) -> np.ndarray:
     return vertices
 
 
-def square_links(n_rows: int, n_cols: int):
-    """(units a, units b, vertex of a, vertex of b, axis (L, 2)): x neighbours, then y neighbours."""
+def square_links(n_rows: int, n_cols: int, periodic_x: bool = False, periodic_y: bool = False):
+    """(units a, units b, vertex of a, vertex of b, axis (L, 2)): x neighbours, then y neighbours,
+    then the wraps of a periodic sheet (last column to first, top row to bottom)."""
     site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
     parts = [(site[:, :-1].ravel(), site[:, 1:].ravel(), X_LINK), (site[:-1, :].ravel(), site[1:, :].ravel(), Y_LINK)]
+    if periodic_x:
+        parts.append((site[:, -1], site[:, 0], X_LINK))
+    if periodic_y:
+        parts.append((site[-1, :], site[0, :], Y_LINK))
     a = np.concatenate([p[0] for p in parts])
     b = np.concatenate([p[1] for p in parts])
     va = np.concatenate([np.full(p[0].size, p[2][0]) for p in parts])
@@ -104,7 +109,7 @@ def kagome_geometry(cfg: RigidNetwork):
     deg = (np.array([90.0, 210.0, 330.0])[:, None] + np.array(step)[None, :]).ravel()
     ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad(deg)[None, :] + (sigma * t0)[:, None]
     vertices = centres[:, None, :] + side * HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
-    a, b, beta = kagome_hinges(nr, nc, False, False)
+    a, b, beta = kagome_hinges(nr, nc, cfg.left == "periodic", cfg.bottom == "periodic")
     axis = np.stack([np.cos(beta), np.sin(beta)], 1)
 
     def towards(unit, direction):  # the linked vertex of each unit pointing closest to ``direction`` (L,)
@@ -124,12 +129,42 @@ def column_pitch(cfg: RigidNetwork) -> float:
 
 
 def geometry(cfg: RigidNetwork):
-    """(vertices (N, V, 2) in units of a, links (units a, units b, vertex of a, vertex of b, axis))."""
+    """(vertices (N, V, 2) in units of a, links (units a, units b, vertex of a, vertex of b, axis)),
+    with the wrapping links of the periodic edges (``periods``)."""
     if cfg.pattern in ("rotating_triangles", "rotating_hexagons"):
         return kagome_geometry(cfg)
+    links = square_links(cfg.n_rows, cfg.n_cols, cfg.left == "periodic", cfg.bottom == "periodic")
     if cfg.pattern == "rectangles":
-        return rectangle_vertices(cfg), square_links(cfg.n_rows, cfg.n_cols)
-    return square_vertices(cfg), square_links(cfg.n_rows, cfg.n_cols)
+        return rectangle_vertices(cfg), links
+    return square_vertices(cfg), links
+
+
+def pitches(cfg: RigidNetwork) -> tuple[float, float]:
+    """Distances between neighbouring columns and between neighbouring rows of a generated sheet
+    (units of a)."""
+    across = column_pitch(cfg) / cfg.a_m
+    if cfg.pattern in ("rotating_triangles", "rotating_hexagons"):
+        return across, math.sqrt(3.0) * across  # rows 3/2 of a hinge (2 cos θ0/√3) apart
+    if cfg.pattern == "rectangles":
+        beta = math.atan(cfg.aspect_ratio)
+        return across, math.sin(cfg.theta0_rad + math.pi / 4 + beta) + cfg.ligament_length_m / cfg.a_m
+    return across, across
+
+
+def periods(cfg: RigidNetwork, links) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lattice vectors (P, 2) in units of a, link shifts (L, P)) of a generated sheet with periodic
+    edges: the whole sheet is the cell, and a link from a unit to one in a lower column (row) is a
+    wrap to the next cell along x (y); None without periodic edges."""
+    axes = cfg.periodic_axes
+    if not axes:
+        return None
+    px, py = pitches(cfg)
+    row, col = np.divmod(np.arange(cfg.n_rows * cfg.n_cols), cfg.n_cols)
+    a, b = links[0], links[1]
+    vectors = {"x": (cfg.n_cols * px, 0.0), "y": (0.0, cfg.n_rows * py)}
+    wraps = {"x": col[b] < col[a], "y": row[b] < row[a]}
+    return (np.array([vectors[ax] for ax in axes], float),
+            np.stack([wraps[ax].astype(np.int64) for ax in axes], 1))
 
 
 def polygon_inertia(vertices: np.ndarray, density: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -150,21 +185,22 @@ def polygon_inertia(vertices: np.ndarray, density: float) -> tuple[np.ndarray, n
 
 
 def ligament_table(vertices: np.ndarray, centres: np.ndarray, links, ks: float, kt: float,
-                   law: int = lg.LAW_PAPER) -> np.ndarray:
+                   law: int = lg.LAW_PAPER, image: np.ndarray | float = 0.0) -> np.ndarray:
     """The ligament table (L, N_LIGAMENT_PARAMS) of ``links`` with k_l = 1 (nondimensional): the
     joined vertices relative to their centres, the rest offset that makes the reference
     stress-free (the centres' separation less the vertices' gap), the link's axis, and the rest
     length ℓ = |gap|. DifFlexMM's laws read the bond along the rest gap: their axis is gap/ℓ (the
-    link's axis where ℓ = 0)."""
+    link's axis where ℓ = 0). ``image`` (L, 2): where the copy of b a link joins lies relative to b
+    (a periodic network's wrapping links; 0 inside the cell)."""
     a, b, va, vb, axis = links
     ar = np.arange(a.size)
     lig = np.zeros((a.size, lg.N_LIGAMENT_PARAMS))
-    pa, pb = vertices[a, va[ar]], vertices[b, vb[ar]]
+    pa, pb = vertices[a, va[ar]], vertices[b, vb[ar]] + image
     gap = pb - pa
     length = np.hypot(gap[:, 0], gap[:, 1])
     lig[:, [lg.L_AX, lg.L_AY]] = pa - centres[a]
-    lig[:, [lg.L_BX, lg.L_BY]] = pb - centres[b]
-    lig[:, [lg.L_OX, lg.L_OY]] = centres[b] - centres[a] - gap
+    lig[:, [lg.L_BX, lg.L_BY]] = pb - centres[b] - image
+    lig[:, [lg.L_OX, lg.L_OY]] = centres[b] + image - centres[a] - gap
     lig[:, [lg.L_EX, lg.L_EY]] = axis
     if law != lg.LAW_PAPER:
         along = length > 1e-12
@@ -190,6 +226,12 @@ class Network:
     grid: tuple[np.ndarray, np.ndarray] | None = None  # (row, col) of every unit
     full_grid: bool = True
     sets: dict | None = None  # a geometry file's named unit sets (config.geometry.UnitSet)
+    cell: np.ndarray | None = None  # periodic: lattice vectors (P, 2), units of a
+    shifts: np.ndarray | None = None  # periodic: (L, P) the cell of each link's b relative to a's
+
+    def images(self) -> np.ndarray | float:
+        """(L, 2) where the copy of b each link joins lies relative to b (0 without periods)."""
+        return 0.0 if self.cell is None else self.shifts @ self.cell
 
 
 def generated(cfg: RigidNetwork) -> Network:
@@ -200,7 +242,8 @@ def generated(cfg: RigidNetwork) -> Network:
     vertices, links = geometry(cfg)
     n = vertices.shape[0]
     row, col = np.divmod(np.arange(n), cfg.n_cols)
-    net = Network(vertices, links, grid=(row, col))
+    cell, shifts = periods(cfg, links) or (None, None)
+    net = Network(vertices, links, grid=(row, col), cell=cell, shifts=shifts)
     if cfg.mask is None:
         return net
     _, centres, _ = polygon_inertia(vertices, 1.0)
@@ -273,9 +316,15 @@ def from_file(cfg: RigidNetwork) -> Network:
                           column([g.k_rot_n_m_per_rad for g in ligs])], 1)
     rest_gap = np.array([[nan, nan] if g.rest_gap_m is None else g.rest_gap_m for g in ligs], float) / cfg.a_m
     _, centres, _ = polygon_inertia(vertices, 1.0)
-    gap = np.where(np.isnan(rest_gap), vertices[b, j] - vertices[a, i], rest_gap)
+    cell = shifts = None
+    image = 0.0
+    if f.lattice_vectors_m is not None:
+        cell = np.asarray(f.lattice_vectors_m, float) / cfg.a_m
+        shifts = np.array([g.shift or [0] * len(cell) for g in ligs], np.int64).reshape(len(ligs), len(cell))
+        image = shifts @ cell
+    gap = np.where(np.isnan(rest_gap), vertices[b, j] + image - vertices[a, i], rest_gap)
     along = gap / np.maximum(np.hypot(gap[:, 0], gap[:, 1]), 1e-300)[:, None]
-    towards = centres[b] - centres[a]
+    towards = centres[b] + image - centres[a]
     towards /= np.hypot(towards[:, 0], towards[:, 1])[:, None]
     axis = np.where((np.hypot(gap[:, 0], gap[:, 1]) > 1e-9 * float(np.median(np.ptp(vertices, 1).max(1))))[:, None],
                     along, towards)
@@ -283,7 +332,7 @@ def from_file(cfg: RigidNetwork) -> Network:
         if g.axis is not None:
             axis[k] = np.asarray(g.axis) / math.hypot(*g.axis)
     return Network(vertices, (a, b, i, j, axis), mass, inertia, stiffness, rest_gap, grid=None, full_grid=False,
-                   sets=f.sets)
+                   sets=f.sets, cell=cell, shifts=shifts)
 
 
 def bounding_ends(centres: np.ndarray, sizes: np.ndarray) -> dict[str, list[int]]:
@@ -326,13 +375,18 @@ def build(cfg: RigidNetwork) -> System:
     kl = cfg.k_long_n_per_m
     ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
     law = lg.LAWS[cfg.ligament_law]
-    lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law)
+    image = net.images()
+    lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law,
+                         image)
     if net.stiffness is not None:  # per-ligament springs and rest gaps of a geometry file
         for col, scale, k in ((lg.L_KL, kl, 0), (lg.L_KS, kl, 1), (lg.L_KT, kl * a * a, 2)):
             lig[:, col] = np.where(np.isnan(net.stiffness[:, k]), lig[:, col], net.stiffness[:, k] / scale)
         gap = net.rest_gap
         rows = ~np.isnan(gap[:, 0])
-        lig[np.ix_(rows, [lg.L_OX, lg.L_OY])] = (centres[ub] - centres[ua] - gap)[rows]
+        lig[np.ix_(rows, [lg.L_OX, lg.L_OY])] = (centres[ub] + image - centres[ua] - gap)[rows]
+    if cfg.contact is not None and net.cell is not None:
+        raise geo.GeometryError("lattice.contact: contact between units across a periodic file's cell boundary is "
+                                "not supported; remove contact or lattice_vectors_m")
     contact = () if cfg.contact is None else uc.contact_pairs(
         vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a)
     args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n), law, *contact)
@@ -358,7 +412,8 @@ def build(cfg: RigidNetwork) -> System:
     if net.grid is not None and cfg.n_rows > 1:
         coords |= {"row": net.grid[0], "col": net.grid[1]}
         attrs = COORD_ATTRS
-    joined = np.hypot(*(centres[ub] - centres[ua]).T)
+    joined = np.hypot(*(centres[ub] + image - centres[ua]).T)
+    inside = np.ones(ua.size, bool) if net.cell is None else ~np.any(net.shifts, 1)  # wraps are not drawn
     spacing = column_pitch(cfg) if net.full_grid else a * float(np.median(joined))
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=Scales(a, math.sqrt(m / kl), m),
@@ -369,6 +424,7 @@ def build(cfg: RigidNetwork) -> System:
         grid_shape=(cfg.n_rows, cfg.n_cols) if cfg.n_rows > 1 and net.full_grid else None,
         site_coord_attrs=attrs, site_groups=groups,
         neighbour_pairs=np.stack([ua[pairs], ub[pairs]], 1),
-        shapes=UnitShapes(centres, vertices - centres[:, None, :], np.ones(n), np.stack([ua, ub], 1),
-                          np.stack([lig[:, [lg.L_AX, lg.L_AY]], lig[:, [lg.L_BX, lg.L_BY]]], 1)),
+        shapes=UnitShapes(centres, vertices - centres[:, None, :], np.ones(n), np.stack([ua[inside], ub[inside]], 1),
+                          np.stack([lig[inside][:, [lg.L_AX, lg.L_AY]], lig[inside][:, [lg.L_BX, lg.L_BY]]], 1)),
+        periodic=None if net.cell is None else PeriodicCell(net.cell.copy(), net.shifts.copy()),
     )

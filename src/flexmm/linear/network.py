@@ -1,0 +1,111 @@
+"""Bloch bands of a periodic rigid-unit network (docs/physics.md §1.9), from the exact Hessian of the
+energy its runs integrate.
+
+A periodic network (``lattice.left/right`` or ``bottom/top: periodic`` on a generated sheet, or a
+geometry file with ``lattice_vectors_m``) is one cell of N units repeated by its lattice vectors
+A_p; link k joins unit a_k of a cell to unit b_k of the cell displaced by s_k·A
+(``System.periodic``). Its Hessian at rest couples DOF α of unit a to DOF β of the copy of unit b
+at R_b + s·A; summing over those partners with the phase of the partner's position,
+
+    D_αβ(k) = Σ K_{α, β(s)} e^{i k·(R_b + s·A − R_a)},    D(k) x = ω² M x,
+
+M the cell's diagonal mass (``flexmm.linalg.read_cell``, ``bloch_frequencies``). The couplings
+are read from the Hessian-vector product of the ligament law (``models.ligaments.network_hvp``,
+exact, the law the runs integrate) applied to a copy of the cell tiled 3 times along each periodic
+direction, where every link's partner (shifts −1, 0, 1) is a distinct unit. Held DOFs (fixed
+edges of a strip, ``fixed_units``) are left out of the cell. A generated sheet whose pattern
+repeats every two columns and rows is reduced to that 2 × 2 cell (2 columns of a strip); random
+quads and geometry files keep their whole cell. Nondimensional: k in 1/a, ω in
+1/sqrt(m/k_l) (``System.scales``).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from flexmm.errors import FlexmmError
+from flexmm.linalg import BlochCell, bloch_frequencies, read_cell
+from flexmm.models.ligaments import NetworkArgs, network_hvp
+from flexmm.models.network import build
+
+#: copies of the cell along each periodic direction in the tiled network the couplings are read from
+_TILES = 3
+
+
+class NotPeriodic(FlexmmError):
+    """The network has no periodic direction, so it has no Bloch bands."""
+
+
+def cell_lattice(lat):
+    """The smallest periodic copy of a network config whose Bloch cell gives its bands: a generated
+    pattern cut to 2 columns (and 2 rows) along its periodic directions, with no named sets; a
+    random-quads sheet or a geometry file as given. NotPeriodic without a periodic direction."""
+    if lat.geometry is None and not lat.periodic_axes:
+        raise NotPeriodic("the network is not periodic: set left/right (and/or bottom/top) to periodic, or give "
+                          "the geometry file lattice_vectors_m and ligament shifts")
+    if lat.geometry is not None or lat.pattern == "random_quads":
+        return lat
+    update = {"unit_sets": {}, "fixed_units": []}
+    if "x" in lat.periodic_axes:
+        update["n_cols"] = 2
+    if "y" in lat.periodic_axes:
+        update["n_rows"] = 2
+    return lat.model_copy(update=update)
+
+
+def tiled_args(args: NetworkArgs, shifts: np.ndarray, n: int) -> tuple[NetworkArgs, np.ndarray]:
+    """The network of ``_TILES`` copies of the cell along each of its P periodic directions, links
+    wrapping on that torus: (its args, the cell index (T, P) of every copy, in −1..1). Copy t holds
+    units t·n .. t·n + n − 1; a link of shift s from a unit of copy t joins copy t + s (mod 3)."""
+    p = shifts.shape[1]
+    tiles = np.array(list(itertools.product(range(_TILES), repeat=p)), np.int64)[:, ::-1]  # first index fastest
+    flat = lambda t: (t * _TILES ** np.arange(p)).sum(-1)  # noqa: E731
+    ua = np.concatenate([args.unit_a + n * flat(t) for t in tiles])
+    ub = np.concatenate([args.unit_b + n * flat((t + shifts) % _TILES) for t in tiles])
+    m = n * len(tiles)
+    big = NetworkArgs(ua, ub, np.tile(args.ligaments, (len(tiles), 1)), np.zeros(m), np.zeros(m), args.law)
+    return big, np.where(tiles == _TILES - 1, -1, tiles)
+
+
+def network_cell(system) -> BlochCell:
+    """The ``BlochCell`` of a built periodic network (its free DOFs, cell DOF order field-major:
+    u, v, θ of every free unit), offsets the partners' rest positions in units of a."""
+    if system.periodic is None:
+        raise NotPeriodic("the network is not periodic (no lattice vectors)")
+    n = system.n_sites
+    cell, centres = system.periodic, system.unit_shapes().centres
+    big, tiles = tiled_args(system.args, cell.link_shifts, n)
+    m = big.cos.size
+    q, out = np.zeros(3 * m), np.zeros(3 * m)
+
+    def hvp(x):
+        network_hvp(q, big, np.asarray(x, float), out)
+        return out.copy()
+
+    free = np.flatnonzero(system.inv_mass > 0)  # cell DOFs f·n + unit
+    index = np.full(3 * n, -1)
+    index[free] = np.arange(free.size)
+    dof = np.arange(3 * m)
+    field, unit = np.divmod(dof, m)
+    dof_class = index[field * n + unit % n]
+    positions = centres[unit % n] + tiles[unit // n] @ cell.vectors
+    cell_dofs = (free // n) * m + free % n  # copy 0
+    return read_cell(hvp, 3 * m, cell_dofs, dof_class, positions, system.mass[free])
+
+
+def network_bands(lat, k) -> np.ndarray:
+    """ω(k) (…, d) ascending, nondimensional, of the periodic network ``lat`` (a ``RigidNetwork``
+    config) at wave vectors ``k`` (…, 2) in 1/a; d the free DOFs of its Bloch cell (``cell_lattice``)."""
+    return bloch_frequencies(network_cell(build(cell_lattice(lat))), k)
+
+
+def group_velocity(lat, k, band: int, dk: float = 1e-5) -> np.ndarray:
+    """∇_k ω of branch ``band`` at wave vector ``k`` (2,) (central differences of ``network_bands``),
+    nondimensional (a sqrt(k_l/m))."""
+    cell = network_cell(build(cell_lattice(lat)))
+    k = np.asarray(k, float)
+    steps = np.array([[dk, 0.0], [0.0, dk]])
+    w = bloch_frequencies(cell, np.concatenate([k + steps, k - steps]))[:, band]
+    return (w[:2] - w[2:]) / (2 * dk)
