@@ -89,7 +89,7 @@ def test_network_config_errors_are_clear():
     with pytest.raises(ConfigError, match="vertex_jitter"):
         scene({"kind": "rigid_network", "vertex_jitter": 0.1, "n_rows": 2, "n_cols": 3, **LAW})
     with pytest.raises(ConfigError, match="periodic"):
-        scene({"kind": "rigid_network", "left": "periodic", "right": "periodic", "n_rows": 2, "n_cols": 4, **LAW})
+        scene({"kind": "rigid_network", "left": "periodic", "right": "periodic", "n_rows": 2, "n_cols": 5, **LAW})
     with pytest.raises(ConfigError, match="ligament_length_m > 0"):
         scene({"kind": "rigid_network", "ligament_law": "difflexmm", "n_rows": 2, "n_cols": 3, **LAW})
     with pytest.raises(ConfigError, match="cutoff_m"):
