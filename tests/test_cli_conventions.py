@@ -19,7 +19,7 @@ from flexmm.errors import FlexmmError, OutputError, UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "lego_vector_soliton.yaml"
-COMMANDS = ["run", "analyze", "validate", "schema", "sweep", "plan", "compare", "stability", "bench"]
+COMMANDS = ["run", "analyze", "validate", "schema", "sweep", "plan", "compare", "stability", "bench", "bands"]
 runner = CliRunner()
 
 
@@ -56,7 +56,7 @@ def test_flags_have_no_value_metavar(command):
     assert "<bool>" not in result.output and "BOOLEAN" not in result.output
 
 
-@pytest.mark.parametrize("command", ["run", "sweep", "analyze", "bench", "stability"])
+@pytest.mark.parametrize("command", ["run", "sweep", "analyze", "bench", "stability", "bands"])
 def test_writing_verbs_have_quiet(command):
     result = invoke(command, "--help")
     assert re.search(r"--quiet\s+-q", result.output), result.output

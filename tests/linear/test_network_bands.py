@@ -137,3 +137,29 @@ def test_periodic_network_config_errors():
                 contact={"stiffness_n_per_m": 1.0, "cutoff_m": 1e-4}, **LAW)
     with pytest.raises(NotPeriodic, match="not periodic"):
         network_bands(lattice(kind="rigid_network", n_rows=2, n_cols=4, **LAW), np.zeros((1, 2)))
+
+
+def test_the_bands_command_writes_the_path_and_refuses_what_has_no_bands(tmp_path):
+    """`flexmm bands` on the shipped torus: Γ–X–M–Γ, three files, the longitudinal branch's slope at Γ
+    the speed its scene's pulse is launched with (44.25 m/s); a lattice of another kind and a network
+    without periods are user errors (exit 2, no traceback)."""
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from flexmm.cli import app
+
+    repo = Path(__file__).resolve().parents[2]
+    runner = CliRunner()
+    res = runner.invoke(app, ["bands", str(repo / "configs" / "network_bloch_torus.yaml"), "--points", "16",
+                              "--out", str(tmp_path / "b")])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["bands.json", "bands.png", "bands.txt"]
+    rows = np.loadtxt(tmp_path / "b" / "bands.txt")
+    assert rows.shape == (3 * 16 + 1, 3 + 12)
+    slope = 2 * math.pi * rows[1, 4] / rows[1, 1]  # the faster acoustic branch at the first step along x
+    assert slope == pytest.approx(44.25, rel=2e-3)
+    for config, message in ((repo / "configs" / "lego_vector_soliton.yaml", "rigid_network"),
+                            (repo / "configs" / "rotating_hexagons_pulse.yaml", "not periodic")):
+        res = runner.invoke(app, ["bands", str(config), "--out", str(tmp_path / "c")])
+        assert res.exit_code == 2 and message in res.output and "Traceback" not in res.output, res.output

@@ -17,6 +17,7 @@ import typer
 
 from flexmm import __version__
 from flexmm.cli import analyze as _analyze
+from flexmm.cli import bands as _bands
 from flexmm.cli import bench as _bench
 from flexmm.cli import compare as _compare
 from flexmm.cli import design as _design
@@ -67,6 +68,7 @@ for _name, _func in (
     ("plan", _plan.plan),
     ("compare", _compare.compare),
     ("stability", _stability.stability),
+    ("bands", _bands.bands),
     ("bench", _bench.bench),
     ("render", _render.render),
     ("export", _export.export),

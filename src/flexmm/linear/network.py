@@ -109,3 +109,25 @@ def group_velocity(lat, k, band: int, dk: float = 1e-5) -> np.ndarray:
     steps = np.array([[dk, 0.0], [0.0, dk]])
     w = bloch_frequencies(cell, np.concatenate([k + steps, k - steps]))[:, band]
     return (w[:2] - w[2:]) / (2 * dk)
+
+
+def band_path(lat, n_points: int = 64) -> dict:
+    """The bands of the periodic network ``lat`` along Γ → ½b₁ → ½(b₁ + b₂) → Γ (one periodic
+    direction: Γ → ½b₁), b_p the reciprocal vectors of its Bloch cell (``cell_lattice``), ``n_points``
+    wave vectors per segment. SI: {"k_rad_m" (K, 2), "distance_rad_m" (K,) along the path, "labels"
+    [(distance, name)], "frequency_hz" (K, d)}; NaN for an unstable branch."""
+    small = build(cell_lattice(lat))
+    cell = network_cell(small)
+    vectors = small.periodic.vectors
+    recip = 2 * np.pi * np.linalg.pinv(vectors).T  # (P, 2): b_p · A_q = 2π δ_pq
+    corners = [np.zeros(2), 0.5 * recip[0]] + ([0.5 * (recip[0] + recip[1]), np.zeros(2)] if len(recip) > 1 else [])
+    names = ["Γ", "X"] + (["M", "Γ"] if len(recip) > 1 else [])
+    t = np.linspace(0.0, 1.0, n_points, endpoint=False)
+    k = np.concatenate([p + t[:, None] * (q - p) for p, q in zip(corners[:-1], corners[1:])] + [corners[-1][None]])
+    step = np.hypot(*np.diff(k, axis=0).T)
+    distance = np.concatenate([[0.0], np.cumsum(step)])
+    at = [0.0] + [float(distance[(i + 1) * n_points]) for i in range(len(corners) - 1)]
+    scales = small.scales
+    return {"k_rad_m": k / scales.length_m, "distance_rad_m": distance / scales.length_m,
+            "labels": [(d / scales.length_m, name) for d, name in zip(at, names)],
+            "frequency_hz": bloch_frequencies(cell, k) / (2 * np.pi * scales.time_s)}
