@@ -71,6 +71,31 @@ class UnitContact(Strict):
     cutoff_m: Positive = Field(description="distance c (m) below which a vertex and an edge repel")
 
 
+class Region(Strict):
+    """A part of a network with its own ligaments and density (an interface between two materials, a
+    stiff inclusion): the units of a named unit set (``units``); the fields given replace the
+    lattice's for the ligaments between two of its units and for its units' mass. A ligament joining a
+    unit of the region to a unit outside it (the interface) is two half-ligaments in series: each
+    stiffness is 2 k₁k₂/(k₁ + k₂) of the two sides' (docs/physics.md §1.9)."""
+
+    units: str = Field(description="the named unit set (lattice.unit_sets, a geometry file's sets) of the region")
+    k_long_n_per_m: Positive | None = None
+    k_shear_n_per_m: NonNegative | None = None
+    k_rot_n_m_per_rad: NonNegative | None = None
+    areal_density_kg_m2: Positive | None = Field(
+        None, description="the region's units' mass per area (units whose mass a geometry file gives keep it)")
+
+    @model_validator(mode="after")
+    def _something(self):
+        if all(getattr(self, k) is None for k in REGION_FIELDS):
+            raise ValueError(f"a region changes at least one of {', '.join(REGION_FIELDS)}")
+        return self
+
+
+#: the lattice fields a region may replace
+REGION_FIELDS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad", "areal_density_kg_m2")
+
+
 class RigidNetwork(GridUnits):
     """Rigid polygons joined by ligaments at their vertices, from a geometry generator; u, v, θ
     per unit (θ the rotation from the reference geometry, not staggered). Unit = row · n_cols + col."""
@@ -112,6 +137,8 @@ class RigidNetwork(GridUnits):
                                           "circle) for fixed_units and excitation.units")
     fixed_units: list[str] = Field(default_factory=list, description="named unit sets whose units are held "
                                    "(every DOF)")
+    regions: list[Region] = Field(default_factory=list, description="parts of the network (named unit sets, "
+                                  "no unit in two) with their own ligament stiffnesses and density: interfaces")
 
     @model_validator(mode="before")
     @classmethod
@@ -154,6 +181,8 @@ class RigidNetwork(GridUnits):
             return "the sheet is masked"
         if self.unit_sets:
             return "named unit sets are placed on the whole sheet"
+        if self.regions:
+            return "the network has regions"
         if self.periodic_axes:
             return "the sheet is periodic"
         return None
@@ -186,10 +215,11 @@ class RigidNetwork(GridUnits):
         names = self.unit_set_names()
         if len(set(names)) != len(names):
             raise ValueError(f"unit_sets: a name is given twice (here and in the geometry file): {names}")
-        unknown = [s for s in self.fixed_units if s not in names]
-        if unknown:
-            raise ValueError(f"fixed_units {unknown}: not a named unit set (unit_sets"
-                             f"{', geometry sets' if self.geometry else ''}: {', '.join(names) or 'none'})")
+        for what, used in (("fixed_units", self.fixed_units), ("regions", [r.units for r in self.regions])):
+            unknown = [s for s in used if s not in names]
+            if unknown:
+                raise ValueError(f"{what} {unknown}: not a named unit set (unit_sets"
+                                 f"{', geometry sets' if self.geometry else ''}: {', '.join(names) or 'none'})")
         if self.pattern != "rectangles" and self.aspect_ratio != 1.0:
             raise ValueError("aspect_ratio shapes the units of rectangles: set pattern: rectangles")
         if self.pattern != "random_quads" and self.vertex_jitter:

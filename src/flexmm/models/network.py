@@ -359,6 +359,41 @@ def named_sets(specs: dict, centres_m: np.ndarray) -> dict[str, list[int]]:
     return out
 
 
+def apply_regions(cfg: RigidNetwork, groups: dict[str, list[int]], lig: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+                  mass_si: np.ndarray, inertia_si: np.ndarray, given: np.ndarray | None) -> None:
+    """The lattice's ``regions`` (``config.network.Region``) in place: each region's density scales
+    its units' mass and inertia (not those a geometry file gives: ``given``), and its stiffnesses
+    replace the lattice's in the ligament table — between two units of the same region, or, across
+    an interface, the series stiffness 2 k₁k₂/(k₁ + k₂) of the two sides. GeometryError if a unit
+    lies in two regions."""
+    n = mass_si.size
+    kl, a = cfg.k_long_n_per_m, cfg.a_m
+    scales = {"k_long_n_per_m": kl, "k_shear_n_per_m": kl, "k_rot_n_m_per_rad": kl * a * a}
+    k_unit = np.tile([cfg.k_long_n_per_m, cfg.k_shear_n_per_m, cfg.k_rot_n_m_per_rad], (n, 1))
+    region = np.full(n, -1)
+    for r, spec in enumerate(cfg.regions):
+        units = np.asarray(groups[spec.units], np.int64)
+        twice = units[region[units] >= 0]
+        if twice.size:
+            raise geo.GeometryError(f"lattice.regions: units {twice[:5].tolist()} are in two regions "
+                                    f"({cfg.regions[region[twice[0]]].units!r} and {spec.units!r})")
+        region[units] = r
+        for col, name in enumerate(scales):
+            if getattr(spec, name) is not None:
+                k_unit[units, col] = getattr(spec, name)
+        if spec.areal_density_kg_m2 is not None:
+            scaled = units if given is None else units[~given[units]]
+            mass_si[scaled] *= spec.areal_density_kg_m2 / cfg.areal_density_kg_m2
+            inertia_si[scaled] *= spec.areal_density_kg_m2 / cfg.areal_density_kg_m2
+    touched = (region[ua] >= 0) | (region[ub] >= 0)
+    ka, kb = k_unit[ua[touched]], k_unit[ub[touched]]
+    total = ka + kb
+    series = np.where(total > 0, 2 * ka * kb / np.where(total > 0, total, 1.0), 0.0)
+    k = np.where((region[ua[touched]] == region[ub[touched]])[:, None], ka, series)
+    for j, (col, scale) in enumerate(zip((lg.L_KL, lg.L_KS, lg.L_KT), scales.values())):
+        lig[touched, col] = k[:, j] / scale
+
+
 def build(cfg: RigidNetwork) -> System:
     """The network as a System: state (u, v, θ) of its units; edges free or fixed (all DOFs held),
     named unit sets held by ``fixed_units``."""
@@ -371,6 +406,7 @@ def build(cfg: RigidNetwork) -> System:
         mass_si = np.where(np.isnan(net.mass_kg), mass_si, net.mass_kg)
         inertia_si = np.where(np.isnan(net.inertia_kg_m2), inertia_si, net.inertia_kg_m2)
     centres = centres / a
+    groups = named_sets(dict(cfg.unit_sets) | (net.sets or {}), centres * a)
     m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
     ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
@@ -378,6 +414,9 @@ def build(cfg: RigidNetwork) -> System:
     image = net.images()
     lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law,
                          image)
+    if cfg.regions:
+        given = None if net.mass_kg is None else ~np.isnan(net.mass_kg)
+        apply_regions(cfg, groups, lig, ua, ub, mass_si, inertia_si, given)
     if net.stiffness is not None:  # per-ligament springs and rest gaps of a geometry file
         for col, scale, k in ((lg.L_KL, kl, 0), (lg.L_KS, kl, 1), (lg.L_KT, kl * a * a, 2)):
             lig[:, col] = np.where(np.isnan(net.stiffness[:, k]), lig[:, col], net.stiffness[:, k] / scale)
@@ -397,7 +436,6 @@ def build(cfg: RigidNetwork) -> System:
     else:
         ends = bounding_ends(centres, np.ptp(vertices, 1).max(1))
     hold_fixed_ends(cfg, inv_mass, ends, n)
-    groups = named_sets(dict(cfg.unit_sets) | (net.sets or {}), centres * a)
     for name in cfg.fixed_units:
         inv_mass[np.concatenate([np.asarray(groups[name]) + f * n for f in range(3)])] = 0.0
     if net.full_grid:
