@@ -13,10 +13,9 @@ A geometry file is YAML, lengths in metres::
       - {a: 0, i: 2, b: 1, j: 3, rest_gap_m: [0.001, 0], axis: [1, 0], k_shear_n_per_m: 500}
     sets:                       # named unit sets for lattice.fixed_units and excitation.units
       left: {box_m: [-1, -1, 0.005, 1]}
-    lattice_vectors_m: [[0.022, 0]]   # optional: the file is one cell of a periodic network
 
-With ``lattice_vectors_m`` (one or two vectors, m) the file's units are one cell repeated by those
-vectors, and a ligament with ``shift: [s]`` (or ``[s1, s2]``, each −1, 0 or 1) joins vertex i of a
+With ``lattice_vectors_m: [[x1, y1]]`` or ``[[x1, y1], [x2, y2]]`` (m) the file's units are one cell
+repeated by those vectors, and a ligament with ``shift: [s]`` (or ``[s1, s2]``, each −1, 0 or 1) joins vertex i of a
 to vertex j of the copy of b in the cell displaced by s1 times the first vector plus s2 times the
 second: the links that cross the cell's boundary, which wrap around in a run (a unit may be linked
 to its own copy). The network is then periodic: its runs wrap and ``linear.network`` gives its
