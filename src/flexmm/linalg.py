@@ -38,6 +38,7 @@ FD_STEP = 1e-6  # central-difference step, relative to max |x|
 DENSE_LIMIT = 400  # at most this many DOFs: assemble and diagonalise densely
 LANCZOS_MAX_ITER = 600
 LANCZOS_RTOL = 1e-6
+SCATTER_LIMIT = 2**24  # entries × d² above which Bloch matrices are summed per wave vector, not by one product
 UNSTABLE_TOL = 1e-10  # ω² below −UNSTABLE_TOL·max(1, max|ω²|) is an unstable mode (NaN frequency)
 
 Operator = Callable[[np.ndarray], np.ndarray]
@@ -253,9 +254,14 @@ def bloch_matrices(cell: BlochCell, k) -> np.ndarray:
         k = k[..., None]
     d = cell.size
     phase = np.exp(1j * (k.reshape(-1, cell.dim) @ cell.offsets.T)) * cell.values  # (n_k, entries)
-    scatter = np.zeros((cell.values.size, d * d))
-    scatter[np.arange(cell.values.size), cell.rows * d + cell.cols] = 1.0
-    mat = (phase @ scatter).reshape(-1, d, d)
+    if cell.values.size * d * d <= SCATTER_LIMIT:
+        scatter = np.zeros((cell.values.size, d * d))
+        scatter[np.arange(cell.values.size), cell.rows * d + cell.cols] = 1.0
+        mat = (phase @ scatter).reshape(-1, d, d)
+    else:  # a large cell: sum the entries of each wave vector into its matrix
+        at = cell.rows * d + cell.cols
+        mat = np.stack([np.bincount(at, p.real, d * d) + 1j * np.bincount(at, p.imag, d * d) for p in phase])
+        mat = mat.reshape(-1, d, d)
     mat = 0.5 * (mat + np.conj(np.swapaxes(mat, 1, 2)))
     return mat.reshape(k.shape[:-1] + (d, d))
 

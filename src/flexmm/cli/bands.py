@@ -27,6 +27,8 @@ def bands(
 
     The network must be periodic: a generated sheet with left/right and/or bottom/top periodic, or a
     geometry file with lattice_vectors_m. Frequencies in Hz, wave vectors in rad/m."""
+    import numpy as np
+
     from flexmm.io.atomic import atomic_target, write_text_atomic
     from flexmm.linear.network import band_path
 
@@ -51,8 +53,8 @@ def bands(
         for name in FILES:
             typer.echo(folder / name)
         return
-    typer.echo(f"{scene.name}: {f.shape[1]} branches; at Γ (Hz): "
-               + ", ".join(f"{x:.4g}" for x in f[0]) + f"; highest {float(max(f.max(), 0)):.4g} Hz")
+    typer.echo(f"{scene.name}: {f.shape[1]} branches; {'the lowest ' if f.shape[1] > 12 else ''}at Γ (Hz): "
+               + ", ".join(f"{x:.4g}" for x in f[0, :12]) + f"; highest {float(np.nanmax(f, initial=0.0)):.4g} Hz")
     typer.echo(f"written: {folder}/bands.{{txt,json,png}}")
 
 

@@ -15,7 +15,7 @@ exact, the law the runs integrate) applied to a copy of the cell tiled 3 times a
 direction, where every link's partner (shifts −1, 0, 1) is a distinct unit. Held DOFs (fixed
 edges of a strip, ``fixed_units``) are left out of the cell. A generated sheet whose pattern
 repeats every two columns and rows is reduced to that 2 × 2 cell (2 columns of a strip); random
-quads and geometry files keep their whole cell. Nondimensional: k in 1/a, ω in
+quads, networks with regions and geometry files keep their whole cell. Nondimensional: k in 1/a, ω in
 1/sqrt(m/k_l) (``System.scales``).
 """
 
@@ -41,11 +41,12 @@ class NotPeriodic(FlexmmError):
 def cell_lattice(lat):
     """The smallest periodic copy of a network config whose Bloch cell gives its bands: a generated
     pattern cut to 2 columns (and 2 rows) along its periodic directions, with no named sets; a
-    random-quads sheet or a geometry file as given. NotPeriodic without a periodic direction."""
+    random-quads sheet, a network with regions or a geometry file as given. NotPeriodic without a
+    periodic direction."""
     if lat.geometry is None and not lat.periodic_axes:
         raise NotPeriodic("the network is not periodic: set left/right (and/or bottom/top) to periodic, or give "
                           "the geometry file lattice_vectors_m and ligament shifts")
-    if lat.geometry is not None or lat.pattern == "random_quads":
+    if lat.geometry is not None or lat.pattern == "random_quads" or lat.regions:
         return lat
     update = {"unit_sets": {}, "fixed_units": []}
     if "x" in lat.periodic_axes:
