@@ -438,8 +438,8 @@ def build(cfg: RigidNetwork) -> System:
     hold_fixed_ends(cfg, inv_mass, ends, n)
     for name in cfg.fixed_units:
         inv_mass[np.concatenate([np.asarray(groups[name]) + f * n for f in range(3)])] = 0.0
-    if net.full_grid:
-        pairs = np.arange(cfg.n_rows * (cfg.n_cols - 1))  # the links along the rows come first (both generators)
+    if net.full_grid:  # the links along the rows (first in both generators, and the wraps of a periodic x)
+        pairs = np.flatnonzero(net.grid[0][ua] == net.grid[0][ub])
     else:
         pairs = np.arange(ua.size)
     two_d = cfg.n_rows > 1 or not net.full_grid
