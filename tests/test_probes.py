@@ -163,7 +163,8 @@ def test_run_from_answers_every_file(files, kind, tmp_path):
         assert f"--from {files[kind]}" in res.stderr and "--set initial.from_run" not in res.stderr, res.stderr
 
 
-@pytest.mark.parametrize("verb", ["validate", "plan", "run", "sweep", "stability", "compare", "bench", "fit", "design"])
+@pytest.mark.parametrize("verb", ["validate", "plan", "run", "sweep", "stability", "bands", "compare", "bench", "fit",
+                                  "design"])
 @pytest.mark.parametrize("kind", ["run_nc", "analysis_nc", "sweep_nc", "text", "empty", "foreign", "empty_dir"])
 def test_config_verbs_answer_files_that_are_not_configs(files, verb, kind, tmp_path):
     user_error(invoke(verb, files[kind], *(["--out", tmp_path / "o"] if verb in ("run", "sweep") else [])))

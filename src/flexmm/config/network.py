@@ -76,7 +76,8 @@ class Region(Strict):
     stiff inclusion): the units of a named unit set (``units``); the fields given replace the
     lattice's for the ligaments between two of its units and for its units' mass. A ligament joining a
     unit of the region to a unit outside it (the interface) is two half-ligaments in series: each
-    stiffness is 2 k₁k₂/(k₁ + k₂) of the two sides' (docs/physics.md §1.9)."""
+    stiffness is 2 k₁k₂/(k₁ + k₂) of the two sides' (docs/physics.md §1.9). Springs a geometry file
+    gives a ligament stay the file's."""
 
     units: str = Field(description="the named unit set (lattice.unit_sets, a geometry file's sets) of the region")
     k_long_n_per_m: Positive | None = None
