@@ -163,3 +163,17 @@ def test_the_bands_command_writes_the_path_and_refuses_what_has_no_bands(tmp_pat
                             (repo / "configs" / "rotating_hexagons_pulse.yaml", "not periodic")):
         res = runner.invoke(app, ["bands", str(config), "--out", str(tmp_path / "c")])
         assert res.exit_code == 2 and message in res.output and "Traceback" not in res.output, res.output
+
+
+def test_periodic_geometry_file_errors_name_the_line(tmp_path):
+    """A shift in a file without lattice vectors, or with one entry too few, is reported at its line."""
+    doc = {"units": [{"vertices_m": [[0, 0], [0.01, 0], [0.01, 0.01], [0, 0.01]]},
+                     {"vertices_m": [[0.011, 0], [0.021, 0], [0.021, 0.01], [0.011, 0.01]]}],
+           "ligaments": [{"a": 0, "i": 1, "b": 1, "j": 0}, {"a": 1, "i": 1, "b": 0, "j": 0, "shift": [1]}]}
+    law = {k: v for k, v in LAW.items() if k != "a_m"}
+    for vectors, message in ((None, "only a periodic file"), ([[0.022, 0], [0, 0.02]], "one entry per lattice vector")):
+        path = tmp_path / "f.yaml"
+        path.write_text(yaml.safe_dump({**doc, "lattice_vectors_m": vectors}))
+        with pytest.raises(ConfigError, match=message) as err:
+            build(lattice(kind="rigid_network", geometry=str(path), **law))
+        assert f"{path}:" in str(err.value) and "ligaments.1.shift" in str(err.value)
