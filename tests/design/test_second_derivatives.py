@@ -239,6 +239,8 @@ def test_adjoint_and_tangent_equal_complex_step_of_reference(name):
     hv = step(lam, 0 * t1, 0 * t2)  # ∂F/∂q is symmetric
     assert np.abs(out - hv).max() <= 1e-12 * np.abs(hv).max()
     for table, grad, other in ((0, g1, t2), (1, g2, t1)):
+        if grad.size == 0:  # no contacts between the triangles
+            continue
         ref = np.zeros(grad.size)
         for k in range(grad.size):
             e = np.zeros(grad.size)

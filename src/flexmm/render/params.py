@@ -2,8 +2,8 @@
 
 The render layer does not rebuild models (docs/architecture.md, layers); what it needs of a lattice
 — rest rotations θ0 per unit, masses and inertias, hinge stiffnesses, the hinge list — is computed
-here from the validated lattice config, following the builders' conventions (site = row · n_cols +
-col, hinges horizontal first then vertical, variations by the models' engine ``models.variation``).
+here from the validated lattice config with the builders' own functions (their hinge lists and
+checkerboard, the linkage's joint stiffness, variations by ``models.variation``).
 ``tests/render/test_energy.py`` checks every array against the built model.
 """
 
@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.models.linkage import joint_stiffness
+from flexmm.models.rotating_sheet import checkerboard, lattice_hinges
 from flexmm.models.variation import parameter_arrays
 
 
@@ -55,35 +57,6 @@ class RigidParams:
         return self.theta0_rad.size
 
 
-def sheet_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, skew: int = 0):
-    """(a, b, axis, wrap) of a sheet's hinges: horizontal, then vertical, then the wraps' order
-    of the builder (horizontal wraps after the horizontal hinges, vertical after the vertical)."""
-    site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
-    a_h, b_h = site[:, :-1].ravel(), site[:, 1:].ravel()
-    w_h = np.zeros(a_h.size, bool)
-    a_v, b_v = site[:-1, :].ravel(), site[1:, :].ravel()
-    w_v = np.zeros(a_v.size, bool)
-    if periodic_x:
-        a_h, b_h = np.concatenate([a_h, site[:, -1]]), np.concatenate([b_h, site[:, 0]])
-        w_h = np.concatenate([w_h, np.ones(n_rows, bool)])
-    if periodic_y:
-        cols = np.arange(n_cols) + skew
-        keep = slice(None) if periodic_x else (cols >= 0) & (cols < n_cols)
-        top, bottom = site[-1, :][keep], site[0, cols % n_cols][keep]
-        a_v, b_v = np.concatenate([a_v, top]), np.concatenate([b_v, bottom])
-        w_v = np.concatenate([w_v, np.ones(top.size, bool)])
-    a = np.concatenate([a_h, a_v]).astype(np.int64)
-    b = np.concatenate([b_h, b_v]).astype(np.int64)
-    axis = np.concatenate([np.zeros(a_h.size, np.int64), np.ones(a_v.size, np.int64)])
-    return a, b, axis, np.concatenate([w_h, w_v])
-
-
-def checkerboard(n_rows: int, n_cols: int) -> np.ndarray:
-    """σ = (−1)^(row+col) per site."""
-    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
-    return np.where((r + c) % 2 == 0, 1.0, -1.0)
-
-
 def rigid_params(lat) -> RigidParams | None:
     """The RigidParams of a rotating_squares_chain, rotating_squares_sheet or bistable_linkage
     config (what the energy and well colourings read); None for other lattices."""
@@ -99,19 +72,18 @@ def _base(lat, mass: float, inertia: float) -> dict:
 
 def _chain(lat) -> RigidParams:
     n = lat.n_units
-    ha = np.arange(n - 1, dtype=np.int64)
+    ha, hb, axis, wrap = lattice_hinges(lat)
     sites, hinges = parameter_arrays(_base(lat, lat.mass_kg, lat.inertia_kg_m2), lat.variation,
-                           np.arange(n), np.zeros(n, np.int64), ha, ha + 1)
+                                     np.arange(n), np.zeros(n, np.int64), ha, hb)
     return RigidParams(
-        lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], np.where(np.arange(n) % 2 == 0, 1.0, -1.0),
-        sites["mass_kg"], sites["inertia_kg_m2"], ha, ha + 1, np.zeros(n - 1, np.int64),
-        np.zeros(n - 1, bool), hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
+        lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], checkerboard(1, n), sites["mass_kg"],
+        sites["inertia_kg_m2"], ha, hb, axis, wrap, hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
         hinges["k_rot_n_m_per_rad"], n_lateral=lat.n_lateral, lateral_stretch=lat.lateral_stretch)
 
 
 def _sheet(lat) -> RigidParams:
     nr, nc = lat.n_rows, lat.n_cols
-    ha, hb, axis, wrap = sheet_hinges(nr, nc, lat.left == "periodic", lat.bottom == "periodic", lat.skew_cols)
+    ha, hb, axis, wrap = lattice_hinges(lat)
     row, col = np.divmod(np.arange(nr * nc), nc)
     sites, hinges = parameter_arrays(_base(lat, lat.unit_mass_kg, lat.unit_inertia_kg_m2), lat.variation, col, row, ha, hb)
     magnets = None if lat.magnets is None else (lat.magnets.recess_m, lat.magnets.polarity)
@@ -121,18 +93,13 @@ def _sheet(lat) -> RigidParams:
         hinges["k_rot_n_m_per_rad"], ligament_m=lat.ligament_length_m, magnets=magnets)
 
 
-def joint_stiffness_j(released_energy_j: float, switch_rad: float, beta: float) -> float:
-    """k (J) of the linkage's double well from its released energy ΔE = k ψ*⁴ (1 − 2β)/12."""
-    return 12.0 * released_energy_j / (switch_rad**4 * (1.0 - 2.0 * beta))
-
-
 def _linkage(lat) -> RigidParams:
     nc, L, m = lat.n_cols, lat.bar_length_m, lat.mass_kg
     n = 2 * nc
     J = lat.inertia_kg_m2 if lat.inertia_kg_m2 is not None else m * L * L / 12
-    ha, hb, axis, wrap = sheet_hinges(2, nc, False, False)
+    ha, hb, axis, wrap = lattice_hinges(lat)
     switch = 2.0 * (lat.theta_deployed_rad - lat.theta0_rad)
-    k = joint_stiffness_j(lat.released_energy_j, switch, lat.barrier_fraction)
+    k = joint_stiffness(lat.released_energy_j, switch, lat.barrier_fraction)  # in J: ΔE is in J
     nh = ha.size
     return RigidParams(
         lat.kind, 2, nc, L / 2, np.full(n, lat.theta0_rad), checkerboard(2, nc), np.full(n, m), np.full(n, J),
@@ -163,5 +130,4 @@ def lateral_energy_j(p: RigidParams, theta) -> np.ndarray:
     return p.n_lateral * (0.25 * float(p.lateral_stretch) * kl * a * a * g * g + kt * theta * theta)
 
 
-__all__ = ["RigidParams", "checkerboard", "joint_energy_j", "joint_stiffness_j", "lateral_energy_j",
-           "rigid_params", "sheet_hinges"]
+__all__ = ["RigidParams", "joint_energy_j", "lateral_energy_j", "rigid_params"]
