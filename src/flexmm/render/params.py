@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.models.energies import joint_energies
 from flexmm.models.linkage import joint_stiffness
 from flexmm.models.rotating_sheet import checkerboard, lattice_hinges
 from flexmm.models.variation import parameter_arrays
@@ -107,10 +108,13 @@ def _linkage(lat) -> RigidParams:
         joint=(k, lat.barrier_fraction, switch))
 
 
-def joint_energy_j(psi, joint: tuple[float, float, float]):
-    """Double-well energy of a linkage joint, V(ψ) = k [ψ⁴/4 − (1+β)ψ*ψ³/3 + βψ*²ψ²/2] (J)."""
-    k, beta, s = joint
-    return k * (psi**4 / 4 - (1 + beta) * s * psi**3 / 3 + beta * s * s * psi**2 / 2)
+def joint_energy_j(psi, joint: tuple[float, float, float]) -> np.ndarray:
+    """Double-well energy (J) of a linkage joint at ψ (rad; any shape): the model's joint law
+    (``models.joints.joint_law``) with k in J."""
+    psi = np.asarray(psi, float)
+    out = np.empty(psi.size)
+    joint_energies(np.ascontiguousarray(psi.ravel()), np.asarray(joint, float), out)
+    return out.reshape(psi.shape)
 
 
 def lateral_energy_j(p: RigidParams, theta) -> np.ndarray:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN, N_HINGE_PARAMS
-from flexmm.models.hinge_energies import hinge_energies
+from flexmm.models.energies import hinge_energies
 from flexmm.render.params import RigidParams, joint_energy_j, lateral_energy_j
 
 
