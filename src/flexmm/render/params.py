@@ -13,7 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.models import rotating_chain
 from flexmm.models.energies import joint_energies
+from flexmm.models.hinge import S_KG, S_KR
 from flexmm.models.linkage import joint_stiffness
 from flexmm.models.rotating_sheet import checkerboard, lattice_hinges
 from flexmm.models.variation import parameter_arrays
@@ -46,7 +48,8 @@ class RigidParams:
     k_rot_n_m_per_rad: np.ndarray
     ligament_m: float = 0.0
     n_lateral: int = 0
-    lateral_stretch: bool = False
+    #: a chain's lateral hinges as the builder's on-site law: (k_g, k_r) per unit (N, 2) in J, or None
+    lateral_j: np.ndarray | None = None
     #: bistable joints of the linkage: (k J, β, ψ* rad), or None
     joint: tuple[float, float, float] | None = None
     #: face magnets of a sheet: (recess_m, polarity) or None
@@ -79,7 +82,8 @@ def _chain(lat) -> RigidParams:
     return RigidParams(
         lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], checkerboard(1, n), sites["mass_kg"],
         sites["inertia_kg_m2"], ha, hb, axis, wrap, hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
-        hinges["k_rot_n_m_per_rad"], n_lateral=lat.n_lateral, lateral_stretch=lat.lateral_stretch)
+        hinges["k_rot_n_m_per_rad"], n_lateral=lat.n_lateral,
+        lateral_j=rotating_chain.varied_tables(lat)[0].site_prm[:, [S_KG, S_KR]] * lat.k_long_n_per_m * lat.a_m**2)
 
 
 def _sheet(lat) -> RigidParams:
@@ -118,20 +122,12 @@ def joint_energy_j(psi, joint: tuple[float, float, float]) -> np.ndarray:
 
 
 def lateral_energy_j(p: RigidParams, theta) -> np.ndarray:
-    """Energy of a chain unit's lateral hinges (docs/physics.md §1.1), shape like ``theta``.
-
-    E_v = n_v [¼ s_v k_l a² (cos θ0 − cos(θ0+θ))² + k_θ θ²], with the unit's mean k_l, k_θ of its
-    chain hinges (the builder's convention).
-    """
-    if p.n_lateral == 0:
+    """Energy (J) of a chain unit's lateral hinges (docs/physics.md §1.1), shape like ``theta``:
+    the builder's on-site law ½ k_g (cos θ0 − cos(θ0 + θ))² + ½ k_r θ² on its rows (``lateral_j``)."""
+    if p.n_lateral == 0 or p.lateral_j is None:
         return np.zeros_like(theta)
-    n = p.n_units
-    deg = np.bincount(p.hinge_a, minlength=n) + np.bincount(p.hinge_b, minlength=n)
-    kl = (np.bincount(p.hinge_a, p.k_long_n_per_m, n) + np.bincount(p.hinge_b, p.k_long_n_per_m, n)) / deg
-    kt = (np.bincount(p.hinge_a, p.k_rot_n_m_per_rad, n) + np.bincount(p.hinge_b, p.k_rot_n_m_per_rad, n)) / deg
-    a = 2 * p.half_m
     g = np.cos(p.theta0_rad) - np.cos(p.theta0_rad + theta)
-    return p.n_lateral * (0.25 * float(p.lateral_stretch) * kl * a * a * g * g + kt * theta * theta)
+    return 0.5 * (p.lateral_j[:, 0] * g * g + p.lateral_j[:, 1] * theta * theta)
 
 
 __all__ = ["RigidParams", "joint_energy_j", "lateral_energy_j", "rigid_params"]
