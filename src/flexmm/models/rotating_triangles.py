@@ -20,6 +20,7 @@ import numpy as np
 
 from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
 from flexmm.models.base import FieldSpec, System, UnitShapes
+from flexmm.models.rotating_sheet import checkerboard as sublattice_sign  # σ = +1: the triangle points up
 from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
 from flexmm.models import ligaments as lg
 from flexmm.models.triangle_kernels import TriangleArgs
@@ -64,12 +65,6 @@ def kagome_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool):
     b = np.concatenate([b_h, b_v]).astype(np.int64)
     beta = np.concatenate([-sigma.ravel()[a_h] * math.pi / 6, np.full(a_v.size, math.pi / 2)])
     return a, b, beta
-
-
-def sublattice_sign(n_rows: int, n_cols: int) -> np.ndarray:
-    """σ = (−1)^(row+col) per site (+1: the triangle points up), shape (n_rows·n_cols,)."""
-    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
-    return np.where((r + c) % 2 == 0, 1.0, -1.0)
 
 
 def centroids(n_rows: int, n_cols: int, theta0: float) -> tuple[np.ndarray, np.ndarray]:
