@@ -138,15 +138,22 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
     )
 
 
+def vertex_directions(sigma: np.ndarray, theta0: float, step=(0.0,)) -> np.ndarray:
+    """Unit vectors (N, 3·len(step), 2) from each centroid to its triangle's vertices: 90°, 210°, 330°
+    (each plus every angle of ``step``, degrees) pointing up (σ = +1), 270°, 30°, 150° pointing down,
+    turned by σθ0."""
+    deg = (np.array([90.0, 210.0, 330.0])[:, None] + np.array(step)[None, :]).ravel()
+    ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad(deg)[None, :] + (sigma * theta0)[:, None]
+    return np.stack([np.cos(ang), np.sin(ang)], -1)
+
+
 def shapes(args: TriangleArgs, theta0: float, centres: np.ndarray) -> UnitShapes:
     """The triangles (vertices at 90°, 210°, 330° from the centroid pointing up, 270°, 30°, 150°
     pointing down, turned by σθ0) and their hinges' points (the ligament table's r_A, r_B); a
     periodic wrap's hinge (its points far apart in the reference configuration) is left out of
     the drawing."""
     sigma, net = args.sigma, args.network
-    ang = (np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad([90.0, 210.0, 330.0])[None, :]
-           + sigma[:, None] * theta0)
-    vertices = HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
+    vertices = HALF * vertex_directions(sigma, theta0)
     ha, hb, lig = net.unit_a, net.unit_b, net.ligaments
     r_a, r_b = lig[:, [lg.L_AX, lg.L_AY]], lig[:, [lg.L_BX, lg.L_BY]]
     drawn = np.hypot(*(centres[hb] + r_b - centres[ha] - r_a).T) < 1e-9  # the periodic wraps are not drawn
