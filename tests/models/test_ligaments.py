@@ -14,6 +14,8 @@ from flexmm.config import scene_from_dict
 from flexmm.models import MODELS
 from flexmm.models import ligaments as lg
 from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN
+from flexmm.models.kernels import kernels_of
+from flexmm.models.rotating_triangles import kagome_hinges, sublattice_sign
 
 
 def random_network(rng, n=7, n_lig=15, law="paper"):
@@ -197,27 +199,38 @@ def assert_same_forces(system, net, sigma, amplitudes, seed):
         assert lg.network_energy(qn, net) == pytest.approx(system.energy(q, system.args), rel=1e-13, abs=1e-15)
 
 
-def triangles_as_network(args):
-    """The ligament table of a rotating-triangles lattice: hinge points r_A = h_A R(σ_A θ0) e,
-    r_B = −h_B R(σ_B θ0) e on the hinge axis e, rest offset D e (docs/physics.md §1.6)."""
-    ha, hb, ec, es, hprm, theta0 = args[:6]
-    n = theta0.size
-    sig_a = hprm[:, H_SIGN]
-    sigma = np.zeros(n)
-    sigma[ha], sigma[hb] = sig_a, -sig_a
-    e = np.stack([ec, es], 1)
+def triangles_from_vertices(lat, stiff, q):
+    """Energy and forces of a triangle lattice written from its vertices (docs/physics.md §1.6),
+    not from the ligament table: hinge axes e from ``kagome_hinges``, the actual rotations
+    φ = σ(θ0 + θ) (σ_B = −σ_A), vertices r_A = h R(φ_A) e and r_B = −h R(φ_B) e (h = a/√3), the gap
+    g = x_B − x_A + D e + r_B − r_A (D = 2h cos θ0), elongation g·e, shear g·n, hinge rotation
+    θ_A + θ_B; ∂E/∂φ of a vertex r moved by its unit is ±(ẑ × r)·G. ``stiff`` (H, 3): k_l, k_s, k_θ."""
+    n_rows, n_cols = getattr(lat, "n_rows", 1), getattr(lat, "n_cols", getattr(lat, "n_units", 0))
+    ha, hb, beta = kagome_hinges(n_rows, n_cols, lat.left == "periodic", getattr(lat, "bottom", "") == "periodic")
+    n, t0, h = n_rows * n_cols, lat.theta0_rad, 1 / np.sqrt(3)
+    sig_a = sublattice_sign(n_rows, n_cols)[ha]
+    u, v, th = q[:n], q[n : 2 * n], q[2 * n : 3 * n]
+    e = np.stack([np.cos(beta), np.sin(beta)], 1)
+    nrm = np.stack([-e[:, 1], e[:, 0]], 1)
 
-    def turned(vec, phi):
-        c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
-        return np.concatenate([c * vec[:, :1] - s * vec[:, 1:], s * vec[:, :1] + c * vec[:, 1:]], 1)
+    def rot(vec, ang):
+        c, s = np.cos(ang), np.sin(ang)
+        return np.stack([c * vec[:, 0] - s * vec[:, 1], s * vec[:, 0] + c * vec[:, 1]], 1)
 
-    lig = np.zeros((ha.size, lg.N_LIGAMENT_PARAMS))
-    lig[:, [lg.L_AX, lg.L_AY]] = turned(hprm[:, H_HALF_A, None] * e, sigma[ha] * theta0[ha])
-    lig[:, [lg.L_BX, lg.L_BY]] = turned(-hprm[:, H_HALF_B, None] * e, sigma[hb] * theta0[hb])
-    lig[:, [lg.L_OX, lg.L_OY]] = hprm[:, H_REST, None] * e
-    lig[:, [lg.L_EX, lg.L_EY]] = e
-    lig[:, lg.L_KL], lig[:, lg.L_KS], lig[:, lg.L_KT] = hprm[:, H_KL], hprm[:, H_KS], hprm[:, H_KT]
-    return lg.NetworkArgs(ha, hb, lig, np.empty(n), np.empty(n)), sigma
+    r_a, r_b = rot(h * e, sig_a * (t0 + th[ha])), rot(-h * e, -sig_a * (t0 + th[hb]))
+    gap = np.stack([u[hb] - u[ha], v[hb] - v[ha]], 1) + 2 * h * np.cos(t0) * e + r_b - r_a
+    el, es, ep = np.sum(gap * e, 1), np.sum(gap * nrm, 1), th[ha] + th[hb]
+    kl, ks, kt = stiff.T
+    energy = 0.5 * float(np.sum(kl * el**2 + ks * es**2 + kt * ep**2))
+    G = (kl * el)[:, None] * e + (ks * es)[:, None] * nrm
+    cross = lambda r: -r[:, 1] * G[:, 0] + r[:, 0] * G[:, 1]  # noqa: E731 - (ẑ × r)·G
+    f = np.zeros(3 * n)
+    for k, off in ((0, 0), (1, n)):
+        np.add.at(f, off + ha, G[:, k])
+        np.add.at(f, off + hb, -G[:, k])
+    np.add.at(f, 2 * n + ha, sig_a * cross(r_a) - kt * ep)
+    np.add.at(f, 2 * n + hb, sig_a * cross(r_b) - kt * ep)
+    return energy, f
 
 
 TRIANGLE_EXAMPLES = [(kind, name, ex["lattice"]) for kind, exs in EXAMPLE_LATTICES.items()
@@ -228,8 +241,21 @@ TRIANGLE_EXAMPLES = [(kind, name, ex["lattice"]) for kind, exs in EXAMPLE_LATTIC
 def test_rotating_triangles_are_the_ligament_law_on_their_hinge_points(kind, name, lattice):
     """Every triangle example of tests/conftest.py (strip and kagome, twisted, periodic, graded):
     the triangles' kernel and the general law on their hinge points give the same forces and
-    energies (θ staggered: the units' rotations are σθ)."""
+    energies as the hinges written from the triangles' vertices (θ staggered: the units'
+    rotations are σθ); the triangles run on the network's kernels, with their torques times σ."""
     scene = scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}})
     system = MODELS[kind].build(scene.lattice)
-    net, sigma = triangles_as_network(system.args)
-    assert_same_forces(system, net, sigma, (0.02, 0.3), seed=9)
+    net, sigma = system.args.network, system.args.sigma
+    stiff = net.ligaments[:, [lg.L_KL, lg.L_KS, lg.L_KT]]
+    rng = np.random.default_rng(9)
+    n = sigma.size
+    for amplitude in (0.02, 0.3):
+        q = amplitude * rng.normal(size=3 * n)
+        e_ref, f_ref = triangles_from_vertices(scene.lattice, stiff, q)
+        f = np.empty(3 * n)
+        system.force(q, system.args, f)
+        assert_allclose(f, f_ref, rtol=0, atol=1e-13 * max(np.abs(f_ref).max(), 1.0))
+        assert system.energy(q, system.args) == pytest.approx(e_ref, rel=1e-13, abs=1e-15)
+        e_k, f_k = kernels_of(type(system.args)).reference(q, system.args)
+        assert_allclose(f_k, f_ref, rtol=0, atol=1e-13 * max(np.abs(f_ref).max(), 1.0))
+        assert e_k == pytest.approx(e_ref, rel=1e-13, abs=1e-15)

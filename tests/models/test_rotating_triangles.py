@@ -30,6 +30,7 @@ from flexmm.linear.triangles import (
     sheet_long_wave_speeds,
 )
 from flexmm.models import MODELS
+from flexmm.models import ligaments as lg
 from flexmm.models.rotating_triangles import centroids, sublattice_sign
 from flexmm.stability import hessian_operator
 
@@ -71,14 +72,14 @@ def test_hinged_vertices_meet_at_rest(theta0, make_scene, scene_dict):
     x, y = s.site_coords["x"] / a, s.site_coords["y"] / a
     sigma = np.where((s.site_coords["row"] + s.site_coords["col"]) % 2 == 0, 1.0, -1.0)
     vert = vertices(x, y, sigma, sigma * theta0)
-    args = s.args
-    for h, (ia, ib) in enumerate(zip(args.hinge_a, args.hinge_b)):
+    args, net = s.args, s.args.network
+    for h, (ia, ib) in enumerate(zip(net.unit_a, net.unit_b)):
         gap = np.linalg.norm(vert[ia][:, None, :] - vert[ib][None, :, :], axis=-1)
         assert gap.min() < 1e-12, (h, gap.min())
         d = np.array([x[ib] - x[ia], y[ib] - y[ia]])
-        np.testing.assert_allclose(d, args.hinge_prm[h, 0] * np.array([args.axis_cos[h], args.axis_sin[h]]),
-                                   atol=1e-12)
-    degree = np.bincount(args.hinge_a, minlength=n) + np.bincount(args.hinge_b, minlength=n)
+        np.testing.assert_allclose(d, net.ligaments[h, [lg.L_OX, lg.L_OY]], atol=1e-12)
+        np.testing.assert_allclose(d, np.linalg.norm(d) * net.ligaments[h, [lg.L_EX, lg.L_EY]], atol=1e-12)
+    degree = np.bincount(net.unit_a, minlength=n) + np.bincount(net.unit_b, minlength=n)
     row, col = s.site_coords["row"], s.site_coords["col"]
     ix, iy = s.site_grid()  # grid indices for planners and initial fields: columns and rows
     np.testing.assert_array_equal(ix, col)
@@ -92,7 +93,7 @@ def test_hinged_vertices_meet_at_rest(theta0, make_scene, scene_dict):
     t = 0.05
     scale = math.cos(theta0 + t) / math.cos(theta0) - 1.0
     q[:n], q[n : 2 * n], q[2 * n :] = scale * x, scale * y, t
-    expected = 0.5 * args.hinge_prm[0, 6] * (2 * t) ** 2 * len(args.hinge_a)
+    expected = 0.5 * net.ligaments[0, lg.L_KT] * (2 * t) ** 2 * len(net.unit_a)
     assert s.energy(q, args) == pytest.approx(expected, rel=1e-10)
 
 

@@ -5,6 +5,7 @@ polygon moved rigidly, and the drawn joints give back the model's own energy."""
 import numpy as np
 import pytest
 
+from flexmm.models import ligaments as lg
 from flexmm.models.kernels import kernels_of
 from flexmm.render.api import RenderOptions, still_figure
 from render_helpers import build, polygons, random_fields, write_run
@@ -79,15 +80,9 @@ def test_drawn_joints_give_the_model_energy(example_lattice, tmp_path):
     _, rest_segs = drawn(tmp_path / "a", lattice, system, fields, 0)
     _, segs = drawn(tmp_path / "b", lattice, system, fields, 1)
     sc, n = system.scales, system.n_sites
-    args = system.args
-    if hasattr(args, "ligaments"):
-        from flexmm.models import ligaments as lg
-        e = args.ligaments[:, [lg.L_EX, lg.L_EY]]
-        k = args.ligaments[:, [lg.L_KL, lg.L_KS, lg.L_KT]]
-    else:
-        from flexmm.models.hinge import H_KL, H_KS, H_KT
-        e = np.stack([args.axis_cos, args.axis_sin], 1)
-        k = args.hinge_prm[:, [H_KL, H_KS, H_KT]]
+    lig = getattr(system.args, "network", system.args).ligaments  # the triangles' hinges are ligaments
+    e = lig[:, [lg.L_EX, lg.L_EY]]
+    k = lig[:, [lg.L_KL, lg.L_KS, lg.L_KT]]
     g = ((segs[:, 1] - segs[:, 0]) - (rest_segs[:, 1] - rest_segs[:, 0])) / sc.length_m
     nrm = np.stack([-e[:, 1], e[:, 0]], 1)
     phi = system.unit_shapes().rotation_sign * fields["theta"][1][:n]
@@ -95,4 +90,4 @@ def test_drawn_joints_give_the_model_energy(example_lattice, tmp_path):
     dphi = phi[ends[:, 1]] - phi[ends[:, 0]]
     energy = 0.5 * np.sum(k[:, 0] * np.sum(g * e, 1) ** 2 + k[:, 1] * np.sum(g * nrm, 1) ** 2 + k[:, 2] * dphi**2)
     q = np.concatenate([fields[f.name][1] / sc.coordinate(f.kind) for f in system.fields])
-    assert energy == pytest.approx(kernels_of(type(args)).reference(q, args)[0], rel=1e-9)
+    assert energy == pytest.approx(kernels_of(type(system.args)).reference(q, system.args)[0], rel=1e-9)

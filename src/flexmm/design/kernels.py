@@ -10,8 +10,9 @@ and a forward (tangent) step needs (∂F/∂q) dq + (∂F/∂p) dp. Both are wri
 evaluations. Parameters are the model's two tables (``param_tables``): for ``ChainArgs`` the
 hinge table (H, 7) and the site table (N, 3) of ``models.hinge``; for ``SheetArgs`` the hinge
 table and θ0 (N,) (with dipoles, joints or loads a longer vector: ``kernels_extra``, which also
-describes the tables of loaded chains, rotating triangles and harmonic oscillators); for ``MassArgs`` the bond and on-site law rows (B, 9), (S, 9) of
-``models.laws``. Columns that are not continuous (the hinge
+describes the tables of loaded chains and harmonic oscillators); for ``MassArgs`` the bond and
+on-site law rows (B, 9), (S, 9) of ``models.laws``; for ``NetworkArgs`` and ``TriangleArgs`` the
+ligament and contact tables (``models.ligaments``, ``models.triangle_kernels``). Columns that are not continuous (the hinge
 sign, a tabulated law's start and length) get zero derivatives.
 
 ``model_adjoint(q, args, lam, out, g1, g2)`` adds (∂F/∂q)ᵀλ to ``out`` and (∂F/∂p)ᵀλ to
@@ -34,8 +35,6 @@ from flexmm._trig import sincos
 from flexmm.design.kernels_extra import (
     add_to_ends,
     dipoles_second,
-    fields,
-    from_frame,
     harmonic_adjoint,
     harmonic_pack,
     harmonic_tangent,
@@ -49,7 +48,6 @@ from flexmm.design.kernels_extra import (
     sheet_offsets,
     sheet_pack,
     sheet_unpack,
-    triangle_frame,
     unit_angles,
 )
 from flexmm.models.laws import law_second
@@ -81,7 +79,7 @@ from flexmm.models.ligaments import NetworkArgs, network_adjoint, network_pack, 
 from flexmm.models.loads import LoadedChainArgs
 from flexmm.models.mass_kernels import MassArgs
 from flexmm.models.sheet_kernels import SheetArgs
-from flexmm.models.triangle_kernels import TriangleArgs
+from flexmm.models.triangle_kernels import TriangleArgs, triangle_adjoint, triangle_pack, triangle_tangent, triangle_unpack
 
 # ---------------------------------------------------------------- rotating-squares chain
 
@@ -958,55 +956,6 @@ def loaded_chain_tangent(q, args, dq, d1, d2, out):
     loads_tangent(args[1], d2, 3 * n, out)
 
 
-# Rotating triangles: the squares' hinge in each hinge's frame (``kernels_extra.triangle_frame``).
-
-
-@jit
-def triangle_adjoint(q, args, lam, out, g1, g2):
-    """(∂F/∂q)ᵀλ added to ``out``, (∂F/∂p)ᵀλ to g1 (hinge table) and g2 (θ0).
-
-    One loop over the hinges: q and λ into the hinge's frame (``kernels_extra.triangle_frame``),
-    ``hinge_second`` on scalars, its products back (``from_frame``); fields as views, unit
-    indices unsigned (no negative-index wraparound).
-    """
-    ha, hb, ec, es, hprm, theta0 = args[0], args[1], args[2], args[3], args[4], args[5]
-    n = theta0.shape[0]
-    cs, sn = np.empty(n), np.empty(n)
-    unit_angles(q, theta0, cs, sn)
-    (u, v, t), (lu, lv, lt), (ou, ov, ot) = fields(q, n), fields(lam, n), fields(out, n)
-    hf = hprm.ravel()
-    for h in range(ha.shape[0]):
-        a, b, c, s, dlq, dsq, dll, dsl = triangle_frame(ha, hb, ec, es, u, v, lu, lv, h)
-        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
-        pl, pss, d_ta, d_tb, d_t0a, d_t0b, g_ha, g_hb, g_kl, g_ks, g_kt = hinge_second(
-            dlq, dsq, t[a] + t[b], dll, dsl, lt[a], lt[b], rest, hA, hB, sig, kl, ks, kt, cs[a], sn[a], cs[b], sn[b])
-        from_frame(ou, ov, ot, a, b, c, s, pl, pss, d_ta, d_tb)
-        add_hinge_grads(g1, h, pl, g_ha, g_hb, g_kl, g_ks, g_kt)
-        g2[a] -= d_t0a
-        g2[b] -= d_t0b
-
-
-@jit
-def triangle_tangent(q, args, dq, d1, d2, out):
-    """(∂F/∂q) dq + (∂F/∂p)(d1, d2) into ``out`` (d1: hinge table, d2: θ0 directions)."""
-    ha, hb, ec, es, hprm, theta0 = args[0], args[1], args[2], args[3], args[4], args[5]
-    n = theta0.shape[0]
-    for k in range(out.shape[0]):
-        out[k] = 0.0
-    cs, sn = np.empty(n), np.empty(n)
-    unit_angles(q, theta0, cs, sn)
-    (u, v, t), (du, dv, dt), (ou, ov, ot) = fields(q, n), fields(dq, n), fields(out, n)
-    hf, df = hprm.ravel(), d1.ravel()
-    for h in range(ha.shape[0]):
-        a, b, c, s, dlq, dsq, ddl, dds = triangle_frame(ha, hb, ec, es, u, v, du, dv, h)
-        rest, hA, hB, sig, kl, ks, kt = hinge_row(hf, h)
-        drest, dhA, dhB, _, dkl, dks, dkt = hinge_row(df, h)
-        d_fl, d_fs, d_ga, d_gb = hinge_tangent_terms(
-            dlq, dsq, t[a] + t[b], ddl, dds, dt[a], dt[b], d2[a], d2[b], rest, hA, hB, sig, kl, ks, kt, drest, dhA, dhB,
-            dkl, dks, dkt, cs[a], sn[a], cs[b], sn[b])
-        from_frame(ou, ov, ot, a, b, c, s, d_fl, d_fs, d_ga, d_gb)
-
-
 # ---------------------------------------------------------------- dispatch
 
 
@@ -1030,7 +979,7 @@ ADJOINT_KERNELS: dict[type, AdjointKernels] = {
     SheetArgs: AdjointKernels(sheet_full_adjoint, sheet_full_tangent, pack=sheet_pack, unpack=sheet_unpack),
     LoadedChainArgs: AdjointKernels(loaded_chain_adjoint, loaded_chain_tangent, pack=loaded_chain_pack,
                                     unpack=loaded_chain_unpack),
-    TriangleArgs: AdjointKernels(triangle_adjoint, triangle_tangent, ("hinge_prm", "theta0")),
+    TriangleArgs: AdjointKernels(triangle_adjoint, triangle_tangent, pack=triangle_pack, unpack=triangle_unpack),
     HarmonicArgs: AdjointKernels(harmonic_adjoint, harmonic_tangent, pack=harmonic_pack, unpack=harmonic_unpack),
     NetworkArgs: AdjointKernels(network_adjoint, network_tangent, pack=network_pack, unpack=network_unpack),
 }

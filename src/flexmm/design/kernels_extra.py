@@ -8,8 +8,6 @@ tangent kernels (``kernels.model_adjoint``/``model_tangent``) of:
   (``models.joints``: ``joints_adjoint``) and constant loads (``models.loads``: ``loads_adjoint``);
 - the loaded rotating-squares chain (``LoadedChainArgs``, ``models.predeform``): the chain's
   kernels plus constant loads;
-- rotating triangles (``TriangleArgs``): the squares' hinge law in each hinge's own frame
-  (``triangle_frame``, ``from_frame``);
 - independent harmonic oscillators (``HarmonicArgs``: ``harmonic_adjoint``, here in full).
 
 Each element's second derivatives are the directional derivative of its gradient (forward
@@ -27,7 +25,6 @@ Parameter tables (``gradient.Raw.t1``, ``t2``; the ``*_pack``/``*_unpack`` funct
   t2 is θ0, as for the hinge-only sheet. Not differentiated: the magnets' directions (the faces'
   normals) and the checkerboard signs.
 - loaded chain: t1 the hinge table; t2 the site table (N × 3, row-major) then the loads' values.
-- triangles: t1 the hinge table, t2 θ0 (the hinge axes are the lattice's geometry: fixed).
 - harmonic: t1 the stiffnesses, t2 empty.
 """
 
@@ -342,23 +339,7 @@ def loaded_chain_unpack(args: LoadedChainArgs, t1: np.ndarray, t2: np.ndarray) -
     return LoadedChainArgs(chain, (args.loads[0], t2[sprm.size :].copy()))
 
 
-# ---------------------------------------------------------------- rotating triangles
-#
-# A triangle hinge is the squares' hinge in its own frame: d_l = e·Δx, d_s = n·Δx (e = (c, s)
-# the hinge axis, n = (−s, c), Δx = x_B − x_A). Its energy is Ẽ(L q) with L linear (q to the
-# local coordinates (d_l, d_s, θ_A, θ_B): ``to_frame``), so the Hessian-vector product is
-# Lᵀ ∇²Ẽ (L λ): ``kernels.hinge_second`` on the local coordinates of q and λ, rotated back
-# (``from_frame``).
-
-
-@jit
-def to_frame(xu, xv, a, b, c, s):
-    """(e·Δx, n·Δx) across a triangle hinge from unit a to b with axis e = (c, s), n = (−s, c):
-    Δx = (xu[b] − xu[a], xv[b] − xv[a]) the relative displacement of q, λ or δq (xu, xv: its
-    x and y fields, (N,)), along and across the hinge."""
-    dx = xu[b] - xu[a]
-    dy = xv[b] - xv[a]
-    return c * dx + s * dy, c * dy - s * dx
+# ---------------------------------------------------------------- rigid units' helpers
 
 
 @jit
@@ -372,44 +353,17 @@ def unit_angles(q, theta0, cs, sn):
 
 
 @jit
-def triangle_frame(ha, hb, ec, es, u, v, xu, xv, h):
-    """Triangle hinge h: its units a, b (unsigned), axis (c, s), and the relative displacements
-    along and across it of q (fields u, v) and of x (λ or δq: xu, xv) (``to_frame``)."""
-    a = np.uint64(ha[h])
-    b = np.uint64(hb[h])
-    c, s = ec[h], es[h]
-    dlq, dsq = to_frame(u, v, a, b, c, s)
-    dlx, dsx = to_frame(xu, xv, a, b, c, s)
-    return a, b, c, s, dlq, dsq, dlx, dsx
-
-
-@jit
 def add_to_ends(o_l, o_s, o_t, la, lb, sa, sb, ta, tb, fl, fs, ga, gb):
     """A hinge's derivatives (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, on its units'
     DOFs: +fl at o_l[la], −fl at o_l[lb], +fs at o_s[sa], −fs at o_s[sb], −ga at o_t[ta], −gb at
     o_t[tb] (d_l = x_B − x_A along the axis, d_s across; the sheet's hinges pass ``out`` thrice
-    with DOF indices, the triangles' the fields with unit indices: ``from_frame``)."""
+    with DOF indices)."""
     o_l[la] += fl
     o_l[lb] -= fl
     o_s[sa] += fs
     o_s[sb] -= fs
     o_t[ta] -= ga
     o_t[tb] -= gb
-
-
-@jit
-def from_frame(ou, ov, ot, a, b, c, s, fl, fs, ga, gb):
-    """Add Lᵀ(−fl, −fs, −ga, −gb) to the output's fields ou, ov, ot (x, y, θ; (N,)): a
-    hinge-frame derivative (fl, fs, ga, gb) along (d_l, d_s, θ_A, θ_B), negated, taken back
-    to the units — +(c fl − s fs, s fl + c fs) at unit a, the opposite at b, −ga, −gb at
-    their rotations (the force's pattern, ``triangle_kernels``)."""
-    add_to_ends(ou, ov, ot, a, b, a, b, a, b, c * fl - s * fs, s * fl + c * fs, ga, gb)
-
-
-@jit
-def fields(x, n):
-    """The three fields (u, v, θ) of a sheet's or triangles' state-like vector x (3N) as views."""
-    return x[:n], x[n : 2 * n], x[2 * n : 3 * n]
 
 
 # ---------------------------------------------------------------- harmonic oscillators

@@ -217,15 +217,15 @@ def unit_field(design: Design, var: Variable, vals: np.ndarray) -> np.ndarray | 
     if var.profile != "each" or lattice.get("kind") != "rotating_squares_sheet":
         return None
     from flexmm.config.rigid import SITE_TARGETS
-    from flexmm.render.params import rigid_params
+    from flexmm.models.rotating_sheet import lattice_hinges
 
     rows, cols = int(lattice["n_rows"]), int(lattice["n_cols"])
     vals = np.asarray(vals, float)
     if var.target in SITE_TARGETS:
         return vals.reshape(rows, cols)
 
-    rp = rigid_params(scene_from_dict(design.base, source=design.source, base_dir=design.base_dir).lattice)
-    ends = np.concatenate([rp.hinge_a, rp.hinge_b])
+    ha, hb, _, _ = lattice_hinges(scene_from_dict(design.base, source=design.source, base_dir=design.base_dir).lattice)
+    ends = np.concatenate([ha, hb])
     total = np.bincount(ends, np.concatenate([vals, vals]), rows * cols)
     return (total / np.maximum(np.bincount(ends, minlength=rows * cols), 1)).reshape(rows, cols)
 
@@ -256,10 +256,10 @@ def target_elements(lattice) -> dict[str, int]:
         return {k: v.size for k, v in mass_element_values(lattice, build_topology(lattice)).items()}
     if lattice.kind in ("rotating_squares_chain", "rotating_squares_sheet"):
         from flexmm.config.rigid import HINGE_TARGETS, SITE_TARGETS
-        from flexmm.render.params import rigid_params
+        from flexmm.models.rotating_sheet import lattice_hinges
 
-        rp = rigid_params(lattice)
-        return {t: getattr(rp, t).size for t in SITE_TARGETS + HINGE_TARGETS}
+        n_hinges = lattice_hinges(lattice)[0].size
+        return {t: lattice.n_units for t in SITE_TARGETS} | {t: n_hinges for t in HINGE_TARGETS}
     return {}
 
 

@@ -466,7 +466,7 @@ def network_reference(q: np.ndarray, args: tuple) -> tuple[float, np.ndarray]:
     def cross(v, w):  # v·J w = v_y w_x − v_x w_y
         return v[1] * w[0] - v[0] * w[1]
 
-    f = np.zeros(3 * n)
+    f = np.zeros(3 * n, np.result_type(q, lig))  # complex for a complex step
     for dim in range(2):
         np.add.at(f, dim * n + ua, grad[dim])
         np.add.at(f, dim * n + ub, -grad[dim])

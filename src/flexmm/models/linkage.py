@@ -35,7 +35,7 @@ def joint_stiffness(released_energy: float, switch: float, beta: float) -> float
 def build(cfg) -> System:
     """The linkage as a System (a two-row rotating_sheet with pins and bistable joints)."""
     from flexmm.models.sheet_kernels import SheetArgs
-    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hinge_pairs, hold_fixed_ends,
+    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hold_fixed_ends, lattice_hinges,
                                               hinge_table, sheet_shapes)
     from flexmm.models.magnets import empty_dipoles
     from flexmm.models.loads import empty_loads
@@ -45,7 +45,7 @@ def build(cfg) -> System:
     n = 2 * nc
     J = cfg.inertia_kg_m2 if cfg.inertia_kg_m2 is not None else m * L * L / 12
     scales = Scales(L, math.sqrt(m / cfg.k_pin_n_per_m), m)
-    ha, hb, hax = hinge_pairs(2, nc, False, False)
+    ha, hb, hax, _ = lattice_hinges(cfg)
     sigma = checkerboard(2, nc)
     theta0 = np.full(n, cfg.theta0_rad)
     hprm = hinge_table(ha, hb, hax, sigma, theta0, 0.5, 0.5, 0.0, 1.0, 1.0, 0.0)

@@ -97,7 +97,7 @@ def kagome_geometry(cfg: RigidNetwork):
     centroids and hinges), or of regular hexagons of side a on the same sites whose alternate
     vertices are those triangles' (side √3 a): (N, 3 or 6, 2) vertices in units of a, and the links —
     each hinge joins the linked vertex of A and that of B that point along its axis at rest."""
-    from flexmm.models.rotating_triangles import HALF, centroids, kagome_hinges, sublattice_sign
+    from flexmm.models.rotating_triangles import HALF, centroids, kagome_hinges, sublattice_sign, vertex_directions
 
     nr, nc, t0 = cfg.n_rows, cfg.n_cols, cfg.theta0_rad
     hexagons = cfg.pattern == "rotating_hexagons"
@@ -106,9 +106,7 @@ def kagome_geometry(cfg: RigidNetwork):
     sigma = sublattice_sign(nr, nc)
     x, y = centroids(nr, nc, t0)
     centres = side * np.stack([x, y], 1)
-    deg = (np.array([90.0, 210.0, 330.0])[:, None] + np.array(step)[None, :]).ravel()
-    ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad(deg)[None, :] + (sigma * t0)[:, None]
-    vertices = centres[:, None, :] + side * HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
+    vertices = centres[:, None, :] + side * HALF * vertex_directions(sigma, t0, step)
     a, b, beta = kagome_hinges(nr, nc, cfg.left == "periodic", cfg.bottom == "periodic")
     axis = np.stack([np.cos(beta), np.sin(beta)], 1)
 

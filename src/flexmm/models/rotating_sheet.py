@@ -28,6 +28,7 @@ from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, RotatingSqua
 from flexmm.models.hinge import (H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN,
                                  N_HINGE_PARAMS)
 from flexmm.models.joints import empty_joints
+from flexmm.models.rotating_chain import hinge_pairs as chain_hinge_pairs
 from flexmm.models.magnets import MU0_OVER_4PI, empty_dipoles, face_magnets
 from flexmm.models.loads import empty_loads
 from flexmm.models.sheet_kernels import SheetArgs
@@ -67,6 +68,20 @@ def hinge_pairs(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, sk
     b = np.concatenate([b_h, b_v]).astype(np.int64)
     axis = np.concatenate([np.zeros(a_h.size), np.ones(a_v.size)]).astype(np.int64)
     return a, b, axis
+
+
+def lattice_hinges(lat) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(a, b, axis, wrap) of the hinges of a rotating-squares chain or sheet or a linkage config, in
+    the builder's order (its own ``hinge_pairs``); ``wrap`` marks the periodic wraps (b before a)."""
+    if lat.kind == "rotating_squares_chain":
+        a, b = chain_hinge_pairs(lat.n_units, lat.left == "periodic")
+        axis = np.zeros(a.size, np.int64)
+    elif lat.kind == "bistable_linkage":
+        a, b, axis = hinge_pairs(2, lat.n_cols, False, False)
+    else:
+        a, b, axis = hinge_pairs(lat.n_rows, lat.n_cols, lat.left == "periodic", lat.bottom == "periodic",
+                                 lat.skew_cols)
+    return a, b, axis, b <= a
 
 
 def magnet_pairs(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, h: float):
@@ -123,7 +138,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
     m, J, kl, a = cfg.unit_mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
     scales = Scales(a, math.sqrt(m / kl), m)
     px, py = cfg.left == "periodic", cfg.bottom == "periodic"
-    ha, hb, hax = hinge_pairs(nr, nc, px, py, cfg.skew_cols)
+    ha, hb, hax, _ = lattice_hinges(cfg)
     row, col = np.divmod(np.arange(n), nc)
     base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": J, "k_long_n_per_m": kl,
             "k_shear_n_per_m": cfg.k_shear_n_per_m, "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}

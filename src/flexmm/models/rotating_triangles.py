@@ -20,8 +20,9 @@ import numpy as np
 
 from flexmm.config.triangles import RotatingTrianglesChain, RotatingTrianglesSheet
 from flexmm.models.base import FieldSpec, System, UnitShapes
+from flexmm.models.rotating_sheet import checkerboard as sublattice_sign  # σ = +1: the triangle points up
 from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
-from flexmm.models.hinge import H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN, N_HINGE_PARAMS
+from flexmm.models import ligaments as lg
 from flexmm.models.triangle_kernels import TriangleArgs
 from flexmm.models.variation import parameter_arrays
 from flexmm.units import Scales
@@ -66,12 +67,6 @@ def kagome_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool):
     return a, b, beta
 
 
-def sublattice_sign(n_rows: int, n_cols: int) -> np.ndarray:
-    """σ = (−1)^(row+col) per site (+1: the triangle points up), shape (n_rows·n_cols,)."""
-    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
-    return np.where((r + c) % 2 == 0, 1.0, -1.0)
-
-
 def centroids(n_rows: int, n_cols: int, theta0: float) -> tuple[np.ndarray, np.ndarray]:
     """Rest centroid positions (x, y) (N,) in units of a."""
     r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
@@ -81,18 +76,27 @@ def centroids(n_rows: int, n_cols: int, theta0: float) -> tuple[np.ndarray, np.n
 
 def triangle_args(n_rows: int, n_cols: int, theta0: float, Ks: float, Ktheta: float,
                   periodic_x: bool, periodic_y: bool) -> TriangleArgs:
-    """Connectivity and parameter tables (nondimensional, a = 1, k_l = 1)."""
+    """Connectivity and ligament table (nondimensional, a = 1, k_l = 1): hinge h joins the vertex
+    r_A = h R(σ_A θ0) e of triangle A to r_B = −h R(σ_B θ0) e of B (e its axis, σ_B = −σ_A), rest
+    offset D e with D = 2h cos θ0 the centroids' distance (``triangle_kernels``)."""
     a, b, beta = kagome_hinges(n_rows, n_cols, periodic_x, periodic_y)
     n = n_rows * n_cols
-    hprm = np.empty((a.size, N_HINGE_PARAMS))
-    hprm[:, H_REST] = 2.0 * HALF * math.cos(theta0)
-    hprm[:, H_HALF_A] = HALF
-    hprm[:, H_HALF_B] = HALF
-    hprm[:, H_SIGN] = sublattice_sign(n_rows, n_cols)[a]
-    hprm[:, H_KL] = 1.0
-    hprm[:, H_KS] = Ks
-    hprm[:, H_KT] = Ktheta
-    return TriangleArgs(a, b, np.cos(beta), np.sin(beta), hprm, np.full(n, float(theta0)), np.zeros(n), np.zeros(n))
+    sigma = sublattice_sign(n_rows, n_cols)
+    e = np.stack([np.cos(beta), np.sin(beta)], 1)
+    rest = 2.0 * HALF * math.cos(theta0)
+    lig = np.zeros((a.size, lg.N_LIGAMENT_PARAMS))
+    lig[:, [lg.L_AX, lg.L_AY]] = turned(HALF * e, sigma[a] * theta0)
+    lig[:, [lg.L_BX, lg.L_BY]] = turned(-HALF * e, sigma[b] * theta0)
+    lig[:, [lg.L_OX, lg.L_OY]] = rest * e
+    lig[:, [lg.L_EX, lg.L_EY]] = e
+    lig[:, lg.L_KL], lig[:, lg.L_KS], lig[:, lg.L_KT], lig[:, lg.L_LEN] = 1.0, Ks, Ktheta, rest
+    return TriangleArgs(lg.NetworkArgs(a, b, lig, np.zeros(n), np.zeros(n)), sigma)
+
+
+def turned(vec: np.ndarray, phi) -> np.ndarray:
+    """R(φ) v for rows v of ``vec`` (k, 2), φ (k,) or a scalar."""
+    c, s = np.cos(phi), np.sin(phi)
+    return np.stack([c * vec[:, 0] - s * vec[:, 1], s * vec[:, 0] + c * vec[:, 1]], 1)
 
 
 def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
@@ -106,16 +110,18 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
         m, J, kl, a = cfg.mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
         base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": J, "k_long_n_per_m": kl,
                 "k_shear_n_per_m": cfg.k_shear_n_per_m, "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}
-        units, hinges = parameter_arrays(base, cfg.variation, col, row, args.hinge_a, args.hinge_b)
+        net = args.network
+        units, hinges = parameter_arrays(base, cfg.variation, col, row, net.unit_a, net.unit_b)
         mass = np.concatenate([units["mass_kg"] / m, units["mass_kg"] / m, units["inertia_kg_m2"] / (m * a**2)])
-        args.hinge_prm[:, H_KL] = hinges["k_long_n_per_m"] / kl
-        args.hinge_prm[:, H_KS] = hinges["k_shear_n_per_m"] / kl
-        args.hinge_prm[:, H_KT] = hinges["k_rot_n_m_per_rad"] / (kl * a**2)
+        net.ligaments[:, lg.L_KL] = hinges["k_long_n_per_m"] / kl
+        net.ligaments[:, lg.L_KS] = hinges["k_shear_n_per_m"] / kl
+        net.ligaments[:, lg.L_KT] = hinges["k_rot_n_m_per_rad"] / (kl * a**2)
     inv_mass = 1.0 / mass
     hold_fixed_ends(cfg, inv_mass, ends, n)
     a = cfg.a_m
     x, y = centroids(n_rows, n_cols, cfg.theta0_rad)
-    rows = np.flatnonzero(args.axis_sin < 1.0)  # the hinges along the rows (not the vertical ones)
+    net = args.network
+    rows = np.flatnonzero(net.ligaments[:, lg.L_EY] < 1.0)  # the hinges along the rows (not the vertical ones)
     return System(
         model=cfg.kind, fields=FIELDS, n_sites=n,
         scales=Scales(a, math.sqrt(cfg.mass_kg / cfg.k_long_n_per_m), cfg.mass_kg),
@@ -127,28 +133,29 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
         end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
         grid_shape=(n_rows, n_cols) if n_rows > 1 else None,
         site_coord_attrs=COORD_ATTRS if n_rows > 1 else {},
-        neighbour_pairs=np.stack([args.hinge_a[rows], args.hinge_b[rows]], 1),
-        shapes=shapes(args, sublattice_sign(n_rows, n_cols), np.stack([x, y], 1)),
+        neighbour_pairs=np.stack([net.unit_a[rows], net.unit_b[rows]], 1),
+        shapes=shapes(args, cfg.theta0_rad, np.stack([x, y], 1)),
     )
 
 
-def shapes(args, sigma: np.ndarray, centres: np.ndarray) -> UnitShapes:
+def vertex_directions(sigma: np.ndarray, theta0: float, step=(0.0,)) -> np.ndarray:
+    """Unit vectors (N, 3·len(step), 2) from each centroid to its triangle's vertices: 90°, 210°, 330°
+    (each plus every angle of ``step``, degrees) pointing up (σ = +1), 270°, 30°, 150° pointing down,
+    turned by σθ0."""
+    deg = (np.array([90.0, 210.0, 330.0])[:, None] + np.array(step)[None, :]).ravel()
+    ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad(deg)[None, :] + (sigma * theta0)[:, None]
+    return np.stack([np.cos(ang), np.sin(ang)], -1)
+
+
+def shapes(args: TriangleArgs, theta0: float, centres: np.ndarray) -> UnitShapes:
     """The triangles (vertices at 90°, 210°, 330° from the centroid pointing up, 270°, 30°, 150°
-    pointing down, turned by σθ0) and their hinges' points r_A = h_A R(σ_A θ0) e,
-    r_B = −h_B R(σ_B θ0) e (e the hinge axis), as ``triangle_kernels`` places them; a periodic
-    wrap's hinge (its points far apart in the reference configuration) is left out of the drawing."""
-    phi0 = sigma * args.theta0
-    ang = np.where(sigma[:, None] > 0, 0.0, math.pi) + np.deg2rad([90.0, 210.0, 330.0])[None, :] + phi0[:, None]
-    vertices = HALF * np.stack([np.cos(ang), np.sin(ang)], -1)
-    e = np.stack([args.axis_cos, args.axis_sin], 1)
-
-    def turned(vec, phi):
-        c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
-        return np.concatenate([c * vec[:, :1] - s * vec[:, 1:], s * vec[:, :1] + c * vec[:, 1:]], 1)
-
-    ha, hb, hprm = args.hinge_a, args.hinge_b, args.hinge_prm
-    r_a = turned(hprm[:, H_HALF_A, None] * e, phi0[ha])
-    r_b = turned(-hprm[:, H_HALF_B, None] * e, phi0[hb])
+    pointing down, turned by σθ0) and their hinges' points (the ligament table's r_A, r_B); a
+    periodic wrap's hinge (its points far apart in the reference configuration) is left out of
+    the drawing."""
+    sigma, net = args.sigma, args.network
+    vertices = HALF * vertex_directions(sigma, theta0)
+    ha, hb, lig = net.unit_a, net.unit_b, net.ligaments
+    r_a, r_b = lig[:, [lg.L_AX, lg.L_AY]], lig[:, [lg.L_BX, lg.L_BY]]
     drawn = np.hypot(*(centres[hb] + r_b - centres[ha] - r_a).T) < 1e-9  # the periodic wraps are not drawn
     return UnitShapes(centres, vertices, sigma.copy(), np.stack([ha, hb], 1)[drawn],
                       np.stack([r_a, r_b], 1)[drawn])

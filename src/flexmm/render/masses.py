@@ -1,8 +1,8 @@
 """Chains, networks and grids of masses from a run's stored config: layout, parameters, energies.
 
-Sites and bonds follow ``flexmm.models.mass_topology`` (chain: sites in a row; network: branches
-in order, then junctions, bonds along each branch; grid: site i + nx·j, horizontal bonds, then
-vertical). The dataset's ``u`` is the displacement from the initial state; a site's drawn
+Sites and bonds are the model's (``flexmm.models.mass_topology.build_topology``: chain: sites in a
+row; network: branches in order, then junctions, bonds along each branch; grid: site i + nx·j,
+horizontal bonds, then vertical); a ring chain is drawn open. The dataset's ``u`` is the displacement from the initial state; a site's drawn
 position is its rest point plus u along its branch direction (x for chains and grids).
 
 A network has no 2D coordinates of its own; ``network_layout`` places the junctions on a line
@@ -17,10 +17,10 @@ nearest energy minimum, as the model does (``mass_relax.relaxed_initial``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import pairwise
 
 import numpy as np
 
+from flexmm.models.mass_topology import Topology, build_topology
 from flexmm.models.variation import mass_values
 from flexmm.render.laws import barriers, law_energy_j
 from flexmm.render.mass_relax import relaxed_initial
@@ -51,33 +51,6 @@ class MassParams:
         return self.rest_xy.shape[0]
 
 
-def _chain_topology(n: int):
-    i = np.arange(n - 1, dtype=np.int64)
-    return np.stack([i, i + 1], 1), np.stack([i[:-1], i[:-1] + 2], 1) if n > 2 else np.zeros((0, 2), np.int64)
-
-
-def second_neighbours(n: int, bonds: np.ndarray) -> np.ndarray:
-    """(i, k) for every path i → j → k of two oriented bonds (models.mass_topology's order)."""
-    inc = [[] for _ in range(n)]
-    out = [[] for _ in range(n)]
-    for i, j in bonds:
-        out[i].append(int(j))
-        inc[j].append(int(i))
-    return np.array([(i, k) for j in range(n) for i in inc[j] for k in out[j]], np.int64).reshape(-1, 2)
-
-
-def network_groups(lat) -> dict[str, list[int]]:
-    """Sites of each branch and junction (branches in order, then junctions)."""
-    groups, start = {}, 0
-    for b in lat.branches:
-        groups[b.name] = list(range(start, start + b.n_units))
-        start += b.n_units
-    for j in lat.junctions:
-        groups[j.name] = [start]
-        start += 1
-    return groups
-
-
 def _fan(count: int, spread_deg: float = 50.0) -> np.ndarray:
     """Directions (count, 2) fanned symmetrically about +x."""
     if count <= 1:
@@ -86,8 +59,8 @@ def _fan(count: int, spread_deg: float = 50.0) -> np.ndarray:
     return np.stack([np.cos(ang), np.sin(ang)], 1)
 
 
-def network_layout(lat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rest_xy (N, 2), direction (N, 2), bonds (B, 2)) of a mass network, in metres.
+def network_layout(lat, topo: Topology) -> tuple[np.ndarray, np.ndarray]:
+    """(rest_xy (N, 2), direction (N, 2)) of a mass network (its topology ``topo``), in metres.
 
     Junctions sit on the x axis in order of first appearance, (n + 1) spacings apart along the
     branches that join them; branches with a free start fan in from the left of their end
@@ -95,8 +68,7 @@ def network_layout(lat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     branches without junctions are stacked below.
     """
     a = lat.spacing_m
-    groups = network_groups(lat)
-    n = sum(len(s) for s in groups.values())
+    groups, n = topo.groups, topo.n_sites
     xy, dirs = np.zeros((n, 2)), np.tile([1.0, 0.0], (n, 1))
     jpos: dict[str, np.ndarray] = {}
     for b in lat.branches:  # place junctions along junction-to-junction branches
@@ -133,22 +105,7 @@ def network_layout(lat) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         dirs[s] = u
     for j in lat.junctions:
         xy[groups[j.name][0]] = jpos.get(j.name, np.zeros(2))
-    bonds = []
-    for b in lat.branches:
-        path = ([groups[b.start][0]] if b.start else []) + groups[b.name] + ([groups[b.end][0]] if b.end else [])
-        bonds += list(pairwise(path))
-    return xy, dirs, np.array(bonds, np.int64).reshape(-1, 2)
-
-
-def _grid(nx: int, ny: int, a: float):
-    idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
-    h = np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1)
-    v = np.stack([idx[:-1, :].ravel(), idx[1:, :].ravel()], 1)
-    d1 = np.stack([idx[:-1, :-1].ravel(), idx[1:, 1:].ravel()], 1)
-    d2 = np.stack([idx[:-1, 1:].ravel(), idx[1:, :-1].ravel()], 1)
-    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny))
-    xy = np.stack([ii.ravel() * a, jj.ravel() * a], 1).astype(float)
-    return xy, np.concatenate([h, v]), np.concatenate([d1, d2])
+    return xy, dirs
 
 
 def _numeric(law) -> list[tuple[str, float]]:
@@ -162,23 +119,15 @@ def mass_params(lat, rest: tuple[np.ndarray, np.ndarray] | None = None) -> MassP
     positions of the other sites are then NaN. Without it they are relaxed from the config.
     """
     a = lat.spacing_m
-    grid_shape = None
-    if lat.kind == "mass_chain":
-        n = lat.n_units
-        bonds, bonds2 = _chain_topology(n)
-        xy, dirs = np.stack([np.arange(n) * a, np.zeros(n)], 1), np.tile([1.0, 0.0], (n, 1))
-    elif lat.kind == "mass_network":
-        xy, dirs, bonds = network_layout(lat)
-        n = xy.shape[0]
-        bonds2 = second_neighbours(n, bonds)
-    elif lat.kind == "mass_grid":
-        n, grid_shape = lat.nx * lat.ny, (lat.nx, lat.ny)
-        xy, bonds, bonds2 = _grid(lat.nx, lat.ny, a)
-        dirs = np.tile([1.0, 0.0], (n, 1))
-    else:
-        raise ValueError(f"not a mass lattice: {lat.kind!r}")
+    ring = lat.kind == "mass_chain" and lat.left == "periodic"  # drawn open, without its closing bonds
+    topo = build_topology(lat.model_copy(update={"left": "free", "right": "free"}) if ring else lat)
+    n, bonds, bonds2, grid_shape, groups = topo.n_sites, topo.bonds, topo.bonds2, topo.grid_shape, topo.groups
     vals = mass_values(lat, n, bonds, bonds2, grid_shape)
-    groups = network_groups(lat) if lat.kind == "mass_network" else {}
+    if lat.kind == "mass_network":
+        xy, dirs = network_layout(lat, topo)
+    else:
+        xy = np.stack([topo.coords["x"], topo.coords.get("y", np.zeros(n))], 1)
+        dirs = np.tile([1.0, 0.0], (n, 1))
     for j in getattr(lat, "junctions", []):
         if j.mass_kg is not None:
             vals["mass_kg"][groups[j.name][0]] = j.mass_kg

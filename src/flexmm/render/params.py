@@ -2,8 +2,8 @@
 
 The render layer does not rebuild models (docs/architecture.md, layers); what it needs of a lattice
 — rest rotations θ0 per unit, masses and inertias, hinge stiffnesses, the hinge list — is computed
-here from the validated lattice config, following the builders' conventions (site = row · n_cols +
-col, hinges horizontal first then vertical, variations by the models' engine ``models.variation``).
+here from the validated lattice config with the builders' own functions (their hinge lists and
+checkerboard, the linkage's joint stiffness, variations by ``models.variation``).
 ``tests/render/test_energy.py`` checks every array against the built model.
 """
 
@@ -13,6 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.models import rotating_chain
+from flexmm.models.energies import joint_energies
+from flexmm.models.hinge import S_KG, S_KR
+from flexmm.models.linkage import joint_stiffness
+from flexmm.models.rotating_sheet import checkerboard, lattice_hinges
 from flexmm.models.variation import parameter_arrays
 
 
@@ -43,7 +48,8 @@ class RigidParams:
     k_rot_n_m_per_rad: np.ndarray
     ligament_m: float = 0.0
     n_lateral: int = 0
-    lateral_stretch: bool = False
+    #: a chain's lateral hinges as the builder's on-site law: (k_g, k_r) per unit (N, 2) in J, or None
+    lateral_j: np.ndarray | None = None
     #: bistable joints of the linkage: (k J, β, ψ* rad), or None
     joint: tuple[float, float, float] | None = None
     #: face magnets of a sheet: (recess_m, polarity) or None
@@ -53,35 +59,6 @@ class RigidParams:
     def n_units(self) -> int:
         """Number of units."""
         return self.theta0_rad.size
-
-
-def sheet_hinges(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, skew: int = 0):
-    """(a, b, axis, wrap) of a sheet's hinges: horizontal, then vertical, then the wraps' order
-    of the builder (horizontal wraps after the horizontal hinges, vertical after the vertical)."""
-    site = np.arange(n_rows * n_cols).reshape(n_rows, n_cols)
-    a_h, b_h = site[:, :-1].ravel(), site[:, 1:].ravel()
-    w_h = np.zeros(a_h.size, bool)
-    a_v, b_v = site[:-1, :].ravel(), site[1:, :].ravel()
-    w_v = np.zeros(a_v.size, bool)
-    if periodic_x:
-        a_h, b_h = np.concatenate([a_h, site[:, -1]]), np.concatenate([b_h, site[:, 0]])
-        w_h = np.concatenate([w_h, np.ones(n_rows, bool)])
-    if periodic_y:
-        cols = np.arange(n_cols) + skew
-        keep = slice(None) if periodic_x else (cols >= 0) & (cols < n_cols)
-        top, bottom = site[-1, :][keep], site[0, cols % n_cols][keep]
-        a_v, b_v = np.concatenate([a_v, top]), np.concatenate([b_v, bottom])
-        w_v = np.concatenate([w_v, np.ones(top.size, bool)])
-    a = np.concatenate([a_h, a_v]).astype(np.int64)
-    b = np.concatenate([b_h, b_v]).astype(np.int64)
-    axis = np.concatenate([np.zeros(a_h.size, np.int64), np.ones(a_v.size, np.int64)])
-    return a, b, axis, np.concatenate([w_h, w_v])
-
-
-def checkerboard(n_rows: int, n_cols: int) -> np.ndarray:
-    """σ = (−1)^(row+col) per site."""
-    r, c = np.divmod(np.arange(n_rows * n_cols), n_cols)
-    return np.where((r + c) % 2 == 0, 1.0, -1.0)
 
 
 def rigid_params(lat) -> RigidParams | None:
@@ -99,19 +76,19 @@ def _base(lat, mass: float, inertia: float) -> dict:
 
 def _chain(lat) -> RigidParams:
     n = lat.n_units
-    ha = np.arange(n - 1, dtype=np.int64)
+    ha, hb, axis, wrap = lattice_hinges(lat)
     sites, hinges = parameter_arrays(_base(lat, lat.mass_kg, lat.inertia_kg_m2), lat.variation,
-                           np.arange(n), np.zeros(n, np.int64), ha, ha + 1)
+                                     np.arange(n), np.zeros(n, np.int64), ha, hb)
     return RigidParams(
-        lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], np.where(np.arange(n) % 2 == 0, 1.0, -1.0),
-        sites["mass_kg"], sites["inertia_kg_m2"], ha, ha + 1, np.zeros(n - 1, np.int64),
-        np.zeros(n - 1, bool), hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
-        hinges["k_rot_n_m_per_rad"], n_lateral=lat.n_lateral, lateral_stretch=lat.lateral_stretch)
+        lat.kind, 1, n, lat.a_m / 2, sites["theta0_rad"], checkerboard(1, n), sites["mass_kg"],
+        sites["inertia_kg_m2"], ha, hb, axis, wrap, hinges["k_long_n_per_m"], hinges["k_shear_n_per_m"],
+        hinges["k_rot_n_m_per_rad"], n_lateral=lat.n_lateral,
+        lateral_j=rotating_chain.varied_tables(lat)[0].site_prm[:, [S_KG, S_KR]] * lat.k_long_n_per_m * lat.a_m**2)
 
 
 def _sheet(lat) -> RigidParams:
     nr, nc = lat.n_rows, lat.n_cols
-    ha, hb, axis, wrap = sheet_hinges(nr, nc, lat.left == "periodic", lat.bottom == "periodic", lat.skew_cols)
+    ha, hb, axis, wrap = lattice_hinges(lat)
     row, col = np.divmod(np.arange(nr * nc), nc)
     sites, hinges = parameter_arrays(_base(lat, lat.unit_mass_kg, lat.unit_inertia_kg_m2), lat.variation, col, row, ha, hb)
     magnets = None if lat.magnets is None else (lat.magnets.recess_m, lat.magnets.polarity)
@@ -121,18 +98,13 @@ def _sheet(lat) -> RigidParams:
         hinges["k_rot_n_m_per_rad"], ligament_m=lat.ligament_length_m, magnets=magnets)
 
 
-def joint_stiffness_j(released_energy_j: float, switch_rad: float, beta: float) -> float:
-    """k (J) of the linkage's double well from its released energy ΔE = k ψ*⁴ (1 − 2β)/12."""
-    return 12.0 * released_energy_j / (switch_rad**4 * (1.0 - 2.0 * beta))
-
-
 def _linkage(lat) -> RigidParams:
     nc, L, m = lat.n_cols, lat.bar_length_m, lat.mass_kg
     n = 2 * nc
     J = lat.inertia_kg_m2 if lat.inertia_kg_m2 is not None else m * L * L / 12
-    ha, hb, axis, wrap = sheet_hinges(2, nc, False, False)
+    ha, hb, axis, wrap = lattice_hinges(lat)
     switch = 2.0 * (lat.theta_deployed_rad - lat.theta0_rad)
-    k = joint_stiffness_j(lat.released_energy_j, switch, lat.barrier_fraction)
+    k = joint_stiffness(lat.released_energy_j, switch, lat.barrier_fraction)  # in J: ΔE is in J
     nh = ha.size
     return RigidParams(
         lat.kind, 2, nc, L / 2, np.full(n, lat.theta0_rad), checkerboard(2, nc), np.full(n, m), np.full(n, J),
@@ -140,28 +112,22 @@ def _linkage(lat) -> RigidParams:
         joint=(k, lat.barrier_fraction, switch))
 
 
-def joint_energy_j(psi, joint: tuple[float, float, float]):
-    """Double-well energy of a linkage joint, V(ψ) = k [ψ⁴/4 − (1+β)ψ*ψ³/3 + βψ*²ψ²/2] (J)."""
-    k, beta, s = joint
-    return k * (psi**4 / 4 - (1 + beta) * s * psi**3 / 3 + beta * s * s * psi**2 / 2)
+def joint_energy_j(psi, joint: tuple[float, float, float]) -> np.ndarray:
+    """Double-well energy (J) of a linkage joint at ψ (rad; any shape): the model's joint law
+    (``models.joints.joint_law``) with k in J."""
+    psi = np.asarray(psi, float)
+    out = np.empty(psi.size)
+    joint_energies(np.ascontiguousarray(psi.ravel()), np.asarray(joint, float), out)
+    return out.reshape(psi.shape)
 
 
 def lateral_energy_j(p: RigidParams, theta) -> np.ndarray:
-    """Energy of a chain unit's lateral hinges (docs/physics.md §1.1), shape like ``theta``.
-
-    E_v = n_v [¼ s_v k_l a² (cos θ0 − cos(θ0+θ))² + k_θ θ²], with the unit's mean k_l, k_θ of its
-    chain hinges (the builder's convention).
-    """
-    if p.n_lateral == 0:
+    """Energy (J) of a chain unit's lateral hinges (docs/physics.md §1.1), shape like ``theta``:
+    the builder's on-site law ½ k_g (cos θ0 − cos(θ0 + θ))² + ½ k_r θ² on its rows (``lateral_j``)."""
+    if p.n_lateral == 0 or p.lateral_j is None:
         return np.zeros_like(theta)
-    n = p.n_units
-    deg = np.bincount(p.hinge_a, minlength=n) + np.bincount(p.hinge_b, minlength=n)
-    kl = (np.bincount(p.hinge_a, p.k_long_n_per_m, n) + np.bincount(p.hinge_b, p.k_long_n_per_m, n)) / deg
-    kt = (np.bincount(p.hinge_a, p.k_rot_n_m_per_rad, n) + np.bincount(p.hinge_b, p.k_rot_n_m_per_rad, n)) / deg
-    a = 2 * p.half_m
     g = np.cos(p.theta0_rad) - np.cos(p.theta0_rad + theta)
-    return p.n_lateral * (0.25 * float(p.lateral_stretch) * kl * a * a * g * g + kt * theta * theta)
+    return 0.5 * (p.lateral_j[:, 0] * g * g + p.lateral_j[:, 1] * theta * theta)
 
 
-__all__ = ["RigidParams", "checkerboard", "joint_energy_j", "joint_stiffness_j", "lateral_energy_j",
-           "rigid_params", "sheet_hinges"]
+__all__ = ["RigidParams", "joint_energy_j", "lateral_energy_j", "rigid_params"]
