@@ -140,6 +140,8 @@ def _launch(system: System, scene, spec) -> tuple[np.ndarray, np.ndarray]:
         return lc.toda_soliton(lat, spec.kappa, spec.center_site, spec.direction)
     if spec.kind == "sech2_pulse":
         return lc.sech2_pulse(lat, spec.strain, spec.center_site, spec.direction)
+    if spec.kind == "fpu_beta_pulse":
+        return lc.fpu_beta_pulse(lat, spec.strain, spec.center_site, spec.direction)
     vis = scene.damping.viscous
     eta = vis.coefficient_n_s_per_m if vis is not None else None
     return lc.tanh_front(lat, eta, spec.center_site, spec.direction, static=spec.speed == "static")

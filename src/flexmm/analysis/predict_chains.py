@@ -27,6 +27,15 @@ def softening_pulse(p_meas, k1: float, k2: float, m: float, a: float) -> list[Co
     ]
 
 
+def fpu_beta_pulse(p_meas, k1: float, k3: float, m: float, a: float) -> list[Comparison]:
+    """sech (mKdV) solitary wave of T(D) = k1 D + k3 D³: speed and W at the measured strain peak."""
+    v, W = th.fpu_beta_solitary_wave(k1, k3, p_meas.amplitude * a, m, a)
+    return [
+        Comparison("", "speed", p_meas.speed_m_s, v, "m/s", "FPU-β (mKdV) v = c0 sqrt(1 + k3Dm²/(2k1))"),
+        Comparison("", "width W (sech fit)", p_meas.width_sech_m, W * a, "m", "W = sqrt(k1/(6k3))/|Dm| sites"),
+    ]
+
+
 def hertz_pulse(p_meas, A: float, m: float, D: float) -> list[Comparison]:
     """Nesterenko solitary wave: speed at the measured compressive strain peak ξ_m = −strain."""
     xi = -p_meas.amplitude
@@ -142,6 +151,8 @@ def pulse(ctx, p_meas) -> list[Comparison]:
         raise ValueError("no solitary-wave relation for this chain or field")
     if bond.law == "polynomial" and bond.k3_n_per_m3 == 0 and bond.k2_n_per_m2 != 0:
         return softening_pulse(p_meas, bond.k1_n_per_m, bond.k2_n_per_m2, m, a)
+    if bond.law == "polynomial" and bond.k2_n_per_m2 == 0 and bond.k3_n_per_m3 > 0:
+        return fpu_beta_pulse(p_meas, bond.k1_n_per_m, bond.k3_n_per_m3, m, a)
     if bond.law == "hertz" and bond.exponent == 1.5:
         xi_0 = rest_overlap(ctx, lat) / a
         if xi_0 > 0:  # a precompressed chain: not the sonic vacuum

@@ -210,6 +210,15 @@ class Sech2Pulse(Strict):
     direction: Literal[1, -1] = 1
 
 
+class FpuBetaPulse(Strict):
+    """The long-wave sech (mKdV) solitary wave of an FPU-β (k1, k3 > 0, k2 = 0) polynomial bond (§2)."""
+
+    kind: Literal["fpu_beta_pulse"]
+    strain: Finite = Field(description="peak bond strain D_m/a (either sign); width sqrt(k1/(6 k3))/|D_m| sites")
+    center_site: Finite
+    direction: Literal[1, -1] = 1
+
+
 class TanhFront(Strict):
     """The damped bistable front (L/2)(1 − tanh((x − X)/w)) of a bistable_cubic chain (§2), moving at
     its predicted speed; ``speed: static`` places the kink (a saddle) at rest."""
@@ -220,7 +229,7 @@ class TanhFront(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
-Launch = Annotated[Union[TodaSoliton, Sech2Pulse, TanhFront], Field(discriminator="kind")]
+Launch = Annotated[Union[TodaSoliton, Sech2Pulse, FpuBetaPulse, TanhFront], Field(discriminator="kind")]
 
 
 class Pin(Strict):

@@ -4,6 +4,7 @@ Each launcher returns SI displacements and velocities of the chain's sites (n,) 
 
 - ``toda_soliton``: the exact Toda soliton of bond stretch r_n, with its exact velocity field;
 - ``sech2_pulse``: the long-wave sech² solitary wave of a polynomial bond k1 D + k2 D²;
+- ``fpu_beta_pulse``: the long-wave sech (mKdV) solitary wave of an FPU-β bond k1 D + k3 D³;
 - ``tanh_front``: the damped bistable front (L/2)(1 − tanh((x − X)/w)) of a bistable_cubic
   on-site term with linear coupling, at its predicted speed (or at rest: the kink saddle).
 
@@ -72,6 +73,18 @@ def sech2_pulse(lat, strain: float, center_site: float, direction: int) -> tuple
     D = strain * a * _sech2(z)
     dDdz = -2 * D * np.tanh(z)
     return _from_bonds(D, dDdz * (-direction * wave.v / (a * wave.W)), direction)
+
+
+def fpu_beta_pulse(lat, strain: float, center_site: float, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """Long-wave solitary wave D_n = D_m sech((n − n0)/W) of T(D) = k1 D + k3 D³, moving at v."""
+    bond, a, m, n = _chain(lat, "polynomial")
+    if lat.onsite or bond.k2_n_per_m2 != 0 or bond.offset_m != 0:
+        raise ValueError("the FPU-β wave needs a polynomial bond k1 D + k3 D³ (k2 = 0) and no on-site terms")
+    v, W = th.fpu_beta_solitary_wave(bond.k1_n_per_m, bond.k3_n_per_m3, strain * a, m, a)
+    z = (np.arange(n - 1) + 0.5 - center_site) / W
+    D = strain * a / np.cosh(np.clip(z, -700, 700))
+    dDdz = -D * np.tanh(z)
+    return _from_bonds(D, dDdz * (-direction * v / (a * W)), direction)
 
 
 def tanh_front(lat, eta: float | None, center_site: float, direction: int,

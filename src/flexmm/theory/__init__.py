@@ -12,6 +12,7 @@ from flexmm.theory.chains import (
     bistable_front_profile,
     evanescent_decay,
     front_kinetic_energy,
+    fpu_beta_solitary_wave,
     linear_chain_band,
     linear_chain_cutoff_frequency,
     linear_chain_dispersion,
@@ -65,5 +66,5 @@ __all__ = [
     "nesterenko_precompressed_speed", "nesterenko_profile", "nesterenko_speed", "nesterenko_speed_from_force", "nesterenko_support",
     "omega_max_chain", "rotational_cutoff_speed", "softening_profile", "softening_solitary_wave",
     "soliton_amplitude", "soliton_exists", "soliton_initial_state", "soliton_profile",
-    "soliton_speed", "soliton_width", "toda_soliton", "toda_speed",
+    "fpu_beta_solitary_wave", "soliton_speed", "soliton_width", "toda_soliton", "toda_speed",
 ]

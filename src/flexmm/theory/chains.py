@@ -114,6 +114,22 @@ def softening_profile(n, t, Dm: float, v: float, W: float, a: float = 1.0):
     return Dm * _sech2(z)
 
 
+# ---------------------------------------------------------------- FPU-β chain (mKdV)
+def fpu_beta_solitary_wave(k1: float, k3: float, Dm: float, m: float = 1.0, a: float = 1.0) -> tuple[float, float]:
+    """Speed v (length/time) and width W (sites) of the solitary wave D = Dm sech((n − vt/a)/W) of
+    T(D) = k1 D + k3 D³ (docs/physics.md §2).
+
+    Same Boussinesq limit as ``softening_solitary_wave``: (k1/12) D'' = (m v²/a² − k1) D − k3 D³,
+    solved by sech with W = sqrt(k1/(6 k3))/|Dm| sites and v = c0 sqrt(1 + k3 Dm²/(2 k1)) (the
+    mKdV soliton to first order in k3 Dm²/k1). Needs k3 > 0 (hardening); either polarity; W >> 1.
+    """
+    if k1 <= 0 or m <= 0 or a <= 0 or Dm == 0:
+        raise ValueError("need k1, m, a > 0 and Dm != 0")
+    if not k3 > 0:
+        raise ValueError(f"no bright solitary wave of T = k1 D + k3 D³ with k3 = {k3} (needs k3 > 0)")
+    return a * math.sqrt(k1 / m) * math.sqrt(1 + k3 * Dm**2 / (2 * k1)), math.sqrt(k1 / (6 * k3)) / abs(Dm)
+
+
 # ---------------------------------------------------------------- Hertzian chain (Nesterenko)
 def nesterenko_speed(A: float, m: float, D: float, xi_m: float) -> float:
     """Solitary-wave speed V = (2/sqrt 5) c xi_m^(1/4), c^2 = A D^(5/2)/m (Nesterenko; docs/physics.md §2).
