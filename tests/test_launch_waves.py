@@ -46,3 +46,52 @@ def test_fpu_beta_launch_on_a_bond_with_k2_is_an_error(tmp_path):
     sc = load_scene(f)
     with pytest.raises(Exception, match="k2 = 0"):
         run_scene(sc, run_dir=tmp_path / "k2")
+
+
+def _kink_scene(onsite, k, eta, n=300, duration=0.05):
+    return scene_from_dict({
+        "name": "kink", "solver": {"duration_s": duration}, "output": {"n_frames": 201},
+        "lattice": {"kind": "mass_chain", "n_units": n, "spacing_m": 0.01, "mass_kg": 0.01, "relax": False,
+                    "bond": {"law": "linear", "k_n_per_m": k}, "onsite": onsite},
+        "damping": {"viscous": {"coefficient_n_s_per_m": eta}},
+        "initial": {"launch": [{"kind": "kink", "center_site": 40}]}})
+
+
+def _front_speed(res):
+    front = max(res.fronts, key=lambda f: f.n_switched)
+    rows = [r for r in res.comparisons if r.quantity == "speed" and r.item == f"front {front.index}"]
+    return front, rows
+
+
+def test_driven_damped_sine_gordon_kink_runs_at_the_mclaughlin_scott_speed(tmp_path):
+    """ω0 = 2π·100 Hz, w = 8 sites, α = η/(m ω0) = 0.1, γ = Fλ/(2πA) = 0.1:
+    v = c/sqrt(1 + (4α/(πγ))²) = 0.618 c (McLaughlin & Scott 1978), within 0.2 %."""
+    A, lam, m, a, k = 0.01, 0.01, 0.01, 0.01, 252662.0
+    w0 = math.sqrt(A / m) * 2 * math.pi / lam
+    alpha, gamma = 0.1, 0.1
+    eta, force = alpha * m * w0, gamma * 2 * math.pi * A / lam
+    sc = _kink_scene([{"law": "sine", "amplitude_j": A, "period_m": lam},
+                      {"law": "constant_force", "force_n": force}], k, eta)
+    res = report.analyze_run(run_scene(sc, run_dir=tmp_path / "sg").path)
+    front, rows = _front_speed(res)
+    v = a * math.sqrt(k / m) / math.sqrt(1 + (4 * alpha / (math.pi * gamma)) ** 2)
+    assert front.direction == 1 and front.speed_m_s == pytest.approx(v, rel=2e-3)
+    assert len(rows) == 1 and "McLaughlin–Scott" in rows[0].note and abs(rows[0].rel_diff) < 2e-3
+
+
+def test_driven_damped_phi4_kink_runs_at_its_energy_balance_speed(tmp_path):
+    """V = h(1 − (u/L)²)²: F·2L v/a = η v² M/(a sqrt(1 − v²/c²)), M = (4L/3) sqrt(2h/k)/a;
+    width L a sqrt(k/(2h)) = 8 sites."""
+    m, a, L, h = 0.01, 0.01, 0.002, 0.01
+    k = 2 * h * (8 / L) ** 2  # L a sqrt(k/(2h)) = 8 a
+    w0 = math.sqrt(8 * h / L**2 / m)
+    eta, force = 0.1 * m * w0, 0.05 * 8 * h / L  # a small tilt against the barrier's slope scale
+    sc = _kink_scene([{"law": "phi4", "barrier_j": h, "half_distance_m": L},
+                      {"law": "constant_force", "force_n": force}], k, eta, duration=0.1)
+    res = report.analyze_run(run_scene(sc, run_dir=tmp_path / "phi4").path)
+    front, rows = _front_speed(res)
+    c, M = a * math.sqrt(k / m), 4 * L / 3 * math.sqrt(2 * h / k) / a
+    q = force * 2 * L / (eta * M)
+    v = q / math.sqrt(1 + (q / c) ** 2)
+    assert front.direction == 1 and front.speed_m_s == pytest.approx(v, rel=5e-3)
+    assert len(rows) == 1 and "φ⁴" in rows[0].note and abs(rows[0].rel_diff) < 5e-3

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from flexmm.analysis.context import Comparison, ModelTheory
+from flexmm.models import launch_chains
 from flexmm.theory import chains as th
 
 
@@ -181,9 +182,26 @@ def _viscous_eta(ctx, lat) -> float:
     return vis.coefficient_n_s_per_m
 
 
+def kink_front(ctx, lat, f_meas) -> list[Comparison]:
+    """Kink of a sine or phi4 substrate driven by a constant force against viscous damping: its
+    terminal speed (energy balance; McLaughlin–Scott for sine-Gordon, docs/physics.md §2)."""
+    kink, _, force = launch_chains.chain_kink(lat)
+    if force == 0:
+        raise ValueError("an undriven kink has no terminal speed")
+    v = th.driven_kink_speed(kink, force, _viscous_eta(ctx, lat))
+    name = "McLaughlin–Scott" if kink.law == "sine" else "φ⁴ energy balance"
+    return [Comparison("", "speed", abs(f_meas.speed_m_s), v, "m/s",
+                       f"driven damped kink ({name}): v = Q/sqrt(1 + (Q/c)²), Q = F Δu/(η M)"),
+            Comparison("", "width 10–90 %", f_meas.width_10_90_m, kink.width_10_90(v), "m",
+                       "the kink's profile, Lorentz-contracted at that speed")]
+
+
 def front(ctx, f_meas) -> list[Comparison]:
-    """Damped bistable front (one bistable_cubic on-site term, linear coupling): v, width, K."""
+    """Damped bistable front (one bistable_cubic on-site term, linear coupling): v, width, K; a
+    driven sine or phi4 kink: its terminal speed (``kink_front``)."""
     lat = _chain(ctx)
+    if any(law.law in ("sine", "phi4") for law in lat.onsite):
+        return kink_front(ctx, lat, f_meas)
     (law,) = lat.onsite
     if law.law != "bistable_cubic" or law.offset_m != 0 or lat.bond.law != "linear" or lat.bond.offset_m != 0:
         raise ValueError("no front relation for this chain")

@@ -7,6 +7,7 @@ initial:
     - {field: theta, table: theta0.csv}     # CSV (site or x, value[, rate]), relative to the config
   launch:
     - {kind: toda_soliton, kappa: 1.0, center_site: 60, direction: 1}
+    - {kind: kink, center_site: 100, direction: 1}   # sine-Gordon / φ⁴ kink
   pinned:
     - {field: u, sites: [0, 199]}           # held at their initial value (inverse mass 0)
   from_run: runs/previous                   # start from the last frame of another run
@@ -229,7 +230,18 @@ class TanhFront(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
-Launch = Annotated[Union[TodaSoliton, Sech2Pulse, FpuBetaPulse, TanhFront], Field(discriminator="kind")]
+class KinkLaunch(Strict):
+    """The sine-Gordon or φ⁴ kink of a linear chain on a sine or phi4 substrate (§2): at rest, or
+    driven by a constant_force against viscous damping at its terminal (McLaughlin–Scott) speed,
+    the well the force favours behind it."""
+
+    kind: Literal["kink"]
+    center_site: Finite
+    direction: Literal[1, -1] = 1
+    speed: Literal["theory", "static"] = "theory"
+
+
+Launch = Annotated[Union[TodaSoliton, Sech2Pulse, FpuBetaPulse, KinkLaunch, TanhFront], Field(discriminator="kind")]
 
 
 class Pin(Strict):

@@ -5,6 +5,8 @@ Each launcher returns SI displacements and velocities of the chain's sites (n,) 
 - ``toda_soliton``: the exact Toda soliton of bond stretch r_n, with its exact velocity field;
 - ``sech2_pulse``: the long-wave sech² solitary wave of a polynomial bond k1 D + k2 D²;
 - ``fpu_beta_pulse``: the long-wave sech (mKdV) solitary wave of an FPU-β bond k1 D + k3 D³;
+- ``kink``: the sine-Gordon or φ⁴ kink of a linear chain on a sine or phi4 substrate, at rest or
+  at the terminal speed of a constant driving force against viscous damping (McLaughlin–Scott);
 - ``tanh_front``: the damped bistable front (L/2)(1 − tanh((x − X)/w)) of a bistable_cubic
   on-site term with linear coupling, at its predicted speed (or at rest: the kink saddle).
 
@@ -107,4 +109,39 @@ def tanh_front(lat, eta: float | None, center_site: float, direction: int,
     th_ = np.tanh(direction * x / w)
     u = 0.5 * L * (1 - th_)
     dudx = -0.5 * L * direction * (1 - th_**2) / w
+    return u, -direction * v * dudx
+
+
+def chain_kink(lat) -> tuple[th.Kink, float, float]:
+    """The continuum kink of a linear chain on one sine or phi4 substrate (plus at most one
+    constant_force): (kink, lower well (m), driving force F (N))."""
+    bond, a, m, _ = _chain(lat, "linear")
+    subs = [law for law in lat.onsite if law.law in ("sine", "phi4")]
+    drive = [law for law in lat.onsite if law.law == "constant_force"]
+    if (len(subs) != 1 or len(drive) > 1 or len(subs) + len(drive) != len(lat.onsite) or bond.offset_m != 0
+            or subs[0].offset_m != 0):
+        raise ValueError("the kink needs a linear bond, one sine or phi4 on-site law and at most one "
+                         "constant_force (no offsets)")
+    law, k = subs[0], bond.k_n_per_m
+    if law.law == "sine":
+        kink, lower = th.sine_gordon_kink(law.amplitude_j, law.period_m, k, m, a), 0.0
+    else:
+        kink, lower = th.phi4_kink(law.barrier_j, law.half_distance_m, k, m, a), -law.half_distance_m
+    return kink, lower, drive[0].force_n if drive else 0.0
+
+
+def kink(lat, eta: float | None, center_site: float, direction: int,
+         static: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Kink from the lower to the upper well, the favoured well (the one the force F pushes
+    towards) behind it, moving ``direction`` at McLaughlin–Scott's terminal speed (or at rest)."""
+    k, lower, force = chain_kink(lat)
+    v = 0.0
+    if not static and force != 0:
+        if eta is None:
+            raise ValueError("a driven kink needs damping.viscous.coefficient_n_s_per_m (its speed is set by η)")
+        v = th.driven_kink_speed(k, force, eta)
+    sign = 1.0 if force >= 0 else -1.0
+    x = (np.arange(lat.n_units) - center_site) * lat.spacing_m
+    u = lower + force / k.curvature + k.profile(-sign * direction * x, v)  # wells moved by the force
+    dudx = -sign * direction * k.slope(-sign * direction * x, v)
     return u, -direction * v * dudx

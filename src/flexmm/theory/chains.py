@@ -182,6 +182,68 @@ def nesterenko_profile(A: float, m: float, D: float, xi_m: float, x, t=0.0):
     return np.where(np.abs(k * s) < math.pi / 2, xi_m * np.cos(k * s) ** 4, 0.0)
 
 
+# ---------------------------------------------------------------- Klein-Gordon kinks (sine-Gordon, φ⁴)
+@dataclass(frozen=True)
+class Kink:
+    """Continuum kink u(x) of m u_tt = k a² u_xx − V'(u) between two wells (docs/physics.md §2).
+
+    jump: well-to-well Δu (m); width: w (m) of the rest profile; c = a sqrt(k/m) (m/s); M = ∫ u_x² dx
+    (m) of the rest kink, from the Bogomolny relation u_x = sqrt(2 V(u)/(k a²)); curvature: V'' at
+    the wells (N/m), so a constant force F moves both wells by F/V'' (first order).
+    """
+
+    law: str
+    jump: float
+    width: float
+    c: float
+    M: float
+    curvature: float
+
+    def profile(self, x, v: float = 0.0):
+        """u(x) − (lower well) of the kink rising from the lower well (x → −∞) to the upper one,
+        Lorentz-contracted at speed v; shape of x."""
+        xi = np.asarray(x, dtype=float) / (self.width * math.sqrt(1 - (v / self.c) ** 2))
+        if self.law == "sine":
+            return 2 * self.jump / math.pi * np.arctan(np.exp(np.clip(xi, -700, 700)))
+        return 0.5 * self.jump * (1 + np.tanh(xi))
+
+    def width_10_90(self, v: float = 0.0) -> float:
+        """Distance (m) over which the moving profile goes from 10 % to 90 % of the jump."""
+        wv = self.width * math.sqrt(1 - (v / self.c) ** 2)
+        return 2 * wv * (math.log(math.tan(0.45 * math.pi)) if self.law == "sine" else math.atanh(0.8))
+
+    def slope(self, x, v: float = 0.0):
+        """du/dx of ``profile``; shape of x."""
+        wv = self.width * math.sqrt(1 - (v / self.c) ** 2)
+        xi = np.clip(np.asarray(x, dtype=float) / wv, -350, 350)
+        if self.law == "sine":
+            return self.jump / (math.pi * wv) / np.cosh(xi)
+        return 0.5 * self.jump / wv / np.cosh(xi) ** 2
+
+
+def sine_gordon_kink(A: float, period: float, k: float, m: float, a: float) -> Kink:
+    """V = A(1 − cos(2πu/λ)): u = (2λ/π) arctan(e^(x/w)), w = a λ sqrt(k/A)/(2π), M = 4λ sqrt(A/k)/(π a)."""
+    return Kink("sine", period, a * period * math.sqrt(k / A) / (2 * math.pi), a * math.sqrt(k / m),
+                4 * period * math.sqrt(A / k) / (math.pi * a), A * (2 * math.pi / period) ** 2)
+
+
+def phi4_kink(h: float, L: float, k: float, m: float, a: float) -> Kink:
+    """V = h(1 − (u/L)²)² (wells ±L): u = L tanh(x/w), w = L a sqrt(k/(2h)), M = (4L/3) sqrt(2h/k)/a."""
+    return Kink("phi4", 2 * L, L * a * math.sqrt(k / (2 * h)), a * math.sqrt(k / m),
+                4 * L / 3 * math.sqrt(2 * h / k) / a, 8 * h / L**2)
+
+
+def driven_kink_speed(kink: Kink, force: float, eta: float) -> float:
+    """Terminal speed (m/s) of a kink driven by a force F per site against viscous damping η:
+    the power F Δu v/a balances η v² γ M/a (γ = 1/sqrt(1 − v²/c²)), so
+    v = Q/sqrt(1 + (Q/c)²), Q = F Δu/(η M) — for sine-Gordon McLaughlin–Scott's
+    v/c = 1/sqrt(1 + (4α/(π γ_F))²), α = η/(m ω0), γ_F = F λ/(2π A). First order in F."""
+    if not eta > 0:
+        raise ValueError("a driven kink's terminal speed needs viscous damping (η > 0)")
+    q = abs(force) * kink.jump / (eta * kink.M)
+    return q / math.sqrt(1 + (q / kink.c) ** 2)
+
+
 # ---------------------------------------------------------------- Toda lattice
 def toda_soliton(a: float, b: float, m: float, kappa: float, n, t):
     """Bond stretch r_n(t) of the Toda soliton, e^(-b r_n) - 1 = sinh^2(kappa) sech^2(kappa n - beta t) (§2).
