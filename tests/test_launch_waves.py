@@ -95,3 +95,23 @@ def test_driven_damped_phi4_kink_runs_at_its_energy_balance_speed(tmp_path):
     v = q / math.sqrt(1 + (q / c) ** 2)
     assert front.direction == 1 and front.speed_m_s == pytest.approx(v, rel=5e-3)
     assert len(rows) == 1 and "φ⁴" in rows[0].note and abs(rows[0].rel_diff) < 5e-3
+
+
+def test_launched_kdv_pulse_on_a_precompressed_hertz_chain(tmp_path):
+    """Static load F0: ξ0 = (F0/A)^(2/3)/D; excess strain ε ξ0 sech²(n/W), W = sqrt(2/ε), at
+    V = c0 sqrt(1 + ε/6), c0² = (3/2)(A D^(5/2)/m) ξ0^(1/2) (Nesterenko's law, first order in ε)."""
+    A, D, m, F0, eps = 4.88e9, 0.00476, 4.5e-4, 2.0, 0.2
+    sc = scene_from_dict({
+        "name": "kdv", "solver": {"duration_s": 6e-4},
+        "lattice": {"kind": "mass_chain", "n_units": 160, "spacing_m": D, "mass_kg": m,
+                    "bond": {"law": "hertz", "stiffness_n_per_m_p": A, "exponent": 1.5}, "static_load_n": F0},
+        "initial": {"launch": [{"kind": "hertz_kdv_pulse", "amplitude_ratio": eps, "center_site": 30}]}})
+    res = report.analyze_run(run_scene(sc, run_dir=tmp_path / "kdv").path)
+    p = res.pulses[0]
+    xi0 = (F0 / A) ** (2 / 3) / D
+    c0 = math.sqrt(1.5 * A * D**2.5 / m * math.sqrt(xi0))
+    assert p.direction == 1 and p.amplitude == pytest.approx(-eps * xi0, rel=0.03)
+    assert abs(p.speed_m_s) == pytest.approx(c0 * math.sqrt(1 + eps / 6), rel=3e-3)
+    assert p.width_sech2_m == pytest.approx(math.sqrt(2 / eps) * D, rel=0.05)
+    (row,) = [r for r in res.comparisons if r.item == "pulse 0" and r.quantity == "speed"]
+    assert "precompressed" in row.note and abs(row.rel_diff) < 3e-3

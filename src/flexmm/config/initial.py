@@ -230,6 +230,16 @@ class TanhFront(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
+class HertzKdvPulse(Strict):
+    """The weak (KdV) solitary wave of a precompressed Hertz chain (exponent 3/2; Nesterenko, §2)."""
+
+    kind: Literal["hertz_kdv_pulse"]
+    amplitude_ratio: Positive = Field(description="peak excess strain over the precompression strain ξ0 "
+                                                  "(ε ≪ 1; width sqrt(2/ε) sites, speed c0 sqrt(1 + ε/6))")
+    center_site: Finite
+    direction: Literal[1, -1] = 1
+
+
 class KinkLaunch(Strict):
     """The sine-Gordon or φ⁴ kink of a linear chain on a sine or phi4 substrate (§2): at rest, or
     driven by a constant_force against viscous damping at its terminal (McLaughlin–Scott) speed,
@@ -241,7 +251,7 @@ class KinkLaunch(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
-Launch = Annotated[Union[TodaSoliton, Sech2Pulse, FpuBetaPulse, KinkLaunch, TanhFront], Field(discriminator="kind")]
+Launch = Annotated[Union[TodaSoliton, Sech2Pulse, FpuBetaPulse, HertzKdvPulse, KinkLaunch, TanhFront], Field(discriminator="kind")]
 
 
 class Pin(Strict):

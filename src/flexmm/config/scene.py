@@ -181,7 +181,7 @@ class Scene(Strict):
             if bad:
                 raise ValueError(f"initial.pinned.{k}.sites {bad} outside 0..{n - 1}")
         needs = {"toda_soliton": "toda", "sech2_pulse": "polynomial", "fpu_beta_pulse": "polynomial",
-                 "kink": "linear", "tanh_front": "linear"}
+                 "hertz_kdv_pulse": "hertz", "kink": "linear", "tanh_front": "linear"}
         for k, spec in enumerate(init.launch):
             if not 0 <= spec.center_site <= n - 1:
                 raise ValueError(f"initial.launch.{k}.center_site={spec.center_site} is outside 0..{n - 1}")

@@ -5,6 +5,7 @@ Each launcher returns SI displacements and velocities of the chain's sites (n,) 
 - ``toda_soliton``: the exact Toda soliton of bond stretch r_n, with its exact velocity field;
 - ``sech2_pulse``: the long-wave sech² solitary wave of a polynomial bond k1 D + k2 D²;
 - ``fpu_beta_pulse``: the long-wave sech (mKdV) solitary wave of an FPU-β bond k1 D + k3 D³;
+- ``hertz_kdv_pulse``: the weak (KdV) solitary wave of a precompressed Hertz chain (Nesterenko);
 - ``kink``: the sine-Gordon or φ⁴ kink of a linear chain on a sine or phi4 substrate, at rest or
   at the terminal speed of a constant driving force against viscous damping (McLaughlin–Scott);
 - ``tanh_front``: the damped bistable front (L/2)(1 − tanh((x − X)/w)) of a bistable_cubic
@@ -87,6 +88,23 @@ def fpu_beta_pulse(lat, strain: float, center_site: float, direction: int) -> tu
     D = strain * a / np.cosh(np.clip(z, -700, 700))
     dDdz = -D * np.tanh(z)
     return _from_bonds(D, dDdz * (-direction * v / (a * W)), direction)
+
+
+def hertz_kdv_pulse(lat, eps: float, center_site: float, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """KdV solitary wave of a Hertz chain (exponent 3/2) precompressed by ``static_load_n`` or a
+    held ``precompression_m``: excess strain eps ξ0 sech²((n − n0)/W), added to the rest state."""
+    bond, a, m, n = _chain(lat, "hertz")
+    if lat.onsite or bond.exponent != 1.5 or bond.offset_m != 0:
+        raise ValueError("the KdV wave needs a Hertz bond of exponent 3/2 and no on-site terms")
+    A = bond.stiffness_n_per_m_p
+    delta0 = (abs(lat.static_load_n) / A) ** (2 / 3) if lat.static_load_n else bond.precompression_m
+    if not delta0 > 0:
+        raise ValueError("the KdV wave needs a precompressed chain (static_load_n or a held precompression_m)")
+    wave = th.hertz_kdv_wave(A, m, a, delta0 / a, eps)
+    z = (np.arange(n - 1) + 0.5 - center_site) / wave.W
+    D = wave.Dm * _sech2(z)
+    dDdz = -2 * D * np.tanh(z)
+    return _from_bonds(D, dDdz * (-direction * wave.v / (a * wave.W)), direction)
 
 
 def tanh_front(lat, eta: float | None, center_site: float, direction: int,

@@ -15,6 +15,7 @@ from flexmm.theory.chains import (
     Kink,
     driven_kink_speed,
     fpu_beta_solitary_wave,
+    hertz_kdv_wave,
     phi4_kink,
     sine_gordon_kink,
     linear_chain_band,
@@ -70,6 +71,6 @@ __all__ = [
     "nesterenko_precompressed_speed", "nesterenko_profile", "nesterenko_speed", "nesterenko_speed_from_force", "nesterenko_support",
     "omega_max_chain", "rotational_cutoff_speed", "softening_profile", "softening_solitary_wave",
     "soliton_amplitude", "soliton_exists", "soliton_initial_state", "soliton_profile",
-    "Kink", "driven_kink_speed", "fpu_beta_solitary_wave", "phi4_kink", "sine_gordon_kink",
+    "Kink", "driven_kink_speed", "fpu_beta_solitary_wave", "hertz_kdv_wave", "phi4_kink", "sine_gordon_kink",
     "soliton_speed", "soliton_width", "toda_soliton", "toda_speed",
 ]

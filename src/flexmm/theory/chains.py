@@ -159,6 +159,22 @@ def nesterenko_precompressed_speed(A: float, m: float, D: float, xi_0: float, xi
     return math.sqrt(c2 * (0.8 * (xi_m**2.5 - xi_0**2.5) - 2.0 * xi_0**1.5 * (xi_m - xi_0))) / (xi_m - xi_0)
 
 
+def hertz_kdv_wave(A: float, m: float, D: float, xi_0: float, eps: float) -> SechWave:
+    """Weak solitary wave (KdV limit) of a Hertz chain precompressed to strain xi_0: peak strain
+    xi_0 (1 + eps) above it, eps << 1 (docs/physics.md §2).
+
+    Expanding the long-wave equation of ``nesterenko_profile`` about xi_0 gives, for the excess
+    strain η, η_tt = c0² [η + η²/(4 xi_0) + (D²/12) η_xx]_xx: the Boussinesq equation of
+    ``softening_solitary_wave`` with k2/k1 = 1/(4 xi_0 D) and a = D, so the excess strain is
+    η = eps xi_0 sech²(x/(W D)), W = sqrt(2/eps) sites, V = c0 sqrt(1 + eps/6) (the first order of
+    ``nesterenko_precompressed_speed``). Returned as the bond elongation (compressive, Dm < 0).
+    """
+    if not (xi_0 > 0 and eps > 0):
+        raise ValueError("a KdV wave needs a precompressed chain (xi_0 > 0) and eps > 0")
+    c0 = math.sqrt(1.5 * A * D**2.5 / m * math.sqrt(xi_0))
+    return SechWave(-eps * xi_0 * D, c0 * math.sqrt(1 + eps / 6), math.sqrt(2 / eps), c0, D)
+
+
 def nesterenko_speed_from_force(A: float, m: float, D: float, F_m: float) -> float:
     """Speed from the peak contact force: xi_m = (F_m/A)^(2/3)/D, so V = (2/sqrt5) c (F_m/A)^(1/6) D^(-1/4)."""
     return nesterenko_speed(A, m, D, (F_m / A) ** (2 / 3) / D)
