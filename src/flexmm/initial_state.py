@@ -138,6 +138,8 @@ def _launch(system: System, scene, spec) -> tuple[np.ndarray, np.ndarray]:
     lat = scene.lattice
     if spec.kind == "toda_soliton":
         return lc.toda_soliton(lat, spec.kappa, spec.center_site, spec.direction)
+    if spec.kind == "toda_two_soliton":
+        return lc.toda_two_soliton(lat, spec.kappa, spec.center_site, spec.direction)
     if spec.kind == "sech2_pulse":
         return lc.sech2_pulse(lat, spec.strain, spec.center_site, spec.direction)
     if spec.kind == "fpu_beta_pulse":

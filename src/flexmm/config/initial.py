@@ -202,6 +202,16 @@ class TodaSoliton(Strict):
     direction: Literal[1, -1] = 1
 
 
+class TodaTwoSoliton(Strict):
+    """The exact Toda two-soliton (Hirota's τ function, docs/physics.md §2): two solitons centred on
+    ``center_site`` (the asymptotic centres: also overlapping, mid-collision) moving ``direction``."""
+
+    kind: Literal["toda_two_soliton"]
+    kappa: tuple[Positive, Positive]
+    center_site: tuple[Finite, Finite]
+    direction: tuple[Literal[1, -1], Literal[1, -1]] = (1, -1)
+
+
 class Sech2Pulse(Strict):
     """The long-wave sech² solitary wave of a polynomial (k1, k2) bond (docs/physics.md §2)."""
 
@@ -251,7 +261,7 @@ class KinkLaunch(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
-Launch = Annotated[Union[TodaSoliton, Sech2Pulse, FpuBetaPulse, HertzKdvPulse, KinkLaunch, TanhFront], Field(discriminator="kind")]
+Launch = Annotated[Union[TodaSoliton, TodaTwoSoliton, Sech2Pulse, FpuBetaPulse, HertzKdvPulse, KinkLaunch, TanhFront], Field(discriminator="kind")]
 
 
 class Pin(Strict):

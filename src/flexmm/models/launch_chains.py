@@ -3,6 +3,7 @@
 Each launcher returns SI displacements and velocities of the chain's sites (n,) for one wave:
 
 - ``toda_soliton``: the exact Toda soliton of bond stretch r_n, with its exact velocity field;
+- ``toda_two_soliton``: the exact Toda two-soliton (Hirota's τ function), also mid-collision;
 - ``sech2_pulse``: the long-wave sech² solitary wave of a polynomial bond k1 D + k2 D²;
 - ``fpu_beta_pulse``: the long-wave sech (mKdV) solitary wave of an FPU-β bond k1 D + k3 D³;
 - ``hertz_kdv_pulse``: the weak (KdV) solitary wave of a precompressed Hertz chain (Nesterenko);
@@ -64,6 +65,21 @@ def toda_soliton(lat, kappa: float, center_site: float, direction: int) -> tuple
     r = -np.log1p(s2) / b
     drdz = 2 * s2 * np.tanh(z) / (b * (1 + s2))
     return _from_bonds(r, drdz * (-direction * beta), direction)
+
+
+def toda_two_soliton(lat, kappa, center_site, direction) -> tuple[np.ndarray, np.ndarray]:
+    """Exact Toda two-soliton (``theory.chains.toda_two_soliton``) centred on the two sites; the
+    chain ahead of both is at rest, or between them when they move in opposite directions."""
+    bond, _, m, n = _chain(lat, "toda")
+    if lat.onsite:
+        raise ValueError("the Toda solitons need a chain without on-site terms")
+    r, rdot = th.toda_two_soliton(bond.a_n, bond.b_per_m, m, tuple(kappa), tuple(center_site), tuple(direction),
+                                  np.arange(n - 1) + 0.5)
+    if direction[0] == direction[1]:
+        return _from_bonds(r, rdot, direction[0])
+    u, ud = _from_bonds(r, rdot, 1)
+    mid = int(round(0.5 * (center_site[0] + center_site[1])))
+    return u - u[mid], ud - ud[mid]
 
 
 def sech2_pulse(lat, strain: float, center_site: float, direction: int) -> tuple[np.ndarray, np.ndarray]:

@@ -290,6 +290,36 @@ def toda_head_on_shifts(kappa1: float, kappa2: float) -> tuple[float, float]:
     return -math.log(a12) / (2 * kappa1), -math.log(a12) / (2 * kappa2)
 
 
+def toda_two_soliton(a: float, b: float, m: float, kappa: tuple[float, float], center: tuple[float, float],
+                     sigma: tuple[int, int], n) -> tuple[np.ndarray, np.ndarray]:
+    """Bond stretch r_n and its rate ṙ_n (per unit time) of the exact Toda two-soliton at t = 0
+    (docs/physics.md §2): e^(−b r_n) = τ_(n+1) τ_(n−1)/τ_n², τ = 1 + e^η1 + e^η2 + A12 e^(η1+η2),
+    η_i = 2κ_i (n − n_i) − 2σ_i sinh κ_i s (s = sqrt(ab/m) t), each phase corrected by ln A12 where
+    the other soliton lies on its left, so that soliton i is centred on n_i (its asymptotic centre,
+    before a collision when both sit on one site). ``n``: bond positions (sites).
+    """
+    k1, k2 = kappa
+    if min(k1, k2) <= 0 or (sigma[0] == sigma[1] and k1 == k2):
+        raise ValueError("two Toda solitons need kappa > 0, and different kappas when they move the same way")
+    w = [2 * sg * math.sinh(k) for k, sg in zip(kappa, sigma)]
+    A12 = -((w[0] - w[1]) ** 2 - 4 * math.sinh(k1 - k2) ** 2) / ((w[0] + w[1]) ** 2 - 4 * math.sinh(k1 + k2) ** 2)
+    lnA = math.log(A12)
+    n = np.asarray(n, dtype=float)
+    nn = np.concatenate([[n[0] - 1], n, [n[-1] + 1]])
+    def left_of(j: int, i: int) -> bool:  # on the same site, the soliton moving right is the left one
+        return center[j] < center[i] or (center[j] == center[i] and sigma[j] > sigma[i])
+
+    eta = [2 * k * (nn - c) - (lnA if left_of(1 - i, i) else 0.0) for i, (k, c) in enumerate(zip(kappa, center))]
+    terms = np.stack([np.zeros_like(nn), eta[0], eta[1], lnA + eta[0] + eta[1]])
+    rates = np.array([0.0, -w[0], -w[1], -w[0] - w[1]])[:, None]  # ∂η/∂s of each term
+    top = terms.max(axis=0)
+    weights = np.exp(terms - top)
+    ln_tau = top + np.log(weights.sum(axis=0))
+    dln_tau = (rates * weights).sum(axis=0) / weights.sum(axis=0)  # ∂ ln τ/∂s
+    second = lambda f: f[2:] + f[:-2] - 2 * f[1:-1]  # noqa: E731
+    return -second(ln_tau) / b, -second(dln_tau) * math.sqrt(a * b / m) / b
+
+
 # ---------------------------------------------------------------- linear chain
 def linear_chain_dispersion(k: float, m: float, q, k_onsite: float = 0.0):
     """omega(q) = sqrt((k_onsite + 4 k sin^2(q/2))/m), q the phase per site (q a) (docs/physics.md §2); shape of q."""
