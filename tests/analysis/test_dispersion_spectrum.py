@@ -62,3 +62,20 @@ def test_cli_spectrum_prints_and_draws(ring_run):
     assert r.exit_code == 0, r.output
     assert "ω–k spectrum of u" in r.output and "of the power within 2 frequency bins" in r.output
     assert (ring_run.parent / "spectrum_u.png").stat().st_size > 1000
+
+
+def test_a_sheet_dataset_gives_an_omega_kx_ky_spectrum():
+    """Sites listed by (row, col) coordinates in any order are put back on their grid."""
+    import xarray as xr
+
+    t = np.arange(64) * 0.01
+    rows, cols = np.divmod(np.arange(8 * 16), 16)
+    order = np.random.default_rng(0).permutation(rows.size)
+    w, qx, qy = 2 * math.pi * 5 / 0.64, 2 * math.pi * 3 / 16, 2 * math.pi * 2 / 8
+    u = np.cos(qx * cols[order][None, :] + qy * rows[order][None, :] - w * t[:, None])
+    ds = xr.Dataset({"u": (("time", "site"), u)}, coords={"time": t, "row": ("site", rows[order]),
+                                                          "col": ("site", cols[order])})
+    spec = run_spectrum(RunContext(model="sheet", config={}, ds=ds))
+    i, a, b = np.unravel_index(np.argmax(spec.power), spec.power.shape)
+    assert spec.power.shape == (33, 8, 16) and "sheet" in spec.note
+    assert spec.omega[i] == pytest.approx(w) and spec.k[1][b] == pytest.approx(qx) and spec.k[0][a] == pytest.approx(qy)

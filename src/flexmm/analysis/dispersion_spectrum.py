@@ -105,11 +105,11 @@ def run_spectrum(ctx, spec: str | None = None, row: int | None = None) -> Spectr
     if dts.size < 3 or not np.allclose(dts, dts[0], rtol=1e-6, atol=0):
         raise ValueError("an ω–k spectrum needs at least 4 uniformly spaced frames")
     dt = float(dts[0])
-    grid = "row" in ds.dims and "col" in ds.dims
     if spec is None:
         spec = displacement_field(ds) if any(n in ds.data_vars for n in ("u", "x")) else "theta"
-    if grid and spec in ds.data_vars and ds[spec].dims == ("time", "row", "col"):
-        omega, ks, power = power_spectrum(ds[spec].values, dt)
+    grid = _sheet_grid(ds, spec) if row is None else None
+    if grid is not None:
+        omega, ks, power = power_spectrum(grid, dt)
         return Spectrum(spec, omega, ks, power, note="sheet: ω–k_y–k_x spectrum (no band overlay)")
     view = field_view(ds, spec, row=row)
     omega, ks, power = power_spectrum(view.values, dt)
@@ -119,6 +119,26 @@ def run_spectrum(ctx, spec: str | None = None, row: int | None = None) -> Spectr
         out.bands, out.note = model_chain_bands(ctx, out.band_k)
     except (ValueError, KeyError, ArithmeticError) as exc:
         out.band_k, out.bands, out.note = None, None, f"no linear bands: {exc}"
+    return out
+
+
+def _sheet_grid(ds, name: str) -> np.ndarray | None:
+    """The field ``name`` of a sheet as (n_t, n_rows, n_cols), when its sites fill a whole
+    rectangle of (row, col) once each; None for a chain, a derived field or a masked sheet."""
+    if name not in ds.data_vars:
+        return None
+    var = ds[name]
+    if var.dims == ("time", "row", "col"):
+        return np.asarray(var.values, float)
+    if var.dims != ("time", "site") or "row" not in ds.coords or "col" not in ds.coords:
+        return None
+    rows, cols = (np.asarray(ds[c].values, np.int64) for c in ("row", "col"))
+    rows, cols = rows - rows.min(), cols - cols.min()
+    shape = (int(rows.max()) + 1, int(cols.max()) + 1)
+    if shape[0] < 2 or rows.size != shape[0] * shape[1] or np.unique(rows * shape[1] + cols).size != rows.size:
+        return None
+    out = np.empty((var.shape[0],) + shape)
+    out[:, rows, cols] = np.asarray(var.values, float)
     return out
 
 
