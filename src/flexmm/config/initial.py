@@ -261,7 +261,8 @@ class KinkLaunch(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
-Launch = Annotated[Union[TodaSoliton, TodaTwoSoliton, Sech2Pulse, FpuBetaPulse, HertzKdvPulse, KinkLaunch, TanhFront], Field(discriminator="kind")]
+Launch = Annotated[Union[TodaSoliton, TodaTwoSoliton, Sech2Pulse, FpuBetaPulse, HertzKdvPulse, KinkLaunch, TanhFront],
+                   Field(discriminator="kind")]
 
 
 class Pin(Strict):

@@ -293,8 +293,9 @@ def benchmark(problem, methods=None, ivp_methods=baseline.METHODS, *, n_frames: 
     say(f"reference: dopri5 rtol {ref_rtol:g} in {ref.wall_s:.3g} s, {n_frames} frames; pulse speed "
         f"{ref.speed:.6g} m/s, amplitude {ref.amplitude:.6g}; load average {os.getloadavg()[0]:.2f}")
     spread, scale, wall = reference_spread(problem, ref, n_frames)
+    share = spread / scale if scale else math.inf
     msg = (f"a reference at rtol {ref_rtol * CHECK_RTOL_FACTOR:g} ends {spread:.3g} from the one at {ref_rtol:g} "
-           f"({spread / scale if scale else math.inf:.2g} of the field's largest value {scale:.3g}; checked in {wall:.3g} s)")
+           f"({share:.2g} of the field's largest value {scale:.3g}; checked in {wall:.3g} s)")
     if not spread <= CHAOS_RATIO * scale:
         text = (f"{msg}: the final state is chaotic (errors grow without bound), so every method's error would "
                 f"measure the chaos, not the method; bench a shorter run (solver.duration_s=...)")
