@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.ndimage import minimum_filter1d
 
 from flexmm.analysis.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
 from flexmm.analysis.detect import Track, refine_peak, split_reversals, track_peaks
@@ -332,7 +331,8 @@ def held_peak(vals: np.ndarray) -> float:
     if top.size == 0:
         return float("nan")
     window = max(1, int(round(HOLD_FRACTION * top.size)))
-    return float(np.max(minimum_filter1d(top, window, mode="nearest")))
+    padded = np.pad(top, (window // 2, window - 1 - window // 2), mode="edge")  # numpy: no scipy.ndimage import
+    return float(np.max(np.lib.stride_tricks.sliding_window_view(padded, window).min(axis=1)))
 
 
 def _thresholds(vals: np.ndarray, fraction: float, floor: float, per_sign: bool) -> tuple[float, float]:
