@@ -157,7 +157,10 @@ def omega_k(spec, path, *, title: str = "") -> Path:
                     ax.plot(sign * spec.band_k, spec.bands[:, b], "c--", lw=0.8,
                             label="linear bands" if (b, sign) == (0, 1) else None)
             ax.legend(loc="upper right", fontsize=8)
-        ax.set(xlabel=xlabel, ylabel="ω (rad/s)", title=title, ylim=(0, spec.omega[-1]))
+        top = spec.omega[-1]
+        if spec.bands is not None and np.isfinite(spec.bands).any():  # up to the bands, not the frames' Nyquist
+            top = min(top, 1.3 * float(np.nanmax(spec.bands)))
+        ax.set(xlabel=xlabel, ylabel="ω (rad/s)", title=title, ylim=(0, top))
     return _save(fig, path)
 
 
