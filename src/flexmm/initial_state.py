@@ -138,10 +138,18 @@ def _launch(system: System, scene, spec) -> tuple[np.ndarray, np.ndarray]:
     lat = scene.lattice
     if spec.kind == "toda_soliton":
         return lc.toda_soliton(lat, spec.kappa, spec.center_site, spec.direction)
+    if spec.kind == "toda_two_soliton":
+        return lc.toda_two_soliton(lat, spec.kappa, spec.center_site, spec.direction)
     if spec.kind == "sech2_pulse":
         return lc.sech2_pulse(lat, spec.strain, spec.center_site, spec.direction)
+    if spec.kind == "fpu_beta_pulse":
+        return lc.fpu_beta_pulse(lat, spec.strain, spec.center_site, spec.direction)
     vis = scene.damping.viscous
     eta = vis.coefficient_n_s_per_m if vis is not None else None
+    if spec.kind == "hertz_kdv_pulse":
+        return lc.hertz_kdv_pulse(lat, spec.amplitude_ratio, spec.center_site, spec.direction)
+    if spec.kind == "kink":
+        return lc.kink(lat, eta, spec.center_site, spec.direction, static=spec.speed == "static")
     return lc.tanh_front(lat, eta, spec.center_site, spec.direction, static=spec.speed == "static")
 
 

@@ -10,7 +10,7 @@ import pytest
 from flexmm.analysis import report
 from flexmm.api import run_scene
 from flexmm.config import scene_from_dict
-from flexmm.theory.chains import toda_head_on_shifts
+from flexmm.theory.chains import toda_head_on_shifts, toda_speed
 
 
 def test_equal_solitons_shift_by_ln_cosh_over_kappa():
@@ -21,7 +21,9 @@ def test_equal_solitons_shift_by_ln_cosh_over_kappa():
 
 
 def test_toda_head_on_collision_shifts_match_the_exact_solution(tmp_path):
-    k1, k2, a = 1.0, 0.7, 0.01
+    """κ = 1 and κ = 0.5: the smaller soliton (28 % of the larger, 23 % of their sum while they
+    overlap) is found, both speeds match β/κ and both shifts −ln A12/(2κ)."""
+    k1, k2, a, m, b = 1.0, 0.5, 0.01, 0.01, 100.0
     sc = scene_from_dict({
         "name": "toda_collision", "solver": {"duration_s": 1.6, "accuracy": 1e-6}, "output": {"n_frames": 1601},
         "lattice": {"kind": "mass_chain", "n_units": 300, "spacing_m": a, "mass_kg": 0.01,
@@ -33,7 +35,12 @@ def test_toda_head_on_collision_shifts_match_the_exact_solution(tmp_path):
     assert c.outcome == "passed through" and abs(c.amplitude_change_a) < 1e-3 and abs(c.speed_change_a) < 1e-3
     right = "a" if res.pulses[c.pulse_a].direction > 0 else "b"
     left = "b" if right == "a" else "a"
-    d1, d2 = toda_head_on_shifts(k1, k2)  # 0.313 and 0.448 sites forward
+    assert len(res.pulses) == 2
+    assert abs(res.pulses[c.pulse_a if right == "a" else c.pulse_b].speed_m_s) == pytest.approx(
+        toda_speed(1.0, b, m, k1) * a, rel=1e-4)
+    assert abs(res.pulses[c.pulse_b if right == "a" else c.pulse_a].speed_m_s) == pytest.approx(
+        toda_speed(1.0, b, m, k2) * a, rel=1e-4)
+    d1, d2 = toda_head_on_shifts(k1, k2)  # 0.227 and 0.455 sites forward
     assert getattr(c, f"shift_{right}_m") == pytest.approx(d1 * a, rel=0.02)
     assert getattr(c, f"shift_{left}_m") == pytest.approx(d2 * a, rel=0.02)
     rows = [r for r in res.comparisons if r.item == "collision 0" and r.quantity.startswith("space shift")]

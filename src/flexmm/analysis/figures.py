@@ -4,6 +4,7 @@ space_time: field against position and time with the fitted pulse/front trajecto
 profile: a measured spatial profile, its sech/sech² fits and the theory profile;
 speed_amplitude: measured (amplitude, speed) points of several runs on the theory curve;
 front_position: 50 % crossing position against time; spectrum: far-end spectrum of a driven run;
+omega_k: ω–k power spectrum of a run's field with the linear bands;
 transmission: transmission against drive frequency over several runs, with theory pass bands.
 """
 
@@ -131,6 +132,35 @@ def spectrum(driven, path, *, title: str = "") -> Path:
         ax.axvline(n * driven.frequency_hz, color="C3", lw=0.8, ls=":")
     ax.set(xlabel="frequency (Hz)", ylabel="far-end amplitude", title=title,
            xlim=(0, (driven.harmonics.size + 0.5) * driven.frequency_hz))
+    return _save(fig, path)
+
+
+def omega_k(spec, path, *, title: str = "") -> Path:
+    """log10 of an ω–k power spectrum (``analysis.dispersion_spectrum``) with the linear bands
+    drawn over it (chains); a sheet's ω–k_x (k_y = 0) and ω–k_y (k_x = 0) cuts."""
+    if spec.power.ndim == 2:
+        cuts = [(spec.k[0], spec.power, "k (rad/site)")]
+    else:
+        ky, kx = spec.k
+        cuts = [(kx, spec.power[:, np.argmin(np.abs(ky)), :], "k_x (rad/site), k_y = 0"),
+                (ky, spec.power[:, :, np.argmin(np.abs(kx))], "k_y (rad/site), k_x = 0")]
+    fig, axes = plt.subplots(1, len(cuts), figsize=(5.6 * len(cuts), 4.2), squeeze=False)
+    for ax, (k, p, xlabel) in zip(axes[0], cuts):
+        logp = np.log10(np.maximum(p, np.max(p) * 1e-12 if np.max(p) > 0 else 1e-300))
+        dk = k[1] - k[0] if k.size > 1 else 1.0
+        im = ax.imshow(logp, origin="lower", aspect="auto", cmap="magma", interpolation="nearest",
+                       extent=(k[0] - dk / 2, k[-1] + dk / 2, 0, spec.omega[-1]), vmin=logp.max() - 8)
+        fig.colorbar(im, ax=ax, label="log10 power")
+        if spec.bands is not None and p is spec.power:
+            for b in range(spec.bands.shape[1]):
+                for sign in (1, -1):
+                    ax.plot(sign * spec.band_k, spec.bands[:, b], "c--", lw=0.8,
+                            label="linear bands" if (b, sign) == (0, 1) else None)
+            ax.legend(loc="upper right", fontsize=8)
+        top = spec.omega[-1]
+        if spec.bands is not None and np.isfinite(spec.bands).any():  # up to the bands, not the frames' Nyquist
+            top = min(top, 1.3 * float(np.nanmax(spec.bands)))
+        ax.set(xlabel=xlabel, ylabel="ω (rad/s)", title=title, ylim=(0, top))
     return _save(fig, path)
 
 

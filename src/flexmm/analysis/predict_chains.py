@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from flexmm.analysis.context import Comparison, ModelTheory
+from flexmm.models import launch_chains
 from flexmm.theory import chains as th
 
 
@@ -24,6 +25,15 @@ def softening_pulse(p_meas, k1: float, k2: float, m: float, a: float) -> list[Co
     return [
         Comparison("", "speed", p_meas.speed_m_s, wave.v, "m/s", "v = c0 sqrt(1 + 2k2Dm/(3k1))"),
         Comparison("", "width W (sech² fit)", p_meas.width_sech2_m, wave.W * a, "m", "W = sqrt(k1/(2k2Dm)) sites"),
+    ]
+
+
+def fpu_beta_pulse(p_meas, k1: float, k3: float, m: float, a: float) -> list[Comparison]:
+    """sech (mKdV) solitary wave of T(D) = k1 D + k3 D³: speed and W at the measured strain peak."""
+    v, W = th.fpu_beta_solitary_wave(k1, k3, p_meas.amplitude * a, m, a)
+    return [
+        Comparison("", "speed", p_meas.speed_m_s, v, "m/s", "FPU-β (mKdV) v = c0 sqrt(1 + k3Dm²/(2k1))"),
+        Comparison("", "width W (sech fit)", p_meas.width_sech_m, W * a, "m", "W = sqrt(k1/(6k3))/|Dm| sites"),
     ]
 
 
@@ -142,6 +152,8 @@ def pulse(ctx, p_meas) -> list[Comparison]:
         raise ValueError("no solitary-wave relation for this chain or field")
     if bond.law == "polynomial" and bond.k3_n_per_m3 == 0 and bond.k2_n_per_m2 != 0:
         return softening_pulse(p_meas, bond.k1_n_per_m, bond.k2_n_per_m2, m, a)
+    if bond.law == "polynomial" and bond.k2_n_per_m2 == 0 and bond.k3_n_per_m3 > 0:
+        return fpu_beta_pulse(p_meas, bond.k1_n_per_m, bond.k3_n_per_m3, m, a)
     if bond.law == "hertz" and bond.exponent == 1.5:
         xi_0 = rest_overlap(ctx, lat) / a
         if xi_0 > 0:  # a precompressed chain: not the sonic vacuum
@@ -170,9 +182,26 @@ def _viscous_eta(ctx, lat) -> float:
     return vis.coefficient_n_s_per_m
 
 
+def kink_front(ctx, lat, f_meas) -> list[Comparison]:
+    """Kink of a sine or phi4 substrate driven by a constant force against viscous damping: its
+    terminal speed (energy balance; McLaughlin–Scott for sine-Gordon, docs/physics.md §2)."""
+    kink, _, force = launch_chains.chain_kink(lat)
+    if force == 0:
+        raise ValueError("an undriven kink has no terminal speed")
+    v = th.driven_kink_speed(kink, force, _viscous_eta(ctx, lat))
+    name = "McLaughlin–Scott" if kink.law == "sine" else "φ⁴ energy balance"
+    return [Comparison("", "speed", abs(f_meas.speed_m_s), v, "m/s",
+                       f"driven damped kink ({name}): v = Q/sqrt(1 + (Q/c)²), Q = F Δu/(η M)"),
+            Comparison("", "width 10–90 %", f_meas.width_10_90_m, kink.width_10_90(v), "m",
+                       "the kink's profile, Lorentz-contracted at that speed")]
+
+
 def front(ctx, f_meas) -> list[Comparison]:
-    """Damped bistable front (one bistable_cubic on-site term, linear coupling): v, width, K."""
+    """Damped bistable front (one bistable_cubic on-site term, linear coupling): v, width, K; a
+    driven sine or phi4 kink: its terminal speed (``kink_front``)."""
     lat = _chain(ctx)
+    if any(law.law in ("sine", "phi4") for law in lat.onsite):
+        return kink_front(ctx, lat, f_meas)
     (law,) = lat.onsite
     if law.law != "bistable_cubic" or law.offset_m != 0 or lat.bond.law != "linear" or lat.bond.offset_m != 0:
         raise ValueError("no front relation for this chain")

@@ -28,11 +28,13 @@ def bench(
     budget_s: float = typer.Option(30.0, "--budget", help="Stop a method's ladder past this wall time per run."),
     out: str = typer.Option(None, "--out", "-o", help="Output directory (default runs/<name>/bench)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths of the files written."),
+    force: bool = typer.Option(False, "--force", help="Bench a chaotic scene anyway (its errors measure the chaos)."),
 ) -> None:
     """Chart error against cost for each integrator and for solve_ivp on the same equations.
 
     The equations are those `flexmm run` would integrate (its plan, printed first: trimmed domain,
-    pruned output, frames); the plan's method and step are one point of the chart's ladders."""
+    pruned output, frames); the plan's method and step are one point of the chart's ladders. A
+    chaotic scene (a reference at 1000x its tolerance ends far from it) is refused unless --force."""
     from flexmm.diagnostics import baseline
     from flexmm.diagnostics import workprecision as wp
     from flexmm.integrators import INTEGRATORS
@@ -50,7 +52,11 @@ def bench(
     folder = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "bench")
     n_frames = frames or scene.output.n_frames  # a frame interval also caps the largest step (the plan's frames)
     say = (lambda m: None) if quiet else (lambda m: typer.echo(m, err=True))
-    rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s, log=say)
+    try:
+        rows, ref = wp.benchmark(problem, names, ivps, n_frames=n_frames, repeats=repeats, budget_s=budget_s,
+                                 log=say, force=force)
+    except wp.ChaoticReference as exc:
+        raise error(str(exc)) from None
     attrs = {**provenance_attrs(scene), "reference": f"dopri5 rtol {ref.rtol:g}",
              "reference_pulse_speed_m_s": ref.speed, "reference_pulse_amplitude": ref.amplitude}
     output_dir(folder)

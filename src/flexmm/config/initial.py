@@ -7,6 +7,7 @@ initial:
     - {field: theta, table: theta0.csv}     # CSV (site or x, value[, rate]), relative to the config
   launch:
     - {kind: toda_soliton, kappa: 1.0, center_site: 60, direction: 1}
+    - {kind: kink, center_site: 100, direction: 1}   # sine-Gordon / φ⁴ kink
   pinned:
     - {field: u, sites: [0, 199]}           # held at their initial value (inverse mass 0)
   from_run: runs/previous                   # start from the last frame of another run
@@ -201,11 +202,30 @@ class TodaSoliton(Strict):
     direction: Literal[1, -1] = 1
 
 
+class TodaTwoSoliton(Strict):
+    """The exact Toda two-soliton (Hirota's τ function, docs/physics.md §2): two solitons centred on
+    ``center_site`` (the asymptotic centres: also overlapping, mid-collision) moving ``direction``."""
+
+    kind: Literal["toda_two_soliton"]
+    kappa: tuple[Positive, Positive]
+    center_site: tuple[Finite, Finite]
+    direction: tuple[Literal[1, -1], Literal[1, -1]] = (1, -1)
+
+
 class Sech2Pulse(Strict):
     """The long-wave sech² solitary wave of a polynomial (k1, k2) bond (docs/physics.md §2)."""
 
     kind: Literal["sech2_pulse"]
     strain: Finite = Field(description="peak bond strain D_m/a (sign of k2: tensile for a softening bond)")
+    center_site: Finite
+    direction: Literal[1, -1] = 1
+
+
+class FpuBetaPulse(Strict):
+    """The long-wave sech (mKdV) solitary wave of an FPU-β (k1, k3 > 0, k2 = 0) polynomial bond (§2)."""
+
+    kind: Literal["fpu_beta_pulse"]
+    strain: Finite = Field(description="peak bond strain D_m/a (either sign); width sqrt(k1/(6 k3))/|D_m| sites")
     center_site: Finite
     direction: Literal[1, -1] = 1
 
@@ -220,7 +240,29 @@ class TanhFront(Strict):
     speed: Literal["theory", "static"] = "theory"
 
 
-Launch = Annotated[Union[TodaSoliton, Sech2Pulse, TanhFront], Field(discriminator="kind")]
+class HertzKdvPulse(Strict):
+    """The weak (KdV) solitary wave of a precompressed Hertz chain (exponent 3/2; Nesterenko, §2)."""
+
+    kind: Literal["hertz_kdv_pulse"]
+    amplitude_ratio: Positive = Field(description="peak excess strain over the precompression strain ξ0 "
+                                                  "(ε ≪ 1; width sqrt(2/ε) sites, speed c0 sqrt(1 + ε/6))")
+    center_site: Finite
+    direction: Literal[1, -1] = 1
+
+
+class KinkLaunch(Strict):
+    """The sine-Gordon or φ⁴ kink of a linear chain on a sine or phi4 substrate (§2): at rest, or
+    driven by a constant_force against viscous damping at its terminal (McLaughlin–Scott) speed,
+    the well the force favours behind it."""
+
+    kind: Literal["kink"]
+    center_site: Finite
+    direction: Literal[1, -1] = 1
+    speed: Literal["theory", "static"] = "theory"
+
+
+Launch = Annotated[Union[TodaSoliton, TodaTwoSoliton, Sech2Pulse, FpuBetaPulse, HertzKdvPulse, KinkLaunch, TanhFront],
+                   Field(discriminator="kind")]
 
 
 class Pin(Strict):

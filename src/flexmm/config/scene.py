@@ -180,9 +180,11 @@ class Scene(Strict):
             bad = [s for s in pin.sites if s >= n]
             if bad:
                 raise ValueError(f"initial.pinned.{k}.sites {bad} outside 0..{n - 1}")
-        needs = {"toda_soliton": "toda", "sech2_pulse": "polynomial", "tanh_front": "linear"}
+        needs = {"toda_soliton": "toda", "toda_two_soliton": "toda", "sech2_pulse": "polynomial",
+                 "fpu_beta_pulse": "polynomial", "hertz_kdv_pulse": "hertz", "kink": "linear", "tanh_front": "linear"}
         for k, spec in enumerate(init.launch):
-            if not 0 <= spec.center_site <= n - 1:
+            centers = spec.center_site if isinstance(spec.center_site, tuple) else (spec.center_site,)
+            if not all(0 <= c <= n - 1 for c in centers):
                 raise ValueError(f"initial.launch.{k}.center_site={spec.center_site} is outside 0..{n - 1}")
             law = getattr(getattr(self.lattice, "bond", None), "law", None)
             if self.lattice.kind != "mass_chain" or law != needs[spec.kind]:

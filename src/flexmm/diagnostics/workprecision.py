@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from flexmm.diagnostics import baseline
+from flexmm.errors import FlexmmError
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.runner import integrate
 
@@ -261,14 +262,48 @@ def chart(rows: list[Row], path, title: str = "") -> None:
     plt.close(fig)
 
 
+#: a second reference at CHECK_RTOL_FACTOR × the reference's rtol whose final state differs from the
+#: reference's by more than CHAOS_RATIO of the field's largest value: errors grow without bound
+#: (a chaotic wave field), and no step or tolerance of any method reaches a chart worth drawing
+CHECK_RTOL_FACTOR = 1e3
+CHAOS_RATIO = 1e-4
+
+
+class ChaoticReference(FlexmmError):
+    """The reference cannot be trusted: a looser reference ends far from it (chaotic dynamics)."""
+
+
+def reference_spread(problem, ref: Reference, n_frames: int) -> tuple[float, float, float]:
+    """(final-state difference of a reference at CHECK_RTOL_FACTOR × its rtol, the largest |q| of
+    the reference's lattice DOFs, the check's wall time): both in displacement units."""
+    check = reference(problem, n_frames, ref.rtol * CHECK_RTOL_FACTOR)
+    dofs = lattice_dofs(problem.system)
+    return (float(np.max(np.abs(check.q[-1, dofs] - ref.q[-1, dofs]))), float(np.max(np.abs(ref.q[:, dofs]))),
+            check.wall_s)
+
+
 def benchmark(problem, methods=None, ivp_methods=baseline.METHODS, *, n_frames: int = 101,
               repeats: int = 3, ref_rtol: float = 1e-12, budget_s: float = 30.0, threads: int = 1,
-              log=None) -> tuple[list[Row], Reference]:
-    """Run the whole comparison; returns the rows and the reference."""
+              log=None, force: bool = False) -> tuple[list[Row], Reference]:
+    """Run the whole comparison; returns the rows and the reference. ChaoticReference (unless
+    ``force``: a warning) when a reference at 1000× the tolerance ends more than CHAOS_RATIO of the
+    field away from it: the final-state errors would measure the chaos, not the methods."""
     say = log or (lambda m: None)
     ref = reference(problem, n_frames, ref_rtol)
     say(f"reference: dopri5 rtol {ref_rtol:g} in {ref.wall_s:.3g} s, {n_frames} frames; pulse speed "
         f"{ref.speed:.6g} m/s, amplitude {ref.amplitude:.6g}; load average {os.getloadavg()[0]:.2f}")
+    spread, scale, wall = reference_spread(problem, ref, n_frames)
+    share = spread / scale if scale else math.inf
+    msg = (f"a reference at rtol {ref_rtol * CHECK_RTOL_FACTOR:g} ends {spread:.3g} from the one at {ref_rtol:g} "
+           f"({share:.2g} of the field's largest value {scale:.3g}; checked in {wall:.3g} s)")
+    if not spread <= CHAOS_RATIO * scale:
+        text = (f"{msg}: the final state is chaotic (errors grow without bound), so every method's error would "
+                f"measure the chaos, not the method; bench a shorter run (solver.duration_s=...)")
+        if not force:
+            raise ChaoticReference(text + " or pass --force")
+        say(f"warning: {text}")
+    else:
+        say(f"reference check: {msg}")
     rows: list[Row] = []
     for name in methods or list(INTEGRATORS):
         rows += run_flexmm(problem, ref, name, repeats=repeats, threads=threads, budget_s=budget_s, log=say)

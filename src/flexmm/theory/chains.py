@@ -114,6 +114,22 @@ def softening_profile(n, t, Dm: float, v: float, W: float, a: float = 1.0):
     return Dm * _sech2(z)
 
 
+# ---------------------------------------------------------------- FPU-β chain (mKdV)
+def fpu_beta_solitary_wave(k1: float, k3: float, Dm: float, m: float = 1.0, a: float = 1.0) -> tuple[float, float]:
+    """Speed v (length/time) and width W (sites) of the solitary wave D = Dm sech((n − vt/a)/W) of
+    T(D) = k1 D + k3 D³ (docs/physics.md §2).
+
+    Same Boussinesq limit as ``softening_solitary_wave``: (k1/12) D'' = (m v²/a² − k1) D − k3 D³,
+    solved by sech with W = sqrt(k1/(6 k3))/|Dm| sites and v = c0 sqrt(1 + k3 Dm²/(2 k1)) (the
+    mKdV soliton to first order in k3 Dm²/k1). Needs k3 > 0 (hardening); either polarity; W >> 1.
+    """
+    if k1 <= 0 or m <= 0 or a <= 0 or Dm == 0:
+        raise ValueError("need k1, m, a > 0 and Dm != 0")
+    if not k3 > 0:
+        raise ValueError(f"no bright solitary wave of T = k1 D + k3 D³ with k3 = {k3} (needs k3 > 0)")
+    return a * math.sqrt(k1 / m) * math.sqrt(1 + k3 * Dm**2 / (2 * k1)), math.sqrt(k1 / (6 * k3)) / abs(Dm)
+
+
 # ---------------------------------------------------------------- Hertzian chain (Nesterenko)
 def nesterenko_speed(A: float, m: float, D: float, xi_m: float) -> float:
     """Solitary-wave speed V = (2/sqrt 5) c xi_m^(1/4), c^2 = A D^(5/2)/m (Nesterenko; docs/physics.md §2).
@@ -143,6 +159,22 @@ def nesterenko_precompressed_speed(A: float, m: float, D: float, xi_0: float, xi
     return math.sqrt(c2 * (0.8 * (xi_m**2.5 - xi_0**2.5) - 2.0 * xi_0**1.5 * (xi_m - xi_0))) / (xi_m - xi_0)
 
 
+def hertz_kdv_wave(A: float, m: float, D: float, xi_0: float, eps: float) -> SechWave:
+    """Weak solitary wave (KdV limit) of a Hertz chain precompressed to strain xi_0: peak strain
+    xi_0 (1 + eps) above it, eps << 1 (docs/physics.md §2).
+
+    Expanding the long-wave equation of ``nesterenko_profile`` about xi_0 gives, for the excess
+    strain η, η_tt = c0² [η + η²/(4 xi_0) + (D²/12) η_xx]_xx: the Boussinesq equation of
+    ``softening_solitary_wave`` with k2/k1 = 1/(4 xi_0 D) and a = D, so the excess strain is
+    η = eps xi_0 sech²(x/(W D)), W = sqrt(2/eps) sites, V = c0 sqrt(1 + eps/6) (the first order of
+    ``nesterenko_precompressed_speed``). Returned as the bond elongation (compressive, Dm < 0).
+    """
+    if not (xi_0 > 0 and eps > 0):
+        raise ValueError("a KdV wave needs a precompressed chain (xi_0 > 0) and eps > 0")
+    c0 = math.sqrt(1.5 * A * D**2.5 / m * math.sqrt(xi_0))
+    return SechWave(-eps * xi_0 * D, c0 * math.sqrt(1 + eps / 6), math.sqrt(2 / eps), c0, D)
+
+
 def nesterenko_speed_from_force(A: float, m: float, D: float, F_m: float) -> float:
     """Speed from the peak contact force: xi_m = (F_m/A)^(2/3)/D, so V = (2/sqrt5) c (F_m/A)^(1/6) D^(-1/4)."""
     return nesterenko_speed(A, m, D, (F_m / A) ** (2 / 3) / D)
@@ -164,6 +196,68 @@ def nesterenko_profile(A: float, m: float, D: float, xi_m: float, x, t=0.0):
     s = np.asarray(x, dtype=float) - nesterenko_speed(A, m, D, xi_m) * np.asarray(t, dtype=float)
     k = math.sqrt(10) / (5 * D)
     return np.where(np.abs(k * s) < math.pi / 2, xi_m * np.cos(k * s) ** 4, 0.0)
+
+
+# ---------------------------------------------------------------- Klein-Gordon kinks (sine-Gordon, φ⁴)
+@dataclass(frozen=True)
+class Kink:
+    """Continuum kink u(x) of m u_tt = k a² u_xx − V'(u) between two wells (docs/physics.md §2).
+
+    jump: well-to-well Δu (m); width: w (m) of the rest profile; c = a sqrt(k/m) (m/s); M = ∫ u_x² dx
+    (m) of the rest kink, from the Bogomolny relation u_x = sqrt(2 V(u)/(k a²)); curvature: V'' at
+    the wells (N/m), so a constant force F moves both wells by F/V'' (first order).
+    """
+
+    law: str
+    jump: float
+    width: float
+    c: float
+    M: float
+    curvature: float
+
+    def profile(self, x, v: float = 0.0):
+        """u(x) − (lower well) of the kink rising from the lower well (x → −∞) to the upper one,
+        Lorentz-contracted at speed v; shape of x."""
+        xi = np.asarray(x, dtype=float) / (self.width * math.sqrt(1 - (v / self.c) ** 2))
+        if self.law == "sine":
+            return 2 * self.jump / math.pi * np.arctan(np.exp(np.clip(xi, -700, 700)))
+        return 0.5 * self.jump * (1 + np.tanh(xi))
+
+    def width_10_90(self, v: float = 0.0) -> float:
+        """Distance (m) over which the moving profile goes from 10 % to 90 % of the jump."""
+        wv = self.width * math.sqrt(1 - (v / self.c) ** 2)
+        return 2 * wv * (math.log(math.tan(0.45 * math.pi)) if self.law == "sine" else math.atanh(0.8))
+
+    def slope(self, x, v: float = 0.0):
+        """du/dx of ``profile``; shape of x."""
+        wv = self.width * math.sqrt(1 - (v / self.c) ** 2)
+        xi = np.clip(np.asarray(x, dtype=float) / wv, -350, 350)
+        if self.law == "sine":
+            return self.jump / (math.pi * wv) / np.cosh(xi)
+        return 0.5 * self.jump / wv / np.cosh(xi) ** 2
+
+
+def sine_gordon_kink(A: float, period: float, k: float, m: float, a: float) -> Kink:
+    """V = A(1 − cos(2πu/λ)): u = (2λ/π) arctan(e^(x/w)), w = a λ sqrt(k/A)/(2π), M = 4λ sqrt(A/k)/(π a)."""
+    return Kink("sine", period, a * period * math.sqrt(k / A) / (2 * math.pi), a * math.sqrt(k / m),
+                4 * period * math.sqrt(A / k) / (math.pi * a), A * (2 * math.pi / period) ** 2)
+
+
+def phi4_kink(h: float, L: float, k: float, m: float, a: float) -> Kink:
+    """V = h(1 − (u/L)²)² (wells ±L): u = L tanh(x/w), w = L a sqrt(k/(2h)), M = (4L/3) sqrt(2h/k)/a."""
+    return Kink("phi4", 2 * L, L * a * math.sqrt(k / (2 * h)), a * math.sqrt(k / m),
+                4 * L / 3 * math.sqrt(2 * h / k) / a, 8 * h / L**2)
+
+
+def driven_kink_speed(kink: Kink, force: float, eta: float) -> float:
+    """Terminal speed (m/s) of a kink driven by a force F per site against viscous damping η:
+    the power F Δu v/a balances η v² γ M/a (γ = 1/sqrt(1 − v²/c²)), so
+    v = Q/sqrt(1 + (Q/c)²), Q = F Δu/(η M) — for sine-Gordon McLaughlin–Scott's
+    v/c = 1/sqrt(1 + (4α/(π γ_F))²), α = η/(m ω0), γ_F = F λ/(2π A). First order in F."""
+    if not eta > 0:
+        raise ValueError("a driven kink's terminal speed needs viscous damping (η > 0)")
+    q = abs(force) * kink.jump / (eta * kink.M)
+    return q / math.sqrt(1 + (q / kink.c) ** 2)
 
 
 # ---------------------------------------------------------------- Toda lattice
@@ -194,6 +288,36 @@ def toda_head_on_shifts(kappa1: float, kappa2: float) -> tuple[float, float]:
     s1, s2 = math.sinh(kappa1), math.sinh(kappa2)
     a12 = -((s1 + s2) ** 2 - math.sinh(kappa1 - kappa2) ** 2) / ((s1 - s2) ** 2 - math.sinh(kappa1 + kappa2) ** 2)
     return -math.log(a12) / (2 * kappa1), -math.log(a12) / (2 * kappa2)
+
+
+def toda_two_soliton(a: float, b: float, m: float, kappa: tuple[float, float], center: tuple[float, float],
+                     sigma: tuple[int, int], n) -> tuple[np.ndarray, np.ndarray]:
+    """Bond stretch r_n and its rate ṙ_n (per unit time) of the exact Toda two-soliton at t = 0
+    (docs/physics.md §2): e^(−b r_n) = τ_(n+1) τ_(n−1)/τ_n², τ = 1 + e^η1 + e^η2 + A12 e^(η1+η2),
+    η_i = 2κ_i (n − n_i) − 2σ_i sinh κ_i s (s = sqrt(ab/m) t), each phase corrected by ln A12 where
+    the other soliton lies on its left, so that soliton i is centred on n_i (its asymptotic centre,
+    before a collision when both sit on one site). ``n``: bond positions (sites).
+    """
+    k1, k2 = kappa
+    if min(k1, k2) <= 0 or (sigma[0] == sigma[1] and k1 == k2):
+        raise ValueError("two Toda solitons need kappa > 0, and different kappas when they move the same way")
+    w = [2 * sg * math.sinh(k) for k, sg in zip(kappa, sigma)]
+    A12 = -((w[0] - w[1]) ** 2 - 4 * math.sinh(k1 - k2) ** 2) / ((w[0] + w[1]) ** 2 - 4 * math.sinh(k1 + k2) ** 2)
+    lnA = math.log(A12)
+    n = np.asarray(n, dtype=float)
+    nn = np.concatenate([[n[0] - 1], n, [n[-1] + 1]])
+    def left_of(j: int, i: int) -> bool:  # on the same site, the soliton moving right is the left one
+        return center[j] < center[i] or (center[j] == center[i] and sigma[j] > sigma[i])
+
+    eta = [2 * k * (nn - c) - (lnA if left_of(1 - i, i) else 0.0) for i, (k, c) in enumerate(zip(kappa, center))]
+    terms = np.stack([np.zeros_like(nn), eta[0], eta[1], lnA + eta[0] + eta[1]])
+    rates = np.array([0.0, -w[0], -w[1], -w[0] - w[1]])[:, None]  # ∂η/∂s of each term
+    top = terms.max(axis=0)
+    weights = np.exp(terms - top)
+    ln_tau = top + np.log(weights.sum(axis=0))
+    dln_tau = (rates * weights).sum(axis=0) / weights.sum(axis=0)  # ∂ ln τ/∂s
+    second = lambda f: f[2:] + f[:-2] - 2 * f[1:-1]  # noqa: E731
+    return -second(ln_tau) / b, -second(dln_tau) * math.sqrt(a * b / m) / b
 
 
 # ---------------------------------------------------------------- linear chain
