@@ -71,9 +71,11 @@ def open_dataset(path):
 
     if isinstance(path, xr.Dataset):
         return path
+    from flexmm.io.run_dataset import load_run_quickly
+
     nc, _ = run_dataset(path)
     try:
-        return xr.load_dataset(nc, engine="h5netcdf")
+        return load_run_quickly(nc)  # the Dataset xarray's reader gives, read with h5py alone
     except (OSError, ValueError) as exc:
         raise RunNotFound(f"cannot read {nc}: {exc}") from None
 
