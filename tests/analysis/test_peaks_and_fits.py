@@ -15,8 +15,8 @@ import pytest
 from scipy.optimize import curve_fit
 from scipy.signal import find_peaks, peak_widths, savgol_filter
 
-from flexmm.analysis import peaks
-from flexmm.analysis.profiles import SHAPES, fit_profile, shape_jacobian
+from flexmm.analysis.features import peaks
+from flexmm.analysis.features.profiles import SHAPES, fit_profile, shape_jacobian
 
 
 def _signals(n_cases: int = 400, seed: int = 5):
@@ -115,7 +115,7 @@ def test_a_fit_at_its_bound_is_bounded():
 
 
 def test_the_pulse_analysis_imports_neither_scipy_signal_nor_stats():
-    code = ("import sys; import flexmm.analysis.report, flexmm.analysis.summary; "
+    code = ("import sys; import flexmm.analysis.report.analyze, flexmm.analysis.report.summary; "
             "print(sorted(m for m in sys.modules if m.startswith(('scipy.signal', 'scipy.stats', 'scipy.optimize', "
             "'scipy.ndimage'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -125,7 +125,7 @@ def test_the_pulse_analysis_imports_neither_scipy_signal_nor_stats():
 def test_line_fit_slope_error_and_degenerate_abscissae():
     """The slope and its standard error against numpy's covariance; points that share one
     abscissa (arrivals in one column of a sheet) have no line: NaN, not an exception."""
-    from flexmm.analysis.arrivals import line_fit
+    from flexmm.analysis.measure.arrivals import line_fit
 
     x = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
     y = 2.0 * x + 1.0 + np.array([0.1, -0.1, 0.05, 0.0, -0.05])

@@ -72,7 +72,7 @@ def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
 
 
 def compare_transient(p) -> list[Comparison]:
-    """Rows for a formation transient (``analysis.transients``): how far and how long the lobe
+    """Rows for a formation transient (``analysis.measure.transients``): how far and how long the lobe
     travelled, and what it turned into; never compared with a steady-pulse law."""
     note = "formation transient" + (f", turns into pulse {p.continues_as}" if p.continues_as >= 0 else ", dies out")
     return [Comparison(f"pulse {p.index}", q, value, None, units, note) for q, value, units in (

@@ -1,6 +1,6 @@
 """Find localized features in every frame and link them into tracks through time.
 
-Per frame, peaks of ±field above a height threshold (``analysis.peaks.find_peaks`` with a prominence
+Per frame, peaks of ±field above a height threshold (``analysis.features.peaks.find_peaks`` with a prominence
 criterion) are located to sub-site accuracy by a parabola through the three samples around the
 maximum. Peaks are then linked frame to frame by a greedy nearest-neighbour tracker that predicts
 each track's position from its recent velocity, keeps a track alive across a few missing frames
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexmm.analysis.peaks import find_peaks, local_maxima_rows
+from flexmm.analysis.features.peaks import find_peaks, local_maxima_rows
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Spatial and temporal widths of a tracked pulse.
 
-- FWHM: ``analysis.peaks.peak_width`` on the spatial profile, median over up to 25 frames;
+- FWHM: ``analysis.features.peaks.peak_width`` on the spatial profile, median over up to 25 frames;
 - shape widths W (sech, sech², §1.3 profile; see ``profiles``): one least-squares fit of all
   usable frames pooled in the frame moving with the pulse, each frame divided by the fitted
   amplitude at its position — pooling averages noise far better than frame-by-frame fits;
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexmm.analysis.peaks import peak_width
-from flexmm.analysis.profiles import SHAPES, ProfileFit, fit_profile, shape_fwhm
+from flexmm.analysis.features.peaks import peak_width
+from flexmm.analysis.features.profiles import SHAPES, ProfileFit, fit_profile, shape_fwhm
 
 POOLED_FRAMES = 200  # frames pooled into the co-moving width fit
 
