@@ -11,7 +11,8 @@ Shapes (z = (x − x0)/W):
 as well (``fwhm``), in the units of x.
 
 ``fit_profile`` solves the least-squares problem by Levenberg–Marquardt with the shapes' analytic
-Jacobians (``shape_jacobian``), converged far tighter than the fit's use needs; the parameters
+Jacobians (``shape_jacobian``), converged far tighter than the fit's use needs (``fit_profiles``:
+many profiles at once, each with its own steps, in one vectorised iteration); the parameters
 are bounded (centre within the samples, W within 10⁻³–10³ of its guess, b ≤ 0.95), and a
 solution outside the bounds, or a solve that does not converge, is redone by
 ``scipy.optimize.curve_fit`` within them (imported only then: it is slow to import, and an
@@ -82,8 +83,12 @@ class ProfileFit:
 
 def shape_jacobian(shape: str, x: np.ndarray, p) -> tuple[np.ndarray, np.ndarray]:
     """The shape's values at ``x`` for parameters ``p`` (A, x0, W[, b]) and their derivatives
-    (n, len(p)); written with sech and tanh, so nothing overflows far from the centre."""
-    A, x0, W = p[0], p[1], p[2]
+    (..., len(p)); written with sech and tanh, so nothing overflows far from the centre.
+
+    One problem: x (n,), p (k,) -> (n,), (n, k); a batch: x (m, n), p (m, k) -> (m, n), (m, n, k).
+    """
+    p = np.asarray(p, float)
+    A, x0, W = p[..., 0, None], p[..., 1, None], p[..., 2, None]
     z = (x - x0) / W
     e = np.exp(-2 * np.abs(z))
     s = 2 * np.sqrt(e) / (1 + e)  # sech z
@@ -96,7 +101,7 @@ def shape_jacobian(shape: str, x: np.ndarray, p) -> tuple[np.ndarray, np.ndarray
         f = A * dA
         dz = -2 * f * t
     else:  # kg: A s / (b s + 1 - b)
-        b = p[3]
+        b = p[..., 3, None]
         E = b * s + 1 - b
         dA = s / E
         f = A * dA
@@ -104,46 +109,97 @@ def shape_jacobian(shape: str, x: np.ndarray, p) -> tuple[np.ndarray, np.ndarray
     cols = [dA, -dz / W, -dz * z / W]
     if shape == "kg":
         cols.append(A * s * (1 - s) / (E * E))
-    return f, np.stack(cols, axis=1)
+    return f, np.stack(cols, axis=-1)
 
 
-def _least_squares(shape: str, x: np.ndarray, y: np.ndarray, p0: np.ndarray, max_iter: int = 100):
-    """Levenberg–Marquardt (Marquardt's diagonal scaling) from ``p0``: (p, J at p, sum of squares),
-    or None if it did not converge (or met a singular or non-finite step)."""
+def _least_squares(shape: str, x: np.ndarray, y: np.ndarray, mask: np.ndarray, p0: np.ndarray,
+                   max_iter: int = 100) -> list:
+    """Levenberg–Marquardt (Marquardt's diagonal scaling) of m problems at once.
+
+    x, y, mask (m, n): the samples of each problem (``mask`` False on the padding of the shorter
+    ones), p0 (m, k). Each problem takes its own steps and damping, as if solved alone. Returns per
+    problem (p, J at p on its samples, sum of squares), or None if it did not converge (or met a
+    singular or non-finite step).
+    """
+    m, k = p0.shape
+    eye = np.eye(k)
+
+    padded = not mask.all()
+
+    def residual(rows, pp):
+        f, J = shape_jacobian(shape, x[rows], pp)
+        r = f - y[rows]
+        if padded:
+            r, J = np.where(mask[rows], r, 0.0), np.where(mask[rows, :, None], J, 0.0)
+        return r, J, np.einsum("ij,ij->i", r, r)
+
     p = np.array(p0, float)
-    f, J = shape_jacobian(shape, x, p)
-    r = f - y
-    cost = float(r @ r)
-    lam = 1e-3
-    for _ in range(max_iter):
-        g = J.T @ r
-        H = J.T @ J
-        d = np.diag(H).copy()
-        if not np.all(np.isfinite(H)) or d.max() <= 0:
-            return None
-        d = np.maximum(d, 1e-12 * d.max())
-        while True:
-            try:
-                step = np.linalg.solve(H + lam * np.diag(d), -g)
-            except np.linalg.LinAlgError:
-                return None
-            pn = p + step
-            fn, Jn = shape_jacobian(shape, x, pn)
-            rn = fn - y
-            cn = float(rn @ rn)
-            if np.isfinite(cn) and cn <= cost:
-                break
-            if np.isfinite(cn) and cn - cost <= 1e-14 * cost and np.all(np.abs(step) <= 1e-9 * np.abs(p)):
-                return p, J, cost  # the cost is flat to rounding around p: converged
-            lam *= 4.0
-            if lam > 1e20:  # no step lowers the cost: a minimum to rounding, if the gradient agrees
-                return (p, J, cost) if np.all(np.abs(g) <= 1e-8 * (np.sqrt(d) * (np.sqrt(cost) + 1e-300))) else None
-        small = np.all(np.abs(step) <= 1e-11 * np.abs(pn)) or cost - cn <= 1e-15 * cost
-        p, J, r, cost = pn, Jn, rn, cn
-        lam = max(lam / 3.0, 1e-12)
-        if small:
-            return p, J, cost
-    return None
+    r, J, cost = residual(slice(None), p)
+    lam = np.full(m, 1e-3)
+    g, H, d = np.zeros((m, k)), np.zeros((m, k, k)), np.zeros((m, k))
+    out: list = [None] * m
+    live, fresh, steps = np.ones(m, bool), np.ones(m, bool), np.zeros(m, int)
+
+    def done(i, converged: bool) -> None:
+        out[i] = (p[i].copy(), J[i][mask[i]], float(cost[i])) if converged else None
+        live[i] = False
+
+    while live.any():
+        new = np.flatnonzero(live & fresh)  # a step was taken: the normal equations at the new p
+        if new.size:
+            JT = J[new].transpose(0, 2, 1)
+            g[new] = (JT @ r[new][..., None])[..., 0]
+            H[new] = JT @ J[new]
+            dd = np.diagonal(H[new], axis1=1, axis2=2)
+            bad = ~np.all(np.isfinite(H[new]), axis=(1, 2)) | (dd.max(axis=1) <= 0)
+            for i in new[bad]:
+                done(i, False)
+            d[new] = np.maximum(dd, 1e-12 * dd.max(axis=1, keepdims=True))
+            fresh[new] = False
+        a = np.flatnonzero(live)
+        if not a.size:
+            break
+        try:
+            step = np.linalg.solve(H[a] + lam[a, None, None] * eye * d[a, None, :], -g[a][..., None])[..., 0]
+        except np.linalg.LinAlgError:  # one singular system: solve them one by one
+            step = np.full((a.size, k), np.nan)
+            for j, i in enumerate(a):
+                try:
+                    step[j] = np.linalg.solve(H[i] + lam[i] * np.diag(d[i]), -g[i])
+                except np.linalg.LinAlgError:
+                    done(i, False)
+            keep = live[a]
+            a, step = a[keep], step[keep]
+            if not a.size:
+                continue
+        pn = p[a] + step
+        rn, Jn, cn = residual(a, pn)
+        finite = np.isfinite(cn)
+        accept = finite & (cn <= cost[a])
+        flat = finite & (cn - cost[a] <= 1e-14 * cost[a]) & np.all(np.abs(step) <= 1e-9 * np.abs(p[a]), axis=1)
+        for j, i in enumerate(a):
+            if accept[j]:
+                continue
+            if flat[j]:  # the cost is flat to rounding around p: converged
+                done(i, True)
+                continue
+            lam[i] *= 4.0
+            if lam[i] > 1e20:  # no step lowers the cost: a minimum to rounding, if the gradient agrees
+                done(i, bool(np.all(np.abs(g[i]) <= 1e-8 * (np.sqrt(d[i]) * (np.sqrt(cost[i]) + 1e-300)))))
+        acc = np.flatnonzero(accept)
+        if acc.size:
+            i = a[acc]
+            small = np.all(np.abs(step[acc]) <= 1e-11 * np.abs(pn[acc]), axis=1) | (cost[i] - cn[acc] <= 1e-15 * cost[i])
+            p[i], J[i], r[i], cost[i] = pn[acc], Jn[acc], rn[acc], cn[acc]
+            lam[i] = np.maximum(lam[i] / 3.0, 1e-12)
+            steps[i] += 1
+            fresh[i] = True
+            for j, ii in enumerate(i):
+                if small[j]:
+                    done(ii, True)
+                elif steps[ii] >= max_iter:
+                    done(ii, False)
+    return out
 
 
 def _covariance(J: np.ndarray, cost: float) -> np.ndarray:
@@ -158,17 +214,42 @@ def _covariance(J: np.ndarray, cost: float) -> np.ndarray:
 
 def fit_profile(x: np.ndarray, y: np.ndarray, shape: str, guess: tuple[float, float, float]) -> ProfileFit:
     """Fit ``shape`` to samples (x, y) from a guess (A, x0, W); failed fit -> ``ok=False``, NaNs."""
-    func = SHAPES[shape]
-    A0, x00, W0 = guess
-    p0 = [A0, x00, W0] + ([0.0] if shape == "kg" else [])
-    big = np.inf
-    lo = [-big, x.min(), 1e-3 * W0] + ([-20.0] if shape == "kg" else [])
-    hi = [big, x.max(), 1e3 * W0] + ([0.95] if shape == "kg" else [])
-    p0[1] = min(max(p0[1], lo[1]), hi[1])
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y)) and np.all(np.isfinite(p0))) or x.size == 0:
+    return fit_profiles([x], [y], shape, [guess])[0]
+
+
+def fit_profiles(xs: list, ys: list, shape: str, guesses: list) -> list[ProfileFit]:
+    """``fit_profile`` of several profiles (x, y) with their guesses (A, x0, W), solved together
+    (one Levenberg–Marquardt over the batch: the cost of a few fits, not of their number)."""
+    xs = [np.asarray(x, float) for x in xs]
+    ys = [np.asarray(y, float) for y in ys]
+    setups, todo = [], []
+    for i, (x, y, (A0, x00, W0)) in enumerate(zip(xs, ys, guesses)):
+        p0 = [A0, x00, W0] + ([0.0] if shape == "kg" else [])
+        ok = x.size > 0 and np.all(np.isfinite(x)) and np.all(np.isfinite(y))
+        lo = [-np.inf, x.min() if ok else 0.0, 1e-3 * W0] + ([-20.0] if shape == "kg" else [])
+        hi = [np.inf, x.max() if ok else 0.0, 1e3 * W0] + ([0.95] if shape == "kg" else [])
+        p0[1] = min(max(p0[1], lo[1]), hi[1])
+        ok = ok and np.all(np.isfinite(p0))
+        setups.append((ok, p0, lo, hi))
+        if ok and W0 > 0:
+            todo.append(i)
+    sols: dict = {}
+    if todo:
+        n = max(xs[i].size for i in todo)
+        X, Y, M = np.zeros((len(todo), n)), np.zeros((len(todo), n)), np.zeros((len(todo), n), bool)
+        for j, i in enumerate(todo):
+            X[j, : xs[i].size], Y[j, : xs[i].size], M[j, : xs[i].size] = xs[i], ys[i], True
+        P0 = np.array([setups[i][1] for i in todo], float)
+        sols = dict(zip(todo, _least_squares(shape, X, Y, M, P0)))
+    return [_finish(shape, xs[i], ys[i], *setups[i], sols.get(i)) for i in range(len(xs))]
+
+
+def _finish(shape: str, x, y, ok: bool, p0, lo, hi, sol) -> ProfileFit:
+    """A ProfileFit from the batch's solution of one problem: its covariance, or, at a bound or not
+    converged, the bounded solver's fit."""
+    if not ok:
         return ProfileFit.failed(shape)
-    sol = _least_squares(shape, x, y, np.asarray(p0, float)) if W0 > 0 else None
+    func = SHAPES[shape]
     if sol is not None:
         popt, J, cost = sol
         popt[2] = abs(popt[2])  # every shape is even in z: W and -W are the same fit
