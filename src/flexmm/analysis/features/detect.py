@@ -156,9 +156,14 @@ def merge_tracks(tracks: list[Track], gate: float, rel_speed: float = 0.25,
     if levels is None:
         return _merge(tracks, gate, rel_speed, 8, lambda mb: mb[0])
 
+    seen: dict = {}  # (id, length) -> (track, near): a track changes only by growing; kept, so ids stay unique
+
     def near(tr: Track) -> bool:
-        level = levels[0] if tr.polarity > 0 else levels[1]
-        return bool(np.median(np.abs(tr.height)) <= NEAR * level)
+        key = (id(tr), len(tr.height))
+        if key not in seen:
+            level = levels[0] if tr.polarity > 0 else levels[1]
+            seen[key] = (tr, bool(np.median(np.abs(tr.height)) <= NEAR * level))
+        return seen[key][1]
 
     tracks = _merge(tracks, gate, rel_speed, 8, lambda mb: mb[0], lambda a, b: not (near(a) and near(b)))
     return _merge(tracks, gate, rel_speed, JOIN_POINTS, lambda mb: (mb[1].time[0], mb[0]),
