@@ -16,7 +16,7 @@ from scipy.optimize import curve_fit
 from scipy.signal import find_peaks, peak_widths, savgol_filter
 
 from flexmm.analysis.features import peaks
-from flexmm.analysis.features.profiles import SHAPES, fit_profile, shape_jacobian
+from flexmm.analysis.features.profiles import SHAPES, fit_profile, fit_profiles, shape_jacobian
 
 
 def _signals(n_cases: int = 400, seed: int = 5):
@@ -105,6 +105,36 @@ def test_fits_agree_with_a_tightly_converged_curve_fit(shape):
         if shape == "kg":
             assert ours.b == pytest.approx(ref[3], abs=1e-5)
         assert ours.W_stderr == pytest.approx(np.sqrt(cov[2, 2]), rel=1e-4)
+
+
+@pytest.mark.parametrize("shape", sorted(SHAPES))
+def test_profiles_fitted_together_are_those_fitted_alone(shape):
+    """fit_profiles on 12 noisy profiles of different lengths (the shorter padded in the batch),
+    one of them empty and one non-finite: each fit as fit_profile gives it alone (the same
+    minimum: W, centre, amplitude within 1e-7), the bad ones failed."""
+    rng = np.random.default_rng({"sech": 11, "sech2": 12, "kg": 13}[shape])
+    xs, ys, guesses = [], [], []
+    for _ in range(12):
+        n = int(rng.integers(12, 70))
+        x = np.sort(rng.uniform(-6.0, 6.0, n))
+        true = [rng.uniform(0.2, 2.0) * rng.choice([-1, 1]), rng.uniform(-1, 1), rng.uniform(0.8, 3.0)]
+        true += [rng.uniform(-1.0, 0.6)] if shape == "kg" else []
+        xs.append(x)
+        ys.append(SHAPES[shape](x, *true) + 0.02 * rng.standard_normal(n))
+        guesses.append((true[0] * rng.uniform(0.8, 1.2), true[1] + rng.uniform(-0.3, 0.3), true[2] * rng.uniform(0.7, 1.4)))
+    xs[3], ys[3] = np.zeros(0), np.zeros(0)
+    ys[7] = ys[7].copy()
+    ys[7][2] = np.nan
+    together = fit_profiles(xs, ys, shape, guesses)
+    for j, (x, y, g, f) in enumerate(zip(xs, ys, guesses, together)):
+        if j in (3, 7):
+            assert not f.ok
+            continue
+        alone = fit_profile(x, y, shape, g)
+        assert f.ok and alone.ok
+        assert f.W == pytest.approx(alone.W, rel=1e-7)
+        assert f.center == pytest.approx(alone.center, abs=1e-7 * alone.W)
+        assert f.amplitude == pytest.approx(alone.amplitude, rel=1e-7)
 
 
 def test_a_fit_at_its_bound_is_bounded():
