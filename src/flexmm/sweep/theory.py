@@ -3,7 +3,7 @@
 ``speed_at`` evaluates the ``speed_curve`` of the model's theory (``analysis.report.theory_comparison.theory_for``;
 NaN where the model has no speed law or no pulse of that amplitude exists); ``reference_lines``
 adds the theory's model-specific thresholds worth drawing: for the rotating-squares chain, the
-amplitude gap A_min of each polarity (docs/physics.md §1.3, ``predict_rotating.amplitude_gap_lines``).
+amplitude gap A_min of each polarity (docs/physics.md §1.3, ``analysis.predict.rotating_squares.amplitude_gap_lines``).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 A model kind's theory is a ``ModelTheory`` (``analysis.context``): plain functions that take the
 run's context and a measurement and return ``Comparison`` rows (or a curve for figures), named by
 the ``theory`` hook of its ``ModelSpec`` (``flexmm.config.lattice.MODELS``; see
-``predict_rotating.CHAIN`` and ``predict_chains.MASS_CHAIN``). A model without one, or a measurement
+``predict.rotating_squares.CHAIN`` and ``predict.mass_chain.MASS_CHAIN``). A model without one, or a measurement
 a theory does not cover, simply gets no prediction.
 """
 
