@@ -189,7 +189,8 @@ def _least_squares(shape: str, x: np.ndarray, y: np.ndarray, mask: np.ndarray, p
         acc = np.flatnonzero(accept)
         if acc.size:
             i = a[acc]
-            small = np.all(np.abs(step[acc]) <= 1e-11 * np.abs(pn[acc]), axis=1) | (cost[i] - cn[acc] <= 1e-15 * cost[i])
+            small = (np.all(np.abs(step[acc]) <= 1e-11 * np.abs(pn[acc]), axis=1)
+                     | (cost[i] - cn[acc] <= 1e-15 * cost[i]))
             p[i], J[i], r[i], cost[i] = pn[acc], Jn[acc], rn[acc], cn[acc]
             lam[i] = np.maximum(lam[i] / 3.0, 1e-12)
             steps[i] += 1

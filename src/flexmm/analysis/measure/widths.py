@@ -63,9 +63,10 @@ def frame_fits(view, tr_frames, tr_pos, tr_h, polarity, fwhm, pick, fit: bool = 
     if fit and xs:
         sech_fits = fit_profiles(xs, ys, "sech", [(h, c, w / shape_fwhm("sech", 1.0)) for h, c, w in guesses])
         mid = len(xs) // 2
+        h, c, w = guesses[mid]
         for s in SHAPES:
-            h, c, w = guesses[mid]
-            middle[s] = sech_fits[mid] if s == "sech" else fit_profile(xs[mid], ys[mid], s, (h, c, w / shape_fwhm(s, 1.0)))
+            middle[s] = (sech_fits[mid] if s == "sech"
+                         else fit_profile(xs[mid], ys[mid], s, (h, c, w / shape_fwhm(s, 1.0))))
     fw = [v for v in fw if np.isfinite(v)]
     return (float(np.median(fw)) if fw else np.nan), sech_fits, middle
 
