@@ -18,10 +18,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from flexmm.analysis.measure.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
 from flexmm.analysis.features.detect import Track, refine_peak, split_reversals, track_peaks
 from flexmm.analysis.features.peaks import local_maxima, peak_width
 from flexmm.analysis.features.profiles import SHAPES
+from flexmm.analysis.measure.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
 from flexmm.analysis.measure.steady import steady_part
 from flexmm.analysis.measure.widths import fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
 from flexmm.errors import FlexmmError

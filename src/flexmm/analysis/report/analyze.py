@@ -3,10 +3,11 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of the model's theory (``theory_comparison.theory_for``), pairs colliding pulses (``analysis.measure.collisions``), tells formation
-transients from persistent pulses (``analysis.measure.transients``; transients are not compared with
-theory), and returns a ``RunAnalysis`` that ``analysis.report.export`` writes out. Fields are
-measured from the rest state the dataset stores (``analysis.features.rest``; the model is never rebuilt).
+of the model's theory (``theory_comparison.theory_for``), pairs colliding pulses
+(``analysis.measure.collisions``), tells formation transients from persistent pulses
+(``analysis.measure.transients``; transients are not compared with theory), and returns a
+``RunAnalysis`` that ``analysis.report.export`` writes out. Fields are measured from the rest
+state the dataset stores (``analysis.features.rest``; the model is never rebuilt).
 """
 
 from __future__ import annotations
@@ -16,19 +17,19 @@ from pathlib import Path
 from typing import get_args
 
 from flexmm._blas import single_blas_thread
+from flexmm.analysis.features.fields import FieldView, check_finite, check_saved_fields, field_view
+from flexmm.analysis.features.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.analysis.measure.collisions import Collision, find_collisions
+from flexmm.analysis.measure.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
+from flexmm.analysis.measure.energy import EnergyBudget, energy_budget
+from flexmm.analysis.measure.fronts import FrontMeasurement, FrontNotFound, measure_fronts
+from flexmm.analysis.measure.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
+from flexmm.analysis.measure.pulses import PulseMeasurement, PulseNotFound, measure_pulses
+from flexmm.analysis.measure.transients import mark_transients
 from flexmm.analysis.report.theory_comparison import (
     Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, compare_transient,
     theory_for,
 )
-from flexmm.analysis.measure.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
-from flexmm.analysis.measure.energy import EnergyBudget, energy_budget
-from flexmm.analysis.features.fields import FieldView, check_finite, check_saved_fields, field_view
-from flexmm.analysis.measure.fronts import FrontMeasurement, FrontNotFound, measure_fronts
-from flexmm.analysis.measure.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
-from flexmm.analysis.measure.pulses import PulseMeasurement, PulseNotFound, measure_pulses
-from flexmm.analysis.features.rest import RestStateMissing, from_rest, rest_fields
-from flexmm.analysis.measure.transients import mark_transients
 from flexmm.config.analysis import AnalysisKind, AnalysisOptions
 from flexmm.io.identify import RunNotFound, run_dataset
 
