@@ -131,7 +131,7 @@ def _least_squares(shape: str, x: np.ndarray, y: np.ndarray, mask: np.ndarray, p
         r = f - y[rows]
         if padded:
             r, J = np.where(mask[rows], r, 0.0), np.where(mask[rows, :, None], J, 0.0)
-        return r, J, np.einsum("ij,ij->i", r, r)
+        return r, J, np.array([r[0] @ r[0]]) if m == 1 else np.einsum("ij,ij->i", r, r)
 
     p = np.array(p0, float)
     r, J, cost = residual(slice(None), p)
@@ -147,9 +147,12 @@ def _least_squares(shape: str, x: np.ndarray, y: np.ndarray, mask: np.ndarray, p
     while live.any():
         new = np.flatnonzero(live & fresh)  # a step was taken: the normal equations at the new p
         if new.size:
-            JT = J[new].transpose(0, 2, 1)
-            g[new] = (JT @ r[new][..., None])[..., 0]
-            H[new] = JT @ J[new]
+            if m == 1:  # one (often long) profile: BLAS's products, as a fit of it alone
+                g[0], H[0] = J[0].T @ r[0], J[0].T @ J[0]
+            else:
+                JT = J[new].transpose(0, 2, 1)
+                g[new] = (JT @ r[new][..., None])[..., 0]
+                H[new] = JT @ J[new]
             dd = np.diagonal(H[new], axis1=1, axis2=2)
             bad = ~np.all(np.isfinite(H[new]), axis=(1, 2)) | (dd.max(axis=1) <= 0)
             for i in new[bad]:
