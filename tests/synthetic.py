@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from flexmm.analysis.profiles import SHAPES
+from flexmm.analysis.features.profiles import SHAPES
 
 
 @dataclass(frozen=True)

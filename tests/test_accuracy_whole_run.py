@@ -14,8 +14,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from flexmm import accuracy as acc
-from flexmm.analysis.report import analyze_dataset
-from flexmm.analysis.summary import principal
+from flexmm.analysis.report.analyze import analyze_dataset
+from flexmm.analysis.report.summary import principal
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
 from flexmm.config import load_scene

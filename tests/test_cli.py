@@ -138,7 +138,7 @@ def test_schema_is_json_with_lattice():
 
 
 def test_schema_of_sweep_specs():
-    from flexmm.analysis.report import KINDS
+    from flexmm.analysis.report.analyze import KINDS
 
     result = invoke("schema", "sweep")
     assert result.exit_code == 0

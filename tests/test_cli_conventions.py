@@ -63,8 +63,8 @@ def test_writing_verbs_have_quiet(command):
 
 
 def test_user_error_classes_share_one_base():
-    from flexmm.analysis.fields import FieldError
-    from flexmm.analysis.report import RunNotFound
+    from flexmm.analysis.features.fields import FieldError
+    from flexmm.analysis.report.analyze import RunNotFound
     from flexmm.assemble import SceneError
     from flexmm.config import ConfigError
     from flexmm.plan import PlanError

@@ -11,7 +11,7 @@ import xarray as xr
 import yaml
 from typer.testing import CliRunner
 
-from flexmm.analysis import report
+from flexmm.analysis.report import analyze as report
 from flexmm.api import run_scene
 from flexmm.assemble import build_system
 from flexmm.cli import app
@@ -196,7 +196,7 @@ def test_rotation_field_of_a_rotating_squares_chain_from_an_expression(lego_conf
 def test_launched_damped_front_runs_at_its_predicted_speed(tmp_path):
     """The tanh front of a damped bistable_cubic chain (w = 14 sites) launched at its predicted
     speed keeps it (docs/physics.md §2): speed within 1 %, carried kinetic energy within 2 %."""
-    from flexmm.analysis.summary import principal
+    from flexmm.analysis.report.summary import principal
     from flexmm.theory.chains import bistable_front
 
     sc = scene_from_dict({

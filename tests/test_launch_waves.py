@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from flexmm.analysis import report
+from flexmm.analysis.report import analyze as report
 from flexmm.api import run_scene
 from flexmm.config import ConfigError, load_scene, scene_from_dict
 

@@ -34,7 +34,7 @@ def test_energy_budget_infers_the_work_of_a_prescribed_rotation():
     import xarray as xr
     import yaml
 
-    from flexmm.analysis.energy import energy_budget
+    from flexmm.analysis.measure.energy import energy_budget
 
     t = np.linspace(0.0, 1.0, 5)
     ds = xr.Dataset({"kinetic_energy": ("time", t), "potential_energy": ("time", 0 * t),

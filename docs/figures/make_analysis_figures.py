@@ -17,7 +17,8 @@ import math
 import sys
 from pathlib import Path
 
-from flexmm.analysis import analyze_run, figures
+from flexmm.analysis import analyze_run
+from flexmm.analysis.report import figures
 from flexmm.api import run_scene
 from flexmm.assemble import build_problem
 from flexmm.config import load_scene, scene_from_dict
@@ -55,7 +56,7 @@ def speed_amplitude(work: Path) -> Path:
               f"({100 * row.rel_diff:+.2f} %)")
     th = results[0]
     amps = [a / 1000 for a in range(130, 700, 2)]
-    from flexmm.analysis.theory_comparison import theory_for
+    from flexmm.analysis.report.theory_comparison import theory_for
 
     curve = (amps, theory_for(th.ctx).speed_curve(th.ctx, "rad", amps))
     pts = [(p.amplitude, p.speed_m_s, p.speed_stderr_m_s, r.name) for r in results for p in figures.main_pulses(r)]

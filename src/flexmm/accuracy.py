@@ -168,7 +168,7 @@ class Trace:
 def _sampled(system) -> tuple[np.ndarray, np.ndarray | None]:
     """Indices into q of the sampled sites of every field (fields × sites), and for a model
     without rotations — whose runs report the strain of the displacement — the (i, i + 1) pairs
-    of the first field's strain (2 × sites), as ``analysis.fields`` takes it, else None."""
+    of the first field's strain (2 × sites), as ``analysis.features.fields`` takes it, else None."""
     n, nf = system.n_sites, len(system.fields)
     stride = max(1, math.ceil(n / MAX_SITES))
     sites = np.arange(0, n, stride)

@@ -2,7 +2,7 @@
 
 The notebook API (``flexmm.run``, ``flexmm.analyze``, ``flexmm.render``, re-exported at the top
 of the package; docs/api.md) is a thin layer over what the command line runs: ``run_scene``
-(``flexmm run``), ``analysis.report`` (``flexmm analyze``) and ``render.api`` (``flexmm render``).
+(``flexmm run``), ``analysis.report.analyze`` (``flexmm analyze``) and ``render.api`` (``flexmm render``).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     import xarray as xr
     from matplotlib.figure import Figure
 
-    from flexmm.analysis.report import RunAnalysis
+    from flexmm.analysis.report.analyze import RunAnalysis
 
 
 class _InPlace:
@@ -242,7 +242,7 @@ def run(scene: Scene | dict | str | Path, out: str | Path | None = None, *, over
     naming the source, the dotted field and what was expected); a run that fails or is
     interrupted returns with ``status`` and ``message`` saying so.
     """
-    from flexmm.analysis.report import open_dataset
+    from flexmm.analysis.report.analyze import open_dataset
     from flexmm.config import resolve_scene
     from flexmm.plan.cost import EXACT_SITES, enforce
     from flexmm.plan.output import parse_analysis
@@ -295,7 +295,7 @@ class Measurements:
 
     @property
     def principal(self) -> Any:
-        from flexmm.analysis.summary import principal
+        from flexmm.analysis.report.summary import principal
 
         pick = principal(self.report)
         return None if pick is None else pick[1]
@@ -311,12 +311,12 @@ class Measurements:
 
     @property
     def dataset(self) -> xr.Dataset:
-        from flexmm.analysis.export import to_dataset
+        from flexmm.analysis.report.export import to_dataset
 
         return to_dataset(self.report)
 
     def __str__(self) -> str:
-        from flexmm.analysis.summary import summary_lines
+        from flexmm.analysis.report.summary import summary_lines
 
         return "\n".join(summary_lines(self.report))
 
@@ -331,7 +331,7 @@ def analyze(run: xr.Dataset | str | Path | Result, **options: Any) -> Measuremen
     (``flexmm analyze``'s options; a mistake raises ``ConfigError``). Nothing to measure raises
     a ``FlexmmError`` subclass (``PulseNotFound``, ``FrontNotFound``, ...).
     """
-    from flexmm.analysis.report import analyze_dataset, analyze_with
+    from flexmm.analysis.report.analyze import analyze_dataset, analyze_with
     from flexmm.config.analysis import AnalysisOptions
     from flexmm.config.loader import validate
 

@@ -99,7 +99,7 @@ def measure(path, kind: str, field_spec: str, x_range: tuple[float, float] | Non
 
     Pulses: ``analysis.leading_pulse`` (largest peak of each site's trace, line fit over the
     interior sites), robust to the secondary pulses an impact leaves behind; fronts:
-    ``analysis.fronts.measure_fronts``, first front.
+    ``analysis.measure.fronts.measure_fronts``, first front.
     """
     from flexmm.io.run_dataset import open_run
 
@@ -110,8 +110,8 @@ def measure(path, kind: str, field_spec: str, x_range: tuple[float, float] | Non
         x = np.asarray(ds["x"].values, float)
         ds = ds.isel(site=np.flatnonzero((x >= x_range[0] - 1e-12) & (x <= x_range[1] + 1e-12)))
     if kind == "front":
-        from flexmm.analysis.fields import field_view
-        from flexmm.analysis.fronts import measure_fronts
+        from flexmm.analysis.features.fields import field_view
+        from flexmm.analysis.measure.fronts import measure_fronts
 
         view = field_view(ds, field_spec)
         f = measure_fronts(view)[0]

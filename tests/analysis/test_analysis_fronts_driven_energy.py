@@ -9,7 +9,7 @@ import pytest
 import xarray as xr
 
 from flexmm.analysis import FrontNotFound, energy_budget, field_view, measure_driven, measure_fronts
-from flexmm.analysis.driven import drive_frequency, lockin, pass_bands
+from flexmm.analysis.measure.driven import drive_frequency, lockin, pass_bands
 from synthetic import driven_dataset, front_dataset, pulse_dataset
 
 

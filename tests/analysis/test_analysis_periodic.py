@@ -1,4 +1,4 @@
-"""analysis.periodic on a synthetic driven wave with bound and free harmonics of known size."""
+"""analysis.measure.periodic on a synthetic driven wave with bound and free harmonics of known size."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from flexmm.analysis.periodic import measure_periodic_wave
+from flexmm.analysis.measure.periodic import measure_periodic_wave
 
 
 def _wave(free: float):

@@ -12,8 +12,8 @@ import xarray as xr
 from conftest import LEGO_CHAIN
 
 from flexmm.analysis import analyze_run
-from flexmm.analysis.export import write_dataset
-from flexmm.analysis.theory_comparison import RunContext, bands_for, theory_for
+from flexmm.analysis.report.export import write_dataset
+from flexmm.analysis.report.theory_comparison import RunContext, bands_for, theory_for
 from flexmm.config import scene_from_dict
 from flexmm.config.lattice import RotatingSquaresChain
 from flexmm.io.provenance import config_text

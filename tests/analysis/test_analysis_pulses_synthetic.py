@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from flexmm.analysis import PulseNotFound, field_view, leading_pulse, measure_pulses
-from flexmm.analysis.profiles import SHAPES, fit_profile, shape_fwhm
+from flexmm.analysis.features.profiles import SHAPES, fit_profile, shape_fwhm
 from synthetic import SynthPulse, pulse_dataset
 
 

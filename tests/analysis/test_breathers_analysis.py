@@ -1,8 +1,8 @@
-"""analysis.breathers.site_oscillation on synthetic signals of known frequency."""
+"""analysis.measure.breathers.site_oscillation on synthetic signals of known frequency."""
 import numpy as np
 import pytest
 
-from flexmm.analysis.breathers import site_oscillation
+from flexmm.analysis.measure.breathers import site_oscillation
 from flexmm.theory.breathers import SineGordonBreather
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from flexmm.analysis import report
+from flexmm.analysis.report import analyze as report
 from flexmm.api import run_scene
 from flexmm.config import load_scene
 

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from flexmm.analysis import report
+from flexmm.analysis.report import analyze as report
 from flexmm.api import run_scene
 from flexmm.config import scene_from_dict
 from flexmm.theory.chains import toda_head_on_shifts, toda_speed

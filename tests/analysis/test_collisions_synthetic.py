@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from flexmm.analysis import field_view, measure_pulses
-from flexmm.analysis.collisions import find_collisions
+from flexmm.analysis.measure.collisions import find_collisions
 from synthetic import SynthLeg, SynthPulse, collision_dataset, pulse_dataset
 
 
@@ -90,7 +90,7 @@ def test_linear_superposition_passes_with_zero_shift():
 
 
 def test_a_track_that_turns_back_is_split_at_its_turning_point():
-    from flexmm.analysis.detect import Track, split_reversals
+    from flexmm.analysis.features.detect import Track, split_reversals
 
     t = np.arange(40.0)
     pos = np.where(t < 20, 10 + t, 50 - t) + 0.2 * np.sin(3 * t)  # out and back, with jitter

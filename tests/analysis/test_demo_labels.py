@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from flexmm.analysis.report import analyze_run
-from flexmm.analysis.summary import summary_lines
+from flexmm.analysis.report.analyze import analyze_run
+from flexmm.analysis.report.summary import summary_lines
 from flexmm.api import run_scene
 from flexmm.config import load_scene
 

@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 from flexmm.analysis.context import RunContext
-from flexmm.analysis.dispersion_spectrum import power_spectrum, run_spectrum
-from flexmm.analysis.report import open_dataset
+from flexmm.analysis.measure.dispersion_spectrum import power_spectrum, run_spectrum
+from flexmm.analysis.report.analyze import open_dataset
 from flexmm.api import run_scene
 from flexmm.cli import app
 from flexmm.config import scene_from_dict

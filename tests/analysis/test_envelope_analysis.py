@@ -1,8 +1,8 @@
-"""analysis.envelope.envelope_track on a synthetic moving sech envelope with a carrier."""
+"""analysis.features.envelope.envelope_track on a synthetic moving sech envelope with a carrier."""
 import numpy as np
 import pytest
 
-from flexmm.analysis.envelope import envelope_track
+from flexmm.analysis.features.envelope import envelope_track
 from flexmm.theory.envelope import SECH_FWHM
 
 

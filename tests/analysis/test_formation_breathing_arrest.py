@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from flexmm.analysis import field_view, measure_fronts, measure_pulses
-from flexmm.analysis.steady import steady_part
+from flexmm.analysis.measure.steady import steady_part
 from synthetic import SynthPulse, front_dataset, pulse_dataset
 
 # each example analyses a whole dataset (~1 s): report a failure as found rather than shrink it for minutes

@@ -1,8 +1,8 @@
-"""analysis.harmonics on synthetic signals with known harmonic amplitudes."""
+"""analysis.measure.harmonics on synthetic signals with known harmonic amplitudes."""
 import numpy as np
 import pytest
 
-from flexmm.analysis.harmonics import harmonic_profiles
+from flexmm.analysis.measure.harmonics import harmonic_profiles
 
 
 def test_harmonic_profiles_recover_known_amplitudes():

@@ -47,7 +47,7 @@ def test_the_precompressed_law_meets_its_limits() -> None:
 
 
 def test_a_precompressed_chain_is_compared_with_the_precompressed_law(tmp_path) -> None:
-    from flexmm.analysis.report import analyze_run
+    from flexmm.analysis.report.analyze import analyze_run
     from flexmm.api import run_scene
 
     res = run_scene(scene_from_dict(scene()), run_dir=tmp_path / "r", fidelity="auto")
@@ -65,7 +65,7 @@ def test_a_precompressed_chain_is_compared_with_the_precompressed_law(tmp_path) 
 
 def test_no_theory_without_a_law_for_the_chain(tmp_path) -> None:
     # a precompressed contact of exponent 2 has no solitary-wave law here: no prediction is printed
-    from flexmm.analysis.report import analyze_run
+    from flexmm.analysis.report.analyze import analyze_run
     from flexmm.api import run_scene
 
     sc = scene(bond={"law": "hertz", "stiffness_n_per_m_p": A * 1e3, "exponent": 2.0})

@@ -15,8 +15,8 @@ import pytest
 from scipy.optimize import curve_fit
 from scipy.signal import find_peaks, peak_widths, savgol_filter
 
-from flexmm.analysis import peaks
-from flexmm.analysis.profiles import SHAPES, fit_profile, shape_jacobian
+from flexmm.analysis.features import peaks
+from flexmm.analysis.features.profiles import SHAPES, fit_profile, fit_profiles, shape_jacobian
 
 
 def _signals(n_cases: int = 400, seed: int = 5):
@@ -107,6 +107,36 @@ def test_fits_agree_with_a_tightly_converged_curve_fit(shape):
         assert ours.W_stderr == pytest.approx(np.sqrt(cov[2, 2]), rel=1e-4)
 
 
+@pytest.mark.parametrize("shape", sorted(SHAPES))
+def test_profiles_fitted_together_are_those_fitted_alone(shape):
+    """fit_profiles on 12 noisy profiles of different lengths (the shorter padded in the batch),
+    one of them empty and one non-finite: each fit as fit_profile gives it alone (the same
+    minimum: W, centre, amplitude within 1e-7), the bad ones failed."""
+    rng = np.random.default_rng({"sech": 11, "sech2": 12, "kg": 13}[shape])
+    xs, ys, guesses = [], [], []
+    for _ in range(12):
+        n = int(rng.integers(12, 70))
+        x = np.sort(rng.uniform(-6.0, 6.0, n))
+        true = [rng.uniform(0.2, 2.0) * rng.choice([-1, 1]), rng.uniform(-1, 1), rng.uniform(0.8, 3.0)]
+        true += [rng.uniform(-1.0, 0.6)] if shape == "kg" else []
+        xs.append(x)
+        ys.append(SHAPES[shape](x, *true) + 0.02 * rng.standard_normal(n))
+        guesses.append((true[0] * rng.uniform(0.8, 1.2), true[1] + rng.uniform(-0.3, 0.3), true[2] * rng.uniform(0.7, 1.4)))
+    xs[3], ys[3] = np.zeros(0), np.zeros(0)
+    ys[7] = ys[7].copy()
+    ys[7][2] = np.nan
+    together = fit_profiles(xs, ys, shape, guesses)
+    for j, (x, y, g, f) in enumerate(zip(xs, ys, guesses, together)):
+        if j in (3, 7):
+            assert not f.ok
+            continue
+        alone = fit_profile(x, y, shape, g)
+        assert f.ok and alone.ok
+        assert f.W == pytest.approx(alone.W, rel=1e-7)
+        assert f.center == pytest.approx(alone.center, abs=1e-7 * alone.W)
+        assert f.amplitude == pytest.approx(alone.amplitude, rel=1e-7)
+
+
 def test_a_fit_at_its_bound_is_bounded():
     """A profile wider than 1000 × the guess: the width stays at its bound, as curve_fit's does."""
     x = np.linspace(-5.0, 5.0, 41)
@@ -115,7 +145,7 @@ def test_a_fit_at_its_bound_is_bounded():
 
 
 def test_the_pulse_analysis_imports_neither_scipy_signal_nor_stats():
-    code = ("import sys; import flexmm.analysis.report, flexmm.analysis.summary; "
+    code = ("import sys; import flexmm.analysis.report.analyze, flexmm.analysis.report.summary; "
             "print(sorted(m for m in sys.modules if m.startswith(('scipy.signal', 'scipy.stats', 'scipy.optimize', "
             "'scipy.ndimage'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -125,7 +155,7 @@ def test_the_pulse_analysis_imports_neither_scipy_signal_nor_stats():
 def test_line_fit_slope_error_and_degenerate_abscissae():
     """The slope and its standard error against numpy's covariance; points that share one
     abscissa (arrivals in one column of a sheet) have no line: NaN, not an exception."""
-    from flexmm.analysis.arrivals import line_fit
+    from flexmm.analysis.measure.arrivals import line_fit
 
     x = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
     y = 2.0 * x + 1.0 + np.array([0.1, -0.1, 0.05, 0.0, -0.05])

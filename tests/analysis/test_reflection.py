@@ -1,8 +1,8 @@
-"""Running-wave split (flexmm.analysis.reflection) on synthetic signals with known waves."""
+"""Running-wave split (flexmm.analysis.measure.reflection) on synthetic signals with known waves."""
 import numpy as np
 import pytest
 
-from flexmm.analysis.reflection import complex_amplitudes, running_waves
+from flexmm.analysis.measure.reflection import complex_amplitudes, running_waves
 
 
 def test_split_recovers_left_and_right_waves_at_one_harmonic():

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from flexmm.models import rotating_chain
 from flexmm.analysis.context import RunContext
-from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
+from flexmm.analysis.features.rest import RestStateMissing, from_rest, rest_fields
 from flexmm.api import run_scene
 from flexmm.cli import app
 from flexmm.config import scene_from_dict

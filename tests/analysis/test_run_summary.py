@@ -1,6 +1,6 @@
 """``flexmm run`` prints analyze's measurement of what the scene is about (one measurement path).
 
-The printed line must be the feature ``flexmm analyze`` picks (``analysis.summary.principal``),
+The printed line must be the feature ``flexmm analyze`` picks (``analysis.report.summary.principal``),
 measured on the same field: strain for chains of masses, not the displacement u; the soliton,
 not a small precursor; a front for a multistable chain. No scipy warning may leak.
 """
@@ -16,9 +16,10 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from flexmm.analysis import field_view, measure_pulses, report
+from flexmm.analysis import field_view, measure_pulses
+from flexmm.analysis.report import analyze as report
 from flexmm.analysis.context import RunContext
-from flexmm.analysis.summary import principal, summary_lines
+from flexmm.analysis.report.summary import principal, summary_lines
 from synthetic import SynthPulse, pulse_dataset
 from flexmm.cli import app
 

@@ -1,4 +1,4 @@
-"""Formation transients (analysis.transients): a lobe that forms and dies out, or turns into the
+"""Formation transients (analysis.measure.transients): a lobe that forms and dies out, or turns into the
 steady pulse, is reported with its formation distance and time and never compared with theory."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import json
 import pytest
 
 from flexmm.analysis import field_view, measure_pulses
-from flexmm.analysis.report import analyze_run
-from flexmm.analysis.summary import principal, summary_lines
+from flexmm.analysis.report.analyze import analyze_run
+from flexmm.analysis.report.summary import principal, summary_lines
 from synthetic import SynthPulse, pulse_dataset
-from flexmm.analysis.transients import mark_transients
+from flexmm.analysis.measure.transients import mark_transients
 
 END_S = 30.0  # the lobe fades out around this time, and the steady pulse fades in
 

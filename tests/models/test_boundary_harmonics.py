@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from rigid_scene_checks import run
 
-from flexmm.analysis.reflection import complex_amplitudes, running_waves
+from flexmm.analysis.measure.reflection import complex_amplitudes, running_waves
 from flexmm.models.rotating_chain import build
 from flexmm.theory.boundary_harmonics import boundary_reflection
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from rigid_scene_checks import run
 
-from flexmm.analysis.periodic import measure_periodic_wave
+from flexmm.analysis.measure.periodic import measure_periodic_wave
 from flexmm.theory.cnoidal import linear_speed, wave_with_mean
 from flexmm.theory.rotating import RotatingChainND
 

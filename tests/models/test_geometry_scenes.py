@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from rigid_scene_checks import run
 
-from flexmm.analysis.report import analyze_run
+from flexmm.analysis.report.analyze import analyze_run
 
 pytestmark = pytest.mark.slow
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from rigid_scene_checks import run
 
-from flexmm.analysis.report import analyze_run
+from flexmm.analysis import analyze_run
 from flexmm.linear.network import cell_lattice, network_bands
 from flexmm.models.network import build
 

@@ -5,7 +5,7 @@ import pytest
 from conftest import LEGO_CHAIN
 
 from flexmm.analysis.context import RunContext
-from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.analysis.features.rest import from_rest, rest_fields
 from flexmm.assemble import SceneError, build_problem
 from flexmm.config import scene_from_dict
 from flexmm.theory.prestressed import prestressed_chain
@@ -42,7 +42,7 @@ def test_bad_launches_are_reported(amplitude, center, match):
 def test_from_rest_subtracts_the_stored_rest_state_and_never_rebuilds_the_model():
     import xarray as xr
 
-    from flexmm.analysis.rest import RestStateMissing
+    from flexmm.analysis.features.rest import RestStateMissing
 
     scene = _scene()
     system = build_problem(scene).system

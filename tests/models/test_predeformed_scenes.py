@@ -15,8 +15,8 @@ from rigid_scene_checks import peak, run
 
 from flexmm.analysis import analyze_run
 from flexmm.analysis.context import RunContext
-from flexmm.analysis.periodic import measure_periodic_wave
-from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.analysis.measure.periodic import measure_periodic_wave
+from flexmm.analysis.features.rest import from_rest, rest_fields
 from flexmm.theory.cnoidal import driven_wave, linear_speed
 from flexmm.theory.prestressed import prestressed_chain, static_rotation
 from flexmm.theory.rotating import (RotatingChainND, dispersion_chain, exact_soliton, soliton_initial_state,

@@ -19,7 +19,7 @@ from scipy import optimize
 from test_predeformed_scenes import _exact_fwhm_sites, _fwhm
 
 from flexmm.analysis.context import RunContext
-from flexmm.analysis.rest import from_rest, rest_fields
+from flexmm.analysis.features.rest import from_rest, rest_fields
 from flexmm.assemble import build_system
 from flexmm.models.kernels import model_force
 from flexmm.theory.prestressed import prestressed_chain, soliton_window

@@ -18,7 +18,7 @@ from rigid_scene_checks import (
     wall_position,
 )
 
-from flexmm.analysis.oblique import fold_axis, wave_groups
+from flexmm.analysis.measure.oblique import fold_axis, wave_groups
 from flexmm.linear.sheet import acoustic_modes
 from flexmm.sweep.observe import observe_run
 from flexmm.theory.rotating import (

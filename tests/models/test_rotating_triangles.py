@@ -268,7 +268,7 @@ def test_scene_pulse_is_measured_at_the_long_wave_speed(name, c_long, tmp_path):
     K_s = 0.1); the pulse (FWHM 4 ms, a few units) is slower by its dispersion, by less than 2 %."""
     from pathlib import Path
 
-    from flexmm.analysis import report
+    from flexmm.analysis.report import analyze as report
     from flexmm.api import run_scene
     from flexmm.config import load_scene
 
@@ -284,7 +284,7 @@ def test_scene_pulse_is_measured_at_the_long_wave_speed(name, c_long, tmp_path):
 def test_shipped_chain_scene_reports_its_longitudinal_pulse_against_bloch(tmp_path) -> None:
     """`flexmm run` measures the field the triangles' theory predicts (u, ModelTheory.pulse_field)
     and compares it with the Bloch long-wave speed (measured −1.05 %: a 5-site pulse's dispersion)."""
-    from flexmm.analysis import report
+    from flexmm.analysis.report import analyze as report
     from flexmm.api import run_scene
     from flexmm.config import load_scene
 

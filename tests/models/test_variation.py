@@ -200,7 +200,7 @@ def test_a_triangle_hinge_stiffness_variation_reaches_the_energy():
 def test_a_varied_triangle_lattice_gets_no_uniform_bloch_speed():
     from types import SimpleNamespace
 
-    from flexmm.analysis.predict_triangles import pulse
+    from flexmm.analysis.predict.rotating_triangles import pulse
 
     def rows(variation):
         lattice = {**RIGID, "kind": "rotating_triangles_chain", "n_units": 8, "k_shear_n_per_m": 7.0e3,

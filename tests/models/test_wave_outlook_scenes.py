@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from mass_chain_scene_checks import run
 
-from flexmm.analysis.breathers import site_oscillation
-from flexmm.analysis.envelope import envelope_track
-from flexmm.analysis.harmonics import harmonic_profiles
+from flexmm.analysis.measure.breathers import site_oscillation
+from flexmm.analysis.features.envelope import envelope_track
+from flexmm.analysis.measure.harmonics import harmonic_profiles
 from flexmm.models.mass_chain import build
 from flexmm.theory.breathers import SineGordonBreather, breather_frequency, frenkel_kontorova_scales
 from flexmm.theory.envelope import SECH_FWHM, envelope_soliton

@@ -237,7 +237,7 @@ def test_spec_errors_name_line_field_and_expectation(tmp_path, body, where, mess
 
 
 def test_analysis_kinds_are_those_the_analysis_dispatches_on():
-    from flexmm.analysis.report import KINDS
+    from flexmm.analysis.report.analyze import KINDS
     from flexmm.config.analysis import AnalysisOptions
 
     assert AnalysisOptions.model_json_schema()["properties"]["kind"]["enum"] == list(KINDS)

@@ -1,19 +1,27 @@
 """Turn run datasets into what the papers report (pulse speed, amplitude, width, fronts, ...).
 
-``analyze_run(run_dir)`` is the entry point (``flexmm analyze``); the pieces are usable alone:
-``field_view`` picks a field, ``measure_pulses`` / ``measure_fronts`` / ``measure_driven`` /
-``energy_budget`` measure, ``theory_comparison.theory_for`` finds the predictions of the run's model kind and
-``analysis.export`` writes analysis.nc, JSON and CSV. ``summary.principal`` picks the feature
-``flexmm run`` prints (``summary.summary_lines``); ``leading_pulse`` is a quick single-pulse fit
-(work-precision and fidelity pilots).
+Four subpackages, each importing only those listed after it:
+
+- ``report``: ``analyze.analyze_run(run_dir)``, the entry point (``flexmm analyze``);
+  ``theory_comparison`` pairs measurements with predictions; ``summary`` (what ``flexmm run``
+  prints), ``export`` (analysis.nc, JSON, CSV), ``figures``;
+- ``predict``: each model kind's predictions (a ``ModelTheory``, named by its ``ModelSpec``);
+- ``measure``: what is measured — pulses, fronts, driven response, oblique waves, collisions,
+  transients, energy — each usable alone (``measure_pulses``, ``measure_fronts``,
+  ``measure_driven``, ``energy_budget``; ``leading_pulse`` is a quick single-pulse fit for the
+  work-precision and fidelity pilots);
+- ``features``: the primitives on sampled fields (peaks, tracks, profile fits, the field view
+  ``field_view``, the rest state).
+
+``context`` (the run's context, a measured-vs-predicted row, ``ModelTheory``) is shared by all.
 """
 
-from flexmm.analysis.driven import NotDriven, measure_driven
-from flexmm.analysis.energy import energy_budget
-from flexmm.analysis.fields import FieldError, field_view
-from flexmm.analysis.fronts import FrontNotFound, measure_fronts
-from flexmm.analysis.pulses import PulseNotFound, leading_pulse, measure_pulses
-from flexmm.analysis.report import RunAnalysis, RunNotFound, analyze_run
+from flexmm.analysis.features.fields import FieldError, field_view
+from flexmm.analysis.measure.driven import NotDriven, measure_driven
+from flexmm.analysis.measure.energy import energy_budget
+from flexmm.analysis.measure.fronts import FrontNotFound, measure_fronts
+from flexmm.analysis.measure.pulses import PulseNotFound, leading_pulse, measure_pulses
+from flexmm.analysis.report.analyze import RunAnalysis, RunNotFound, analyze_run
 
 __all__ = [
     "FieldError", "FrontNotFound", "NotDriven", "PulseNotFound", "RunAnalysis", "RunNotFound",

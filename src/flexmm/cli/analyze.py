@@ -107,7 +107,7 @@ def _write_text(target: str, text: str) -> None:
 
 
 def _csv_text(results) -> str:
-    from flexmm.analysis import export as out_ds
+    from flexmm.analysis.report import export as out_ds
 
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=out_ds.CSV_COLUMNS)
@@ -133,10 +133,10 @@ def analysis_options(**given):
 
 def _spectra(runs, options, console, wrote) -> None:
     """``--spectrum``: the ω–k spectrum of each run, a line of what it holds and its figure."""
-    from flexmm.analysis import figures as plots
-    from flexmm.analysis import report
+    from flexmm.analysis.report import figures as plots
+    from flexmm.analysis.report import analyze as report
     from flexmm.analysis.context import RunContext
-    from flexmm.analysis.dispersion_spectrum import run_spectrum
+    from flexmm.analysis.measure.dispersion_spectrum import run_spectrum
 
     for r in runs:
         ds = report.open_dataset(r)
@@ -185,13 +185,13 @@ def analyze(
     """
     from rich.console import Console
 
-    from flexmm.analysis import export as out_ds
-    from flexmm.analysis import report
+    from flexmm.analysis.report import export as out_ds
+    from flexmm.analysis.report import analyze as report
     from flexmm.io.identify import SWEEP, file_kind
     from flexmm.sweep import is_sweep
 
     if plot:  # matplotlib only when figures are asked for (it costs more than the demo's analysis)
-        from flexmm.analysis import figures as plots
+        from flexmm.analysis.report import figures as plots
 
     options = analysis_options(analysis=analysis, field=field, row=row, threshold=threshold, jump=jump)
     data_to_stdout = json_out == "-" or csv_out == "-"

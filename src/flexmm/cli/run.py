@@ -163,8 +163,8 @@ def _print_error_estimate(acc: dict, quiet: bool) -> None:
 def _print_summary(path, analysis: str | None = None) -> None:
     """What ``flexmm analyze`` measures on the run (the same analysis, field and feature), in a
     few lines: the pulse, front, driven response or wave groups the scene is about, with theory."""
-    from flexmm.analysis import report
-    from flexmm.analysis.summary import principal, summary_lines
+    from flexmm.analysis.report import analyze as report
+    from flexmm.analysis.report.summary import principal, summary_lines
     from flexmm.cli.common import analysis_request
     from flexmm.plan.continuum import alongside
 

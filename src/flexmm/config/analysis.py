@@ -4,7 +4,7 @@ One model for every place that says how a run is measured: ``flexmm analyze`` bu
 its options (``--analysis``, ``--field``, ``--row``, ``--threshold``, ``--jump``) and a sweep
 spec's ``analysis:`` block is this model, so both accept the same values and report mistakes
 the same way (file:line, or the option, with the field and what was expected). The analysis
-kinds are ``AnalysisKind``; ``flexmm.analysis.report`` dispatches on them.
+kinds are ``AnalysisKind``; ``flexmm.analysis.report.analyze`` dispatches on them.
 """
 
 from __future__ import annotations

@@ -7,7 +7,9 @@ reductions. Hooks are ``"module:attribute"`` paths (``flexmm.config.base.resolve
 by the layer that uses them, so the config layer stays importable without numpy models, analysis or
 planning (docs/architecture.md, Registries).
 
-Adding a model kind: its config class, its models module (a builder, ``FIELDS``), one line below.
+Adding a model kind: its config class, its models module (a builder, ``FIELDS``), one line below;
+its predictions, if it has a theory, in ``flexmm.analysis.predict.<its models module>`` (a
+``ModelTheory`` named by the ``theory`` hook).
 """
 
 from __future__ import annotations
@@ -93,21 +95,21 @@ def _registry(*specs: ModelSpec) -> dict[str, ModelSpec]:
 MODELS: dict[str, ModelSpec] = _registry(
     ModelSpec(RotatingSquaresChain, "flexmm.models.rotating_chain:build", "n_units",
               launcher="flexmm.models.rotating_chain:launch_soliton", soliton_on_predeformed=True,
-              theory="flexmm.analysis.predict_rotating:CHAIN", continuum="flexmm.plan.continuum:ROTATING_CHAIN"),
+              theory="flexmm.analysis.predict.rotating_squares:CHAIN", continuum="flexmm.plan.continuum:ROTATING_CHAIN"),
     ModelSpec(RotatingSquaresSheet, "flexmm.models.rotating_sheet:build", "n_cols",
-              launcher="flexmm.models.rotating_sheet:launch_soliton", theory="flexmm.analysis.predict_rotating:SHEET",
+              launcher="flexmm.models.rotating_sheet:launch_soliton", theory="flexmm.analysis.predict.rotating_squares:SHEET",
               reducers={"strip": "flexmm.plan.dimension:sheet_to_strip",
                         "chain": "flexmm.plan.dimension:sheet_to_chain"}),
     ModelSpec(BistableLinkage, "flexmm.models.linkage:build", "n_cols",
-              theory="flexmm.analysis.predict_linkage:THEORY"),
+              theory="flexmm.analysis.predict.linkage:THEORY"),
     ModelSpec(MassChain, "flexmm.models.mass_chain:build", "n_units",
-              theory="flexmm.analysis.predict_chains:MASS_CHAIN", continuum="flexmm.plan.continuum:MASS_FRONT"),
+              theory="flexmm.analysis.predict.mass_chain:MASS_CHAIN", continuum="flexmm.plan.continuum:MASS_FRONT"),
     ModelSpec(MassNetwork, "flexmm.models.mass_chain:build", None),
     ModelSpec(MassGrid, "flexmm.models.mass_chain:build", "nx"),
     ModelSpec(RotatingTrianglesChain, "flexmm.models.rotating_triangles:build_chain", "n_units",
-              theory="flexmm.analysis.predict_triangles:THEORY"),
+              theory="flexmm.analysis.predict.rotating_triangles:THEORY"),
     ModelSpec(RotatingTrianglesSheet, "flexmm.models.rotating_triangles:build_sheet", "n_cols",
-              theory="flexmm.analysis.predict_triangles:THEORY"),
+              theory="flexmm.analysis.predict.rotating_triangles:THEORY"),
     ModelSpec(RigidNetwork, "flexmm.models.network:build", "n_cols"),
 )
 

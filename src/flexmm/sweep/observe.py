@@ -1,14 +1,14 @@
 """Per-point observables of a sweep, from the public extraction of ``flexmm.analysis``.
 
-What is measured follows ``flexmm.analysis.report.choose_kind`` (travelling pulse, transition
+What is measured follows ``flexmm.analysis.report.analyze.choose_kind`` (travelling pulse, transition
 front or driven response) unless the sweep spec's ``analysis: {kind: ...}`` says otherwise:
 
 - ``analyze_run`` on the field analyze uses (θ, else the strain of u), and of what it measures
-  the feature ``flexmm run`` prints (``analysis.summary.principal``: the largest |amplitude|
+  the feature ``flexmm run`` prints (``analysis.report.summary.principal``: the largest |amplitude|
   among pulses fitted over ≥ 10 sites, the front that switched most sites, the fastest group of
   an oblique plane wave, the driven response);
 - theory: the model's ``speed_curve`` at the measured amplitude (pulses), or the analysis'
-  predicted speed (fronts), from the model's theory (``analysis.theory_comparison.theory_for``).
+  predicted speed (fronts), from the model's theory (``analysis.report.theory_comparison.theory_for``).
 
 Options: the sweep spec's ``analysis:`` block, a ``flexmm.config.analysis.AnalysisOptions``
 (``kind``, ``field``, ``row``, ``threshold_fraction``, ``jump``), the options of ``flexmm analyze``.
@@ -32,7 +32,7 @@ OBSERVABLES = {
     "amplitude_min": (None, "pulse: smallest |peak| of the steady part (signed), the breathing range"),
     "amplitude_max": (None, "pulse: largest |peak| of the steady part (signed)"),
     "breathing_period": ("s", "pulse: period of its amplitude oscillation (NaN: not breathing)"),
-    "n_collisions": ("1", "pulse collisions found (analysis.collisions)"),
+    "n_collisions": ("1", "pulse collisions found (analysis.measure.collisions)"),
     "collision_shift": ("m", "first collision: space shift of its first incoming pulse"),
     "collision_delay": ("s", "first collision: time shift (delay) of its first incoming pulse"),
     "collision_amplitude_change": ("1", "first collision: relative amplitude change of its first incoming pulse"),
@@ -52,8 +52,8 @@ def observe_run(path, options=None) -> dict:
 
     ``options``: an ``AnalysisOptions``, or its fields as a dict (what a sweep task carries).
     """
-    from flexmm.analysis.theory_comparison import RunContext
-    from flexmm.analysis.report import choose_kind
+    from flexmm.analysis.report.theory_comparison import RunContext
+    from flexmm.analysis.report.analyze import choose_kind
     from flexmm.config.analysis import AnalysisOptions
     from flexmm.io.run_dataset import load_run_quickly
 
@@ -74,9 +74,9 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
 
 def _full(ds, kind: str, opts) -> dict:
     from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound
-    from flexmm.analysis.oblique import NoWaveGroups
-    from flexmm.analysis.report import analyze_with
-    from flexmm.analysis.summary import principal
+    from flexmm.analysis.measure.oblique import NoWaveGroups
+    from flexmm.analysis.report.analyze import analyze_with
+    from flexmm.analysis.report.summary import principal
 
     try:
         a = analyze_with(ds, opts.model_copy(update={"kind": kind}))

@@ -1,9 +1,9 @@
 """Theory for sweep datasets and plots, taken from the analysis' per-model registry.
 
-``speed_at`` evaluates the ``speed_curve`` of the model's theory (``analysis.theory_comparison.theory_for``;
+``speed_at`` evaluates the ``speed_curve`` of the model's theory (``analysis.report.theory_comparison.theory_for``;
 NaN where the model has no speed law or no pulse of that amplitude exists); ``reference_lines``
 adds the theory's model-specific thresholds worth drawing: for the rotating-squares chain, the
-amplitude gap A_min of each polarity (docs/physics.md §1.3, ``predict_rotating.amplitude_gap_lines``).
+amplitude gap A_min of each polarity (docs/physics.md §1.3, ``analysis.predict.rotating_squares.amplitude_gap_lines``).
 """
 
 from __future__ import annotations
@@ -12,14 +12,14 @@ import numpy as np
 
 
 def _context(config: dict):
-    from flexmm.analysis.theory_comparison import RunContext
+    from flexmm.analysis.report.theory_comparison import RunContext
 
     return RunContext(model=str((config.get("lattice") or {}).get("kind", "unknown")), config=config)
 
 
 def speed_at(config: dict, units: str, amplitudes) -> np.ndarray:
     """Predicted speed (m/s) of a pulse of each amplitude in a scene (resolved config dict)."""
-    from flexmm.analysis.theory_comparison import theory_for
+    from flexmm.analysis.report.theory_comparison import theory_for
 
     amp = np.asarray(amplitudes, float)
     ctx = _context(config)
@@ -34,7 +34,7 @@ def speed_at(config: dict, units: str, amplitudes) -> np.ndarray:
 
 def reference_lines(config: dict) -> dict[str, float]:
     """Scalar theory values of a scene (dataset attributes ``theory_*``); {} if none."""
-    from flexmm.analysis.theory_comparison import theory_for
+    from flexmm.analysis.report.theory_comparison import theory_for
 
     ctx = _context(config)
     fn = theory_for(ctx).reference_lines

@@ -16,6 +16,7 @@ coefficients and linear dispersion below include it.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -304,8 +305,10 @@ class TravellingState(NamedTuple):
     theta_dot: np.ndarray
 
 
-def _exact(p: RotatingChainND, A: float, zeta, gradient: str):
-    """theta, dtheta/dzeta, U' and U (U -> 0 as zeta -> +inf) of the first integral; shapes of zeta."""
+@functools.lru_cache(maxsize=64)
+def _exact_solution(p: RotatingChainND, A: float, gradient: str):
+    """The two integrations of ``_exact`` (core to θ = A/2, then the tail in ψ = ln θ/A), kept per
+    (p, A, gradient): a run's analysis and its summary evaluate the same soliton several times."""
     if not soliton_exists(p, A, gradient):
         raise ValueError(f"no regular soliton of amplitude A = {A} for {p} (gradient={gradient!r})")
     c = float(soliton_speed(p, A))
@@ -340,7 +343,12 @@ def _exact(p: RotatingChainND, A: float, zeta, gradient: str):
     z1, (_, _, I1) = s1.t_events[0][0], s1.y_events[0][0]
     s2 = integrate.solve_ivp(tail, (z1, z1 + span), [math.log(0.5), I1], events=deep, atol=1e-14, **opts)
     z2, (psi2, I_inf) = s2.t_events[0][0], s2.y_events[0][0]
+    return s1, s2, z1, z2, psi2, I_inf, C1, kU, F
 
+
+def _exact(p: RotatingChainND, A: float, zeta, gradient: str):
+    """theta, dtheta/dzeta, U' and U (U -> 0 as zeta -> +inf) of the first integral; shapes of zeta."""
+    s1, s2, z1, z2, psi2, I_inf, C1, kU, F = _exact_solution(p, float(A), gradient)
     zeta = np.asarray(zeta, dtype=float)
     z = np.abs(zeta).ravel()
     th, dth, I = np.empty_like(z), np.empty_like(z), np.full_like(z, I_inf)

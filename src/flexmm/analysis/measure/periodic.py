@@ -1,7 +1,7 @@
 """Steady periodic (cnoidal) waves of a driven run: the numbers flexmm.theory.cnoidal predicts.
 
 Over a window of whole drive periods and a stretch of sites, per site the complex harmonics
-H_n = 2 <(y - ybar) e^{-i n omega t}> (analysis.driven.lockin's average) and the mean ybar. The
+H_n = 2 <(y - ybar) e^{-i n omega t}> (analysis.measure.driven.lockin's average) and the mean ybar. The
 wavenumber q (radians per site) is the slope of the unwrapped phase of H1 along the sites, so the
 phase speed is omega/q sites per unit time. A driven nonlinear wave carries *bound* harmonics,
 phase-locked to the fundamental (H_n ~ e^{-i n q site}), and *free* ones launched at the drive at

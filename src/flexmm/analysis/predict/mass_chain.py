@@ -65,7 +65,7 @@ def rest_overlap(ctx, lat) -> float:
     elongation (the median over the saved bonds of the dataset's rest state: a static load
     compresses the chain, a free chain lets a precompression go). ValueError when the chain may be
     precompressed and the run's rest state is not at hand."""
-    from flexmm.analysis.rest import rest_fields
+    from flexmm.analysis.features.rest import rest_fields
 
     bond = lat.bond
     rest = rest_fields(ctx) if ctx.ds is not None else None

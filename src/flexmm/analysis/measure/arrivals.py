@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from flexmm._blas import single_blas_thread
-from flexmm.analysis.detect import refine_peak
+from flexmm.analysis.features.detect import refine_peak
 
 SPEED_CHANGE = 0.02  # relative speed change that ends a pulse at a collision
 OVERLAP_FWHM = 3.0  # another pulse closer than this many FWHM overlaps a site

@@ -4,7 +4,7 @@ A sheet of ``n_rows`` rows whose bottom/top wrap is shifted by ``skew_cols`` col
 waves along φ = atan(skew_cols/n_rows); every unit sits at the distance ζ = col cosφ + row sinφ
 (in lattice spacings) along the propagation direction. The translational kinetic energy of the
 units is binned onto ζ (one-spacing bins) and smoothed over ``smooth`` spacings; the peaks of that
-energy profile are tracked through the frames (flexmm.analysis.detect), and every track that
+energy profile are tracked through the frames (flexmm.analysis.features.detect), and every track that
 travels far enough is a *group*: its speed (line fit of position against time over the frames it
 is seen in), its energy share, and its polarisation — the angle ψ, measured from the propagation
 direction, of the principal axis of the (u̇, v̇) velocities inside the group (ψ = 0: longitudinal,
@@ -21,7 +21,7 @@ import yaml
 
 from flexmm._blas import single_blas_thread
 from flexmm.analysis.context import Comparison, RunContext
-from flexmm.analysis.detect import track_peaks
+from flexmm.analysis.features.detect import track_peaks
 from flexmm.errors import FlexmmError
 
 

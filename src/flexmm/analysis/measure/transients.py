@@ -22,7 +22,7 @@ a solitary wave and must not be compared with a steady-pulse law. A measured pul
 A transient is reported with its formation distance (the distance its peak travelled) and
 formation time (how long it lived), and with the pulse that starts where it stops, if any
 (``continues_as``: the pulse it turns into or merges with). It takes no part in theory
-comparisons or in the run's headline (``analysis.summary``).
+comparisons or in the run's headline (``analysis.report.summary``).
 """
 
 from __future__ import annotations

@@ -3,10 +3,11 @@
 ``analyze_run(path)`` opens ``dataset.nc``, picks what to measure (``kind='auto'``: a driven run
 if the excitation is a shaker, transition fronts if the model's theory says so, travelling
 pulses otherwise), measures it on the chosen field, adds the energy budget and the theory rows
-of the model's theory (``theory_comparison.theory_for``), pairs colliding pulses (``analysis.collisions``), tells formation
-transients from persistent pulses (``analysis.transients``; transients are not compared with
-theory), and returns a ``RunAnalysis`` that ``analysis.export`` writes out. Fields are
-measured from the rest state the dataset stores (``analysis.rest``; the model is never rebuilt).
+of the model's theory (``theory_comparison.theory_for``), pairs colliding pulses
+(``analysis.measure.collisions``), tells formation transients from persistent pulses
+(``analysis.measure.transients``; transients are not compared with theory), and returns a
+``RunAnalysis`` that ``analysis.report.export`` writes out. Fields are measured from the rest
+state the dataset stores (``analysis.features.rest``; the model is never rebuilt).
 """
 
 from __future__ import annotations
@@ -16,19 +17,19 @@ from pathlib import Path
 from typing import get_args
 
 from flexmm._blas import single_blas_thread
-from flexmm.analysis.collisions import Collision, find_collisions
-from flexmm.analysis.theory_comparison import (
+from flexmm.analysis.features.fields import FieldView, check_finite, check_saved_fields, field_view
+from flexmm.analysis.features.rest import RestStateMissing, from_rest, rest_fields
+from flexmm.analysis.measure.collisions import Collision, find_collisions
+from flexmm.analysis.measure.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
+from flexmm.analysis.measure.energy import EnergyBudget, energy_budget
+from flexmm.analysis.measure.fronts import FrontMeasurement, FrontNotFound, measure_fronts
+from flexmm.analysis.measure.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
+from flexmm.analysis.measure.pulses import PulseMeasurement, PulseNotFound, measure_pulses
+from flexmm.analysis.measure.transients import mark_transients
+from flexmm.analysis.report.theory_comparison import (
     Comparison, RunContext, compare_collision, compare_driven, compare_front, compare_pulse, compare_transient,
     theory_for,
 )
-from flexmm.analysis.driven import DrivenMeasurement, NotDriven, drive_frequency, measure_driven
-from flexmm.analysis.energy import EnergyBudget, energy_budget
-from flexmm.analysis.fields import FieldView, check_finite, check_saved_fields, field_view
-from flexmm.analysis.fronts import FrontMeasurement, FrontNotFound, measure_fronts
-from flexmm.analysis.oblique import NoWaveGroups, WaveGroup, compare_groups, is_oblique, wave_groups
-from flexmm.analysis.pulses import PulseMeasurement, PulseNotFound, measure_pulses
-from flexmm.analysis.rest import RestStateMissing, from_rest, rest_fields
-from flexmm.analysis.transients import mark_transients
 from flexmm.config.analysis import AnalysisKind, AnalysisOptions
 from flexmm.io.identify import RunNotFound, run_dataset
 
@@ -71,9 +72,11 @@ def open_dataset(path):
 
     if isinstance(path, xr.Dataset):
         return path
+    from flexmm.io.run_dataset import load_run_quickly
+
     nc, _ = run_dataset(path)
     try:
-        return xr.load_dataset(nc, engine="h5netcdf")
+        return load_run_quickly(nc)  # the Dataset xarray's reader gives, read with h5py alone
     except (OSError, ValueError) as exc:
         raise RunNotFound(f"cannot read {nc}: {exc}") from None
 
@@ -98,7 +101,7 @@ def default_field_for(kind: str, ds, ctx=None) -> str | None:
     """Field used when none is given: for fronts the field the model's units switch
     (``ModelTheory.front_field``), else the displacement; the displacement for drives; for pulses
     the field the model's theory predicts (``ModelTheory.pulse_field``), else θ or strain."""
-    from flexmm.analysis.fields import displacement_field
+    from flexmm.analysis.features.fields import displacement_field
     from flexmm.config import ConfigError
 
     theory = None
@@ -183,7 +186,7 @@ def measure_run(path: str | Path, *, field_spec: str | None = None,
                 kind: str = "auto") -> tuple[RunAnalysis | None, str | None]:
     """``analyze_run``, or (None, why) when the run is fine but there is nothing (or no such field)
     to measure: what ``flexmm run`` prints after a run (a missing run still raises)."""
-    from flexmm.analysis.fields import FieldError
+    from flexmm.analysis.features.fields import FieldError
 
     try:
         return analyze_run(path, field_spec=field_spec, kind=kind), None
@@ -199,8 +202,8 @@ __all__ = ["KINDS", "RunAnalysis", "RunNotFound", "analyze_dataset", "analyze_ru
 def sweep_bands(results: list[RunAnalysis], pass_level: float = 0.1) -> dict | None:
     """Pass bands measured over a set of driven runs (transmission ≥ pass_level × max) and the
     linear theory's bands of the first run's model; None with fewer than two driven runs."""
-    from flexmm.analysis.theory_comparison import bands_for
-    from flexmm.analysis.driven import pass_bands
+    from flexmm.analysis.report.theory_comparison import bands_for
+    from flexmm.analysis.measure.driven import pass_bands
 
     driven = [r for r in results if r.driven is not None]
     if len(driven) < 2:

@@ -1,13 +1,13 @@
 """Harmonic content of a driven run, site by site: amplitude of n ω against distance.
 
-Uses the lock-in amplitude of ``analysis.driven`` over a window of whole drive periods, here an
+Uses the lock-in amplitude of ``analysis.measure.driven`` over a window of whole drive periods, here an
 explicit time window (the steady part before reflections return), for several harmonics at once.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from flexmm.analysis.driven import lockin
+from flexmm.analysis.measure.driven import lockin
 
 
 def harmonic_profiles(time: np.ndarray, values: np.ndarray, frequency_hz: float, t_start: float,

@@ -1,6 +1,6 @@
 """Spatial and temporal widths of a tracked pulse.
 
-- FWHM: ``analysis.peaks.peak_width`` on the spatial profile, median over up to 25 frames;
+- FWHM: ``analysis.features.peaks.peak_width`` on the spatial profile, median over up to 25 frames;
 - shape widths W (sech, sech², §1.3 profile; see ``profiles``): one least-squares fit of all
   usable frames pooled in the frame moving with the pulse, each frame divided by the fitted
   amplitude at its position — pooling averages noise far better than frame-by-frame fits;
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexmm.analysis.peaks import peak_width
-from flexmm.analysis.profiles import SHAPES, ProfileFit, fit_profile, shape_fwhm
+from flexmm.analysis.features.peaks import peak_width
+from flexmm.analysis.features.profiles import SHAPES, ProfileFit, fit_profile, fit_profiles, shape_fwhm
 
 POOLED_FRAMES = 200  # frames pooled into the co-moving width fit
 
@@ -47,21 +47,26 @@ def frames_inside(tr_pos, tr_t, fwhm, lo_x, hi_x, others, n_max=POOLED_FRAMES) -
 
 def frame_fits(view, tr_frames, tr_pos, tr_h, polarity, fwhm, pick, fit: bool = True) -> tuple[float, list, dict]:
     """Median spatial FWHM (m) at frames ``pick``; with ``fit``, the sech fit of each of them
-    (their spread is ``spread``) and every shape's fit of the middle one {shape: ProfileFit}
-    (the profile the figures draw): what is reported of per-frame fits, and nothing more."""
-    fw, sech_fits, middle = [], [], {}
-    for n, j in enumerate(pick):
+    (their spread is ``spread``; fitted together, ``fit_profiles``) and every shape's fit of the
+    middle one {shape: ProfileFit} (the profile the figures draw): what is reported of per-frame
+    fits, and nothing more."""
+    fw, xs, ys, guesses = [], [], [], []
+    for j in pick:
         y = view.values[tr_frames[j]]
         fw.append(_fwhm_at(polarity * y, int(np.argmin(np.abs(view.x - tr_pos[j])))) * view.spacing_m)
-        if not fit:
-            continue
-        w = np.abs(view.x - tr_pos[j]) <= 3 * fwhm
-        for s in SHAPES if n == len(pick) // 2 else ("sech",):
-            f = fit_profile(view.x[w], y[w], s, (tr_h[j], tr_pos[j], fwhm / shape_fwhm(s, 1.0)))
-            if s == "sech":
-                sech_fits.append(f)
-            if n == len(pick) // 2:
-                middle[s] = f
+        if fit:
+            w = np.abs(view.x - tr_pos[j]) <= 3 * fwhm
+            xs.append(view.x[w])
+            ys.append(y[w])
+            guesses.append((tr_h[j], tr_pos[j], fwhm))
+    sech_fits, middle = [], {}
+    if fit and xs:
+        sech_fits = fit_profiles(xs, ys, "sech", [(h, c, w / shape_fwhm("sech", 1.0)) for h, c, w in guesses])
+        mid = len(xs) // 2
+        h, c, w = guesses[mid]
+        for s in SHAPES:
+            middle[s] = (sech_fits[mid] if s == "sech"
+                         else fit_profile(xs[mid], ys[mid], s, (h, c, w / shape_fwhm(s, 1.0))))
     fw = [v for v in fw if np.isfinite(v)]
     return (float(np.median(fw)) if fw else np.nan), sech_fits, middle
 

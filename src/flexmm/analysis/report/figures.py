@@ -18,7 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from flexmm.analysis.profiles import SHAPES  # noqa: E402
+from flexmm.analysis.features.profiles import SHAPES  # noqa: E402
 
 DPI = 110
 
@@ -179,10 +179,10 @@ def transmission(freqs, trans, path, *, bands=(), title: str = "") -> Path:
 
 
 # ----------------------------------------------------------------------------------------------
-# Figures of analysed runs (RunAnalysis objects from analysis.report)
+# Figures of analysed runs (RunAnalysis objects from analysis.report.analyze)
 
 def _theory(res):
-    from flexmm.analysis.theory_comparison import theory_for
+    from flexmm.analysis.report.theory_comparison import theory_for
 
     return theory_for(res.ctx)
 
@@ -235,7 +235,7 @@ def set_figures(results, directory) -> list[Path]:
                                     units=with_pulses[0].view.units))
     driven = [r for r in results if r.driven is not None]
     if len(driven) >= 2:
-        from flexmm.analysis.theory_comparison import bands_for
+        from flexmm.analysis.report.theory_comparison import bands_for
 
         bands = bands_for(driven[0].ctx)
         made.append(transmission([r.driven.frequency_hz for r in driven], [r.driven.transmission for r in driven],

@@ -4,7 +4,7 @@
 each one (see its docstring; the pieces live in ``detect``, ``arrivals`` and ``widths``).
 
 ``leading_pulse`` is a quick single-pulse fit (pilots; ``flexmm run`` prints analyze's
-measurement, ``analysis.summary``): arrival time at a site = time
+measurement, ``analysis.report.summary``): arrival time at a site = time
 of the largest peak of |field(t)| there, refined by a three-point parabola; sites whose largest
 peak is below ``threshold_fraction`` of the 90th percentile, or of the minority polarity, are
 dropped, and so are outliers of the line fit (> 4 median absolute deviations). Speed = inverse
@@ -18,12 +18,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from flexmm.analysis.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
-from flexmm.analysis.detect import Track, refine_peak, split_reversals, track_peaks
-from flexmm.analysis.peaks import local_maxima, peak_width
-from flexmm.analysis.profiles import SHAPES
-from flexmm.analysis.steady import steady_part
-from flexmm.analysis.widths import fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
+from flexmm.analysis.features.detect import Track, refine_peak, split_reversals, track_peaks
+from flexmm.analysis.features.peaks import local_maxima, peak_width
+from flexmm.analysis.features.profiles import SHAPES
+from flexmm.analysis.measure.arrivals import arrivals, clean, line_fit, segment_fit, segments, speed_groups
+from flexmm.analysis.measure.steady import steady_part
+from flexmm.analysis.measure.widths import fwhm_estimate, frame_fits, frames_inside, pooled_fits, spread, temporal_fwhm
 from flexmm.errors import FlexmmError
 
 
@@ -138,7 +138,7 @@ class PulseMeasurement:
     collisions each belongs to, ``steady`` False in the formation transient; ``track_*`` are the tracked
     peak positions per frame; ``profile_*`` one measured spatial profile (for figures).
     ``transient``: the whole pulse is a formation transient, a lobe that dies out or turns into
-    another pulse (``analysis.transients``; its formation distance and time are then those of the
+    another pulse (``analysis.measure.transients``; its formation distance and time are then those of the
     lobe, and it is not compared with theory); ``continues_as``: the pulse that starts where this one
     stops mid-run (-1: none).
     """

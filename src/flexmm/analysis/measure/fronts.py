@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from flexmm.analysis.detect import link, merge_tracks
+from flexmm.analysis.features.detect import link, merge_tracks
 from flexmm.errors import FlexmmError
 
 

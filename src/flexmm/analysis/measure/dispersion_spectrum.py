@@ -97,7 +97,7 @@ def chain_bands(system, k: np.ndarray) -> tuple[np.ndarray, str]:
 def run_spectrum(ctx, spec: str | None = None, row: int | None = None) -> Spectrum:
     """The ω–k spectrum of a run's field ``spec`` (default: the displacement ``u``/``x``, else θ),
     with the model's linear bands for a chain (``note`` says why there are none)."""
-    from flexmm.analysis.fields import displacement_field, field_view
+    from flexmm.analysis.features.fields import displacement_field, field_view
 
     ds = ctx.ds
     t = np.asarray(ds["time"].values, float)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexmm.analysis.peaks import smooth_cubic7
+from flexmm.analysis.features.peaks import smooth_cubic7
 
 
 @dataclass(frozen=True)

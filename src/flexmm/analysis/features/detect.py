@@ -1,6 +1,6 @@
 """Find localized features in every frame and link them into tracks through time.
 
-Per frame, peaks of ±field above a height threshold (``analysis.peaks.find_peaks`` with a prominence
+Per frame, peaks of ±field above a height threshold (``analysis.features.peaks.find_peaks`` with a prominence
 criterion) are located to sub-site accuracy by a parabola through the three samples around the
 maximum. Peaks are then linked frame to frame by a greedy nearest-neighbour tracker that predicts
 each track's position from its recent velocity, keeps a track alive across a few missing frames
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexmm.analysis.peaks import find_peaks, local_maxima_rows
+from flexmm.analysis.features.peaks import find_peaks, local_maxima_rows
 
 
 @dataclass
@@ -156,9 +156,14 @@ def merge_tracks(tracks: list[Track], gate: float, rel_speed: float = 0.25,
     if levels is None:
         return _merge(tracks, gate, rel_speed, 8, lambda mb: mb[0])
 
+    seen: dict = {}  # (id, length) -> (track, near): a track changes only by growing; kept, so ids stay unique
+
     def near(tr: Track) -> bool:
-        level = levels[0] if tr.polarity > 0 else levels[1]
-        return bool(np.median(np.abs(tr.height)) <= NEAR * level)
+        key = (id(tr), len(tr.height))
+        if key not in seen:
+            level = levels[0] if tr.polarity > 0 else levels[1]
+            seen[key] = (tr, bool(np.median(np.abs(tr.height)) <= NEAR * level))
+        return seen[key][1]
 
     tracks = _merge(tracks, gate, rel_speed, 8, lambda mb: mb[0], lambda a, b: not (near(a) and near(b)))
     return _merge(tracks, gate, rel_speed, JOIN_POINTS, lambda mb: (mb[1].time[0], mb[0]),

@@ -4,7 +4,7 @@
 for ``flexmm run``, ``flexmm analyze`` and sweeps:
 
 - pulses: the largest |amplitude| among the persistent pulses (formation transients,
-  ``analysis.transients``, only when nothing else was measured) fitted over at least
+  ``analysis.measure.transients``, only when nothing else was measured) fitted over at least
   ``MIN_TRACK_SITES`` sites (all of them if none is), so a small fast precursor never hides the
   soliton behind it;
 - fronts: the front that switched the most sites;
@@ -12,7 +12,7 @@ for ``flexmm run``, ``flexmm analyze`` and sweeps:
 
 ``summary_lines(res)`` turns it into text with the theory's prediction where one applies, plus
 one line per other persistent pulse (speed and amplitude), one per formation transient (distance
-and time; no theory) and per collision (``analysis.collisions``).
+and time; no theory) and per collision (``analysis.measure.collisions``).
 """
 
 from __future__ import annotations

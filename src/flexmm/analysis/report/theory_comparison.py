@@ -3,7 +3,7 @@
 A model kind's theory is a ``ModelTheory`` (``analysis.context``): plain functions that take the
 run's context and a measurement and return ``Comparison`` rows (or a curve for figures), named by
 the ``theory`` hook of its ``ModelSpec`` (``flexmm.config.lattice.MODELS``; see
-``predict_rotating.CHAIN`` and ``predict_chains.MASS_CHAIN``). A model without one, or a measurement
+``predict.rotating_squares.CHAIN`` and ``predict.mass_chain.MASS_CHAIN``). A model without one, or a measurement
 a theory does not cover, simply gets no prediction.
 """
 
@@ -72,7 +72,7 @@ def compare_pulse(ctx: RunContext, p) -> list[Comparison]:
 
 
 def compare_transient(p) -> list[Comparison]:
-    """Rows for a formation transient (``analysis.transients``): how far and how long the lobe
+    """Rows for a formation transient (``analysis.measure.transients``): how far and how long the lobe
     travelled, and what it turned into; never compared with a steady-pulse law."""
     note = "formation transient" + (f", turns into pulse {p.continues_as}" if p.continues_as >= 0 else ", dies out")
     return [Comparison(f"pulse {p.index}", q, value, None, units, note) for q, value, units in (

@@ -8,7 +8,7 @@ exact (non-truncated) soliton. Below the amplitude gap, and for longitudinal pul
 rotational soliton, the linear long-wave speed. Strain pulses riding on a θ soliton (a vector
 soliton): the soliton speed and the strain peak U' = η G(A)/(c² − η²). A predeformed chain is
 compared with the prestressed theory about its rest rotation (flexmm.theory.prestressed), its
-fields having been measured from the rest state (analysis.rest).
+fields having been measured from the rest state (analysis.features.rest).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
 
 def _prestressed(ctx, p: rt.RotatingChainND) -> rt.RotatingChainND:
     """The predeformed chain about its rest rotation θ_s in the middle (flexmm.theory.prestressed)."""
-    from flexmm.analysis.rest import rest_fields
+    from flexmm.analysis.features.rest import rest_fields
     from flexmm.theory.prestressed import prestressed_chain
 
     if ctx.scene().lattice.kind != "rotating_squares_chain":
@@ -96,8 +96,8 @@ def _linear_rows(ctx, p_meas, why: str) -> list:
 
 def _theta_partner(ctx, p_meas):
     """The θ pulse travelling with a longitudinal pulse (same place mid-way), or None."""
-    from flexmm.analysis.fields import field_view
-    from flexmm.analysis.pulses import PulseNotFound, measure_pulses
+    from flexmm.analysis.features.fields import field_view
+    from flexmm.analysis.measure.pulses import PulseNotFound, measure_pulses
 
     if ctx.ds is None or "theta" not in ctx.ds:
         return None
