@@ -35,6 +35,7 @@ class _Recorder:
         self.stack: list[list] = []
         self.test = "(collection)"
         self.loads: dict[str, float] = defaultdict(float)  # CPU-s loading from numba's cache, per test
+        self.loaded: list[list] = []  # [function, signature, test] of each signature loaded from the cache
 
     def on_start(self, data) -> None:
         self.stack.append([time.perf_counter(), time.process_time(), 0.0, 0.0, data])
@@ -75,7 +76,11 @@ def _install(rec: _Recorder) -> None:
     def timed_load(self, sig, target_context):  # a warm run's cost: loading compiled code
         c0 = time.process_time()
         try:
-            return load(self, sig, target_context)
+            cres = load(self, sig, target_context)
+            if cres is not None:
+                fn = self._py_func
+                rec.loaded.append([f"{fn.__module__}.{fn.__qualname__}", ", ".join(str(a) for a in sig), rec.test])
+            return cres
         finally:
             rec.loads[rec.test] += time.process_time() - c0
 
@@ -157,7 +162,7 @@ def pytest_configure(config) -> None:
         with open(out + ".tmp", "w") as f:
             json.dump({"worker": worker, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - w0,
                        "load": os.getloadavg(), "compilations": rec.rows, "test_cpu_s": plugin.test_cpu,
-                       "load_cpu_s": rec.loads}, f)
+                       "load_cpu_s": rec.loads, "loaded": rec.loaded}, f)
         os.replace(out + ".tmp", out)
 
     plugin = _Plugin(rec, dump)
