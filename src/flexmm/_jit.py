@@ -121,6 +121,29 @@ if not NO_JIT:
     def _fma_overload(a, b, c):
         return lambda a, b, c: _fma(a, b, c)
 
+
+def runtime(x):
+    """``x`` as a run-time value in compiled code: numba types a constant argument (``True``, ``0``)
+    as a literal and compiles the called function once per constant; through ``runtime`` the
+    callee compiles once for the type (for arguments that only steer a branch or an offset)."""
+    return x
+
+
+if not NO_JIT:
+
+    @intrinsic
+    def _runtime(typingctx, x):
+        t = types.unliteral(x)
+
+        def codegen(context, builder, signature, args):
+            return context.cast(builder, args[0], signature.args[0], t)
+
+        return t(x), codegen
+
+    @overload(runtime, inline="always", jit_options=JIT_OPTIONS)
+    def _runtime_overload(x):
+        return lambda x: _runtime(x)
+
 _PACKAGE = Path(__file__).resolve().parent
 #: cache directories unused this long are removed
 PRUNE_AGE_S = 7 * 86400.0
