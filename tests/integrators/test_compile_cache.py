@@ -243,3 +243,28 @@ def test_a_kernel_another_process_is_compiling_is_loaded_not_compiled_again(tmp_
             out = waiter.stdout.read()
         assert holder.wait(timeout=600) == 0 and waiter.wait(timeout=600) == 0
     assert json.loads(out.strip().splitlines()[-1]) == [1, 0]  # (hits, misses): loaded
+
+
+def test_constants_passed_through_runtime_compile_the_callee_once() -> None:
+    """numba compiles a function once per constant passed to it (a literal type); through
+    ``_jit.runtime`` the constants share one compiled copy (what the fused chain kernel relies on)."""
+    import numba
+    import numpy as np
+
+    from flexmm._jit import runtime
+
+    @numba.njit
+    def pick(x, flip, k):
+        return -x[k] if flip else x[k]
+
+    @numba.njit
+    def through_runtime(x):
+        return pick(x, runtime(True), runtime(0)) + pick(x, runtime(False), runtime(1))
+
+    @numba.njit
+    def as_constants(x):
+        return pick(x, True, 0) + pick(x, False, 1)
+
+    x = np.array([2.0, 5.0])
+    assert through_runtime(x) == 3.0 and len(pick.signatures) == 1
+    assert as_constants(x) == 3.0 and len(pick.signatures) == 3  # a copy per pair of constants
