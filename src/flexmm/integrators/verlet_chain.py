@@ -654,14 +654,14 @@ def _range_steps(q, v, f, tables, w, halo, hf, drives, gvals, p0, p1, diss, n, l
         _hold_rates(drives, G, lo, hi, p1[s])
         fl, gb = 0.0, 0.0
         if lo > 0:
-            fl, gb, _ = _segment(L[0], L[1], L[2], L[3], hf[0], hf[1], wl, wl, lo, q[lo], q[n + lo], runtime(True), 0.0, 0.0,
-                                 tables, w, h, last, damped, drives, gvals)
-        fl, gb, diss[s] = _segment(G[0], G[1], G[2], G[3], f[:n], f[n:], runtime(0), lo, hi, R[0][0], R[1][0], hi < n, fl, gb,
-                                   tables, w, h, last, damped, drives, gvals)
+            fl, gb, _ = _segment(L[0], L[1], L[2], L[3], hf[0], hf[1], wl, wl, lo, q[lo], q[n + lo], runtime(True),
+                                 0.0, 0.0, tables, w, h, last, damped, drives, gvals)
+        fl, gb, diss[s] = _segment(G[0], G[1], G[2], G[3], f[:n], f[n:], runtime(0), lo, hi, R[0][0], R[1][0], hi < n,
+                                   fl, gb, tables, w, h, last, damped, drives, gvals)
         _against(drives, f, lo, hi, p1[s])
         if hi < n and not last:
-            _segment(R[0], R[1], R[2], R[3], hf[0], hf[1], hi, hi, wr, 0.0, 0.0, runtime(False), fl, gb, tables, w, h, last,
-                     damped, drives, gvals)
+            _segment(R[0], R[1], R[2], R[3], hf[0], hf[1], hi, hi, wr, 0.0, 0.0, runtime(False), fl, gb, tables, w, h,
+                     last, damped, drives, gvals)
 
 
 @jit
