@@ -2,6 +2,9 @@
 
     python benchmarks/compile_profile.py [pytest args ...]      # run pytest, record, print the top costs
     python benchmarks/compile_profile.py --report FILE.json     # print the top costs of a recorded run
+    PYTHONPATH=benchmarks pytest -p compile_profile -n 2 ...    # as a plugin: one record per xdist worker
+    python benchmarks/compile_profile.py --workers FILE.json    # merge them: what each worker compiled, and
+                                                                # what both compiled (duplicated work)
 
 Runs pytest in this process (pass ``-p no:xdist``; CPU time of subprocesses is not counted)
 with a listener on numba's ``numba:compile`` event, so each compilation of a kernel for a new
@@ -32,6 +35,7 @@ class _Recorder:
         self.stack: list[list] = []
         self.test = "(collection)"
         self.loads: dict[str, float] = defaultdict(float)  # CPU-s loading from numba's cache, per test
+        self.loaded: list[list] = []  # [function, signature, test] of each signature loaded from the cache
 
     def on_start(self, data) -> None:
         self.stack.append([time.perf_counter(), time.process_time(), 0.0, 0.0, data])
@@ -72,7 +76,11 @@ def _install(rec: _Recorder) -> None:
     def timed_load(self, sig, target_context):  # a warm run's cost: loading compiled code
         c0 = time.process_time()
         try:
-            return load(self, sig, target_context)
+            cres = load(self, sig, target_context)
+            if cres is not None:
+                fn = self._py_func
+                rec.loaded.append([f"{fn.__module__}.{fn.__qualname__}", ", ".join(str(a) for a in sig), rec.test])
+            return cres
         finally:
             rec.loads[rec.test] += time.process_time() - c0
 
@@ -138,7 +146,61 @@ def report(rows: list[dict], test_cpu: dict[str, float], loads: dict[str, float]
         print(f"{c:7.1f}  {name}")
 
 
+def pytest_configure(config) -> None:
+    """Loaded as a plugin (``-p compile_profile``): record this process (an xdist worker or the
+    only one) to ``$COMPILE_PROFILE_OUT.<worker>.json``; the controller of an xdist run records
+    nothing (it runs no tests)."""
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        return
+    worker = getattr(config, "workerinput", {}).get("workerid", "main")
+    rec = _Recorder()
+    _install(rec)
+    c0, w0 = time.process_time(), time.perf_counter()
+    out = f"{os.environ.get('COMPILE_PROFILE_OUT', 'compile_profile.json')}.{worker}.json"
+
+    def dump():
+        with open(out + ".tmp", "w") as f:
+            json.dump({"worker": worker, "cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - w0,
+                       "load": os.getloadavg(), "compilations": rec.rows, "test_cpu_s": plugin.test_cpu,
+                       "load_cpu_s": rec.loads, "loaded": rec.loaded}, f)
+        os.replace(out + ".tmp", out)
+
+    plugin = _Plugin(rec, dump)
+    config.pluginmanager.register(plugin, "compile_profile_recorder")
+    config.add_cleanup(dump)
+
+
+def workers_report(paths: list[str]) -> None:
+    """Merge per-worker records: compile CPU-s per worker, and the (function, signature) pairs
+    compiled by more than one worker (each paid it because neither found it cached)."""
+    recs = []
+    for path in paths:
+        with open(path) as f:
+            recs.append(json.load(f))
+    seen: dict[tuple, list] = defaultdict(list)
+    for rec in recs:
+        c = sum(r["self_cpu_s"] for r in rec["compilations"])
+        print(f"{rec['worker']}: {len(rec['compilations'])} compilations, {c:.0f} compile CPU-s of "
+              f"{rec['cpu_s']:.0f} CPU-s, {rec['wall_s']:.0f} s wall")
+        for r in rec["compilations"]:
+            seen[(r["function"], r["signature"])].append((rec["worker"], r["self_cpu_s"], r["test"]))
+    dup = {k: v for k, v in seen.items() if len({w for w, _, _ in v}) > 1}
+    extra = sum(sum(c for _, c, _ in v) - max(c for _, c, _ in v) for v in dup.values())
+    print(f"\n{len(dup)} signatures compiled in more than one worker: {extra:.0f} CPU-s paid twice")
+    for (fn, sig), v in sorted(dup.items(), key=lambda kv: -sum(c for _, c, _ in kv[1]))[:TOP]:
+        print(f"{sum(c for _, c, _ in v):7.1f}  {fn} ({_short(sig, 60)})")
+        for w, c, t in v:
+            print(f"           {w} {c:6.1f}  <- {t}")
+    rows = [r for rec in recs for r in rec["compilations"]]
+    test_cpu = {k: v for rec in recs for k, v in rec["test_cpu_s"].items()}
+    loads = {k: v for rec in recs for k, v in rec.get("load_cpu_s", {}).items()}
+    report(rows, test_cpu, loads)
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--workers"]:
+        workers_report(argv[1:])
+        return 0
     if argv[:1] == ["--report"]:
         with open(argv[1]) as f:
             rec = json.load(f)

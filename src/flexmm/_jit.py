@@ -26,6 +26,9 @@ every kernel, integrator loops included, is cached across processes. The cache d
    integrator, and a change recompiles only the modules that import the changed one; every
    checkout or installation of the same sources shares these directories (``_ModuleDirLocator``).
    A module's other versions unused for a week are removed when it is used (``prune_cache``);
+   processes sharing a cache compile a function one at a time (a lock file beside its cache),
+   so a kernel that one is compiling is loaded, not compiled again, by the others
+   (``_one_compile_at_a_time``);
 3. if that cannot be written, a per-user directory under the system's temporary directory, with
    a warning; if nothing is writable, caching is off (every process compiles) and a warning
    says so.
@@ -42,11 +45,17 @@ import sys
 import tempfile
 import time
 import warnings
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: processes compile without waiting for each other
+    fcntl = None
 from pathlib import Path
 
 import llvmlite.binding
 import numba
-from numba.core import caching, types
+from numba.core import caching, sigutils, types
+from numba.core.compiler_lock import global_compiler_lock
 from numba.extending import intrinsic, overload
 
 NO_JIT = os.environ.get("FLEXMM_NO_JIT", "0") == "1"
@@ -111,6 +120,29 @@ if not NO_JIT:
     @overload(fma, jit_options=JIT_OPTIONS)
     def _fma_overload(a, b, c):
         return lambda a, b, c: _fma(a, b, c)
+
+
+def runtime(x):
+    """``x`` as a run-time value in compiled code: numba types a constant argument (``True``, ``0``)
+    as a literal and compiles the called function once per constant; through ``runtime`` the
+    callee compiles once for the type (for arguments that only steer a branch or an offset)."""
+    return x
+
+
+if not NO_JIT:
+
+    @intrinsic
+    def _runtime(typingctx, x):
+        t = types.unliteral(x)
+
+        def codegen(context, builder, signature, args):
+            return context.cast(builder, args[0], signature.args[0], t)
+
+        return t(x), codegen
+
+    @overload(runtime, inline="always", jit_options=JIT_OPTIONS)
+    def _runtime_overload(x):
+        return lambda x: _runtime(x)
 
 _PACKAGE = Path(__file__).resolve().parent
 #: cache directories unused this long are removed
@@ -304,6 +336,57 @@ _CACHE_IMPL = getattr(caching, "CacheImpl", None) or caching._CacheImpl
 _CACHE_IMPL._locator_classes = [_ModuleDirLocator, *_CACHE_IMPL._locator_classes]
 
 
+#: how long a process waits for another one compiling the same function before compiling it too
+COMPILE_WAIT_S = 1800.0
+_HELD: set[str] = set()  # the functions this process holds the compile lock of (nested compiles)
+
+
+def _one_compile_at_a_time(disp, where: Path):
+    """Make ``disp`` compile a new signature only while it holds a lock file for its function
+    beside its cache, so processes sharing an empty cache (two test workers, a sweep's workers)
+    compile each kernel once: the others wait, then load it from the cache. It also keeps two
+    processes from rewriting the function's cache index at once (numba reads, extends and writes
+    it back, so one process's entry could be lost, or point at the other's code). Locks are per
+    function and taken inside numba's own (per-process) compile lock; a function's compile takes
+    the locks of the functions it calls, never the reverse, so two processes cannot wait on each
+    other."""
+    if fcntl is None:
+        return
+    fn = disp.py_func
+    name = f"{fn.__module__}.{fn.__qualname__}:{fn.__code__.co_firstlineno}"
+    path = where / f".compile-{hashlib.sha1(name.encode()).hexdigest()[:16]}.lock"
+    compile_ = disp.compile
+
+    def compile(sig):
+        with global_compiler_lock:
+            if name in _HELD or tuple(sigutils.normalize_signature(sig)[0]) in disp.overloads:
+                return compile_(sig)
+            try:
+                fd = os.open(path, os.O_CREAT | os.O_RDWR, 0o666)
+            except OSError:
+                return compile_(sig)
+            try:
+                deadline = time.monotonic() + COMPILE_WAIT_S
+                while True:
+                    try:
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                        break
+                    except OSError:
+                        if time.monotonic() > deadline:  # a stuck holder: compile anyway
+                            return compile_(sig)
+                        time.sleep(0.05)
+                _HELD.add(name)
+                try:
+                    return compile_(sig)  # loads from the cache what the holder just saved
+                finally:
+                    _HELD.discard(name)
+            finally:
+                os.close(fd)  # releases the lock
+
+    compile.lock_path, compile.unlocked = path, compile_
+    disp.compile = compile
+
+
 def jit(fn=None, *, parallel: bool = False, inline: bool = False):
     """Compile ``fn`` with flexmm's numba settings (or return it untouched if NO_JIT). ``inline``:
     copied into every compiled caller (numba's IR inlining), so that arguments the caller passes
@@ -319,9 +402,11 @@ def jit(fn=None, *, parallel: bool = False, inline: bool = False):
         saved, numba.config.CACHE_DIR = numba.config.CACHE_DIR, str(where)  # read by numba right here
         _ModuleDirLocator.active = CACHE_KEYED
         try:
-            return numba.njit(f, cache=True, parallel=parallel, inline=how, **JIT_OPTIONS)
+            disp = numba.njit(f, cache=True, parallel=parallel, inline=how, **JIT_OPTIONS)
         finally:
             numba.config.CACHE_DIR = saved
             _ModuleDirLocator.active = False
+        _one_compile_at_a_time(disp, where)
+        return disp
 
     return wrap if fn is None else wrap(fn)

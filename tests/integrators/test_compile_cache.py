@@ -14,6 +14,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 from conftest import LEGO_CHAIN
@@ -207,3 +208,63 @@ def test_checkouts_of_the_same_sources_share_the_compiled_code(tmp_path) -> None
         counts.append(json.loads(out.stdout.strip().splitlines()[-1]))
     assert counts == [[0, 1], [1, 0], [0, 1]]  # (hits, misses): compiled, loaded, compiled
     assert len(list((tmp_path / "xdg" / "flexmm" / "numba").glob("ctmod-*"))) == 2
+
+
+
+HOLD = r"""
+import fcntl, os, time, ctmod, numba
+compile_ = ctmod.scaled.compile
+fd = os.open(compile_.lock_path, os.O_CREAT | os.O_RDWR)
+fcntl.flock(fd, fcntl.LOCK_EX)  # as a process compiling ctmod.scaled holds it
+print("held", flush=True)
+while not os.path.exists("go"):
+    time.sleep(0.05)
+compile_.unlocked((numba.float64,))  # compiles and saves
+os.close(fd)
+"""
+WAIT = ("import json, ctmod; print('calling', flush=True); ctmod.scaled(1.0); s = ctmod.scaled.stats; "
+        "print(json.dumps([sum(s.cache_hits.values()), sum(s.cache_misses.values())]))")
+
+
+def test_a_kernel_another_process_is_compiling_is_loaded_not_compiled_again(tmp_path) -> None:
+    """Two processes on one empty cache (two test workers, a sweep's workers): while one holds a
+    function's compile lock, the other waits, then loads what it saved (one compile, not two)."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "xdg")
+    (tmp_path / "ctmod.py").write_text(TWICE.format(factor="2.0"))
+    run = {"cwd": tmp_path, "env": env, "stdout": subprocess.PIPE, "text": True}
+    with subprocess.Popen([sys.executable, "-c", HOLD], **run) as holder:
+        assert holder.stdout.readline().strip() == "held"
+        with subprocess.Popen([sys.executable, "-c", WAIT], **run) as waiter:
+            assert waiter.stdout.readline().strip() == "calling"
+            time.sleep(2.0)  # unlocked, the waiter would have compiled by now
+            assert waiter.poll() is None
+            (tmp_path / "go").touch()
+            out = waiter.stdout.read()
+        assert holder.wait(timeout=600) == 0 and waiter.wait(timeout=600) == 0
+    assert json.loads(out.strip().splitlines()[-1]) == [1, 0]  # (hits, misses): loaded
+
+
+def test_constants_passed_through_runtime_compile_the_callee_once() -> None:
+    """numba compiles a function once per constant passed to it (a literal type); through
+    ``_jit.runtime`` the constants share one compiled copy (what the fused chain kernel relies on)."""
+    import numba
+    import numpy as np
+
+    from flexmm._jit import runtime
+
+    @numba.njit
+    def pick(x, flip, k):
+        return -x[k] if flip else x[k]
+
+    @numba.njit
+    def through_runtime(x):
+        return pick(x, runtime(True), runtime(0)) + pick(x, runtime(False), runtime(1))
+
+    @numba.njit
+    def as_constants(x):
+        return pick(x, True, 0) + pick(x, False, 1)
+
+    x = np.array([2.0, 5.0])
+    assert through_runtime(x) == 3.0 and len(pick.signatures) == 1
+    assert as_constants(x) == 3.0 and len(pick.signatures) == 3  # a copy per pair of constants

@@ -41,13 +41,19 @@ Used for chains with their own hinge order and 2N DOFs, with on-site damping and
 prescribed-displacement or applied-force drives on up to ``MAX_DRIVES`` DOFs, but without
 contacts, dashpots or ground friction (velocity-dependent forces are evaluated at a predicted
 velocity that needs the neighbours' forces: ``fusable``); anything else runs ``verlet_advance``.
+
+Compile cost: numba compiles a function once per constant passed to it (a literal type), so the
+constants that only steer a branch or an offset (a segment's ``has_next``, a zero base, the serial
+kernel's one chunk) go through ``_jit.runtime`` and the column accessors (``_view``, ``_at``) are
+inlined: each function here compiles once per argument types, the three parameter variants of the
+block loops (``_block``) being the only copies.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from flexmm._jit import jit, prange
+from flexmm._jit import jit, prange, runtime
 from flexmm._trig import sincos
 from flexmm.integrators.common import (ACC_DISSIPATED, ACC_WORK, MODE_DISPLACEMENT, MODE_FORCE,
                                        waveform)
@@ -288,7 +294,7 @@ def _prepare(args, minv, damp, h, damped):
     return (rep, full, row, flag, any_kg, uniform, hinges_uniform)
 
 
-@jit
+@jit(inline=True)  # inlined: its callers pass the column as a constant (a compiled copy each, else)
 def _view(tables, c, g, a):
     """Column c from site a on, for block g (a in block g)."""
     rep, full, row, flag = tables[0], tables[1], tables[2], tables[3]
@@ -297,7 +303,7 @@ def _view(tables, c, g, a):
     return rep[c, (a & 1):]
 
 
-@jit
+@jit(inline=True)
 def _at(tables, c, i):
     """Column c at site i."""
     rep, full, row = tables[0], tables[1], tables[2]
@@ -602,7 +608,7 @@ def _against(drives, f, lo, hi, out):
 def _start_drives(drives, t, gvals, state, f, lo, hi, p0):
     """Before a step from t: the drives' power at t (v½; f the force at t) on sites lo..hi−1."""
     _drive_values(drives, t, gvals)
-    _power(drives, gvals, state, 0, lo, hi, p0)
+    _power(drives, gvals, state, runtime(0), lo, hi, p0)
     _prescribed_power(drives, f, state, lo, hi, p0)
 
 
@@ -641,21 +647,21 @@ def _range_steps(q, v, f, tables, w, halo, hf, drives, gvals, p0, p1, diss, n, l
         _start_drives(drives, t, gvals, G, f, lo, hi, p0[s])
         t += h
         _prescribe(drives, t, L, wl, wl, lo)
-        _prescribe(drives, t, G, 0, lo, hi)
+        _prescribe(drives, t, G, runtime(0), lo, hi)
         _prescribe(drives, t, R, hi, hi, wr)
         _drive_values(drives, t, gvals)
-        _power(drives, gvals, G, 0, lo, hi, p1[s])
+        _power(drives, gvals, G, runtime(0), lo, hi, p1[s])
         _hold_rates(drives, G, lo, hi, p1[s])
         fl, gb = 0.0, 0.0
         if lo > 0:
-            fl, gb, _ = _segment(L[0], L[1], L[2], L[3], hf[0], hf[1], wl, wl, lo, q[lo], q[n + lo], True, 0.0, 0.0,
-                                 tables, w, h, last, damped, drives, gvals)
-        fl, gb, diss[s] = _segment(G[0], G[1], G[2], G[3], f[:n], f[n:], 0, lo, hi, R[0][0], R[1][0], hi < n, fl, gb,
-                                   tables, w, h, last, damped, drives, gvals)
+            fl, gb, _ = _segment(L[0], L[1], L[2], L[3], hf[0], hf[1], wl, wl, lo, q[lo], q[n + lo], runtime(True),
+                                 0.0, 0.0, tables, w, h, last, damped, drives, gvals)
+        fl, gb, diss[s] = _segment(G[0], G[1], G[2], G[3], f[:n], f[n:], runtime(0), lo, hi, R[0][0], R[1][0], hi < n,
+                                   fl, gb, tables, w, h, last, damped, drives, gvals)
         _against(drives, f, lo, hi, p1[s])
         if hi < n and not last:
-            _segment(R[0], R[1], R[2], R[3], hf[0], hf[1], hi, hi, wr, 0.0, 0.0, False, fl, gb, tables, w, h, last,
-                     damped, drives, gvals)
+            _segment(R[0], R[1], R[2], R[3], hf[0], hf[1], hi, hi, wr, 0.0, 0.0, runtime(False), fl, gb, tables, w, h,
+                     last, damped, drives, gvals)
 
 
 @jit
@@ -732,7 +738,7 @@ def chain_verlet_advance_prepared(tables, args, q, v, f, minv, damp, terms, t, h
     while s0 < nsteps:
         k = min(TIME_BLOCK, nsteps - s0)
         _time_block_start(q, v, n, k, work)
-        _chunk_steps(q, v, f, tables, work, drives, 0, 1, n, k, t, h, nsteps - 1 - s0, damped)
+        _chunk_steps(q, v, f, tables, work, drives, runtime(0), runtime(1), n, k, t, h, nsteps - 1 - s0, damped)
         t = _time_block_end(acc, h, damped, k, t, work)
         s0 += k
     _count(acc, nsteps)
