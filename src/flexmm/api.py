@@ -127,18 +127,20 @@ def _publish(rd, out: Path, planned: Scene, result: RunResult) -> Path:
     """config.yaml and run.log beside the dataset, then the commit (``RunDirectory.commit``); a write
     that fails here (a full disk) is an ``OutputError`` saying when, why, and what was kept."""
     pause_point("commit")
+    step = "writing config.yaml"
     try:
         write_text_atomic(rd.stage / "config.yaml", config_text(planned))
+        step = "writing run.log"
         write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
+        step = "the rename that publishes them"
         return rd.commit(result.status)
     except OSError as exc:
         from flexmm.checkpoint import NAME
 
         kept = (f"its outputs and its checkpoint are kept in {rd.stage}: make room, then run flexmm run --resume "
                 f"{out}" if (rd.stage / NAME).is_file() else "nothing of it was kept")
-        where = f"{exc.filename}: " if exc.filename else ""
         raise OutputError(f"the run ended ({result.status}, t = {result.t_end_s:.6g} s) but its outputs could not be "
-                          f"published: {where}{exc.strerror or exc}; {out} is as it was before the run; "
+                          f"published: {step} failed ({exc.strerror or exc}); {out} is as it was before the run; "
                           f"{kept}") from None
 
 
@@ -258,8 +260,12 @@ def _published_result(final: Path) -> RunResult:
     """The finished run published in ``final``, as the result of a run (nothing was run)."""
     import h5py
 
+    def plain(v):
+        v = v.item() if getattr(v, "size", 0) == 1 else v
+        return v.decode() if isinstance(v, bytes) else v
+
     with h5py.File(final / "dataset.nc", "r") as f:
-        a = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+        a = {k: plain(v) for k, v in f.attrs.items()}
         t_end = float(f["time"][-1]) if f["time"].shape[0] else 0.0
     return RunResult("finished", "", final / "dataset.nc", int(a.get("n_steps", 0)), int(a.get("n_frames_written", 0)),
                      t_end, float(a.get("dt_s", 0.0)), float(a.get("stable_dt_s", 0.0)),
