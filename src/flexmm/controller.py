@@ -371,6 +371,8 @@ def _close(writer, attrs: dict, spill: bool, say: Callable[[str], None]) -> tupl
         except OSError as exc:
             say(f"warning: the frames of the final checkpoint could not be written ({exc.strerror or exc})")
             return writer.close(attrs), False
+    elif hasattr(writer, "discard_spill"):  # frames written for earlier checkpoints: none will need them
+        writer.discard_spill()
     return writer.close(attrs), True
 
 

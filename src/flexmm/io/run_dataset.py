@@ -560,6 +560,12 @@ class MemoryWriter:
             self._spill.append(t, site_values, time_values)
         self._spill.sync()
 
+    def discard_spill(self) -> None:
+        """Remove the frames ``sync`` wrote (no checkpoint will count them: a point that finished)."""
+        if self._spill is not None:
+            self._spill.abort()
+            self._spill = None
+
     def copy_frames(self, src: Path, n: int, t_last: float) -> None:
         """Start with the first ``n`` frames of the dataset ``src`` (``DatasetWriter.copy_frames``)."""
         try:
