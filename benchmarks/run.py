@@ -919,7 +919,7 @@ def _grid_spec(path: Path, n_points: int) -> Path:
     return path
 
 
-def sweep_dask(sizes=(200, 1000), workers: int = 2) -> dict:
+def sweep_dask(sizes=(100, 500), workers: int = 2) -> dict:
     """Sweep throughput on a Dask LocalCluster of ``workers`` workers against one process and
     ``workers`` local processes (docs/sweeps.md, "Clusters").
 
