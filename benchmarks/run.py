@@ -919,6 +919,55 @@ def _grid_spec(path: Path, n_points: int) -> Path:
     return path
 
 
+def sweep_dask(sizes=(100, 500), workers: int = 2) -> dict:
+    """Sweep throughput on a Dask LocalCluster of ``workers`` workers against one process and
+    ``workers`` local processes (docs/sweeps.md, "Clusters").
+
+    For two scenes — the tiny one of ``sweep_scale`` (20 units, 2 ms: the per-point overhead) and
+    a medium one (2000 units, 50 ms, about 0.1 s of integration a point) — and each backend,
+    ``flexmm sweep`` of ``sizes`` points (whole command) gives the wall and CPU time; the marginal
+    rate between the two sizes takes start-up (spawning workers, starting the cluster) out.
+    Report it with the load, which distorts wall times on a shared machine.
+    """
+    import shutil
+    import tempfile
+
+    scenes = {"tiny": (TINY_SWEEP, sizes),
+              "medium": (["--set", "lattice.n_units=2000", "--set", "solver.duration_s=0.05"],
+                         tuple(max(2, n // 10) for n in sizes))}
+    backends = {"serial (1 process)": ["--workers", "1"],
+                f"{workers} local processes": ["--workers", str(workers)],
+                f"Dask LocalCluster, {workers} workers": ["--local-dask", "--workers", str(workers)]}
+    root = Path(tempfile.mkdtemp(prefix="flexmm-bench-sweepdask-"))
+    out: dict = {"load_before": os.getloadavg()[0], "rows": []}
+    try:
+        for scene, (args, ns) in scenes.items():
+            for name, opts in backends.items():
+                walls, cpus = {}, {}
+                for n in ns:
+                    d = root / f"{scene}-{len(out['rows'])}-{n}"
+                    cmd = [FLEXMM, "sweep", str(LEGO), *args, "--vary", f"excitation.velocity_m_s=0.5:3:{n}",
+                           "--out", str(d), "--quiet", *opts]
+                    walls[n], _, code = _child(cmd)
+                    cpus[n] = _child.cpu_s
+                    shutil.rmtree(d, ignore_errors=True)
+                few, many = ns
+                row = {"scene": scene, "backend": name, "points": many, "wall_s": walls[many],
+                       "points_per_s": many / walls[many],
+                       "marginal_points_per_s": (many - few) / max(1e-9, walls[many] - walls[few]),
+                       "marginal_cpu_ms_per_point": 1e3 * (cpus[many] - cpus[few]) / (many - few),
+                       "exit": code, "load": os.getloadavg()[0]}
+                out["rows"].append(row)
+                print(f"{scene:6s} {name:32s} {many:5d} points: {walls[many]:6.1f} s, {row['points_per_s']:6.1f} "
+                      f"points/s (marginal {row['marginal_points_per_s']:6.1f} points/s, "
+                      f"{row['marginal_cpu_ms_per_point']:6.1f} ms CPU a point; exit {code}, load {row['load']:.1f})",
+                      flush=True)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    out["load_after"] = os.getloadavg()[0]
+    return out
+
+
 def sweep_scale(plan_sizes=(10_000, 100_000, 1_000_000), n_points: int = 10_000, workers: int = 2,
                 resume_points: int = 100_000) -> dict:
     """Sweeps that outgrow one machine (issue 34): planning, points/s, bytes per point, resume.
@@ -1605,7 +1654,7 @@ def checkpoints(n_units: int = 1_000_000, steps: int = 400, n_frames: int = 21, 
     return row
 
 
-SECTIONS = {"checkpoints": checkpoints, "startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "throughput": throughput, "bandwidth": bandwidth,
+SECTIONS = {"checkpoints": checkpoints, "startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "sweep_dask": sweep_dask, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,

@@ -80,3 +80,19 @@ def deferred() -> Iterator[None]:
             signal.signal(s, signal.SIG_DFL if handler is None else handler)
         if note.noted:
             signal.raise_signal(note.noted[0])
+
+
+@contextmanager
+def absorbed() -> Iterator[None]:
+    """SIGINT and SIGTERM do nothing inside the block (main thread only; elsewhere a no-op): a run
+    already stopping on one writes what it keeps — its last frames, its final checkpoint — whole,
+    however often Ctrl-C is pressed again (a sweep sends it to its workers until they return)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, _Deferred()) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)

@@ -17,7 +17,9 @@ from flexmm.assemble import build_problem
 from flexmm.checkpoint import DEFAULT_EVERY_S, Checkpointing
 from flexmm.config import Scene, load_scene
 from flexmm.controller import RunResult, run_problem
+from flexmm.errors import OutputError
 from flexmm.io.atomic import write_text_atomic
+from flexmm.io.pause import pause_point
 from flexmm.io.provenance import config_hash, config_text
 from flexmm.io.rundir import RunDirectory
 
@@ -53,7 +55,7 @@ def run_dir_for(scene: Scene, root: str | Path | None = None) -> Path:
 def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool = False,
               log: Callable[[str], None] | None = None, fidelity: str = "full",
               analysis: str | None = None, force_limits: bool = False, atomic: bool = True,
-              in_memory: bool = False, checkpoint_s: float | None = None,
+              in_memory: bool = False, checkpoint_s: float | None = None, checkpoint_dir: str | Path | None = None,
               announce: Callable[[list[str]], None] | None = None) -> RunResult:
     """Plan, build (once) and integrate a scene; publish dataset.nc, config.yaml and run.log together.
 
@@ -73,7 +75,10 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
     continuum-only run still writes its file). ``checkpoint_s``: seconds of wall time between
     checkpoints (``flexmm.checkpoint``; also one when the run ends or a signal stops it; ``flexmm
     run`` gives ``checkpoint.DEFAULT_EVERY_S``), which ``continue_run`` continues from; None (the
-    default: sweep points, fidelity runs): none, and none for ``atomic=False`` or ``in_memory``.
+    default: fidelity runs): none. A run written with ``atomic=False`` or kept ``in_memory`` writes
+    them into ``checkpoint_dir`` (a sweep point's work directory: ``continue_point`` continues it), none
+    without one. Outputs that cannot be published (a full disk when the run ends) raise
+    ``OutputError`` saying what was kept: a checkpointed run's work directory, for ``--resume``.
     """
     from flexmm.continuum_run import run_continuum
     from flexmm.plan.cost import check_steps
@@ -84,6 +89,7 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
 
     out = run_dir_for(scene, run_dir)
     keep = atomic and not in_memory and checkpoint_s is not None
+    own_dir = None if checkpoint_s is None or keep or checkpoint_dir is None else Path(checkpoint_dir)
     with (RunDirectory(out, checkpoints=keep) if atomic else _InPlace(out)) as rd:
         for old in getattr(rd, "discarded", []):
             if log:
@@ -101,17 +107,41 @@ def run_scene(scene: Scene, *, run_dir: str | Path | None = None, progress: bool
             problem = rp.problem
             check_steps(problem.duration / problem.dt, problem.dt * problem.system.scales.time_s,
                         problem.system.n_sites, force_limits)
-            ckpt = None if not keep else Checkpointing(rd.stage, checkpoint_s, {
-                "source_config": config_text(scene), "source_sha256": config_hash(scene),
-                "planned_config": config_text(plan.scene),
-                "plan_attrs": rp.attrs(), "error_check": error_check_of(plan)})
+            where_ck = rd.stage if keep else own_dir
+            ckpt = None if where_ck is None else Checkpointing(
+                where_ck, checkpoint_s, _checkpoint_meta(scene, plan.scene, rp.attrs(), error_check_of(plan)))
             result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=rp.attrs(),
                                  on_finish=accuracy_check(plan, problem), in_memory=in_memory, checkpoints=ckpt)
-        write_text_atomic(rd.stage / "config.yaml", config_text(plan.scene))
-        write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
-        where = rd.commit(result.status)
+        where = _publish(rd, out, plan.scene, result)
     result.path = None if result.dataset is not None or result.path is None else where / "dataset.nc"
     return result
+
+
+def _checkpoint_meta(source: Scene, planned: Scene, plan_attrs: dict, error_check: dict | None) -> dict:
+    """What every checkpoint of a run holds besides its state (``flexmm.checkpoint``)."""
+    return {"source_config": config_text(source), "source_sha256": config_hash(source),
+            "planned_config": config_text(planned), "plan_attrs": plan_attrs, "error_check": error_check}
+
+
+def _publish(rd, out: Path, planned: Scene, result: RunResult) -> Path:
+    """config.yaml and run.log beside the dataset, then the commit (``RunDirectory.commit``); a write
+    that fails here (a full disk) is an ``OutputError`` saying when, why, and what was kept."""
+    pause_point("commit")
+    step = "writing config.yaml"
+    try:
+        write_text_atomic(rd.stage / "config.yaml", config_text(planned))
+        step = "writing run.log"
+        write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
+        step = "the rename that publishes them"
+        return rd.commit(result.status)
+    except OSError as exc:
+        from flexmm.checkpoint import NAME
+
+        kept = (f"its outputs and its checkpoint are kept in {rd.stage}: make room, then run flexmm run --resume "
+                f"{out}" if (rd.stage / NAME).is_file() else "nothing of it was kept")
+        raise OutputError(f"the run ended ({result.status}, t = {result.t_end_s:.6g} s) but its outputs could not be "
+                          f"published: {step} failed ({exc.strerror or exc}); {out} is as it was before the run; "
+                          f"{kept}") from None
 
 
 def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: bool = False, progress: bool = False,
@@ -134,7 +164,6 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
     A checkpoint written by another flexmm version or commit is refused unless ``allow_version``.
     """
     from flexmm import checkpoint as ck
-    from flexmm.plan.planner import replace_section
     from flexmm.prepare import whole_run_check
 
     final = Path(run_dir).expanduser()
@@ -145,32 +174,25 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
     with RunDirectory(final, checkpoints=checkpoint_s is not None, keep_work=True) as rd:
         partial = [final.with_name(f"{final.name}.{status}") for status in ("interrupted", "failed")]
         ended_dirs = [final, final.with_name(f"{final.name}.inaccurate")]  # where a run that ended is published
-        sources = ended_dirs if extend else [*rd.work_dirs(), *partial]
-        found, refused = ck.best([d for d in sources if d.is_dir()])
+        if extend:
+            sources = [d for d in ended_dirs if d.is_dir()]
+        else:
+            sources = _current(final, [*rd.work_dirs(), *partial], say)
+            if not sources and _published(final) is not None:
+                say(f"nothing to resume: {final} holds a finished run newer than any checkpoint of it")
+                return _published_result(final)
+        found, refused = ck.best(sources)
         for note in refused:
             say(note)
+        planned, source, problem, check = _continued(found, scene, extend=extend, allow_version=allow_version,
+                                                     from_work=found.directory in rd.work_dirs())
         meta = found.meta
-        planned, source = ck.continuation(found, scene, extend=extend, allow_version=allow_version,
-                                          from_work=found.directory in rd.work_dirs())
-        problem = build_problem(planned)
-        if extend:
-            every_s = meta["interval"] * problem.system.scales.time_s
-            planned = source = replace_section(planned, "output", every_s=every_s)
-            problem = build_problem(planned, built=(problem.system, problem.terms))
-        else:
-            problem.duration = meta["duration"]
-        problem.dt = meta["problem_dt"]
-        check = meta.get("error_check")
-        ckpt = None if checkpoint_s is None else Checkpointing(rd.stage, checkpoint_s, {
-            "source_config": config_text(source), "source_sha256": config_hash(source),
-            "planned_config": config_text(planned),
-            "plan_attrs": meta["plan_attrs"], "error_check": check})
+        ckpt = None if checkpoint_s is None else Checkpointing(
+            rd.stage, checkpoint_s, _checkpoint_meta(source, planned, meta["plan_attrs"], check))
         result = run_problem(problem, rd.stage, progress=progress, log=log, extra_attrs=meta["plan_attrs"],
                              on_finish=whole_run_check(problem, **check) if check else None, checkpoints=ckpt,
                              resume=found)
-        write_text_atomic(rd.stage / "config.yaml", config_text(planned))
-        write_text_atomic(rd.stage / "run.log", "\n".join(result.log) + "\n")
-        where = rd.commit(result.status)
+        where = _publish(rd, final, planned, result)
         if (where / ck.NAME).is_file():  # the run's own checkpoint supersedes the ones it came from
             for old in rd.work_dirs():
                 shutil.rmtree(old, ignore_errors=True)
@@ -178,6 +200,95 @@ def continue_run(run_dir: str | Path, scene: Scene | None = None, *, extend: boo
                 for old in partial:
                     shutil.rmtree(old, ignore_errors=True)
     result.path = None if result.path is None else where / "dataset.nc"
+    return result
+
+
+def _continued(found, scene: Scene | None, *, extend: bool, allow_version: bool, from_work: bool) -> tuple:
+    """(scene that runs, scene as asked, problem, whole-run error check) to continue checkpoint ``found``
+    (``checkpoint.continuation`` refuses what must not be continued); rebuilt without planning again,
+    with the step the checkpoint's run used."""
+    from flexmm import checkpoint as ck
+    from flexmm.plan.planner import replace_section
+
+    meta = found.meta
+    planned, source = ck.continuation(found, scene, extend=extend, allow_version=allow_version, from_work=from_work)
+    problem = build_problem(planned)
+    if extend:
+        every_s = meta["interval"] * problem.system.scales.time_s
+        planned = source = replace_section(planned, "output", every_s=every_s)
+        problem = build_problem(planned, built=(problem.system, problem.terms))
+    else:
+        problem.duration = meta["duration"]
+    problem.dt = meta["problem_dt"]
+    return planned, source, problem, meta.get("error_check")
+
+
+def _current(final: Path, candidates: list[Path], say: Callable[[str], None]) -> list[Path]:
+    """The directories a resume of ``final`` may continue from: those holding a checkpoint newer than
+    the finished run published in ``final`` (if any). A work directory holding no checkpoint, or only
+    older ones — the previous result swapped out by a commit that was killed before removing it — is
+    removed; an older partial run (``.interrupted``, ``.failed``) is left alone, and not continued."""
+    from flexmm import checkpoint as ck
+
+    published = _published(final)
+    out = []
+    for d in candidates:
+        if not d.is_dir():
+            continue
+        stamps = [p.stat().st_mtime_ns for p in (d / ck.NAME, d / ck.PREVIOUS) if p.is_file()]
+        if stamps and (published is None or max(stamps) > published):
+            out.append(d)
+        elif d.name.startswith("."):  # a work directory
+            shutil.rmtree(d, ignore_errors=True)
+            say(f"removed {d.name}: " + ("no checkpoint in it" if not stamps else
+                                         f"older than the finished run in {final}"))
+        else:
+            say(f"not continued: {d} is older than the finished run in {final}")
+    return out
+
+
+def _published(final: Path) -> int | None:
+    """When the finished run in ``final`` was written (its dataset's mtime, ns), None if there is none
+    (only a finished run is published there: ``io.rundir``)."""
+    try:
+        return (final / "dataset.nc").stat().st_mtime_ns
+    except OSError:
+        return None
+
+
+def _published_result(final: Path) -> RunResult:
+    """The finished run published in ``final``, as the result of a run (nothing was run)."""
+    import h5py
+
+    def plain(v):
+        v = v.item() if getattr(v, "size", 0) == 1 else v
+        return v.decode() if isinstance(v, bytes) else v
+
+    with h5py.File(final / "dataset.nc", "r") as f:
+        a = {k: plain(v) for k, v in f.attrs.items()}
+        t_end = float(f["time"][-1]) if f["time"].shape[0] else 0.0
+    return RunResult("finished", "", final / "dataset.nc", int(a.get("n_steps", 0)), int(a.get("n_frames_written", 0)),
+                     t_end, float(a.get("dt_s", 0.0)), float(a.get("stable_dt_s", 0.0)),
+                     float(a.get("compile_time_s", 0.0)), 0.0, str(a.get("log", "")).splitlines(),
+                     accuracy={k: v for k, v in a.items() if k.startswith("accuracy_") and "accuracy_estimate" in a})
+
+
+def continue_point(found, scene: Scene, run_dir: str | Path, *, checkpoint_dir: str | Path,
+                   checkpoint_s: float, log: Callable[[str], None] | None = None) -> RunResult:
+    """Continue a sweep point kept in memory from checkpoint ``found`` (``run_scene`` with
+    ``in_memory`` and ``checkpoint_dir``): its frames read back into memory, the run goes on writing
+    checkpoints into ``checkpoint_dir``; config.yaml and run.log go to ``run_dir``. The dataset
+    (``result.dataset``) is the one the point would have had run whole, bit for bit."""
+    planned, source, problem, check = _continued(found, scene, extend=False, allow_version=False, from_work=True)
+    from flexmm.prepare import whole_run_check
+
+    meta = found.meta
+    ckpt = Checkpointing(Path(checkpoint_dir), checkpoint_s, _checkpoint_meta(source, planned, meta["plan_attrs"], check))
+    with _InPlace(Path(run_dir)) as rd:
+        result = run_problem(problem, rd.stage, log=log, extra_attrs=meta["plan_attrs"], in_memory=True,
+                             on_finish=whole_run_check(problem, **check) if check else None, checkpoints=ckpt,
+                             resume=found)
+        _publish(rd, rd.stage, planned, result)
     return result
 
 
@@ -351,5 +462,5 @@ def render(run: xr.Dataset | str | Path | Result, t: float | None = None, **opti
     return figure(run, t, **options)
 
 
-__all__ = ["Measurements", "Result", "analyze", "build_problem", "continue_run", "load_scene", "render", "run",
+__all__ = ["Measurements", "Result", "analyze", "build_problem", "continue_point", "continue_run", "load_scene", "render", "run",
            "run_dir_for", "run_scene"]

@@ -32,6 +32,7 @@ import numpy as np
 from flexmm._version import __version__
 from flexmm.errors import FlexmmError
 from flexmm.io.atomic import temporary_name
+from flexmm.io.pause import pause_point
 from flexmm.io.provenance import git_commit
 
 MAGIC = b"FLEXMM-CHECKPOINT\n"
@@ -73,6 +74,7 @@ def write(directory: Path, meta: dict, arrays: dict[str, np.ndarray], durable: b
     ``durable``: fsync the file and the directory, so the checkpoint survives a power cut or an OS
     crash, not only the death of the process (which the rename alone survives)."""
     directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
     target, tmp = directory / NAME, temporary_name(directory / NAME)
     flat = {k: np.ascontiguousarray(a, dtype=np.dtype(a.dtype).newbyteorder("<")) for k, a in arrays.items()}
     table, offset = [], 0
@@ -217,8 +219,8 @@ class Checkpointing:
     """Where and how often a run writes checkpoints (``controller.run_problem``), and what it wrote.
 
     ``meta``: what the caller adds to every checkpoint (configs, plan attributes: module docstring).
-    A checkpoint that cannot be written (a full disk) is reported once in ``failed``; the run goes
-    on, and the previous checkpoint stays."""
+    A checkpoint that cannot be written (a full disk) raises ``OSError`` from ``save``, the
+    previous one intact (``write``): the run then stops, failed, saying when and why."""
 
     directory: Path
     every_s: float = DEFAULT_EVERY_S
@@ -226,21 +228,16 @@ class Checkpointing:
     count: int = 0
     bytes: int = 0
     seconds: float = 0.0
-    failed: str = ""
 
-    def save(self, meta: dict, arrays: dict[str, np.ndarray], durable: bool = True) -> bool:
-        """Write one checkpoint (``write``); False when it could not be written (``failed``)."""
+    def save(self, meta: dict, arrays: dict[str, np.ndarray], durable: bool = True) -> None:
+        """Write one checkpoint (``write``); ``OSError`` when it could not be written."""
+        pause_point("checkpoint")
         t0 = time.perf_counter()
         try:
             self.bytes = write(self.directory, {**self.meta, **meta}, arrays, durable)
-        except OSError as exc:
-            if not self.failed:
-                self.failed = f"a checkpoint could not be written in {self.directory} ({exc.strerror or exc})"
-            return False
         finally:
             self.seconds += time.perf_counter() - t0
         self.count += 1
-        return True
 
     def drop_previous(self) -> None:
         (Path(self.directory) / PREVIOUS).unlink(missing_ok=True)

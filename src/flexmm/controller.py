@@ -6,6 +6,8 @@ blow-up checks, progress reporting and the dataset writer; kernels only see arra
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import signal
 import time as _time
@@ -15,7 +17,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from flexmm._signals import signal_of
+from flexmm._signals import absorbed, signal_of
 from flexmm.assemble import Problem
 from flexmm.checkpoint import Checkpoint, CheckpointError, Checkpointing
 from flexmm.integrators import INTEGRATORS
@@ -360,6 +362,20 @@ def _resume(ck: Checkpoint, stepper: Stepper, track: _StepFollower, obs: _Observ
     return done, [*m.get("resumptions", []), note]
 
 
+def _close(writer, attrs: dict, spill: bool, say: Callable[[str], None]) -> tuple[Path | None, bool]:
+    """Close the run's writer: (its path, False if ``spill`` failed). ``spill``: an in-memory run's
+    frames are first written beside its final checkpoint (``MemoryWriter.sync``)."""
+    if spill:
+        try:
+            writer.sync()
+        except OSError as exc:
+            say(f"warning: the frames of the final checkpoint could not be written ({exc.strerror or exc})")
+            return writer.close(attrs), False
+    elif hasattr(writer, "discard_spill"):  # frames written for earlier checkpoints: none will need them
+        writer.discard_spill()
+    return writer.close(attrs), True
+
+
 def _progress(total: int, enabled: bool):
     if not enabled:
         return None
@@ -411,7 +427,9 @@ def run_problem(
     for note in plan.notes:
         say(note)
     n_frames = len(chunks) + 1
-    obs = _Observer(problem, run_dir / "dataset.nc", n_frames, MemoryWriter if in_memory else None)
+    spill = None if checkpoints is None else checkpoints.directory  # an in-memory run's frames, for a checkpoint
+    obs = _Observer(problem, run_dir / "dataset.nc", n_frames,
+                    functools.partial(MemoryWriter, spill=spill) if in_memory else None)
     size = estimate_bytes(n_frames, obs.sites.size, len(obs.site_vars), len(obs.time_vars))
     steps = (f"adaptive steps (rtol {scene.solver.rtol or DEFAULT_RTOL:g})" if spec.adaptive
              else f"{sum(chunks)} steps of {h * sc.time_s:.4g} s")
@@ -449,11 +467,14 @@ def run_problem(
     if prog and start:
         prog.advance(prog.task_ids[0], start)
     write_error: list[tuple[float, OSError]] = []
+    ckpt_error: list[tuple[float, OSError]] = []  # a checkpoint that could not be written: the run stops
     last_line = [_time.monotonic()]
 
     clock = [_time.monotonic()]  # when the last checkpoint was written
+    saved_t: list[float] = [resume.meta["t_s"]] if resume is not None else []  # time of the last checkpoint (s)
 
     def checkpoint(status: str, dataset: str, durable: bool = True) -> None:
+        """Write a checkpoint of the state now (``OSError`` if it cannot be: the previous one stays)."""
         arrays, scalars = stepper.snapshot()
         f_arrays, f_scalars = track.snapshot()
         w = obs.writer
@@ -462,9 +483,8 @@ def run_problem(
                 "h0": plan.h, "chunks": _runs(chunks), "interval": plan.interval, "problem_dt": problem.dt,
                 "duration": problem.duration, "stepper": scalars, "follower": f_scalars, "log": list(lines),
                 "resumptions": resumptions}
-        warned = bool(checkpoints.failed)
-        if not checkpoints.save(meta, {**arrays, **f_arrays}, durable) and not warned:
-            say(f"warning: {checkpoints.failed}; the run goes on")
+        checkpoints.save(meta, {**arrays, **f_arrays}, durable)
+        saved_t.append(stepper.t * sc.time_s)
         clock[0] = _time.monotonic()
 
     def on_frame(st: Stepper) -> bool:
@@ -484,7 +504,11 @@ def run_problem(
                 write_error.append((st.t, exc))
                 return True
             checkpoints.seconds += _time.perf_counter() - t0
-            checkpoint("running", obs.writer.tmp.name)
+            try:
+                checkpoint("running", obs.writer.tmp.name)
+            except OSError as exc:  # a full disk: stop now rather than run on with nothing to resume from
+                ckpt_error.append((st.t, exc))
+                return True
         if prog:
             prog.advance(prog.task_ids[0])
         elif log is not None and _time.monotonic() - last_line[0] >= PROGRESS_EVERY_S:
@@ -515,20 +539,24 @@ def run_problem(
                   f"last good time {outcome.t_good * sc.time_s:.6g} s kept")
     if track.failure and status == "finished":
         status, reason = "failed", track.failure
-    if write_error:
-        t_bad, exc = write_error[0]
+    if write_error or ckpt_error:
+        t_bad, exc = (write_error or ckpt_error)[0]
         status = "failed"
         w = obs.writer
         kept = "no frames are kept" if w.t_written is None else (
             f"the {w.n_written} frames written before it (to t = {w.t_written:.6g} s) are kept")
-        reason = f"writing frames failed at t = {t_bad * sc.time_s:.6g} s ({exc.strerror or exc}); {kept}"
+        what = "writing frames" if write_error else "writing a checkpoint"
+        reason = f"{what} failed at t = {t_bad * sc.time_s:.6g} s ({exc.strerror or exc}); {kept}"
+        if checkpoints is not None:
+            reason += (f", and the checkpoint of t = {saved_t[-1]:.6g} s, which --resume continues from once "
+                       "there is room" if saved_t else "; no checkpoint was written before it")
     elif status == "interrupted":
         reason = (f"interrupted by {outcome.reason} at t = {t * sc.time_s:.6g} s; frames up to "
                   f"{outcome.t_good * sc.time_s:.6g} s kept")
     wall = stepper.wall_s
     mups = n_steps * s.n_sites / wall / 1e6 if wall > 0 else float("nan")
     say(f"{status}: {n_steps} steps in {wall:.3f} s ({mups:.1f} M unit-steps/s), compile {compile_s:.2f} s")
-    if reason and not write_error:  # what a write failure kept is known once the file is closed
+    if reason and not (write_error or ckpt_error):  # what a write failure kept is known once the file is closed
         say(reason)
     track.summary()
     if checkpoints is not None and checkpoints.count:
@@ -576,21 +604,29 @@ def run_problem(
         **({"resumed": "\n".join(resumptions), "n_resumptions": len(resumptions)} if resumptions else {}),
         **(extra_attrs or {}),
     }
-    path = obs.writer.close(attrs)
-    if (checkpoints is not None and path is not None and early is None and status != "failed"
-            and stepper.steps == at_frame[0] and obs.writer.n_written == done[0]):
-        # the state the run ended in, which --resume (interrupted) or --extend go on from; not fsynced,
-        # like the dataset beside it (a power cut may lose both; the death of the process neither)
-        checkpoint(status, path.name, durable=False)
-        if status != "interrupted":
-            checkpoints.drop_previous()
+    # the state the run ended in, which --resume (interrupted) or --extend go on from (a run kept in
+    # memory: only when interrupted, its frames then written beside the checkpoint)
+    final = (checkpoints is not None and early is None and status != "failed" and stepper.steps == at_frame[0]
+             and obs.writer.n_written == done[0] and (not in_memory or status == "interrupted"))
+    with absorbed() if status == "interrupted" else contextlib.nullcontext():
+        path, spilled = _close(obs.writer, attrs, final and in_memory, say)
+        if final and spilled and path is not None:
+            try:  # not fsynced, like the dataset beside it (a power cut may lose both; the death of the process neither)
+                checkpoint(status, path.name, durable=False)
+            except OSError as exc:
+                say(f"warning: the checkpoint of the run's end could not be written ({exc.strerror or exc}): "
+                    + ("--resume continues from the one before" if status == "interrupted"
+                       else "it cannot be --extended"))
+            else:
+                if status != "interrupted":
+                    checkpoints.drop_previous()
     if path is None:  # the file could not be completed: say so, never claim frames that are gone
         status = "failed"
         head = (f"writing frames failed at t = {write_error[0][0] * sc.time_s:.6g} s" if write_error
                 else f"{reason + '; ' if reason else ''}writing the dataset failed")
         reason = f"{head} ({obs.writer.closed_why}); nothing was kept"
         say(reason)
-    elif write_error:
+    elif write_error or ckpt_error:
         say(reason)
     return RunResult(status, reason, path, n_steps, obs.writer.n_written, t * sc.time_s, h * sc.time_s,
                      problem.stable_dt * sc.time_s, compile_s, wall, lines, n_units=s.n_sites,

@@ -58,6 +58,9 @@ class _Bar:
         elif self.lines:
             params = ", ".join(f"{k}={v}" for k, v in outcome["params"].items())
             extra = f": {outcome.get('reason')}" if status != "finished" else ""
+            went_on = outcome.get("resumed") or (f"checkpoint not used, run from the start: {outcome['restarted']}"
+                                                 if outcome.get("restarted") else "")
+            extra += f"; {went_on}" if went_on else ""
             typer.echo(f"[{done}/{self.total}] {status} {params} ({outcome.get('wall_s', 0):.1f} s){extra}", err=True)
 
     def stop(self) -> None:
@@ -90,6 +93,10 @@ def sweep(
     shards: int = typer.Option(4, "--shards", min=1, help="Tasks of the --cluster job array."),
     sbatch: list[str] = typer.Option(None, "--sbatch", help="Extra #SBATCH option of the job array, e.g. "
                                      "--sbatch=--partition=short --sbatch=--time=2:00:00 (repeatable)."),
+    checkpoint_s: float = typer.Option(None, "--checkpoint-s", metavar="SECONDS", show_default=False,
+                                       help="Wall time between a running point's checkpoints (default 60; 0: only "
+                                            "when Ctrl-C/SIGTERM stops it). A stopped or killed point goes on "
+                                            "from its checkpoint when the sweep is run again."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only print the paths written (sweep dataset, figure)."),
 ) -> None:
     """Run every point of a sweep (skipping finished ones) and combine them into SWEEP_DIR/sweep.nc."""
@@ -132,7 +139,7 @@ def sweep(
         bar = _Bar(len(plan.tasks), enabled=stderr_is_tty() and not quiet, lines=not quiet)
         try:
             report = execute(plan, workers=workers, batch_size=batch_size, scheduler=scheduler,
-                             local_dask=local_dask, on_outcome=bar)
+                             local_dask=local_dask, on_outcome=bar, checkpoint_s=_every(checkpoint_s))
         except KeyboardInterrupt:
             typer.echo("interrupted; rerun the same command to resume", err=True)
             raise typer.Exit(EXIT_INTERRUPTED) from None
@@ -167,6 +174,18 @@ def sweep(
         if report.n_failed:
             _list_failed(plan)
             raise typer.Exit(EXIT_FAILED_RUN)
+
+
+def _every(checkpoint_s: float | None) -> float:
+    """--checkpoint-s as the seconds between checkpoints (inf: only on a signal)."""
+    import math
+
+    from flexmm.sweep.worker import CHECKPOINT_S
+
+    if checkpoint_s is not None and checkpoint_s < 0:
+        raise error(f"--checkpoint-s {checkpoint_s:g}: expected seconds ≥ 0 (0: only when a signal stops a point)")
+    seconds = CHECKPOINT_S if checkpoint_s is None else checkpoint_s
+    return seconds if seconds > 0 else math.inf
 
 
 def _job_array(sw, spec: str, vary, zip_axes: bool, overrides, keep, retry_failed: bool, sweep_dir: Path,

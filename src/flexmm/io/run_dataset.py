@@ -106,6 +106,15 @@ def _attrs(name: str, units: str, long_name: str, extra: list[dict]) -> dict:
     return variable_attrs(name, {"units": units, "long_name": long_name, **(extra[0] if extra else {})})
 
 
+def _check_frames(f, src: Path, n: int, t_last: float) -> None:
+    """``OSError`` unless the open dataset ``f`` holds at least ``n`` frames, frame ``n − 1`` at ``t_last`` s."""
+    times = f.variables["time"]
+    if times.shape[0] < n or (n and float(times[n - 1]) != t_last):
+        found = times.shape[0] if times.shape[0] < n else f"time {float(times[n - 1])!r} s at frame {n - 1}"
+        raise OSError(errno.EINVAL, f"it does not hold the checkpoint's {n} frames to t = {t_last!r} s "
+                                    f"(it holds {found})", str(src))
+
+
 class DatasetWriter:
     """Write (time, site) fields and per-time scalars; call ``close`` to publish the file.
 
@@ -258,11 +267,7 @@ class DatasetWriter:
         step = max(1, BUFFER_BYTES // (8 * max(1, self.n_site * max(1, len(self.site_names)))))
         try:
             with h5netcdf.File(src, "r") as f:
-                times = f.variables["time"]
-                if times.shape[0] < n or (n and float(times[n - 1]) != t_last):
-                    found = times.shape[0] if times.shape[0] < n else f"time {float(times[n - 1])!r} s at frame {n - 1}"
-                    raise OSError(errno.EINVAL, f"it does not hold the checkpoint's {n} frames to t = {t_last!r} s "
-                                                f"(it holds {found})", str(src))
+                _check_frames(f, src, n, t_last)
                 if self.n_frames is None:
                     self.file.resize_dimension("time", n)
                 for i in range(0, n, step):
@@ -510,10 +515,16 @@ class MemoryWriter:
 
     For runs that are measured and dropped (the points of a sweep that are not kept): no file to
     lay out, write and read back. ``path`` is where the file would have gone (it does not exist).
+
+    ``spill``: a directory for checkpoints (a sweep point's work directory). A checkpoint needs
+    its frames on disk, so ``sync`` writes the frames kept so far to ``spill/dataset.nc`` (a
+    ``DatasetWriter``, the rest appended at each later ``sync``) and ``close`` completes that file
+    too; a run that ends before its first checkpoint writes nothing. ``copy_frames`` reads the
+    frames of a checkpoint back into memory (a resumed point).
     """
 
     def __init__(self, path: Path, n_site: int, site_vars: dict, time_vars: dict, site_coords: dict,
-                 n_frames: int | None = None, constants: dict | None = None):
+                 n_frames: int | None = None, constants: dict | None = None, spill: Path | None = None):
         self.path, self.n_site, self.n_frames = Path(path), n_site, n_frames
         self.site_vars, self.time_vars, self.site_coords = site_vars, time_vars, site_coords
         self.constants = constants or {}
@@ -521,6 +532,8 @@ class MemoryWriter:
         self.n_written = 0
         self.t_written: float | None = None
         self.dataset = None
+        self.spill_dir = None if spill is None else Path(spill)
+        self._spill: DatasetWriter | None = None
 
     def append(self, t: float, site_values: dict, time_values: dict) -> None:
         if self.n_frames is not None and len(self.frames) >= self.n_frames:
@@ -530,6 +543,42 @@ class MemoryWriter:
 
     def flush(self) -> None:
         pass
+
+    @property
+    def tmp(self) -> Path:
+        """The file the frames a checkpoint counts are in (after ``sync``)."""
+        return self._spill.tmp
+
+    def sync(self) -> None:
+        """Every frame so far on disk, durably, in ``spill/dataset.nc`` (nothing without ``spill``)."""
+        if self.spill_dir is None:
+            return
+        if self._spill is None:
+            self._spill = DatasetWriter(self.spill_dir / "dataset.nc", self.n_site, self.site_vars, self.time_vars,
+                                        self.site_coords, self.n_frames, self.constants)
+        for t, site_values, time_values in self.frames[self._spill.n_written + len(self._spill._buf):]:
+            self._spill.append(t, site_values, time_values)
+        self._spill.sync()
+
+    def discard_spill(self) -> None:
+        """Remove the frames ``sync`` wrote (no checkpoint will count them: a point that finished)."""
+        if self._spill is not None:
+            self._spill.abort()
+            self._spill = None
+
+    def copy_frames(self, src: Path, n: int, t_last: float) -> None:
+        """Start with the first ``n`` frames of the dataset ``src`` (``DatasetWriter.copy_frames``)."""
+        try:
+            with h5netcdf.File(src, "r") as f:
+                _check_frames(f, src, n, t_last)
+                times = np.asarray(f.variables["time"][:n], float)
+                site = {k: np.asarray(f.variables[k][:n], float) for k in self.site_vars}
+                per_time = {k: np.asarray(f.variables[k][:n], float) for k in self.time_vars}
+        except (RuntimeError, KeyError) as exc:  # HDF5 cannot read it (a file cut short by a kill)
+            raise OSError(errno.EIO, f"it cannot be read ({_first_line(exc)})", str(src)) from None
+        self.frames = [(float(times[i]), {k: v[i].copy() for k, v in site.items()},
+                        {k: float(v[i]) for k, v in per_time.items()}) for i in range(n)]
+        self.n_written, self.t_written = n, (t_last if n else None)
 
     def close(self, attrs: dict) -> Path:
         import xarray as xr
@@ -556,11 +605,19 @@ class MemoryWriter:
         ds = xr.Dataset({k: xr.Variable(dims, data, stored[k]) for k, (dims, data, _) in variables.items()},
                         attrs=stored[""])
         self.dataset = xr.decode_cf(ds)
+        if self._spill is not None:  # the frames a last checkpoint counts: the spill file completed
+            try:
+                self.sync()
+            except OSError:
+                pass  # what it holds is cut to the frames written when it closes
+            self._spill.close(attrs)
         self.frames = []
         return self.path
 
     def abort(self) -> None:
         self.frames = []
+        if self._spill is not None:
+            self._spill.abort()
 
 
 def _as_stored(groups: dict[str, dict]) -> dict[str, dict]:

@@ -19,6 +19,12 @@ directory is refused instead of interleaving its files with the first. ``commit(
 A run that writes checkpoints stages in a work directory ``.<name>.work.<pid>`` instead, which
 outlives a killed process for ``flexmm run --resume`` (``RunDirectory``).
 
+A commit killed midway leaves ``<name>`` either as it was or as the new run, never a mix: the
+exchange is one system call (a kill after it leaves the old contents under the work directory's
+name, which ``--resume`` recognises as older than the published run and removes); where the
+filesystem cannot exchange, a kill between the two renames leaves the old directory aside as
+``.<name>.old.<pid>``, which the next run into ``<name>`` renames back (``clean_stale``).
+
 Leaving the ``with`` block without a commit (an error, a signal before the run started) removes
 the staging directory. Staging directories and temporary files of processes that no longer run
 (a ``kill -9``, a power cut) are removed by the next run into the same directory.
@@ -39,6 +45,7 @@ import time
 from pathlib import Path
 
 from flexmm.errors import OutputError
+from flexmm.io.pause import pause_point
 
 FINISHED = "finished"
 #: where a run that did not finish is published: ``<name>.<status>``
@@ -88,6 +95,11 @@ def clean_stale(directory: Path) -> list[Path]:
             continue
         pid = int(m.group(1) or m.group(2))
         if pid != os.getpid() and not _pid_alive(pid):
+            home = directory / p.name[1 : -len(f".old.{pid}")] if p.name.endswith(f".old.{pid}") else None
+            if home is not None and not home.exists():  # a commit killed between its two renames:
+                os.rename(p, home)  # the previous result back in place (the new one is in its work directory)
+                removed.append(p)
+                continue
             if p.is_dir():
                 shutil.rmtree(p, ignore_errors=True)
             else:
@@ -329,10 +341,12 @@ class RunDirectory:
                 raise OutputError(f"output path {target} exists and is not a directory")
             if target.exists():
                 if _exchange(self.stage, target):
+                    pause_point("commit:exchanged")
                     shutil.rmtree(self.stage, ignore_errors=True)  # the old result, swapped out
-                else:  # two renames, under the lock
+                else:  # two renames, under the lock; a kill between them is undone by the next run (clean_stale)
                     old = self.parent / f".{self.final.name}.old.{os.getpid()}"
                     os.rename(target, old)
+                    pause_point("commit:moved-old")
                     os.rename(self.stage, target)
                     shutil.rmtree(old, ignore_errors=True)
             else:

@@ -12,8 +12,11 @@ out the store (``flexmm.sweep.store``) and runs what is pending (failed points o
   flexmm installed and the sweep directory on a shared filesystem; the spec is scattered once);
 - ``local_dask=True``: a ``distributed.LocalCluster`` started for the sweep.
 
-Ctrl-C stops the workers' current points (they stay pending), cancels the rest and returns with
-``interrupted=True``; every point finished so far stays finished.
+Ctrl-C stops the workers' current points (they stay pending, each with a checkpoint of where it
+stopped), cancels the rest and returns with ``interrupted=True``; every point finished so far stays
+finished. The next run continues the stopped points from their checkpoints, and so it does for
+points whose worker was killed (from their last checkpoint, written every ``checkpoint_s`` of
+wall time): ``flexmm.sweep.worker.run_point``.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from flexmm.errors import UsageError
 from flexmm.sweep.shard import Shard, store_lock
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import CODE, FAILED, FINISHED, PENDING, SweepStore, spec_fingerprint, write_json_atomic
-from flexmm.sweep.worker import INTERRUPTED, ONE_THREAD, Batch, init_worker, run_batch
+from flexmm.sweep.worker import CHECKPOINT_S, INTERRUPTED, ONE_THREAD, Batch, init_worker, run_batch
 
 MAX_BATCH = 8
 BATCHES_PER_WORKER = 3
@@ -154,16 +157,17 @@ def batch_size_for(n_tasks: int, n_workers: int, batch_size: int = 0) -> int:
     return batch_size or min(MAX_BATCH, max(1, math.ceil(n_tasks / (BATCHES_PER_WORKER * n_workers))))
 
 
-def batches(tasks: np.ndarray, root: str, size: int) -> Iterator[Batch]:
+def batches(tasks: np.ndarray, root: str, size: int, checkpoint_s: float = CHECKPOINT_S) -> Iterator[Batch]:
     """The tasks in consecutive batches of ``size`` points (made as they are submitted)."""
     for i in range(0, len(tasks), size):
-        yield Batch(tuple(int(k) for k in tasks[i : i + size]), root)
+        yield Batch(tuple(int(k) for k in tasks[i : i + size]), root, checkpoint_s)
 
 
 def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler: str | None = None,
-            local_dask: bool = False, dask_processes: bool = True,
+            local_dask: bool = False, dask_processes: bool = True, checkpoint_s: float = CHECKPOINT_S,
             on_outcome: OnOutcome | None = None) -> SweepReport:
-    """Run the plan's tasks; the report counts every point's state afterwards."""
+    """Run the plan's tasks; the report counts every point's state afterwards. ``checkpoint_s``: wall
+    time between a running point's checkpoints (``flexmm.sweep.worker.run_point``)."""
     from flexmm.sweep.observe import OBSERVABLES
 
     t0 = time.perf_counter()
@@ -187,7 +191,7 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
 
     if len(plan.tasks):
         size = batch_size_for(len(plan.tasks), n_workers, batch_size)
-        work = batches(plan.tasks, str(store.root.resolve()), size)
+        work = batches(plan.tasks, str(store.root.resolve()), size, checkpoint_s)
         n_batches = math.ceil(len(plan.tasks) / size)
         if scheduler or local_dask:
             report.backend = f"dask {scheduler}" if scheduler else "dask LocalCluster"
@@ -311,7 +315,7 @@ def run_sweep(spec: SweepSpec, sweep_dir: str | Path, *, retry_failed: bool = Fa
 
     ``shard`` runs one slice of the points (``flexmm.sweep.shard``); the shard that finds the
     whole sweep done writes sweep.nc. ``options`` go to ``execute`` (workers, batch_size,
-    scheduler, local_dask, dask_processes, on_outcome).
+    scheduler, local_dask, dask_processes, checkpoint_s, on_outcome).
     """
     from flexmm.sweep.shard import sweep_lock
 

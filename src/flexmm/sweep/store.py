@@ -10,6 +10,7 @@ Layout of a sweep directory::
     SWEEP_DIR/store/note.npy            fixed-width UTF-8 per point: why a value is missing / why it failed
     SWEEP_DIR/store/label.npy           fixed-width UTF-8 (point, 3): kind, field and amplitude units measured
     SWEEP_DIR/points/<h[:2]>/<h>/       a kept point's run (``keep:``), <h> = its config sha256
+    SWEEP_DIR/work/<i>/                 checkpoints of point i while it runs (not kept), removed once it is stored
 
 Points are numbered in C order over the sweep's shape (``SweepSpec.point_at``). The arrays are
 laid out once, up front (sparse files), by the process that plans the sweep; afterwards every
@@ -36,6 +37,8 @@ from flexmm.io.atomic import write_text_atomic
 DATASET = "dataset.nc"
 RESULT = "sweep.nc"
 STORE = "store"
+#: the running points' checkpoints: SWEEP_DIR/work/<point>/
+WORK = "work"
 FINISHED, FAILED, PENDING = "finished", "failed", "pending"
 #: status byte of each state (the order of STATES)
 STATES = (PENDING, FINISHED, FAILED)
@@ -96,6 +99,10 @@ class SweepStore:
     def point_dir(self, config_hash: str) -> Path:
         """A kept point's run directory, sharded by the hash's first two hex digits."""
         return self.points / config_hash[:2] / config_hash
+
+    def work_dir(self, index: int) -> Path:
+        """Where point ``index`` writes its checkpoints while it runs (``flexmm.sweep.worker``)."""
+        return self.root / WORK / str(index)
 
     @property
     def result_path(self) -> Path:

@@ -33,12 +33,18 @@ FINISHED, FAILED = "finished", "failed"
 _SPEC = None
 
 
+#: wall time between a point's checkpoints unless told (``flexmm sweep --checkpoint-s``)
+CHECKPOINT_S = 60.0
+
+
 @dataclass(frozen=True)
 class Batch:
-    """Points to compute (their numbers in the sweep) and the sweep directory they go to."""
+    """Points to compute (their numbers in the sweep), the sweep directory they go to, and the wall
+    time between their checkpoints (``math.inf``: only when a signal stops them)."""
 
     indices: tuple[int, ...]
     root: str
+    checkpoint_s: float = CHECKPOINT_S
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -129,7 +135,7 @@ def run_batch(batch: Batch, spec=None) -> list[dict]:
     try:
         _one_thread()
         for i in batch.indices:
-            outcomes.append(run_point(spec, i, store, scratch))
+            outcomes.append(run_point(spec, i, store, scratch, batch.checkpoint_s))
             if outcomes[-1]["status"] == INTERRUPTED:
                 break
     except KeyboardInterrupt:
@@ -147,21 +153,26 @@ def _scratch_root() -> str | None:
     return str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
 
 
-def run_point(spec, index: int, store, scratch: Path) -> dict:
+def run_point(spec, index: int, store, scratch: Path, checkpoint_s: float = CHECKPOINT_S) -> dict:
     """Validate, integrate and measure point ``index``; publish it in the store (status last).
 
-    Ctrl-C at any moment before the status byte is written leaves the point pending (a kept
-    point's partial run goes to ``<dir>.interrupted``); the store write itself runs with SIGINT
-    blocked, so it is all or nothing.
+    The point's run writes checkpoints every ``checkpoint_s`` of wall time and when a signal stops
+    it (a kept point's into its run directory's work directory, ``flexmm run``'s; another's into
+    ``store.work_dir(index)``, its frames beside them), and continues from the newest one left by
+    an earlier attempt that was interrupted or killed (``_run``). Ctrl-C at any moment before the
+    status byte is written leaves the point pending (a kept point's partial run goes to
+    ``<dir>.interrupted``); the store write itself runs with SIGINT blocked, so it is all or
+    nothing; the point's checkpoints are removed after it.
     """
     t0 = time.perf_counter()
     outcome = {"index": index, "params": _plain_params(spec.params_at(index)), "pid": os.getpid()}
     try:
-        info, values, labels = _compute(spec, index, store, scratch, outcome)
+        info, values, labels = _compute(spec, index, store, scratch, outcome, checkpoint_s)
         info["wall_s"] = time.perf_counter() - t0
         if info["status"] != INTERRUPTED:
             with _sigint_blocked():
                 store.write_point(index, info["status"], values, info.get("reason") or "", labels)
+            shutil.rmtree(store.work_dir(index), ignore_errors=True)
     except KeyboardInterrupt:
         return {**outcome, "status": INTERRUPTED, "reason": "interrupted"}
     finally:
@@ -174,7 +185,7 @@ def _plain_params(params: dict) -> dict:
     return {k: (v.item() if hasattr(v, "item") else v) for k, v in params.items()}
 
 
-def _compute(spec, index: int, store, scratch: Path, outcome: dict):
+def _compute(spec, index: int, store, scratch: Path, outcome: dict, checkpoint_s: float = CHECKPOINT_S):
     """(what the outcome records, observables row or None, labels) of one point."""
     from flexmm.config.loader import ConfigError
 
@@ -185,11 +196,10 @@ def _compute(spec, index: int, store, scratch: Path, outcome: dict):
     keep = spec.keeps(index)
     d = store.point_dir(point.hash) if keep else scratch / "run"
     try:
-        from flexmm.api import run_scene
-
-        result = run_scene(point.scene, run_dir=d, atomic=keep, in_memory=not keep)  # dropped: no file
+        result, notes = _run(point, keep, d, store.work_dir(index), checkpoint_s)
     except Exception as exc:  # noqa: BLE001 - any error of a point is recorded, not raised
         return {**outcome, "status": FAILED, "reason": f"{type(exc).__name__}: {exc}"}, None, ("", "", "")
+    outcome = {**outcome, **notes}
     if result.status == INTERRUPTED:
         return {**outcome, "status": INTERRUPTED, "reason": result.reason}, None, ("", "", "")
     info = {**outcome, "status": result.status, "reason": result.reason, "n_steps": result.n_steps,
@@ -201,6 +211,50 @@ def _compute(spec, index: int, store, scratch: Path, outcome: dict):
     if not keep and spec.keeps(index, values):  # keep: where <condition>, met
         info["kept"] = _keep_run(point, store.point_dir(point.hash))
     return {**info, "reason": note}, values, labels
+
+
+def _run(point, keep: bool, run_dir: Path, work: Path, checkpoint_s: float):
+    """Run a point, or continue it from the checkpoint an earlier attempt left: (RunResult, notes
+    for the outcome: ``resumed`` — where it went on from — or ``restarted`` — why a checkpoint
+    found was not used: damaged, of other code; the point then runs from the start).
+
+    A kept point runs like ``flexmm run`` into its directory (``api.run_scene`` with checkpoints;
+    ``api.continue_run``); its end checkpoint is dropped (a sweep never extends a point). Any other
+    point runs in memory, its checkpoints and their frames in ``work`` (``api.continue_point``)."""
+    from flexmm import checkpoint as ck
+    from flexmm.api import continue_point, continue_run, run_scene
+
+    notes: dict = {}
+    if keep:
+        if any(run_dir.parent.glob(f".{run_dir.name}.work.*")) or run_dir.with_name(f"{run_dir.name}.interrupted").is_dir():
+            try:
+                result = continue_run(run_dir, point.scene, checkpoint_s=checkpoint_s)
+                notes["resumed"] = _resumed_at(result)
+            except ck.CheckpointError as exc:
+                notes["restarted"] = str(exc)
+                result = None
+        else:
+            result = None
+        if result is None:
+            result = run_scene(point.scene, run_dir=run_dir, atomic=True, checkpoint_s=checkpoint_s)
+        if result.path is not None:
+            (result.path.parent / ck.NAME).unlink(missing_ok=True)
+        return result, notes
+    if work.is_dir():
+        try:
+            found, _refused = ck.best([work])
+            result = continue_point(found, point.scene, run_dir, checkpoint_dir=work, checkpoint_s=checkpoint_s)
+            return result, {"resumed": _resumed_at(result)}
+        except ck.CheckpointError as exc:  # nothing valid to continue from: the point runs from the start
+            notes["restarted"] = str(exc)
+        shutil.rmtree(work, ignore_errors=True)
+    return run_scene(point.scene, run_dir=run_dir, atomic=False, in_memory=True, checkpoint_s=checkpoint_s,
+                     checkpoint_dir=work), notes  # the dataset is measured and dropped: no file
+
+
+def _resumed_at(result) -> str:
+    """The 'resumed at t = ...' line of a continued run's log ('' if it continued nothing)."""
+    return next((line for line in reversed(result.log) if line.startswith("resumed at t = ")), "")
 
 
 def _keep_run(point, run_dir: Path) -> bool:
