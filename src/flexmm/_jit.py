@@ -37,6 +37,7 @@ every kernel, integrator loops included, is cached across processes. The cache d
 from __future__ import annotations
 
 import ast
+import errno
 import hashlib
 import os
 import re
@@ -371,7 +372,9 @@ def _one_compile_at_a_time(disp, where: Path):
                     try:
                         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
                         break
-                    except OSError:
+                    except OSError as exc:
+                        if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                            return compile_(sig)  # no flock on this filesystem: compile unlocked
                         if time.monotonic() > deadline:  # a stuck holder: compile anyway
                             return compile_(sig)
                         time.sleep(0.05)
