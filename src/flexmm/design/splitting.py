@@ -223,8 +223,8 @@ def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
     has rows, else to f."""
     if uni.kind == UNI_NONE:
         n = q.shape[0]
-        return engine.split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, t, h, FS, np.empty(0),
-                                 np.empty(n), np.empty(n), np.empty((6, 0)))[0]
+        return engine.split_step(args, terms, kicks, drifts, E, G, np.arange(kicks.shape[0]), fsal, q, v, f, t, t, h,
+                                 FS, np.empty(0), np.empty(n), np.empty(n), np.empty((6, 0)))[0]
     return uniform_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS)
 
 

@@ -137,7 +137,7 @@ def _kick_field(e, g, v, f, c, q, vout, qout):
             v[k] = param(e, k) * v[k] + param(g, k) * f[k]
 
 
-@jit
+@jit(inline=True)
 def kick(E, G, s, v, f, c, q, vout, qout):
     """Kick s and its drift (``_kick_field``) on each field; E, G per field ((M + 1, nf), nf
     fewer than the DOFs: ``design.splitting.field_factors``) or per DOF."""
@@ -151,7 +151,7 @@ def kick(E, G, s, v, f, c, q, vout, qout):
         _kick_field(E[s], G[s], v, f, c, q, vout, qout)
 
 
-@jit
+@jit(inline=True)
 def stage_force(args, terms, q, v, t, f):
     """Prescribe the driven DOFs at t, then the position-dependent total force (model, contacts,
     applied forces) at (q, t) into f."""
@@ -161,18 +161,18 @@ def stage_force(args, terms, q, v, t, f):
                     terms.drv_prm)
 
 
-@jit
-def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, tf, h, FS, acc, minv, damp, work):
+@jit(inline=True)
+def split_step(args, terms, kicks, drifts, E, G, slot, fsal, q, v, f, t, tf, h, FS, acc, minv, damp, work):
     """One step of the splitting K(k₀h) D(d₀h) … D(d_{M−1}h) K(k_M h) in place from t; returns
     (t + h, the stage time of the force left in f).
 
-    Each kick and its drift in one pass (``kick``, with E, G of ``kick_factors``), or with
-    velocity-dependent terms (``work``: (6, ndof) scratch, else (6, 0)) the kick by its RK4 flow
-    (with ``minv``, ``damp``) and then the drift. The stage forces (``stage_force``) go to the
-    rows of FS (stage forces, ndof: kept for the gradient's reverse sweep, the carried force
-    copied to f) if it has rows, else to f. ``acc`` (``common.ACC_*``; empty: no ledger) gains
-    each kick's work from its stage force, at the stage time ``tf`` of the force in f. The one
-    step of the engine's ``advance`` and of the gradient's sweeps (``design.splitting``).
+    Each kick (``kick``: kick s with the factors E, G of row ``slot[s]``, ``kick_factors``; with
+    velocity-dependent terms, ``work`` (6, ndof) scratch, else (6, 0), by its RK4 flow with
+    ``minv``, ``damp``), then its drift. The stage forces (``stage_force``) go to the rows of FS
+    (stage forces, ndof: kept for the gradient's reverse sweep, the carried force copied to f)
+    if it has rows, else to f. ``acc`` (``common.ACC_*``; empty: no ledger) gains each kick's
+    work from its stage force, at the stage time ``tf`` of the force in f. The one step of the
+    engine's ``advance`` and of the gradient's sweeps (``design.splitting``).
     """
     n = q.shape[0]
     M = drifts.shape[0]
@@ -189,12 +189,11 @@ def split_step(args, terms, kicks, drifts, E, G, fsal, q, v, f, t, tf, h, FS, ac
             if vdep:
                 _kick_rk4(v, fk, minv, damp, terms, kicks[s] * h, work)
             else:
-                kick(E, G, s, v, fk, c, q if s < M else q[:0], q[:0], q[:0])
+                kick(E, G, slot[s], v, fk, 0.0, q[:0], q[:0], q[:0])
         if s == M:
             break
-        if kicks[s] == 0.0 or vdep:
-            for k in range(n):
-                q[k] += c * v[k]
+        for k in range(n):
+            q[k] += c * v[k]
         ts += c
         if s == M - 1 and not fsal:
             break  # a drift-first method ends with this drift
@@ -244,6 +243,8 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
     if not FSAL and KICKS[-1] != 0.0:
         raise ValueError("a drift-first splitting must also end with a drift (last kick 0)")
     M = len(DRIFTS)
+    VALUES = tuple(dict.fromkeys(KICKS))  # the distinct kick coefficients, and each kick's
+    SLOT = tuple(VALUES.index(c) for c in KICKS)
     EVALS = M if FSAL else M - 1
 
     @jit
@@ -262,7 +263,8 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
             damped = damped or damp[k] * minv[k] != 0.0
         vdep = has_velocity_terms(terms)
         dissipative = damped or terms.dash_ij.shape[0] > 0
-        E, G = kick_factors(kicks, minv, damp, h)
+        E, G = kick_factors(np.array(VALUES), minv, damp, h)  # a row per distinct kick (less to stream)
+        slot = np.array(SLOT)
         work = np.empty((6, n if vdep else 0))
         d0, p0 = _ledger_rates(v, cd, terms, dissipative)
         acc[ACC_WORK] -= applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
@@ -271,8 +273,8 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
         tf = t  # stage time of the force in f
         no_stages = np.empty((0, n))
         for _ in range(nsteps):
-            t, tf = split_step(args, terms, kicks, drifts, E, G, FSAL, q, v, f, t, tf, h, no_stages, acc, minv, damp,
-                               work)
+            t, tf = split_step(args, terms, kicks, drifts, E, G, slot, FSAL, q, v, f, t, tf, h, no_stages, acc, minv,
+                               damp, work)
             d1, p1 = _ledger_rates(v, cd, terms, dissipative)
             acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
             acc[ACC_WORK] += 0.5 * h * (p0 + p1)
