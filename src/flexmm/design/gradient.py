@@ -113,7 +113,7 @@ def check_differentiable(system, terms: Terms) -> None:
     """Refuse models without gradient kernels, magnets or joints of the sheet, and a run that
     is not differentiable because of anisotropic ground friction.
 
-    Dashpots and ground friction are differentiated (``sweeps.step_forces``). The friction law
+    Dashpots and ground friction are differentiated (``integrators.verlet.step_force``). The friction law
     −F tanh(v/v_ε) is smooth, except that with F₊ ≠ F₋ its slope jumps at v = 0: a DOF at rest
     (v = 0 exactly, as every site of a run that starts at rest is until the wave reaches it)
     then moves either way under a perturbation, with different slopes, and the run has no
@@ -220,7 +220,7 @@ class Trajectory:
         #: a chain-ordered chain (loaded or not; contacts, a striker's DOFs, velocity terms allowed)
         self._ordered = chain_ordered(chain, ndof)
         self._nchain = ndof // 2
-        #: dashpots or ground friction: the reverse step reads each step's f_a (``sweeps.step_forces``)
+        #: dashpots or ground friction: the reverse step reads each step's f_a (``integrators.verlet.step_force``)
         self._vdep = has_velocity_terms(self.terms)
         nsite = self.args.theta0.shape[0] if hasattr(self.args, "theta0") else -1
         self._grid = sheet_grid(self.args, 3 * nsite)
@@ -355,7 +355,7 @@ class Trajectory:
         return self._run(raw, segment, scratch)[:2]
 
     def _run(self, raw: Raw, segment: int | None, scratch: bool) -> tuple[Records, tuple, np.ndarray]:
-        """``run`` of velocity Verlet, and the f_a of every step (``sweeps.step_forces``) where the
+        """``run`` of velocity Verlet, and the f_a of every step (``integrators.verlet.step_force``) where the
         gradient's run keeps every state of a run with velocity terms (else no rows)."""
         args, terms, kick, pre, post = self.bind(raw)
         q, v, f = raw.q0.copy(), raw.v0.copy(), np.empty_like(raw.q0)

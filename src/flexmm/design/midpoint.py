@@ -8,12 +8,13 @@ One step from (q, v) at t, with held DOFs H (m⁻¹ = 0: fixed, or prescribed by
     q' = q + h V,   v' = 2V − v,   [q'_D, v'_D] ← [g(t + h), ġ(t + h)],
 
 F the total force (model, contacts, applied forces at Q; dashpots, ground friction at V). The
-forward step is the engine's (``implicit._step``) with its Newton–Krylov iteration run to the
-fixed relative residual ``NEWTON_RTOL`` (round-off) instead of the engine's adaptive one, so the
-computed V is the root of R to rounding and the step is the exact implicit map differentiated
-here. Its Jacobian is J = ∂R/∂V_free = M + (h²/4) K + (h/2) C_v, with K = −∂F/∂Q and
-C_v = c − ∂F/∂V; both are symmetric (F = −∇E for the model and contacts; dashpots are
-symmetric, friction diagonal), so Jᵀ = J.
+forward step is the engine's (``implicit.step``, the one the engine's ``midpoint_advance``
+takes) with its Newton–Krylov iteration run to the fixed relative residual ``NEWTON_RTOL``
+(round-off) instead of the engine's adaptive one, so the computed V is the root of R to
+rounding and the step is the exact implicit map differentiated here. Its Jacobian is
+J = ∂R/∂V_free = M + (h²/4) K + (h/2) C_v, with K = −∂F/∂Q and C_v = c − ∂F/∂V; both are
+symmetric (F = −∇E for the model and contacts; dashpots are symmetric, friction diagonal), so
+Jᵀ = J.
 
 The reverse of a step, given the adjoints (λq', λv') of its end (after the prescription's
 reverse, which sends λ of the overwritten q'_D, v'_D to the drive parameters):
@@ -56,7 +57,7 @@ from flexmm.design.terms import (
     velocity_tangent,
 )
 from flexmm.integrators.common import apply_prescribed, free_damping, total_force
-from flexmm.integrators.implicit import _step
+from flexmm.integrators.implicit import step
 
 #: the Newton iteration's relative residual tolerance in differentiated runs (the engine's
 #: adaptive one loosens to 1e-6 at large steps; this is a few hundred roundings of its terms)
@@ -166,7 +167,7 @@ def forward(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, seg, stride, o
             else:
                 _record_state(args, terms, q, v, t, fr, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            if not _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol):
+            if not step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol):
                 return t, k
             if keep:
                 SW[k, :] = work[7]
@@ -284,7 +285,7 @@ def tangent(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, stride, obs, D
             break
         q0[:] = q
         v0[:] = v
-        if not _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol):
+        if not step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol):
             return t, k
         V, Q = work[7], work[8]
         tm = t + 0.5 * h

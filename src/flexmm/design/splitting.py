@@ -1,8 +1,9 @@
 """Compiled forward (with checkpoints, or every state: the replay), reverse and tangent sweeps of a
 kick/drift splitting (PEFRL, BM6).
 
-One step of ``integrators.splitting.make_splitting_advance(kicks, drifts)`` with M drifts and
-M + 1 kicks (coefficients b_s, a_s; ``SPLITTINGS``) reads, with per-DOF kick factors
+One step of ``integrators.splitting.split_step`` (the engine's ``advance`` and the forward sweep
+here both take it; a uniform chain's or sheet's: ``uniform_step``) with M drifts and M + 1
+kicks (coefficients b_s, a_s; ``SPLITTINGS``) reads, with per-DOF kick factors
 e_s = exp(−γτ_s), g_s = τ_s φ(γτ_s)/m (τ_s = b_s h, γ = c m⁻¹, φ(x) = (1 − e^{−x})/x, the
 exact damped kick flow; e_s = 1, g_s = τ_s m⁻¹ undamped) and stage times T_s = t + Σ_{r≤s} a_r h:
 
@@ -70,6 +71,7 @@ from flexmm.design.sweeps import (
 from flexmm.design.terms import drive_force_adjoint, prescribed_adjoint, prescribed_tangent
 from flexmm.integrators import composition
 from flexmm.integrators import splitting as engine
+from flexmm.integrators.splitting import kick
 from flexmm.integrators.common import apply_prescribed, position_forces
 from flexmm.models.hinge import param
 from flexmm.models.kernels import model_force
@@ -102,14 +104,8 @@ def _phi_and_slope(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def kick_factors(kicks: np.ndarray, minv: np.ndarray, damp: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """(E, G), (M + 1, ndof): e_s and g_s of every kick, computed as the engine does
-    (``splitting._kick_factors``, the same rounding); rows of zero kicks are unused."""
-    E = np.ones((kicks.size, minv.size))
-    G = np.zeros((kicks.size, minv.size))
-    for s, b in enumerate(kicks):
-        if b != 0.0:
-            E[s], G[s] = engine._kick_factors(minv, damp, float(b) * h)
-    return E, G
+    """(E, G), (M + 1, ndof): e_s and g_s of every kick, the engine's (``splitting.kick_factors``)."""
+    return engine.kick_factors(np.asarray(kicks, float), minv, damp, h)
 
 
 def field_factors(E: np.ndarray, G: np.ndarray, nf: int) -> tuple[np.ndarray, np.ndarray]:
@@ -220,45 +216,24 @@ def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
 
 
 @jit
-def _kick_field(e, g, v, f, c, q, vout, qout):
-    """One field of a kick and its drift: v' = e v + g f, q' = q + c v' into vout, qout, or in
-    place if they are empty (then no drift if q is empty too: a separate loop each, as a loop
-    that reads and writes the same array through two names does not vectorise); e, g scalars or
-    columns (``hinge.param``)."""
-    if vout.shape[0]:
-        for k in range(v.shape[0]):
-            x = param(e, k) * v[k] + param(g, k) * f[k]
-            vout[k] = x
-            qout[k] = q[k] + c * x
-    elif q.shape[0]:
-        for k in range(v.shape[0]):
-            x = param(e, k) * v[k] + param(g, k) * f[k]
-            v[k] = x
-            q[k] += c * x
-    else:
-        for k in range(v.shape[0]):
-            v[k] = param(e, k) * v[k] + param(g, k) * f[k]
-
-
-@jit
-def _kick(E, G, s, v, f, c, q, vout, qout):
-    """Kick s and its drift (``_kick_field``) on each field; E, G per field ((M + 1, nf), nf
-    fewer than the DOFs: ``field_factors``) or per DOF."""
-    n = v.shape[0]
-    if E.shape[1] < n:
-        m = n // E.shape[1]
-        for i in range(E.shape[1]):
-            a, b = i * m, (i + 1) * m
-            _kick_field(E[s, i], G[s, i], v[a:b], f[a:b], c, q[a:b], vout[a:b], qout[a:b])
-    else:
-        _kick_field(E[s], G[s], v, f, c, q, vout, qout)
-
-
-@jit
 def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
-    """One step in place (the module docstring; each kick and its drift in one pass, the
-    engine's operations); returns t + h. The stage forces go to the rows of FS (stage forces,
-    ndof: kept for the reverse sweep, the carried force copied to f) if it has rows, else to f."""
+    """One step in place: the engine's (``integrators.splitting.split_step``; no ledger) or, for
+    a uniform chain or sheet, ``uniform_step``; returns t + h. The stage forces go to the rows
+    of FS (stage forces, ndof: kept for the reverse sweep, the carried force copied to f) if it
+    has rows, else to f."""
+    if uni.kind == UNI_NONE:
+        n = q.shape[0]
+        return engine.split_step(args, terms, kicks, drifts, E, G, np.arange(kicks.shape[0]), fsal, q, v, f, t, t, h,
+                                 FS, np.empty(0), np.empty(n), np.empty(n), np.empty((6, 0)))[0]
+    return uniform_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS)
+
+
+@jit
+def uniform_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
+    """``integrators.splitting.split_step`` with the stage forces of a uniform chain or sheet
+    from its shared law (``_total_force``: the model's bits, faster), the same operations in
+    the same order, so the same run (tests/design/test_gradient_splitting.py). An accelerator:
+    the engine's step, written again around a force the engine's layer cannot reach."""
     n = q.shape[0]
     M = drifts.shape[0]
     keep = FS.shape[0] > 0
@@ -268,7 +243,7 @@ def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
     for s in range(M):
         c = drifts[s] * h
         if kicks[s] != 0.0:
-            _kick(E, G, s, v, fk, c, q, q[:0], q[:0])
+            kick(E, G, s, v, fk, c, q, q[:0], q[:0])
         else:
             for k in range(n):
                 q[k] += c * v[k]
@@ -278,7 +253,7 @@ def split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS):
         fk = FS[s] if keep else f
         _stage_force(args, terms, uni, q, v, ts, fk)
     if fsal:
-        _kick(E, G, M, v, fk, 0.0, q[:0], q[:0], q[:0])
+        kick(E, G, M, v, fk, 0.0, q[:0], q[:0], q[:0])
         if keep:
             f[:] = fk
     t1 = t + h
@@ -335,7 +310,7 @@ def _stage_states(terms, kicks, drifts, E, G, fsal, q0, v0, f0, FS, t, h, VB, QS
         dst, qd = VB[s + 1], QS[s]
         c = drifts[s] * h
         if kicks[s] != 0.0:
-            _kick(E, G, s, src, f0 if s == 0 else FS[s - 1], c, qs, dst, qd)
+            kick(E, G, s, src, f0 if s == 0 else FS[s - 1], c, qs, dst, qd)
         else:
             for k in range(n):
                 x = src[k]
@@ -390,7 +365,7 @@ def _kick_adjoint_field(e, g, c, lv, lq, lf, lk, vb, fk, ge, gg):
 
 @jit
 def _kick_adjoint(E, G, s, c, lv, lq, lf, lk, vb, fk, ge, gg):
-    """``_kick_adjoint_field`` of kick s (and drift s, c = a_s h) on each field (E, G as ``_kick``)."""
+    """``_kick_adjoint_field`` of kick s (and drift s, c = a_s h) on each field (E, G as ``engine.kick``)."""
     n = lv.shape[0]
     if E.shape[1] < n:
         m = n // E.shape[1]

@@ -1,7 +1,8 @@
 """Compiled forward, reverse (adjoint) and tangent sweeps of velocity Verlet (docs/physics.md §3).
 
-One step of ``integrators.verlet`` with on-site damping, written with the per-DOF factors
-K = h/2 m⁻¹, P = 1 − hγ/2, S = 1/(1 + hγ/2) (γ = c m⁻¹):
+One step of ``integrators.verlet`` (``verlet.step``: the forward run and the replay take it)
+with on-site damping, written with the per-DOF factors K = h/2 m⁻¹, P = 1 − hγ/2,
+S = 1/(1 + hγ/2) (γ = c m⁻¹):
 
     w = P v + K f,   q' = q + h w,   [q'_D, w_D] = [g(t'), ġ(t')]   (prescribed DOFs D),
     f' = F(q', t'),  v' = S (w + K f').
@@ -19,7 +20,7 @@ v_j = S (w + K f_j), prescribed DOFs included), two per-DOF sums from which ∂J
 follow (``gradient.Trajectory.gradient``).
 
 Velocity-dependent external terms V (dashpots between DOFs, ground friction) enter as the
-engine takes them (``verlet._external``): at the predicted end-of-step velocity u. With G the
+engine takes them (``verlet.step_force``): at the predicted end-of-step velocity u. With G the
 rest of the force (model, contacts, applied forces) at (q', t'):
 
     f_a = G + V(w),   u = S (w + K f_a),   f' = G + V(u),
@@ -80,10 +81,9 @@ from flexmm.design.terms import (
     velocity_tangent,
     waveform_dprm,
 )
-from flexmm.integrators.common import (Terms, apply_prescribed, has_velocity_terms, position_forces,
-                                       total_force, velocity_forces)
+from flexmm.integrators import verlet
+from flexmm.integrators.common import Terms, apply_prescribed, has_velocity_terms, position_forces, total_force
 from flexmm.models.hinge import param
-from flexmm.models.kernels import model_force
 from flexmm.models.loads import load_terms
 
 
@@ -92,49 +92,6 @@ def initial_force(args, terms, q, v, f, t):
     """Prescribe the driven DOFs at t and fill f with the total force (``Stepper`` does the same)."""
     apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
     total_force(args, q, v, t, f, terms)
-
-
-@jit
-def velocity_scratch(terms, n):
-    """The (f_a, u) buffers of ``step_forces``: (n,) each with velocity-dependent terms, else empty."""
-    m = n if has_velocity_terms(terms) else 0
-    return np.empty(m), np.empty(m)
-
-
-@jit
-def step_forces(args, terms, kick, post, q, w, t, f, fa, u):
-    """The force f' = F(q', t', u) of a step as ``verlet._external`` takes it, at the drifted q'
-    and half-kicked w (prescribed DOFs set). Without velocity terms (``fa`` empty) u = w; with
-    them fa = G + V(w) (G: the model, contacts and applied forces; V: dashpots and friction),
-    u = S (w + K fa) the predicted end-of-step velocity, and f' = G + V(u)."""
-    dd, dm, dp = terms.drv_dof, terms.drv_mode, terms.drv_prm
-    model_force(q, args, f)
-    position_forces(q, t, f, terms.con_ij, terms.con_prm, dd, dm, terms.drv_shape, dp)
-    if fa.shape[0] == 0:
-        velocity_forces(w, f, terms.dash_ij, terms.dash_c, dd, dm, dp)
-        return
-    for k in range(q.shape[0]):
-        fa[k] = f[k]
-    velocity_forces(w, fa, terms.dash_ij, terms.dash_c, dd, dm, dp)
-    for k in range(q.shape[0]):
-        u[k] = (w[k] + kick[k] * fa[k]) * post[k]
-    velocity_forces(u, f, terms.dash_ij, terms.dash_c, dd, dm, dp)
-
-
-@jit
-def verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u):
-    """One damped velocity-Verlet step in place (``integrators.verlet``; ``fa``, ``u``: the
-    scratch of ``velocity_scratch``, f_a of the step left in ``fa``); returns t + h."""
-    n = q.shape[0]
-    for k in range(n):
-        v[k] = pre[k] * v[k] + kick[k] * f[k]
-        q[k] += h * v[k]
-    t1 = t + h
-    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
-    step_forces(args, terms, kick, post, q, v, t1, f, fa, u)
-    for k in range(n):
-        v[k] = (v[k] + kick[k] * f[k]) * post[k]
-    return t1
 
 
 @jit
@@ -158,9 +115,9 @@ def _checkpoint(q, v, f, t, CQ, CV, CF, CT, c):
 def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, CA, Rq, Rv, Rf):
     """Run ``nsteps`` from (q, v, f, t) in place; checkpoint every ``seg`` steps (rows of CQ, CV,
     CF, CT; with velocity terms and rows in CA, also the f_a of the step into the state,
-    ``step_forces``: what ``reverse`` reads when every state is kept, seg = 1), record
+    ``verlet.step_force``: what ``reverse`` reads when every state is kept, seg = 1), record
     (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
-    fa, u = velocity_scratch(terms, q.shape[0])
+    g, fa, u = verlet.scratch(terms, q.shape[0])
     keep_fa = fa.shape[0] > 0 and CA.shape[0] > 0
     for k in range(nsteps + 1):
         if k % seg == 0:
@@ -170,19 +127,19 @@ def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, ob
         if k % stride == 0:
             _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
         if k < nsteps:
-            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u)
+            t = verlet.step(args, terms, kick, pre, post, q, v, f, t, h, g, fa, u)
     return t
 
 
 @jit
 def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST, SA):
     """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST (with
-    velocity terms, the f_a of the step into each later state into SA: ``step_forces``)."""
+    velocity terms, the f_a of the step into each later state into SA: ``verlet.step_force``)."""
     q = q0.copy()
     v = v0.copy()
     f = f0.copy()
     t = t0
-    fa, u = velocity_scratch(terms, q.shape[0])
+    g, fa, u = verlet.scratch(terms, q.shape[0])
     for s in range(nsteps + 1):
         SQ[s, :] = q
         SV[s, :] = v
@@ -191,7 +148,7 @@ def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, 
         if s > 0 and fa.shape[0] > 0:
             SA[s, :] = fa
         if s < nsteps:
-            t = verlet_step(args, terms, kick, pre, post, q, v, f, t, h, fa, u)
+            t = verlet.step(args, terms, kick, pre, post, q, v, f, t, h, g, fa, u)
 
 
 #: the model part of a reverse step (``_force_adjoint``'s ``form``): ``model_adjoint`` into the
@@ -272,7 +229,7 @@ def _inject(k, stride, obs, dRq, dRv, dRf, lq, lv, lf, col=None):
 
 @jit
 def _prediction_adjoint(terms, kick, pre, post, v0, f0, fa, t1, lf, lw, GK, GV, gdrv, gdash, s):
-    """Reverse of the velocity terms of the step (·, v0, f0) → (·, ·, f1) (``step_forces``),
+    """Reverse of the velocity terms of the step (·, v0, f0) → (·, ·, f1) (``verlet.step_force``),
     given λf of f1 (``lf``, the S λv part included) and λw so far: λu = (∂V/∂u)ᵀ λf, then
     u = S (w + K f_a) and f_a = G + V(w); λw and the folded factor sums (GK, GV) gain their
     terms, ``lf`` becomes λG = λf + λf_a (what ``_force_adjoint`` takes), and dashpot and
@@ -304,7 +261,7 @@ def _prediction_adjoint(terms, kick, pre, post, v0, f0, fa, t1, lf, lw, GK, GV, 
 def reverse(args, terms, kick, pre, post, SQ, SV, SF, ST, SA, h, k0, nsteps, stride, obs, dRq, dRv, dRf,
             lq, lv, lf, lw, g1, g2, GK, GV, gcon, gdrv, gdash, form):
     """Reverse the steps k0 + nsteps → k0 of a replayed segment (SQ, SV, SF, ST rows 0..nsteps;
-    with velocity terms SA: the f_a of the step into each state, ``step_forces``).
+    with velocity terms SA: the f_a of the step into each state, ``verlet.step_force``).
 
     (lq, lv, lf) enter as the adjoints of the state at step k0 + nsteps (objective included)
     and leave as those at step k0 (objective at k0 included); ``lw`` enters as λw of the step
@@ -399,7 +356,7 @@ def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
     tmp = np.empty(n)
     dd, dm, ds, dp = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
     dij, dc = terms.dash_ij, terms.dash_c
-    fa, u = velocity_scratch(terms, n)
+    g, fa, u = verlet.scratch(terms, n)
     vdep = fa.shape[0] > 0
     dfa = np.empty(fa.shape[0])
     du = np.empty(fa.shape[0])
@@ -428,8 +385,7 @@ def tangent(args, terms, kick, pre, post, q, v, f, t, h, nsteps, stride, obs,
             w[i] = pre[i] * v[i] + kick[i] * f[i]
             q[i] += h * w[i]
         t1 = t + h
-        apply_prescribed(q, w, t1, dd, dm, ds, dp)
-        step_forces(args, terms, kick, post, q, w, t1, f, fa, u)
+        verlet.step_force(args, terms, kick, post, q, w, t1, g, f, fa, u)
         for m in range(nd):
             prescribed_tangent(t1, dq[m], dv[m], dd, dm, ds, dp, DDRV[m], dg, ddg)
             _force_tangent(args, terms, q, t1, dq[m], D1[m], D2[m], DCON[m], DDRV[m], tmp, dg, ddg)
@@ -460,7 +416,7 @@ def apply_prescribed_only(terms, q, v, t):
 #
 # The same scheme on a chain-ordered rotating-squares chain (``kernels.chain_ordered``; with
 # constant loads, contacts and a striker's DOFs past the chain's too) from parameter columns:
-# the forward run and the replay step with the column force (bit-identical to ``verlet_step``);
+# the forward run and the replay step with the column force (bit-identical to ``verlet.step``);
 # the replay keeps (q, v) only, and the reverse step takes the force at each state again with
 # its Hessian-vector product (cos/sin once per site). With velocity terms the run and replay
 # are the general ones (``forward``, ``replay``), and only the reverse step's model part takes

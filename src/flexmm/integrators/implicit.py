@@ -166,7 +166,7 @@ def _cg(args, terms, minv, damp, q, v, V, t_mid, h, R0, delta, precond, W):
 
 
 @jit
-def _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol_fixed):
+def step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol_fixed):
     """One midpoint step of size h in place; False (q, v untouched) if Newton did not converge.
 
     ``rtol_fixed`` > 0 replaces the adaptive relative tolerance (``newton_rtol``): the design
@@ -229,7 +229,7 @@ def midpoint_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     work = np.empty((14, n))
     saved = np.empty((3, n))
     for _ in range(nsteps):
-        if not _step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, 0.0):
+        if not step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, 0.0):
             saved[0], saved[1], saved[2] = q, v, f
             ledger = (acc[ACC_DISSIPATED], acc[ACC_WORK])
             sub, ok = 2, False
@@ -238,7 +238,7 @@ def midpoint_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
                 acc[ACC_DISSIPATED], acc[ACC_WORK] = ledger
                 ok = True
                 for j in range(sub):
-                    if not _step(args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work, 0.0):
+                    if not step(args, terms, minv, damp, cd, q, v, f, t + j * h / sub, h / sub, acc, work, 0.0):
                         ok = False
                         break
                 sub *= 2

@@ -1,7 +1,9 @@
 """Symplectic splittings of drifts and kicks, with damping by exact flows (docs/physics.md §3).
 
-``make_splitting_advance(kicks, drifts)`` compiles the ``advance`` of any splitting given its
-coefficients (PEFRL below; Blanes–Moan's 6th-order method, ``composition``).
+``split_step`` is one step of any splitting given its coefficients as data (PEFRL below;
+Blanes–Moan's 6th-order method, ``composition``): ``make_splitting_advance(kicks, drifts)``
+compiles the engine's ``advance`` around it, and the gradient's sweeps (``design.splitting``)
+step with it too.
 
 PEFRL: 4th-order symplectic splitting (Omelyan, Mryglod & Folk, Comput. Phys. Commun. 146,
 188 (2002), "position-extended Forest–Ruth-like").
@@ -35,6 +37,7 @@ import math
 import numpy as np
 
 from flexmm._jit import jit
+from flexmm.models.hinge import param
 from flexmm.models.kernels import model_force
 from flexmm.integrators.common import (
     ACC_DISSIPATED,
@@ -74,18 +77,6 @@ def _kick_factors(minv, damp, tau):
 
 
 @jit
-def _kick_exact(v, f, e, g):
-    for k in range(v.shape[0]):
-        v[k] = e[k] * v[k] + g[k] * f[k]
-
-
-@jit
-def _kick_undamped(v, f, minv, tau):
-    for k in range(v.shape[0]):
-        v[k] += tau * minv[k] * f[k]
-
-
-@jit
 def _velocity_rhs(vv, fp, minv, damp, terms, out, gbuf):
     """out = M⁻¹(F_q + G(vv)) − γ vv with G the dashpot and friction forces."""
     gbuf[:] = 0.0
@@ -113,14 +104,107 @@ def _kick_rk4(v, fp, minv, damp, terms, tau, work):
 
 
 @jit
-def _kick(v, f, minv, damp, terms, tau, vdep, damped, factors, work):
-    """One kick of size τ with the frozen-q force f: RK4 flow, exact damped flow or plain."""
-    if vdep:
-        _kick_rk4(v, f, minv, damp, terms, tau, work)
-    elif damped:
-        _kick_exact(v, f, factors[0], factors[1])
+def kick_factors(kicks, minv, damp, h):
+    """(E, G), (M + 1, ndof): e_s, g_s of every kick s (``_kick_factors``; rows of zero kicks
+    e = 1, g = 0, unused)."""
+    n = minv.shape[0]
+    E = np.ones((kicks.shape[0], n))
+    G = np.zeros((kicks.shape[0], n))
+    for s in range(kicks.shape[0]):
+        if kicks[s] != 0.0:
+            E[s], G[s] = _kick_factors(minv, damp, kicks[s] * h)
+    return E, G
+
+
+@jit
+def _kick_field(e, g, v, f, c, q, vout, qout):
+    """One field of a kick and its drift: v' = e v + g f, q' = q + c v' into vout, qout, or in
+    place if they are empty (then no drift if q is empty too: a separate loop each, as a loop
+    that reads and writes the same array through two names does not vectorise); e, g scalars or
+    columns (``hinge.param``). Undamped (e = 1, g = τ m⁻¹) the kick is v + τ m⁻¹ f bit for bit."""
+    if vout.shape[0]:
+        for k in range(v.shape[0]):
+            x = param(e, k) * v[k] + param(g, k) * f[k]
+            vout[k] = x
+            qout[k] = q[k] + c * x
+    elif q.shape[0]:
+        for k in range(v.shape[0]):
+            x = param(e, k) * v[k] + param(g, k) * f[k]
+            v[k] = x
+            q[k] += c * x
     else:
-        _kick_undamped(v, f, minv, tau)
+        for k in range(v.shape[0]):
+            v[k] = param(e, k) * v[k] + param(g, k) * f[k]
+
+
+@jit(inline=True)
+def kick(E, G, s, v, f, c, q, vout, qout):
+    """Kick s and its drift (``_kick_field``) on each field; E, G per field ((M + 1, nf), nf
+    fewer than the DOFs: ``design.splitting.field_factors``) or per DOF."""
+    n = v.shape[0]
+    if E.shape[1] < n:
+        m = n // E.shape[1]
+        for i in range(E.shape[1]):
+            a, b = i * m, (i + 1) * m
+            _kick_field(E[s, i], G[s, i], v[a:b], f[a:b], c, q[a:b], vout[a:b], qout[a:b])
+    else:
+        _kick_field(E[s], G[s], v, f, c, q, vout, qout)
+
+
+@jit(inline=True)
+def stage_force(args, terms, q, v, t, f):
+    """Prescribe the driven DOFs at t, then the position-dependent total force (model, contacts,
+    applied forces) at (q, t) into f."""
+    apply_prescribed(q, v, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    model_force(q, args, f)
+    position_forces(q, t, f, terms.con_ij, terms.con_prm, terms.drv_dof, terms.drv_mode, terms.drv_shape,
+                    terms.drv_prm)
+
+
+@jit(inline=True)
+def split_step(args, terms, kicks, drifts, E, G, slot, fsal, q, v, f, t, tf, h, FS, acc, minv, damp, work):
+    """One step of the splitting K(k₀h) D(d₀h) … D(d_{M−1}h) K(k_M h) in place from t; returns
+    (t + h, the stage time of the force left in f).
+
+    Each kick (``kick``: kick s with the factors E, G of row ``slot[s]``, ``kick_factors``; with
+    velocity-dependent terms, ``work`` (6, ndof) scratch, else (6, 0), by its RK4 flow with
+    ``minv``, ``damp``), then its drift. The stage forces (``stage_force``) go to the rows of FS
+    (stage forces, ndof: kept for the gradient's reverse sweep, the carried force copied to f)
+    if it has rows, else to f. ``acc`` (``common.ACC_*``; empty: no ledger) gains each kick's
+    work from its stage force, at the stage time ``tf`` of the force in f. The one step of the
+    engine's ``advance`` and of the gradient's sweeps (``design.splitting``).
+    """
+    n = q.shape[0]
+    M = drifts.shape[0]
+    keep = FS.shape[0] > 0
+    ledger = acc.shape[0] > ACC_WORK
+    vdep = work.shape[1] > 0
+    ts = t
+    fk = f
+    for s in range(M + 1):
+        c = drifts[s] * h if s < M else 0.0
+        if kicks[s] != 0.0:
+            if ledger:
+                _kick_work(q, fk, tf, terms, kicks[s] * h, acc)
+            if vdep:
+                _kick_rk4(v, fk, minv, damp, terms, kicks[s] * h, work)
+            else:
+                kick(E, G, slot[s], v, fk, 0.0, q[:0], q[:0], q[:0])
+        if s == M:
+            break
+        for k in range(n):
+            q[k] += c * v[k]
+        ts += c
+        if s == M - 1 and not fsal:
+            break  # a drift-first method ends with this drift
+        fk = FS[s] if keep else f
+        stage_force(args, terms, q, v, ts, fk)
+        tf = ts
+    if fsal and keep:
+        f[:] = fk
+    t1 = t + h
+    apply_prescribed(q, v, t1, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    return t1, tf
 
 
 @jit
@@ -142,17 +226,6 @@ def _kick_work(q, f, ts, terms, tau, acc):
         acc[ACC_WORK] += tau * stage_power(q, f, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
 
 
-def _kick_slots(kicks: tuple) -> tuple[tuple, tuple]:
-    """(slot of each kick, distinct kick coefficients): the damped-kick factors are per value."""
-    values: list[float] = []
-    slots = []
-    for c in kicks:
-        if c not in values:
-            values.append(c)
-        slots.append(values.index(c))
-    return tuple(slots), tuple(values)
-
-
 def make_splitting_advance(kicks: tuple, drifts: tuple):
     """Compiled ``advance`` for the splitting K(k₀h) D(d₀h) K(k₁h) … D(d_{m−1}h) K(k_m h).
 
@@ -170,58 +243,38 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
     if not FSAL and KICKS[-1] != 0.0:
         raise ValueError("a drift-first splitting must also end with a drift (last kick 0)")
     M = len(DRIFTS)
-    SLOT, VALUES = _kick_slots(KICKS)
-    NSLOT = len(VALUES)
+    VALUES = tuple(dict.fromkeys(KICKS))  # the distinct kick coefficients, and each kick's
+    SLOT = tuple(VALUES.index(c) for c in KICKS)
     EVALS = M if FSAL else M - 1
 
     @jit
     def advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-        """Advance ``nsteps`` steps of size ``h`` from ``t``; returns the new time.
+        """Advance ``nsteps`` steps of size ``h`` from ``t`` (``split_step``); returns the new time.
 
         ``f`` is scratch (the last kick's force); ``acc`` as in ``common.ACC_*``.
         """
-        con_ij, con_prm, dash_ij, dash_c = terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c
         drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
         n = q.shape[0]
+        kicks = np.array(KICKS)
+        drifts = np.array(DRIFTS)
         cd = free_damping(damp, minv)
         damped = False
         for k in range(n):
             damped = damped or damp[k] * minv[k] != 0.0
         vdep = has_velocity_terms(terms)
-        dissipative = damped or dash_ij.shape[0] > 0
-        factors = np.empty((NSLOT, 2, n if damped and not vdep else 0))
-        if damped and not vdep:
-            for j in range(NSLOT):
-                factors[j, 0], factors[j, 1] = _kick_factors(minv, damp, VALUES[j] * h)
+        dissipative = damped or terms.dash_ij.shape[0] > 0
+        E, G = kick_factors(np.array(VALUES), minv, damp, h)  # a row per distinct kick (less to stream)
+        slot = np.array(SLOT)
         work = np.empty((6, n if vdep else 0))
         d0, p0 = _ledger_rates(v, cd, terms, dissipative)
         acc[ACC_WORK] -= applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
         if FSAL:
-            apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-            model_force(q, args, f)
-            position_forces(q, t, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
+            stage_force(args, terms, q, v, t, f)
         tf = t  # stage time of the force in f
+        no_stages = np.empty((0, n))
         for _ in range(nsteps):
-            ts = t
-            for s in range(M):
-                if KICKS[s] != 0.0:
-                    _kick_work(q, f, tf, terms, KICKS[s] * h, acc)
-                    _kick(v, f, minv, damp, terms, KICKS[s] * h, vdep, damped, factors[SLOT[s]], work)
-                c = DRIFTS[s] * h
-                for k in range(n):
-                    q[k] += c * v[k]
-                ts += c
-                if s == M - 1 and not FSAL:
-                    break  # a drift-first method ends with this drift
-                apply_prescribed(q, v, ts, drv_dof, drv_mode, drv_shape, drv_prm)
-                model_force(q, args, f)
-                position_forces(q, ts, f, con_ij, con_prm, drv_dof, drv_mode, drv_shape, drv_prm)
-                tf = ts
-            if FSAL:
-                _kick_work(q, f, tf, terms, KICKS[M] * h, acc)
-                _kick(v, f, minv, damp, terms, KICKS[M] * h, vdep, damped, factors[SLOT[M]], work)
-            t += h
-            apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
+            t, tf = split_step(args, terms, kicks, drifts, E, G, slot, FSAL, q, v, f, t, tf, h, no_stages, acc, minv,
+                               damp, work)
             d1, p1 = _ledger_rates(v, cd, terms, dissipative)
             acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
             acc[ACC_WORK] += 0.5 * h * (p0 + p1)

@@ -163,23 +163,59 @@ def _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode):
 
 
 @jit
-def _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep):
-    """Add external terms to the model force in ``f`` (``common.external_forces`` with the
-    applied forces' values g); velocity terms at the predicted v'. Returns the applied power."""
+def scratch(terms, n):
+    """The buffers of ``step_force``: the applied forces' values (one per drive), and (f_a, u),
+    (n,) each with velocity-dependent terms, else empty."""
+    m = n if has_velocity_terms(terms) else 0
+    return np.zeros(terms.drv_dof.shape[0]), np.empty(m), np.empty(m)
+
+
+@jit
+def step_force(args, terms, kick, post, q, w, t, g, f, fa, u):
+    """The force f' = F(q', t', u) closing a step, at the drifted q' and half-kicked w: the
+    driven DOFs prescribed at t' (q', w changed there), the applied forces' values at t' into
+    ``g`` (``_drive_values``), then the model, contact and applied forces G and the velocity
+    terms V. Without velocity terms (``fa`` empty) f' = G + V(w) (V: nothing); with them
+    fa = G + V(w), u = S (w + K fa) the predicted end-of-step velocity and f' = G + V(u)
+    (module docstring). The one force of a step: the engine's loops and the gradient's
+    sweeps (``design.sweeps``) both take it."""
+    apply_prescribed(q, w, t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
+    _drive_values(t, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, g)
+    model_force(q, args, f)
+    _terms_force(terms, kick, post, q, w, g, f, fa, u)
+
+
+@jit
+def _terms_force(terms, kick, post, q, w, g, f, fa, u):
+    """``step_force`` after the model force (in ``f``): the external terms added."""
     con_ij, con_prm, dash_ij, dash_c = terms.con_ij, terms.con_prm, terms.dash_ij, terms.dash_c
     drv_dof, drv_mode, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_prm
-    if vdep:
-        f_model[:] = f
     _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode)
-    velocity_forces(v, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
-    power = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)
-    if vdep:  # re-evaluate velocity-dependent forces at the predicted v'
-        for k in range(q.shape[0]):
-            v_pred[k] = (v[k] + kick[k] * f[k]) * post[k]
-            f[k] = f_model[k]
-        _position_forces(q, f, con_ij, con_prm, g, drv_dof, drv_mode)
-        velocity_forces(v_pred, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
-    return power
+    if fa.shape[0] == 0:
+        velocity_forces(w, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
+        return
+    for k in range(q.shape[0]):
+        fa[k] = f[k]
+    velocity_forces(w, fa, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
+    for k in range(q.shape[0]):
+        u[k] = (w[k] + kick[k] * fa[k]) * post[k]
+    velocity_forces(u, f, dash_ij, dash_c, drv_dof, drv_mode, drv_prm)
+
+
+@jit
+def step(args, terms, kick, pre, post, q, v, f, t, h, g, fa, u):
+    """One step of size h in place from (q, v, f) at t (f: the force there); returns t + h.
+
+    The opening half kick and drift (``_start``), the step's force (``step_force``; f_a of the
+    step left in ``fa``) and the closing half kick (``_end``); ``g``, ``fa``, ``u``: the scratch
+    of ``scratch``. ``verlet_advance`` runs these passes with the closing kick of one step and
+    the opening of the next in one (``_end_start``): the same bits with on-site damping (the
+    damped passes), a different rounding of the two undamped half kicks (v + 2Kf)."""
+    _start(q, v, f, kick, pre, h, True)
+    t1 = t + h
+    step_force(args, terms, kick, post, q, v, t1, g, f, fa, u)
+    _end(v, f, kick, post, True)
+    return t1
 
 
 @jit
@@ -205,20 +241,17 @@ def verlet_advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
     vdep = has_velocity_terms(terms)
     external = terms.con_ij.shape[0] + dash_ij.shape[0] + drv_dof.shape[0] > 0
     dissipative = damped or dash_ij.shape[0] > 0
-    f_model = np.empty(n if vdep else 0)
-    v_pred = np.empty(n if vdep else 0)
-    g = np.zeros(drv_dof.shape[0])  # applied forces at t
+    g, fa, u = scratch(terms, n)  # g: applied forces at t
+    fs = fa if vdep else f  # the force the applied power reads: G + V(v½)
     _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
     _start(q, v, f, kick, pre, h, damped)
     for s in range(nsteps):
         power0 = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)  # with v½ at t
         t += h
-        apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        model_force(q, args, f)
-        _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
+        step_force(args, terms, kick, post, q, v, t, g, f, fa, u)
         power = 0.0
         if external:
-            power = _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep)
+            power = _applied_power(v, fs, g, drv_dof, drv_mode, drv_prm)
         if dissipative:
             acc[ACC_DISSIPATED] += h * damping_power(v, cd, dash_ij, dash_c)
         acc[ACC_WORK] += 0.5 * h * (power0 + power)
@@ -246,9 +279,8 @@ def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
     vdep = has_velocity_terms(terms)
     external = terms.con_ij.shape[0] + dash_ij.shape[0] + drv_dof.shape[0] > 0
     nb = max(1, min(n // BLOCK, 16))
-    f_model = np.empty(n if vdep else 0)
-    v_pred = np.empty(n if vdep else 0)
-    g = np.zeros(drv_dof.shape[0])  # applied forces at t
+    g, fa, u = scratch(terms, n)  # g: applied forces at t
+    fs = fa if vdep else f  # the force the applied power reads: G + V(v½)
     _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
     for b in prange(nb):
         lo, hi = b * n // nb, (b + 1) * n // nb
@@ -256,12 +288,13 @@ def verlet_advance_parallel(args, q, v, f, minv, damp, terms, t, h, nsteps, acc)
     for s in range(nsteps):
         power0 = _applied_power(v, f, g, drv_dof, drv_mode, drv_prm)
         t += h
-        apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        model_force_parallel(q, args, f)
+        apply_prescribed(q, v, t, drv_dof, drv_mode, drv_shape, drv_prm)  # ``step_force``, threaded
         _drive_values(t, drv_dof, drv_mode, drv_shape, drv_prm, g)
+        model_force_parallel(q, args, f)
+        _terms_force(terms, kick, post, q, v, g, f, fa, u)
         power = 0.0
         if external:
-            power = _external(q, v, f, terms, g, kick, post, f_model, v_pred, vdep)
+            power = _applied_power(v, fs, g, drv_dof, drv_mode, drv_prm)
         if damped:
             diss = 0.0
             for b in prange(nb):
