@@ -2,7 +2,7 @@
 
     python benchmarks/stages.py                       # every case, this tree only
     FLEXMM_BASELINE=/work/main python benchmarks/stages.py demo chain_1e6   # two trees, interleaved
-    python benchmarks/stages.py chain_1e7 --repeats 1 --only before    # one tree
+    python benchmarks/stages.py chain_1e7 --repeats 1 --warmup 0 --only before   # one tree, cache warm
 
 Each case is ``flexmm run`` in a fresh interpreter with the stage functions of ``run.py``'s
 ``STAGE_FUNCS`` wrapped (``run._stages_once``): imports, plan (less its builds), build, step
@@ -49,7 +49,7 @@ STAGES = ("imports", "plan", "build", "step bound", "pilot", "integration", "fra
           "run (rest)", "summary", "start/exit", "cli (rest)")
 
 
-def measure(case: str, repeats: int, only: str | None = None) -> list[dict]:
+def measure(case: str, repeats: int, only: str | None = None, warmup: int = 1) -> list[dict]:
     """The stage table of ``case`` in this tree (and ``$FLEXMM_BASELINE``'s, alternating; ``only``:
     one of the two, "before" or "after")."""
     trees = {"after": ROOT.parent / "src"}
@@ -61,33 +61,40 @@ def measure(case: str, repeats: int, only: str | None = None) -> list[dict]:
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
     runs: dict[str, list[dict]] = {tag: [] for tag in trees}
     with tempfile.TemporaryDirectory(prefix="flexmm-bench-stages-") as tmp:
-        for k in range(repeats + 1):
+        for k in range(repeats + warmup):
             for tag in (list(trees) if k % 2 == 0 else list(trees)[::-1]):
                 row = _stages_once(trees[tag], Path(tmp) / tag, tuple(spec["args"]), spec["config"], env)
                 row["load"] = os.getloadavg()[0]
-                if k:  # the first round warms numba's cache and the file system
+                if k >= warmup:  # the first round warms numba's cache and the file system
                     runs[tag].append(row)
                 print(f"  {case} {tag} run {k}: {row['wall_s']:.2f} s (load {row['load']:.2f})", flush=True)
     out = []
     for tag, rows in runs.items():
         table = {s: min(r["stages"].get(s, 0.0) for r in rows) for s in STAGES}
-        wall = min(r["wall_s"] for r in rows)
+        cpu = {s: min(r["stages_cpu"].get(s, 0.0) for r in rows) for s in STAGES}
+        wall, cpu_total = min(r["wall_s"] for r in rows), min(r["cpu_s"] for r in rows)
         integ = table["integration"]
         plan = [ln.strip() for ln in rows[0]["summary_text"] if ln.strip().startswith("plan:")]
         out.append({"case": case, "tree": tag, "repeats": repeats, "stages_min_s": table, "wall_min_s": wall,
                     "wall_over_integration": wall / integ if integ > 0 else float("nan"),
+                    "stages_cpu_min_s": cpu, "cpu_min_s": cpu_total,
+                    "cpu_over_integration": cpu_total / cpu["integration"] if cpu["integration"] > 0 else float("nan"),
                     "loads": [r["load"] for r in rows], "plan": plan})
     return out
 
 
 def print_table(rows: list[dict]) -> None:
-    head = ["case", "tree"] + [s.replace(" ", "_") for s in STAGES] + ["total", "total/integ"]
+    """Wall and CPU seconds by stage (the CPU time of a one-thread run is the steadier on a shared
+    machine: it leaves out the time the process waited for a core)."""
+    head = ["case", "tree", "clock"] + [s.replace(" ", "_") for s in STAGES] + ["total", "total/integ"]
     print(" ".join(f"{h:>11s}" for h in head))
     for r in rows:
-        vals = [r["stages_min_s"][s] for s in STAGES]
-        print(" ".join([f"{r['case']:>11s}", f"{r['tree']:>11s}"] + [f"{v:11.3f}" for v in vals]
-                       + [f"{r['wall_min_s']:11.3f}", f"{r['wall_over_integration']:11.2f}"]))
-    print(f"(minimum over repeats of each stage's wall seconds; {_load()})")
+        for clock, key, total, ratio in (("wall", "stages_min_s", "wall_min_s", "wall_over_integration"),
+                                         ("cpu", "stages_cpu_min_s", "cpu_min_s", "cpu_over_integration")):
+            vals = [r[key][s] for s in STAGES]
+            print(" ".join([f"{r['case']:>11s}", f"{r['tree']:>11s}", f"{clock:>11s}"] + [f"{v:11.3f}" for v in vals]
+                           + [f"{r[total]:11.3f}", f"{r[ratio]:11.2f}"]))
+    print(f"(minimum over repeats of each stage's seconds; {_load()})")
 
 
 def main(argv: list[str]) -> None:
@@ -96,7 +103,11 @@ def main(argv: list[str]) -> None:
         i = argv.index("--repeats")
         repeats = int(argv[i + 1])
         argv = argv[:i] + argv[i + 2:]
-    only = None
+    only, warmup = None, 1
+    if "--warmup" in argv:
+        i = argv.index("--warmup")
+        warmup = int(argv[i + 1])
+        argv = argv[:i] + argv[i + 2:]
     if "--only" in argv:
         i = argv.index("--only")
         only = argv[i + 1]
@@ -104,7 +115,7 @@ def main(argv: list[str]) -> None:
     cases = argv or list(CASES)
     rows = []
     for case in cases:
-        rows += measure(case, repeats, only)
+        rows += measure(case, repeats, only, warmup)
         print_table(rows)
     RESULTS.mkdir(exist_ok=True)
     path = RESULTS / "stages.json"

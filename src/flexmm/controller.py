@@ -273,7 +273,8 @@ class _Observer:
     def __init__(self, problem: Problem, writer_path: Path, n_frames: int | None = None, writer=None):
         sys_, out = problem.system, problem.scene.output
         self.sys = sys_
-        self.sites = np.arange(0, sys_.n_sites, out.site_stride)
+        self.stride = out.site_stride
+        self.sites = np.arange(0, sys_.n_sites, self.stride)
         names = out.fields or [f.name for f in sys_.fields]
         self.fields = [f for f in sys_.fields if f.name in names]
         self.velocities = out.velocities
@@ -312,11 +313,13 @@ class _Observer:
         s, sc = self.sys, self.sc
         q, v = st.q, st.v
         site_vals, time_vals = {}, {}
+        stride = self.stride
         for f in self.fields:
             k = s.field_index(f.name) * s.n_sites
-            site_vals[f.name] = q[k + self.sites] * sc.coordinate(f.kind)
+            rows = slice(k, k + s.n_sites, stride)  # the sites self.sites: a view, not a gather
+            site_vals[f.name] = q[rows] * sc.coordinate(f.kind)
             if self.velocities:
-                site_vals[f.name + "_dot"] = v[k + self.sites] * sc.rate(f.kind)
+                site_vals[f.name + "_dot"] = v[rows] * sc.rate(f.kind)
         if self.energy:
             kin, pot = st.last_energies or st.energies()
             e = sc.energy
