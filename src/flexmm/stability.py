@@ -121,7 +121,7 @@ def omega_max(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> 
     """Largest angular frequency of small oscillations about ``q_ref`` (nondimensional)."""
     op, free = dynamical_operator(system, terms, q_ref)
     if free.size > BOUND_MIN_DOFS:
-        bounds = banded_bounds(op, system.n_sites, system.ndof)
+        bounds = banded_bounds(op, system.n_sites, system.ndof, (1 + BOUND_MARGIN) ** 2)
         if bounds is not None and bounds[0] > 0 and bounds[1] <= (1 + BOUND_MARGIN) ** 2 * bounds[0]:
             return float(np.sqrt(bounds[1]))
     lam = top_eigenvalue(op, system.ndof, free, DENSE_LIMIT)
