@@ -774,11 +774,13 @@ if ending is not None:
 """
 
 
-def _stages_once(src: Path, out_dir: Path, extra: tuple[str, ...] = ()) -> dict:
-    """One warm demo in a fresh interpreter of tree ``src``: {stage: wall seconds}, {stage: CPU
-    seconds of the process} (on a shared machine the CPU times are the steadier), wall and CPU time."""
-    args = {"stages": STAGE_FUNCS, "opaque": OPAQUE_STAGES, "argv": [str(LEGO), "--out", str(out_dir), *extra]}
-    env = dict(os.environ, PYTHONPATH=str(src))
+def _stages_once(src: Path, out_dir: Path, extra: tuple[str, ...] = (), config: Path = LEGO,
+                 env: dict | None = None) -> dict:
+    """One warm ``flexmm run config`` (default the demo) in a fresh interpreter of tree ``src``:
+    {stage: wall seconds}, {stage: CPU seconds of the process} (on a shared machine the CPU times
+    are the steadier), wall and CPU time."""
+    args = {"stages": STAGE_FUNCS, "opaque": OPAQUE_STAGES, "argv": [str(config), "--out", str(out_dir), *extra]}
+    env = dict(env or os.environ, PYTHONPATH=str(src))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", STAGES_CHILD, json.dumps(args)], env=env, capture_output=True,

@@ -21,6 +21,7 @@ frame times, domain, cost and every change made to what the scene asked) and run
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -32,6 +33,7 @@ from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
 from flexmm.plan.cost import Cost, estimate
 from flexmm.plan.cost import check_steps as cost_check_steps
+from flexmm.plan.domain import trim_scene
 from flexmm.plan.frames import FrameTimes, frame_times
 from flexmm.plan.planner import Plan, PlanStep, make_plan, replace_section
 
@@ -184,7 +186,8 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
         notes = [f"accuracy {solver.accuracy:g}: solver.dt_s = {solver.dt_s:.4g} s honoured ({spec.name})"]
         attrs = {}
         if mode == "pilot":
-            est = acc.run_estimate(problem, spec, problem.dt, acc.estimate(problem, spec, problem.dt))
+            pilot = _pilot_problem(plan, problem)
+            est = acc.run_estimate(pilot, spec, problem.dt, acc.estimate(pilot, spec, problem.dt))
             attrs = _estimate_attrs(solver.accuracy, est, problem.system.scales.time_s)
             if est.converges is False and est.error > solver.accuracy:
                 attrs["accuracy_converges"] = 0
@@ -201,6 +204,22 @@ def _accuracy(plan: Plan, problem: Problem) -> Problem:
         plan.steps = [s for s in plan.steps if s.name != "accuracy"] + [
             PlanStep("accuracy", "not applied", [f"default accuracy not applied ({exc}); dt from solver.dt_fraction"])]
         return problem
+
+
+def _pilot_problem(plan: Plan, problem: Problem) -> Problem:
+    """The problem the accuracy pilots run: ``problem`` itself, or — when the run keeps a lattice
+    the waves never cross (``--fidelity full``; the domain step's ``plan_pilot_first/last``) —
+    the same scene on the units they reach (``plan.domain.trim_scene``), with the whole lattice's
+    ω_max, steps and duration. The pilots measure the waves' speeds and amplitudes where the waves
+    are; on the whole lattice they would spend most of their time on units at rest (and sample
+    the waves at a stride of the lattice's length)."""
+    dom = plan.step("domain")
+    if dom is None or "plan_pilot_first" not in dom.attrs:
+        return problem
+    keep = (int(dom.attrs["plan_pilot_first"]), int(dom.attrs["plan_pilot_last"]))
+    small = build_problem(trim_scene(plan.scene, keep))
+    return dataclasses.replace(small, dt=problem.dt, duration=problem.duration, omega_max=problem.omega_max,
+                               stable_dt=problem.stable_dt)
 
 
 def _estimate_attrs(target: float, est: acc.Estimate, time_s: float) -> dict:
@@ -232,14 +251,15 @@ def _choose(plan: Plan, problem: Problem, only: str | None, mode: str) -> Proble
     ts = problem.system.scales.time_s
     out = scene.output
     every = out.every_s / ts if out.every_s else problem.duration / (out.n_frames - 1)
+    pilot = _pilot_problem(plan, problem)
     try:
-        choice = acc.choose(problem, target, only, every=every)
+        choice = acc.choose(pilot, target, only, every=every)
     except ValueError as exc:
         raise PlanError(f"solver.accuracy: {exc}") from None
-    est = acc.run_estimate(problem, INTEGRATORS[choice.integrator], choice.dt, choice.estimate) \
+    est = acc.run_estimate(pilot, INTEGRATORS[choice.integrator], choice.dt, choice.estimate) \
         if mode == "pilot" else None
     if est is not None and est.method != choice.estimate.method:
-        est = acc.shorten_for_run(problem, choice, est, target, every)
+        est = acc.shorten_for_run(pilot, choice, est, target, every)
     planned = replace_section(scene, "solver", integrator=choice.integrator, dt_s=choice.dt * ts, accuracy=None)
     rows = "; ".join(f"{r['integrator']}: dt {r['dt'] * ts:.3g} s, {r['cost']:.3g} force evals"
                      for r in choice.table)

@@ -5,7 +5,11 @@ Hessian of the energy at a reference state (rest by default), obtained from cent
 differences of the compiled force (``flexmm.linalg.force_hessian``). One-sided contacts (a
 striker) enter with their stiffness at the expected peak overlap, p k δ^(p−1), since a Hertz
 contact stiffens with overlap. The eigenvalue itself is ``flexmm.linalg.top_eigenvalue``: dense
-for small systems, Lanczos otherwise.
+for small systems, Lanczos otherwise. A lattice of more than ``BOUND_MIN_DOFS`` DOFs, where
+Lanczos's few hundred force evaluations over the whole lattice cost more than many of its runs,
+takes ω_max from bounds instead (``flexmm.linalg.banded_bounds``, O(10) force evaluations): the
+Gershgorin bound, which is ≥ the true ω_max, when it is within ``BOUND_MARGIN`` of the lower
+bound of a window of the lattice, else (a bound that loose, or a lattice not banded) Lanczos.
 
 A fixed-step explicit method is linearly stable while h ω_max ≤ its ``stability_limit``
 (harmonic oscillator; ``harmonic_limit`` recomputes it from the compiled method).
@@ -23,6 +27,7 @@ from flexmm.errors import FlexmmError
 from flexmm.integrators.common import Terms
 from flexmm.linalg import (
     DENSE_LIMIT,
+    banded_bounds,
     force_hessian,
     top_eigenpair,
     top_eigenvalue,
@@ -30,6 +35,10 @@ from flexmm.linalg import (
 )
 from flexmm.models.base import System
 
+#: lattices above this many DOFs take ω_max from bounds (smaller ones: the whole-lattice solve)
+BOUND_MIN_DOFS = 100_000
+#: the bound is used when upper/lower ≤ 1 + this (in ω); a step from it is at most this much shorter
+BOUND_MARGIN = 0.02
 GRID_STEP = 2e-4  # scan of h·ω in ``harmonic_limit``: Blanes–Moan's band at hω ≈ π is 9e-4 wide
 
 
@@ -111,6 +120,10 @@ def dynamical_operator(system: System, terms: Terms, q_ref: np.ndarray | None = 
 def omega_max(system: System, terms: Terms, q_ref: np.ndarray | None = None) -> float:
     """Largest angular frequency of small oscillations about ``q_ref`` (nondimensional)."""
     op, free = dynamical_operator(system, terms, q_ref)
+    if free.size > BOUND_MIN_DOFS:
+        bounds = banded_bounds(op, system.n_sites, system.ndof, (1 + BOUND_MARGIN) ** 2)
+        if bounds is not None and bounds[0] > 0 and bounds[1] <= (1 + BOUND_MARGIN) ** 2 * bounds[0]:
+            return float(np.sqrt(bounds[1]))
     lam = top_eigenvalue(op, system.ndof, free, DENSE_LIMIT)
     return float(np.sqrt(max(lam, 0.0)))
 

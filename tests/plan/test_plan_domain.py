@@ -103,3 +103,36 @@ def test_right_end_excitation_trims_the_left():
     assert reach.keep[0] > 0 and reach.keep[1] == 799
     t = trim_scene(sc, reach.keep)
     assert t.lattice.n_units == 800 - reach.keep[0] and t.excitation.end == "right"
+
+
+def test_pilots_of_a_full_fidelity_run_measure_the_units_the_waves_reach(make_scene, lego_config) -> None:
+    """--fidelity full keeps a lattice the waves never cross; its accuracy pilots run on the units
+    they reach, which is the lattice --fidelity auto trims to: the same estimate to the bit, while
+    the run itself keeps every unit (issue 37: pilots whose cost scales with what they measure)."""
+    from flexmm.prepare import resolve
+
+    scene = make_scene(lego_config, {"lattice.n_units": 3000, "solver.dt_s": 1e-4, "solver.duration_s": 0.05,
+                                     "output.n_frames": 11})
+    full, auto = resolve(scene, "full"), resolve(scene, "auto")
+    assert full.problem.system.n_sites == 3000 and auto.problem.system.n_sites < 1000
+    dom = full.plan.step("domain").attrs
+    assert (dom["plan_pilot_first"], dom["plan_pilot_last"]) == (0, auto.problem.system.n_sites - 1)
+    est_full, est_auto = (p.plan.step("accuracy").attrs for p in (full, auto))
+    assert est_full["accuracy_estimate"] == est_auto["accuracy_estimate"] > 0
+    assert est_full["accuracy_check"] == est_auto["accuracy_check"]
+
+
+def test_a_long_uniform_lattice_takes_its_signal_speed_from_a_short_copy(make_scene, lego_config) -> None:
+    """The bands of a uniform chain do not depend on its length: the planner's 256-unit copy gives
+    the speed the whole lattice gives (its Hessian columns then cost a few hundred sites)."""
+    from flexmm.assemble import build_system
+    from flexmm.plan.domain import wave_reach
+    from flexmm.plan.planner import BANDS_COPY_SITES, _bands_copy
+
+    scene = make_scene(lego_config, {"lattice.n_units": 4 * BANDS_COPY_SITES})
+    system, terms = build_system(scene)
+    copy = _bands_copy(scene, system)
+    assert copy is not None and copy[0].n_sites == BANDS_COPY_SITES
+    whole, short = (wave_reach(scene, system, terms, 100.0, b) for b in (None, copy))
+    assert short.speed_sites == pytest.approx(whole.speed_sites, rel=1e-9)
+    assert short.keep == whole.keep

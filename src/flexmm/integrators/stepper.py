@@ -33,6 +33,10 @@ from flexmm.models.kernels import model_energy
 DEFAULT_RTOL = 1e-6
 #: unit-steps per compiled call of a stepper with ``bounded_calls`` (0.02–0.5 s on one core)
 CALL_WORK = 4e6
+#: ... but at least this many steps (a lattice of more than CALL_WORK / MIN_CALL_STEPS sites):
+#: the fused chain kernel is blocked in time (32 steps per sweep of memory), and calls of a step
+#: or two ran it at 40 % of its speed on 10⁷ units; a call then takes ~1 s there
+MIN_CALL_STEPS = 64
 
 
 @dataclass(frozen=True)
@@ -135,13 +139,14 @@ class Stepper:
         self.wall_s += time.perf_counter() - w0
         self.cpu_s += time.process_time() - c0
 
-    def bounded_calls(self, work: float = CALL_WORK) -> Stepper:
+    def bounded_calls(self, work: float = CALL_WORK, min_steps: int = MIN_CALL_STEPS) -> Stepper:
         """Compiled calls of at most ``work`` unit-steps from here on (``max_call_steps``), so the
         stepper comes back to Python — where a signal is acted on — every fraction of a second
         whatever the chunks asked of ``run``. Sized by work, not by wall time: a run's result must
         not depend on the machine's load (a call boundary rounds differently from a step inside a
-        call: the fused closing and opening half kicks). Returns the stepper."""
-        self.max_call_steps = max(1, int(work // max(self.system.n_sites, 1)))
+        call: the fused closing and opening half kicks), and at least ``min_steps`` steps (a kernel
+        blocked in time runs at its speed only on long calls). Returns the stepper."""
+        self.max_call_steps = max(min_steps, 1, int(work // max(self.system.n_sites, 1)))
         return self
 
     # -- checkpoints -----------------------------------------------------------------------------

@@ -193,15 +193,17 @@ def _sources(scene, ix: np.ndarray) -> list[int] | None:
     return src or None
 
 
-def wave_reach(scene, system: System, terms: Terms, duration: float) -> Reach:
+def wave_reach(scene, system: System, terms: Terms, duration: float, bands: tuple | None = None) -> Reach:
     """Reach of the waves of ``scene`` in ``duration`` (nondimensional) on ``system``.
 
     Every source (the excited end or soliton centre, rotation seeds) starts waves; the kept
     range covers the light cones of all of them, so the cut lies where nothing ever moves.
+    ``bands``: the (system, terms) whose bands give the speed (default ``system``'s; a small copy
+    of a uniform lattice has the same bands, and its Hessian columns cost little).
     """
     ix, _ = system.site_grid()
     n_x = int(ix.max()) + 1
-    c, strain = max_signal_speed(system, terms, excitation_velocity(scene, system))
+    c, strain = max_signal_speed(*(bands or (system, terms)), excitation_velocity(scene, system))
     reach = c * duration
     span = int(math.ceil(reach * (1 + MARGIN))) + PAD
     src = _sources(scene, ix)

@@ -143,11 +143,24 @@ def _domain(scene, fidelity: str):
     return scene, step, built
 
 
+#: a trimmable lattice of more sites along x than this takes its bands from a copy of this length
+BANDS_COPY_SITES = 256
+
+
+def _bands_copy(scene, system):
+    """(system, terms) of a ``BANDS_COPY_SITES`` copy of a long uniform lattice, else None: the
+    bands' Hessian columns then cost force evaluations on a few hundred sites, not the lattice."""
+    ix, _ = system.site_grid()
+    if int(ix.max()) + 1 <= BANDS_COPY_SITES or _trimmable(scene) is not None:
+        return None
+    return build_system(trim_scene(scene, (0, BANDS_COPY_SITES - 1)))
+
+
 def _reach(scene, fidelity: str, system, terms):
     sc = system.scales
     duration = scene.solver.duration_s / sc.time_s
     try:
-        reach = wave_reach(scene, system, terms, duration)
+        reach = wave_reach(scene, system, terms, duration, _bands_copy(scene, system))
     except (ValueError, IndexError, np.linalg.LinAlgError) as exc:
         return scene, PlanStep("domain", "kept", [f"reach not computed ({exc}): lattice kept as declared"])
     attrs = {"plan_reach_speed_m_s": reach.speed_m_s, "plan_reach_units": reach.sites_reached,
@@ -170,6 +183,8 @@ def _reach(scene, fidelity: str, system, terms):
     why_not = _trimmable(scene)
     if fidelity == "full" or why_not:
         reason = "--fidelity full" if fidelity == "full" else why_not
+        if not why_not:  # the pilots measure the waves where they are (``prepare._pilot_problem``)
+            attrs.update(plan_pilot_first=reach.keep[0], plan_pilot_last=reach.keep[1])
         return scene, PlanStep("domain", "warning", [head, f"WARNING: {waste} (not trimmed: {reason})"], attrs)
     lo, hi = reach.keep
     trimmed = trim_scene(scene, (lo, hi))
