@@ -142,7 +142,14 @@ def kick(E, G, s, v, f, c, q, vout, qout):
     """Kick s and its drift (``_kick_field``) on each field; E, G per field ((M + 1, nf), nf
     fewer than the DOFs: ``design.splitting.field_factors``) or per DOF."""
     n = v.shape[0]
-    if E.shape[1] < n:
+    if E.shape[1] == 0:  # undamped (``advance``): v' = v + g f, the same bits as e = 1, one load fewer
+        g = G[s]
+        for k in range(n):
+            v[k] += g[k] * f[k]
+        if q.shape[0]:
+            for k in range(n):
+                q[k] += c * v[k]
+    elif E.shape[1] < n:
         m = n // E.shape[1]
         for i in range(E.shape[1]):
             a, b = i * m, (i + 1) * m
@@ -264,6 +271,8 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
         vdep = has_velocity_terms(terms)
         dissipative = damped or terms.dash_ij.shape[0] > 0
         E, G = kick_factors(np.array(VALUES), minv, damp, h)  # a row per distinct kick (less to stream)
+        if not damped:
+            E = E[:, :0]  # e = 1: ``kick``'s undamped loop
         slot = np.array(SLOT)
         work = np.empty((6, n if vdep else 0))
         d0, p0 = _ledger_rates(v, cd, terms, dissipative)
