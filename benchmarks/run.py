@@ -1609,6 +1609,21 @@ def checkpoints(n_units: int = 1_000_000, steps: int = 400, n_frames: int = 21, 
     ``checkpoint.DEFAULT_EVERY_S``). Also the checkpoint's size against the state (q, v: 16 bytes per
     DOF), and a resume's start-up: reading the newest checkpoint, rebuilding nothing, copying the
     frames and restoring the state (``run_problem(resume=...)`` of the finished run's checkpoint)."""
+    dt_s = 1e-4
+    return _checkpoint_cost(LEGO, [f"lattice.n_units={n_units}", "solver.accuracy=null", "solver.integrator=velocity_verlet",
+                                   f"solver.dt_s={dt_s}", f"solver.duration_s={steps * dt_s}", f"output.n_frames={n_frames}",
+                                   "output.site_stride=1000"], f"{n_units:,d}-unit chain", steps, every_s)
+
+
+def checkpoints_sheet(n: int = 400, duration_s: float = 2e-3, n_frames: int = 21, every_s: float = 2.0) -> dict:
+    """``checkpoints`` on an n × n rotating-squares sheet (the sheet scene with its default
+    integrator and planned step, for ``duration_s``), frames of every 1000th site."""
+    return _checkpoint_cost(ROOT.parent / "configs" / "a_sheet_sound_bullet.yaml",
+                            [f"lattice.n_rows={n}", f"lattice.n_cols={n}", f"solver.duration_s={duration_s}",
+                             f"output.n_frames={n_frames}", "output.site_stride=1000"], f"{n}x{n} sheet", None, every_s)
+
+
+def _checkpoint_cost(config, overrides: list[str], label: str, steps: int, every_s: float) -> dict:
     import shutil
     import tempfile
 
@@ -1617,10 +1632,7 @@ def checkpoints(n_units: int = 1_000_000, steps: int = 400, n_frames: int = 21, 
     from flexmm.config import load_scene
     from flexmm.controller import run_problem
 
-    dt_s = 1e-4
-    scene = load_scene(LEGO, [f"lattice.n_units={n_units}", "solver.accuracy=null", "solver.integrator=velocity_verlet",
-                              f"solver.dt_s={dt_s}", f"solver.duration_s={steps * dt_s}", f"output.n_frames={n_frames}",
-                              "output.site_stride=1000"])
+    scene = load_scene(config, overrides)
     problem = build_problem(scene)
     root = Path(tempfile.mkdtemp(prefix="flexmm-bench-ckpt-", dir=RESULTS))
     try:
@@ -1642,13 +1654,14 @@ def checkpoints(n_units: int = 1_000_000, steps: int = 400, n_frames: int = 21, 
         resume_s = time.perf_counter() - t0
     finally:
         shutil.rmtree(root, ignore_errors=True)
-    row = {"n_units": n_units, "ndof": problem.system.ndof, "steps": steps, "run_s": plain_s,
+    row = {"lattice": label, "ndof": problem.system.ndof, "steps": steps or round(problem.duration / problem.dt),
+           "run_s": plain_s,
            "run_with_checkpoints_s": with_s, "checkpoints": policy.count, "s_per_checkpoint": per,
            "overhead_default_cadence_pct": 100 * per / ck.DEFAULT_EVERY_S,
            "overhead_measured_pct": 100 * (with_s - plain_s) / plain_s, "every_s": every_s,
            "checkpoint_MiB": policy.bytes / 2**20, "size_over_state": policy.bytes / state,
            "read_checkpoint_s": read_s, "resume_startup_s": read_s + resume_s, "load": _load()}
-    print(f"checkpoints, {n_units:,d}-unit chain ({problem.system.ndof:,d} DOFs): {per:.3f} s per checkpoint of "
+    print(f"checkpoints, {label} ({problem.system.ndof:,d} DOFs): {per:.3f} s per checkpoint of "
           f"{row['checkpoint_MiB']:.1f} MiB ({row['size_over_state']:.2f} x q + v) -> {row['overhead_default_cadence_pct']:.2f} % "
           f"at one per {ck.DEFAULT_EVERY_S:g} s; measured {policy.count} in {with_s:.1f} s against {plain_s:.1f} s without "
           f"({row['overhead_measured_pct']:+.1f} %, every {every_s:g} s); resume start-up {row['resume_startup_s']:.2f} s "
@@ -1656,7 +1669,7 @@ def checkpoints(n_units: int = 1_000_000, steps: int = 400, n_frames: int = 21, 
     return row
 
 
-SECTIONS = {"checkpoints": checkpoints, "startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "sweep_dask": sweep_dask, "throughput": throughput, "bandwidth": bandwidth,
+SECTIONS = {"checkpoints": checkpoints, "checkpoints_sheet": checkpoints_sheet, "startup": startup, "sweep": sweep_overhead, "sweep_scale": sweep_scale, "sweep_dask": sweep_dask, "throughput": throughput, "bandwidth": bandwidth,
             "memory": memory, "sheet": sheet, "sheet_throughput": sheet_throughput, "roofline": roofline,
             "contention": contention, "compare": compare, "workprecision": workprecision, "render": render,
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
