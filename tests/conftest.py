@@ -10,9 +10,11 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from flexmm.config import scene_from_dict
+from flexmm.io.run_dataset import open_run
 from flexmm.models import MODELS
 
 #: The LEGO rotating-squares unit (docs/physics.md §1.1): the one source of these numbers for the
@@ -287,3 +289,20 @@ def in_process_scheduler():
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
         yield cluster.scheduler_address
+
+
+def assert_same_data(a: Path, b: Path) -> None:
+    """The datasets of two runs are equal bit for bit (every variable), with the same step and
+    force-evaluation counts and status."""
+    da, db = open_run(a), open_run(b)
+    assert set(da.variables) == set(db.variables)
+    differ = [k for k in da.variables if not np.array_equal(da[k].values, db[k].values)]
+    assert differ == [], f"not bit-identical: {differ}"
+    for key in ("n_steps", "force_evaluations", "status"):
+        assert da.attrs[key] == db.attrs[key], key
+
+
+def is_stopped(pid: int) -> bool:
+    """The process is stopped (SIGSTOP: state T in /proc)."""
+    stat = Path(f"/proc/{pid}/stat").read_text()
+    return stat[stat.rfind(")") + 2] == "T"

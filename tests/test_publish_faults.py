@@ -18,12 +18,12 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from flexmm import checkpoint as ck
 from flexmm.io.pause import VARIABLE
 from flexmm.io.run_dataset import open_run
+from conftest import assert_same_data, is_stopped
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
@@ -48,30 +48,16 @@ def paused(pause_at: str, *args, cmd: list[str] | None = None) -> subprocess.Pop
     proc = subprocess.Popen([*(cmd or [FLEXMM]), *map(str, args)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env={**os.environ, VARIABLE: pause_at})
     t0 = time.monotonic()
-    while not _stopped(proc.pid):
+    while not is_stopped(proc.pid):
         assert proc.poll() is None, f"never reached {pause_at}: {proc.communicate()}"
         assert time.monotonic() - t0 < 300, f"never reached {pause_at}"
         time.sleep(0.02)
     return proc
 
 
-def _stopped(pid: int) -> bool:
-    stat = Path(f"/proc/{pid}/stat").read_text()
-    return stat[stat.rfind(")") + 2] == "T"
-
-
 def files(run_dir: Path) -> dict[str, str]:
     """Every file of a directory with the SHA-256 of its contents."""
     return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(run_dir.iterdir()) if p.is_file()}
-
-
-def assert_same_data(a: Path, b: Path) -> None:
-    da, db = open_run(a), open_run(b)
-    assert set(da.variables) == set(db.variables)
-    differ = [k for k in da.variables if not np.array_equal(da[k].values, db[k].values)]
-    assert differ == [], f"not bit-identical: {differ}"
-    for key in ("n_steps", "force_evaluations", "status"):
-        assert da.attrs[key] == db.attrs[key], key
 
 
 @pytest.fixture(scope="module")

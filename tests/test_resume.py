@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import default_sigint
+from conftest import assert_same_data, default_sigint, is_stopped
 
 from flexmm import checkpoint as ck
 from flexmm.integrators import INTEGRATORS
@@ -63,15 +63,6 @@ def wait_for_checkpoint(out: Path, proc: subprocess.Popen, timeout: float = 300.
     raise AssertionError("no checkpoint was written")
 
 
-def assert_same_data(a: Path, b: Path) -> None:
-    da, db = open_run(a), open_run(b)
-    assert set(da.variables) == set(db.variables)
-    differ = [k for k in da.variables if not np.array_equal(da[k].values, db[k].values)]
-    assert differ == [], f"not bit-identical: {differ}"
-    for key in ("n_steps", "force_evaluations", "status"):
-        assert da.attrs[key] == db.attrs[key], key
-
-
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> dict[str, Path]:
     """The reference runs, never stopped."""
@@ -98,12 +89,18 @@ def test_a_killed_run_resumes_bit_identical(tmp_path, uninterrupted) -> None:
     if (work / ck.PREVIOUS).is_file():  # a damaged newest checkpoint: refused, the previous one used
         data = (work / ck.NAME).read_bytes()
         (work / ck.NAME).write_bytes(data[: len(data) // 2])
-    # two resumes at once: the second is refused by the lock the first holds
-    first = start("run", "--resume", out, "--checkpoint-s", "0.3")
+    # two resumes at once: the second is refused by the lock the first holds (the first stopped at
+    # its commit, FLEXMM_PAUSE_AT, so that it cannot finish before the second starts)
+    first = subprocess.Popen([FLEXMM, "run", "--resume", str(out), "--checkpoint-s", "0.3"], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint,
+                             env=dict(os.environ, FLEXMM_PAUSE_AT="commit"))
     t0 = time.monotonic()
-    while len(work_dirs(out)) < 2 and first.poll() is None and time.monotonic() - t0 < 300:
-        time.sleep(0.02)  # the first resume holds the lock once its own work directory exists
+    while not is_stopped(first.pid):
+        assert first.poll() is None, first.communicate()
+        assert time.monotonic() - t0 < 300, "the resume never reached its commit"
+        time.sleep(0.02)
     second = flexmm("run", "--resume", out)
+    first.send_signal(signal.SIGCONT)
     assert second.returncode == 2 and "in use by another flexmm process" in second.stderr, second.stderr
     _, err = first.communicate(timeout=600)
     assert first.returncode == 0, err

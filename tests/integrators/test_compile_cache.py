@@ -143,7 +143,8 @@ EDITS = {
                            "flexmm.integrators.rk4", "flexmm.integrators.verlet", "flexmm.integrators.verlet_chain",
                            "flexmm.design.kernels", "flexmm.design.sweeps"},
     "flexmm.integrators.rk4": {"flexmm.integrators.rk4"},
-    "flexmm.integrators.verlet": {"flexmm.integrators.verlet", "flexmm.integrators.verlet_chain"},
+    "flexmm.integrators.verlet": {"flexmm.integrators.verlet", "flexmm.integrators.verlet_chain",
+                                  "flexmm.design.sweeps"},  # the gradient's sweeps step with verlet.step
     "flexmm.design.kernels_extra": {"flexmm.design.kernels_extra", "flexmm.design.kernels", "flexmm.design.sweeps"},
     "flexmm._jit": set(COMPILED),
 }

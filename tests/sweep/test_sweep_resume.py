@@ -95,6 +95,7 @@ def same_observables(a: Path, b: Path) -> None:
     assert np.isfinite(sa["observables"][:, 0]).all()  # every point measured a speed
 
 
+@pytest.mark.slow  # the default suite keeps the Dask worker kill below (a point resumed mid-way)
 def test_an_interrupted_sweep_goes_on_from_its_points_checkpoints(tmp_path, reference) -> None:
     d = tmp_path / "sweep"
     proc = sweep(spec_file(tmp_path, "none"), "--out", d, "-j", "2", "--batch-size", "1", "--checkpoint-s", "0.2")
@@ -117,6 +118,7 @@ def test_an_interrupted_sweep_goes_on_from_its_points_checkpoints(tmp_path, refe
     assert not (d / "work").exists() or not any((d / "work").iterdir())  # checkpoints removed once stored
 
 
+@pytest.mark.slow  # as above; tests/sweep/test_sweep_interrupt.py kills the driver in the default suite
 def test_a_killed_sweep_goes_on_from_its_last_checkpoints(tmp_path, reference) -> None:
     d = tmp_path / "sweep"
     proc = sweep(spec_file(tmp_path, "none"), "--out", d, "-j", "2", "--batch-size", "1", "--checkpoint-s", "0.2")

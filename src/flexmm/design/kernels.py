@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 from numba.extending import overload
 
-from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit
+from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit, runtime
 from flexmm._trig import sincos
 from flexmm.design.kernels_extra import (
     add_to_ends,
@@ -923,7 +923,7 @@ def sheet_full_adjoint(q, args, lam, out, g1, g2):
     n, o_s, o_core, o_off, o_pos, o_j, o_l, _ = sheet_offsets(args)
     sheet_adjoint(q, args, lam, out, g1, g2)  # hinges; θ0 at g2[:n]
     if args.dipoles[0].shape[0] > 0:
-        dipoles_second(q, args.dipoles, n, lam, g2, o_s, o_core, o_off, o_pos, False, out, g2)
+        dipoles_second(q, args.dipoles, n, lam, g2, o_s, o_core, o_off, o_pos, runtime(False), out, g2)
     joints_adjoint(q, n, args.joints, lam, out, g2, o_j)
     loads_adjoint(args.loads, lam, g2, o_l)
 
@@ -934,7 +934,7 @@ def sheet_full_tangent(q, args, dq, d1, d2, out):
     n, o_s, o_core, o_off, o_pos, o_j, o_l, _ = sheet_offsets(args)
     sheet_tangent(q, args, dq, d1, d2, out)  # zeroes out; θ0 directions at d2[:n]
     if args.dipoles[0].shape[0] > 0:
-        dipoles_second(q, args.dipoles, n, dq, d2, o_s, o_core, o_off, o_pos, True, out, d2)
+        dipoles_second(q, args.dipoles, n, dq, d2, o_s, o_core, o_off, o_pos, runtime(True), out, d2)
     joints_tangent(q, n, args.joints, dq, d2, o_j, out)
     loads_tangent(args.loads, d2, o_l, out)
 

@@ -56,7 +56,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from flexmm._jit import jit
+from flexmm._jit import jit, runtime
 from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, W_COS, W_SIN, chain_uniform_force, chain_uniform_gather,
                                    chain_uniform_hinges, chain_uniform_sites, sheet_uniform_adjoint)
 from flexmm.design.sweeps import (
@@ -327,7 +327,7 @@ def _stage_adjoint(args, terms, uni, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg,
     ``form``, or for a uniform chain or sheet (``Uniform``) the model's part from its shared law
     (into the column form's accumulators) and the applied forces'."""
     if uni.kind == UNI_NONE:
-        _force_adjoint(args, terms, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+        _force_adjoint(args, terms, q, t, lam, lq, g1, g2, gcon, gdrv, dg, ddg, form, runtime(False))
         return
     if uni.kind == UNI_CHAIN:
         u, acc, r = uni.law, uni.acc, uni.r

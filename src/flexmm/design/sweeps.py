@@ -51,7 +51,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic, overload
 
-from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit
+from flexmm._jit import JIT_OPTIONS, NO_JIT, fma, jit, runtime
 from flexmm.design.kernels import (
     N_R,
     U_TH0,
@@ -322,7 +322,7 @@ def reverse_initial(args, terms, q0, v0, t0, lq, lv, lf, g1, g2, gcon, gdrv, gda
     ddg = np.empty(4)
     velocity_adjoint(v0, lf, lv, terms.dash_ij, terms.dash_c, gdash, terms.drv_dof, terms.drv_mode, terms.drv_prm,
                      gdrv)
-    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, False)
+    _force_adjoint(args, terms, q0, t0, lf, lq, g1, g2, gcon, gdrv, dg, ddg, form, runtime(False))
     prescribed_adjoint(t0, lq, lv, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm, gdrv, dg, ddg)
 
 
@@ -501,7 +501,7 @@ def chain_forward(cols, with_kg, ldof, lval, terms, kick, pre, post, q, v, f, t,
             if keep:
                 _chain_open(q, v, f, kick, pre, h)
             elif k > 0:
-                _chain_close_open(q, v, f, kick, pre, post, h, q, v, f[:0], False)
+                _chain_close_open(q, v, f, kick, pre, post, h, q, v, f[:0], runtime(False))
     return t
 
 
@@ -528,7 +528,7 @@ def chain_replay(cols, with_kg, ldof, lval, terms, kick, pre, post, q0, v0, f0, 
         _chain_force_at(cols, with_kg, ldof, lval, terms, q, v, f, t, w)
         ST[s] = t
         if s < nsteps:
-            _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], f[:0], True)
+            _chain_close_open(q, v, f, kick, pre, post, h, SQ[s], SV[s], f[:0], runtime(True))
         else:
             _chain_close(v, f, kick, post)
             SQ[s, :] = q
