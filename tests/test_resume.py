@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
 FLEXMM = str(Path(sys.executable).with_name("flexmm"))
 # velocity Verlet fused with the chain force and blocked in time (verlet_chain), no pilots
-VERLET = ["--set", "lattice.n_units=20000", "--set", "solver.duration_s=0.3", "--set", "output.n_frames=31",
+VERLET = ["--set", "lattice.n_units=20000", "--set", "solver.duration_s=1.2", "--set", "output.n_frames=31",
           "--set", "solver.accuracy=null", "--set", "solver.integrator=velocity_verlet", "--set", "solver.dt_s=2.5e-5",
           "--fidelity", "full", "--checkpoint-s", "0.3"]
 # the accuracy pilots choose the method and step (PEFRL, a splitting): the decision is checkpointed
