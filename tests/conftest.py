@@ -7,7 +7,9 @@ a new model is noticed. Add a small representative config for it below.
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -306,3 +308,18 @@ def is_stopped(pid: int) -> bool:
     """The process is stopped (SIGSTOP: state T in /proc)."""
     stat = Path(f"/proc/{pid}/stat").read_text()
     return stat[stat.rfind(")") + 2] == "T"
+
+
+@contextlib.contextmanager
+def mounted_tmpfs(where: Path, size: str):
+    """A real tmpfs of ``size`` (mount's notation, e.g. ``40m``) mounted at ``where`` (created) for
+    the block; the test is skipped where it cannot be mounted (needs root)."""
+    where.mkdir()
+    res = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)], capture_output=True,
+                         text=True)
+    if res.returncode != 0:
+        pytest.skip(f"cannot mount a {size} tmpfs (needs root): {res.stderr.strip()[:200]}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import default_sigint
+from conftest import default_sigint, mounted_tmpfs
 from test_faults import DEMO, FLEXMM, LONG, SHORT, flexmm, wait_until_stepping
 
 from flexmm.io.run_dataset import open_run
@@ -173,17 +173,9 @@ FILLS_3M = ["--set", "solver.duration_s=20", "--set", "output.n_frames=2001", "-
 @pytest.fixture
 def small_disk(tmp_path):
     """A 3 MiB tmpfs mounted for the test, 0.5 MB of it already used."""
-    where = tmp_path / "small"
-    where.mkdir()
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(where)], capture_output=True,
-                         text=True)
-    if res.returncode != 0:
-        pytest.skip(f"cannot mount a 3 MiB tmpfs (needs root): {res.stderr.strip()[:200]}")
-    try:
+    with mounted_tmpfs(tmp_path / "small", "3m") as where:
         (where / "filler").write_bytes(bytes(500_000))
         yield where
-    finally:
-        subprocess.run(["umount", "-l", str(where)], capture_output=True)
 
 
 def _no_leftovers(where: Path) -> None:

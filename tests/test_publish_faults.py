@@ -23,7 +23,7 @@ import pytest
 from flexmm import checkpoint as ck
 from flexmm.io.pause import VARIABLE
 from flexmm.io.run_dataset import open_run
-from conftest import assert_same_data, is_stopped
+from conftest import assert_same_data, is_stopped, mounted_tmpfs
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
@@ -75,16 +75,8 @@ def reference(tmp_path_factory) -> dict[str, Path]:
 @pytest.fixture
 def small_disk(tmp_path):
     """A 40 MiB tmpfs mounted for the test (root, or skipped)."""
-    where = tmp_path / "small"
-    where.mkdir()
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=40m", "tmpfs", str(where)], capture_output=True,
-                         text=True)
-    if res.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs (needs root): {res.stderr.strip()[:200]}")
-    try:
+    with mounted_tmpfs(tmp_path / "small", "40m") as where:
         yield where
-    finally:
-        subprocess.run(["umount", "-l", str(where)], capture_output=True)
 
 
 def fill(disk: Path, leave: int = 0) -> Path:

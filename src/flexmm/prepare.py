@@ -217,8 +217,7 @@ def _pilot_problem(plan: Plan, problem: Problem) -> Problem:
     if dom is None or "plan_pilot_first" not in dom.attrs:
         return problem
     keep = (int(dom.attrs["plan_pilot_first"]), int(dom.attrs["plan_pilot_last"]))
-    unsaved = replace_section(plan.scene, "output", site_stride=1)  # the pilots save nothing; a stride
-    small = build_problem(trim_scene(unsaved, keep))  # meant for the whole lattice may exceed the trimmed one
+    small = build_problem(trim_scene(plan.scene, keep, probe=True))
     return dataclasses.replace(small, dt=problem.dt, duration=problem.duration, omega_max=problem.omega_max,
                                stable_dt=problem.stable_dt)
 

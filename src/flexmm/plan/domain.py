@@ -219,8 +219,11 @@ def length_key(lattice_cfg) -> str | None:
     return MODELS[lattice_cfg.kind].length
 
 
-def trim_scene(scene, keep: tuple[int, int]):
-    """A copy of ``scene`` keeping only the sites ``keep[0]..keep[1]`` along x.
+def trim_scene(scene, keep: tuple[int, int], *, probe: bool = False):
+    """A copy of ``scene`` keeping only the sites ``keep[0]..keep[1]`` along x. ``probe``: a copy
+    the planner only measures on (the bands, the pilots): it saves nothing (a site stride meant for
+    the whole lattice may exceed the copy) and starts from rest (no initial state, whose sites may
+    lie beyond it).
 
     Site indices in the excitation (soliton centres, struck or kicked units) and imperfection
     (seed sites) follow the kept range (2D: sites are row-major with x the fast index); seeds
@@ -233,6 +236,9 @@ def trim_scene(scene, keep: tuple[int, int]):
         raise PlanError(f"cannot trim lattice kind {scene.lattice.kind!r}: no length field")
     lo, hi = keep
     data = scene.model_dump(mode="json")
+    if probe:
+        data["initial"] = None
+        data["output"]["site_stride"] = 1
     n_x = getattr(scene.lattice, key)
     n_new = hi - lo + 1
     data["lattice"][key] = n_new

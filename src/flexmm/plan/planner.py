@@ -153,13 +153,7 @@ def _bands_copy(scene, system):
     ix, _ = system.site_grid()
     if int(ix.max()) + 1 <= BANDS_COPY_SITES or _trimmable(scene) is not None:
         return None
-    from flexmm.config import scene_from_dict
-
-    data = scene.model_dump(mode="json")  # the bands of the lattice at rest: no initial state (its
-    data["initial"] = None  # sites may lie beyond the copy) and nothing saved (a stride may exceed it)
-    data["output"]["site_stride"] = 1
-    rest = scene_from_dict(data, source="<plan: bands copy>")
-    return build_system(trim_scene(rest, (0, BANDS_COPY_SITES - 1)))
+    return build_system(trim_scene(scene, (0, BANDS_COPY_SITES - 1), probe=True))
 
 
 def _reach(scene, fidelity: str, system, terms):
