@@ -47,6 +47,8 @@ def test_model_hooks_live_in_their_layer_and_resolve(kind: str) -> None:
     spec = MODELS[kind]
     paths = {"builder": [spec.builder], "launcher": [spec.launcher], "theory": [spec.theory],
              "continuum": [spec.continuum], "reducers": list(spec.reducers.values())}
+    paths |= {hook: [getattr(spec, hook)] for hook in ("topology", "hinges", "elements", "bands")}
+    assert set(paths) == set(HOOK_LAYERS)
     for hook, items in paths.items():
         for path in filter(None, items):
             assert path.split(":")[0].startswith(HOOK_LAYERS[hook] + "."), (hook, path)

@@ -78,7 +78,7 @@ def _launch_solitons(system: System, scene: Scene, pulses) -> None:
     for p in pulses:
         system.q0[:], system.v0[:] = 0.0, 0.0
         try:
-            launch(system, p.amplitude_rad, p.center_site, p.direction)
+            launch(system, scene.lattice, p.amplitude_rad, p.center_site, p.direction)
         except ValueError as err:  # e.g. no soliton of that amplitude for these parameters
             raise SceneError(f"excitation.amplitude_rad = {p.amplitude_rad}: {err}") from None
         q += system.q0

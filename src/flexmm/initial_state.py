@@ -134,23 +134,22 @@ def _from_run(system: System, path: str) -> str:
     return f"initial state: last frame (t = {t:.6g} s) of {path} (config_sha256 {sha})"
 
 
+#: launch kind -> ``wave(lattice, entry, viscous coefficient or None) -> (u, u_dot)``, the exact
+#: chain waves of ``models.launch_chains``
+WAVES = {
+    "toda_soliton": lambda lat, s, eta: lc.toda_soliton(lat, s.kappa, s.center_site, s.direction),
+    "toda_two_soliton": lambda lat, s, eta: lc.toda_two_soliton(lat, s.kappa, s.center_site, s.direction),
+    "sech2_pulse": lambda lat, s, eta: lc.sech2_pulse(lat, s.strain, s.center_site, s.direction),
+    "fpu_beta_pulse": lambda lat, s, eta: lc.fpu_beta_pulse(lat, s.strain, s.center_site, s.direction),
+    "hertz_kdv_pulse": lambda lat, s, eta: lc.hertz_kdv_pulse(lat, s.amplitude_ratio, s.center_site, s.direction),
+    "kink": lambda lat, s, eta: lc.kink(lat, eta, s.center_site, s.direction, static=s.speed == "static"),
+    "tanh_front": lambda lat, s, eta: lc.tanh_front(lat, eta, s.center_site, s.direction, static=s.speed == "static"),
+}
+
+
 def _launch(system: System, scene, spec) -> tuple[np.ndarray, np.ndarray]:
-    lat = scene.lattice
-    if spec.kind == "toda_soliton":
-        return lc.toda_soliton(lat, spec.kappa, spec.center_site, spec.direction)
-    if spec.kind == "toda_two_soliton":
-        return lc.toda_two_soliton(lat, spec.kappa, spec.center_site, spec.direction)
-    if spec.kind == "sech2_pulse":
-        return lc.sech2_pulse(lat, spec.strain, spec.center_site, spec.direction)
-    if spec.kind == "fpu_beta_pulse":
-        return lc.fpu_beta_pulse(lat, spec.strain, spec.center_site, spec.direction)
     vis = scene.damping.viscous
-    eta = vis.coefficient_n_s_per_m if vis is not None else None
-    if spec.kind == "hertz_kdv_pulse":
-        return lc.hertz_kdv_pulse(lat, spec.amplitude_ratio, spec.center_site, spec.direction)
-    if spec.kind == "kink":
-        return lc.kink(lat, eta, spec.center_site, spec.direction, static=spec.speed == "static")
-    return lc.tanh_front(lat, eta, spec.center_site, spec.direction, static=spec.speed == "static")
+    return WAVES[spec.kind](scene.lattice, spec, vis.coefficient_n_s_per_m if vis is not None else None)
 
 
 def apply_initial(system: System, scene) -> list[str]:

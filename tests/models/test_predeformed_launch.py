@@ -8,6 +8,7 @@ from flexmm.analysis.context import RunContext
 from flexmm.analysis.features.rest import from_rest, rest_fields
 from flexmm.assemble import SceneError, build_problem
 from flexmm.config import scene_from_dict
+from flexmm.models.rotating_chain import theory_parameters
 from flexmm.theory.prestressed import prestressed_chain
 from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
 
@@ -23,7 +24,7 @@ def _scene(amplitude=-0.38, center=50, lattice=LATTICE):
 
 def test_soliton_rides_on_the_relaxed_state():
     system = build_problem(_scene()).system
-    n, rest, m = system.n_sites, system.rest_state, system.rotating_squares
+    n, rest, m = system.n_sites, system.rest_state, theory_parameters(_scene().lattice)
     p = prestressed_chain(RotatingChainND(0.05, m.Ks, m.Ktheta, m.alpha2, 1, 0),
                           float(rest[n + 50]))
     s = soliton_initial_state(p, -0.38, n, 50)

@@ -10,7 +10,6 @@ the chain's own force kernel). docs/scenes.md quotes the measured values.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -22,8 +21,9 @@ from flexmm.analysis.context import RunContext
 from flexmm.analysis.features.rest import from_rest, rest_fields
 from flexmm.assemble import build_system
 from flexmm.models.kernels import model_force
+from flexmm.models.rotating_chain import theory_parameters
 from flexmm.theory.prestressed import prestressed_chain, soliton_window
-from flexmm.theory.rotating import RotatingChainND, soliton_initial_state, soliton_speed
+from flexmm.theory.rotating import soliton_initial_state, soliton_speed
 
 pytestmark = pytest.mark.slow
 
@@ -74,7 +74,7 @@ def test_scene_a_pull_forms_one_rarefaction_soliton_on_the_prestressed_law(tmp_p
     lat, exc = scene.lattice, scene.excitation
     system, _ = build_system(scene)
     n = system.n_sites
-    p = prestressed_chain(RotatingChainND(**asdict(system.rotating_squares)), float(system.rest_state[n + n // 2]))
+    p = prestressed_chain(theory_parameters(lat), float(system.rest_state[n + n // 2]))
     theta = from_rest(ds, rest_fields(RunContext.from_dataset(ds)))["theta"].values
     t = ds["time"].values / math.sqrt(lat.mass_kg / lat.k_long_n_per_m)
     pos, amp, fwhm, wake = _leading_pulse(theta).T

@@ -14,6 +14,7 @@ from flexmm.api import run_scene
 from flexmm.config import ConfigError, scene_from_dict
 from flexmm.io.run_dataset import open_run
 from flexmm.models import MODELS
+from flexmm.models.rotating_sheet import theory_parameters
 
 SHEET = {"kind": "rotating_squares_sheet", "a_m": 0.01, "k_long_n_per_m": 1e4, "k_shear_n_per_m": 3e3,
          "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0}
@@ -80,7 +81,7 @@ def test_ends_coordinates_and_masses():
     np.testing.assert_allclose(system.site_coords["y"], np.repeat(np.arange(3), 4) * h)
     assert system.site_coords["row"].tolist() == np.repeat(np.arange(3), 4).tolist()
     # inertia from the solid square of diagonal a: J = m a²/12, α² = 1/12
-    assert system.rotating_squares.alpha2 == pytest.approx(1 / 12)
+    assert theory_parameters(cfg).alpha2 == pytest.approx(1 / 12)
     assert system.grid_shape == (3, 4)
     fixed, _ = build(n_rows=3, n_cols=4, left="fixed")
     n = fixed.n_sites

@@ -200,13 +200,13 @@ def test_a_triangle_hinge_stiffness_variation_reaches_the_energy():
 def test_a_varied_triangle_lattice_gets_no_uniform_bloch_speed():
     from types import SimpleNamespace
 
-    from flexmm.analysis.predict.rotating_triangles import pulse
+    from flexmm.analysis.predict.rotating_triangles import CHAIN
 
     def rows(variation):
         lattice = {**RIGID, "kind": "rotating_triangles_chain", "n_units": 8, "k_shear_n_per_m": 7.0e3,
                    "k_rot_n_m_per_rad": 0.05, "variation": variation}  # a gapped twist branch
         scene = scene_from_dict({"name": "t", "lattice": lattice, "solver": {"duration_s": 1e-3}})
-        return pulse(SimpleNamespace(scene=lambda: scene), SimpleNamespace(field="u", speed_m_s=1.0))
+        return CHAIN.pulse(SimpleNamespace(scene=lambda: scene), SimpleNamespace(field="u", speed_m_s=1.0))
 
     assert len(rows([])) == 1
     assert rows([{"kind": "gradient", "target": "mass_kg", "start": 0.004, "end": 0.008}]) == []

@@ -10,6 +10,7 @@ from flexmm.accuracy import integrate
 from flexmm.assemble import absorbing_damping, build_problem
 from flexmm.config import scene_from_dict
 from flexmm.integrators import INTEGRATORS
+from flexmm.models.rotating_chain import theory_parameters
 from flexmm.plan.domain import bloch_dispersion, trim_scene, wave_reach
 from flexmm.theory.rotating import RotatingChainND, dispersion_chain
 
@@ -28,7 +29,7 @@ def test_bloch_dispersion_matches_chain_theory(theta0, n_v, s_v):
     sc = chain_scene(40, theta0_rad=theta0, n_lateral=n_v, lateral_stretch=bool(s_v))
     p = build_problem(sc)
     d = bloch_dispersion(p.system, p.terms)
-    m = p.system.rotating_squares
+    m = theory_parameters(sc.lattice)
     assert (m.theta0, m.n_v, m.s_v) == (theta0, n_v, s_v)
     par = RotatingChainND(theta0, m.Ks, m.Ktheta, m.alpha2, n_v, s_v)
     lo, hi = dispersion_chain(par, d.k)

@@ -29,11 +29,12 @@ def bands(
     geometry file with lattice_vectors_m. Frequencies in Hz, wave vectors in rad/m."""
     import numpy as np
 
+    from flexmm.config.lattice import MODELS
     from flexmm.io.atomic import atomic_target, write_text_atomic
-    from flexmm.linear.network import band_path
 
     scene = load_or_exit(config, list(overrides or []))
-    if scene.lattice.kind != "rigid_network":
+    band_path = MODELS[scene.lattice.kind].hook("bands")
+    if band_path is None:
         raise error(f"flexmm bands computes the bands of a periodic rigid_network; {config} is a "
                     f"{scene.lattice.kind} (its bands: flexmm.linear)")
     folder = check_output_dir(Path(out) if out else Path(scene.output.directory) / scene.name / "bands")

@@ -10,7 +10,7 @@ from flexmm.config.absorbing import AbsorbingLayer
 from flexmm.config.base import NonNegative, Positive, Strict, exactly_one
 from flexmm.config.excitation import EXCITATIONS, ExcitationConfig, NoExcitation
 from flexmm.config.initial import Initial
-from flexmm.config.lattice import LatticeConfig
+from flexmm.config.lattice import MODELS, LatticeConfig
 
 
 class Viscous(Strict):
@@ -187,7 +187,7 @@ class Scene(Strict):
             if not all(0 <= c <= n - 1 for c in centers):
                 raise ValueError(f"initial.launch.{k}.center_site={spec.center_site} is outside 0..{n - 1}")
             law = getattr(getattr(self.lattice, "bond", None), "law", None)
-            if self.lattice.kind != "mass_chain" or law != needs[spec.kind]:
+            if not MODELS[self.lattice.kind].chain_waves or law != needs[spec.kind]:
                 raise ValueError(f"initial.launch.{k}: a {spec.kind} launches on a mass_chain with a "
                                  f"{needs[spec.kind]} bond (this lattice: {self.lattice.kind}"
                                  + (f", {law} bond)" if law else ")"))

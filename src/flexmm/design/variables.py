@@ -217,7 +217,7 @@ def unit_field(design: Design, var: Variable, vals: np.ndarray) -> np.ndarray | 
     if var.profile != "each" or lattice.get("kind") != "rotating_squares_sheet":
         return None
     from flexmm.config.rigid import SITE_TARGETS
-    from flexmm.models.rotating_sheet import lattice_hinges
+    from flexmm.models import lattice_hinges
 
     rows, cols = int(lattice["n_rows"]), int(lattice["n_cols"])
     vals = np.asarray(vals, float)
@@ -248,19 +248,12 @@ def profile_lines(lattice: dict, axis: str, name: str = "") -> list[list[int]]:
 
 
 def target_elements(lattice) -> dict[str, int]:
-    """The number of elements of every per-element target of a lattice config (profile each)."""
-    if lattice.kind.startswith("mass_"):
-        from flexmm.models.mass_chain import element_values as mass_element_values
-        from flexmm.models.mass_topology import build_topology
+    """The number of elements of every per-element target of a lattice config (profile each): its
+    kind's ``elements`` hook (``config.lattice.MODELS``); {} for a kind without one."""
+    from flexmm.models import MODELS
 
-        return {k: v.size for k, v in mass_element_values(lattice, build_topology(lattice)).items()}
-    if lattice.kind in ("rotating_squares_chain", "rotating_squares_sheet"):
-        from flexmm.config.rigid import HINGE_TARGETS, SITE_TARGETS
-        from flexmm.models.rotating_sheet import lattice_hinges
-
-        n_hinges = lattice_hinges(lattice)[0].size
-        return {t: lattice.n_units for t in SITE_TARGETS} | {t: n_hinges for t in HINGE_TARGETS}
-    return {}
+    count = MODELS[lattice.kind].hook("elements")
+    return {} if count is None else count(lattice)
 
 
 def _flat(raw: Raw) -> np.ndarray:

@@ -16,4 +16,11 @@ def model_fields(kind: str) -> tuple[str, ...]:
     return tuple(f.name for f in MODELS[kind].fields)
 
 
-__all__ = ["MODELS", "ModelSpec", "System", "FieldSpec", "model_fields"]
+def lattice_hinges(cfg):
+    """(a, b, axis, wrap) of the hinges of a lattice of rotating units, in its builder's order (its
+    kind's ``hinges`` hook); ``wrap`` marks the periodic wraps (b before a)."""
+    a, b, axis = MODELS[cfg.kind].hook("hinges")(cfg)
+    return a, b, axis, b <= a
+
+
+__all__ = ["MODELS", "ModelSpec", "System", "FieldSpec", "lattice_hinges", "model_fields"]

@@ -119,27 +119,6 @@ def square_units(centres: np.ndarray, theta0: np.ndarray, sigma: np.ndarray, hal
 
 
 @dataclass(frozen=True)
-class RotatingSquaresND:
-    """Nondimensional parameters of the uniform rotating-squares lattice (docs/physics.md §1.1).
-
-    The arguments of ``flexmm.theory.rotating.RotatingChainND``, for soliton launchers and checks.
-    """
-
-    theta0: float
-    """Rest angle of the squares [rad]."""
-    Ks: float
-    """Shear stiffness k_s / k_l."""
-    Ktheta: float
-    """Rotational stiffness k_θ / (k_l a²)."""
-    alpha2: float
-    """Rotational inertia J / (m a²)."""
-    n_v: int
-    """Lateral hinges per unit (0, 1, 2)."""
-    s_v: int
-    """1 if lateral contraction is blocked, else 0."""
-
-
-@dataclass(frozen=True)
 class PeriodicCell:
     """The periods of a network whose links wrap around: ``vectors`` (P, 2) its lattice vectors
     (nondimensional lengths; P = 1 or 2 periodic directions), ``link_shifts`` (L, P) int for each
@@ -208,8 +187,6 @@ class System:
     """Ground friction on the longitudinal field, or None."""
     predeformation: Predeformation | None = None
     """The static equilibrium q0 was relaxed to (``lattice.predeform``); None for a stress-free start."""
-    rotating_squares: RotatingSquaresND | None = None
-    """Nondimensional rotating-squares parameters (rotating-squares chain and sheet models); else None."""
     shapes: UnitShapes | Callable[[], UnitShapes] | None = None
     """The units' polygons and joints for drawing (rigid-unit models), or what makes them when a
     run writes them (so a model built only to be planned never makes them); read them with
@@ -217,8 +194,6 @@ class System:
     initial_displacement_m: np.ndarray | None = None
     """(n_sites,) SI displacements of the initial (relaxed) state, folded into the element shifts so
     that q = 0 there (mass models); None for other models."""
-    relax_residual: float | None = None
-    """Max residual force (nondimensional) of that initial relaxation (mass models with relax); else None."""
     periodic: PeriodicCell | None = None
     """The lattice vectors and link shifts of a network with periodic boundaries (its links wrap: the
     Bloch cell of ``linear.network``); None for a network without, and for other models."""

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from flexmm.config.lattice import MODELS
 from flexmm.theory import chains as th
 
 
@@ -44,7 +45,7 @@ def _from_bonds(r: np.ndarray, rdot: np.ndarray, direction: int) -> tuple[np.nda
 
 
 def _chain(lat, law: str):
-    if lat.kind != "mass_chain":
+    if not MODELS[lat.kind].chain_waves:
         raise ValueError(f"launches a wave of a mass_chain, not of a {lat.kind}")
     if lat.bond2 is not None or lat.variation:
         raise ValueError("the wave is exact only on a uniform nearest-neighbour chain (no variation, no bond2)")

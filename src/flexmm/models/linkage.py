@@ -32,10 +32,17 @@ def joint_stiffness(released_energy: float, switch: float, beta: float) -> float
     return 12.0 * released_energy / (switch**4 * (1.0 - 2.0 * beta))
 
 
+def lattice_hinges(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(a, b, axis) of the linkage's hinges: a two-row sheet's (its ``ModelSpec.hinges``)."""
+    from flexmm.models.rotating_sheet import hinge_pairs
+
+    return hinge_pairs(2, cfg.n_cols, False, False)
+
+
 def build(cfg) -> System:
     """The linkage as a System (a two-row rotating_sheet with pins and bistable joints)."""
     from flexmm.models.sheet_kernels import SheetArgs
-    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hold_fixed_ends, lattice_hinges,
+    from flexmm.models.rotating_sheet import (COORD_ATTRS, checkerboard, edge_sites, hold_fixed_ends,
                                               hinge_table, sheet_shapes)
     from flexmm.models.magnets import empty_dipoles
     from flexmm.models.loads import empty_loads
@@ -45,7 +52,7 @@ def build(cfg) -> System:
     n = 2 * nc
     J = cfg.inertia_kg_m2 if cfg.inertia_kg_m2 is not None else m * L * L / 12
     scales = Scales(L, math.sqrt(m / cfg.k_pin_n_per_m), m)
-    ha, hb, hax, _ = lattice_hinges(cfg)
+    ha, hb, hax = lattice_hinges(cfg)
     sigma = checkerboard(2, nc)
     theta0 = np.full(n, cfg.theta0_rad)
     hprm = hinge_table(ha, hb, hax, sigma, theta0, 0.5, 0.5, 0.0, 1.0, 1.0, 0.0)

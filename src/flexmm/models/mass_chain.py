@@ -176,6 +176,11 @@ def friction_arrays(fr, force_n: np.ndarray, sc: Scales) -> GroundFriction:
                           backward=back / sc.force, velocity=fr.regularisation_m_s / sc.velocity)
 
 
+def element_counts(cfg) -> dict[str, int]:
+    """Target -> number of elements, of each per-element target (its ``ModelSpec.elements``)."""
+    return {k: v.size for k, v in element_values(cfg, build_topology(cfg)).items()}
+
+
 def build(cfg) -> System:
     """A MassChain, MassNetwork or MassGrid config as a System (state: u of every site)."""
     topo = build_topology(cfg)
@@ -190,11 +195,10 @@ def build(cfg) -> System:
     inv_mass = 1.0 / mass
     inv_mass[_fixed_sites(cfg, topo)] = 0.0
     x0 = vals["initial_displacement_m"] / sc.length_m
-    residual = 0.0
     if cfg.relax:  # fixed and driven ends are held where they start
         held = np.zeros(n, bool)
         held[_fixed_sites(cfg, topo, ("fixed", "driven"))] = True
-        x0, residual = relax(args, x0, np.flatnonzero((inv_mass > 0) & ~held))
+        x0, _ = relax(args, x0, np.flatnonzero((inv_mass > 0) & ~held))
     fold_initial_state(args, x0)
     nx_ny = topo.grid_shape  # (nx, ny), site = i + nx j
     friction = None if cfg.friction is None else friction_arrays(cfg.friction, vals["friction.force_n"], sc)
@@ -206,5 +210,5 @@ def build(cfg) -> System:
         grid_shape=None if nx_ny is None else (nx_ny[1], nx_ny[0]),
         neighbour_pairs=topo.bonds, site_groups=topo.groups,
         friction=friction,
-        initial_displacement_m=x0 * sc.length_m, relax_residual=residual if cfg.relax else None,
+        initial_displacement_m=x0 * sc.length_m,
     )

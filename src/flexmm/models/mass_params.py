@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import lru_cache
 from importlib.resources import files
 
@@ -52,25 +54,72 @@ def read_force_table(law) -> tuple[np.ndarray, np.ndarray]:
     return np.array(xs), np.array(fs)
 
 
+def _poly(L: float, E: float, *coeffs_si):
+    """The POLY law's columns from its energy coefficients c_k (J/m^k, k = 1, 2, ...)."""
+    return lw.POLY, [c * L**k / E for k, c in enumerate(coeffs_si, start=1)], None
+
+
+def _dipole(law, v, L, E):
+    p = v["exponent"]
+    c = v["coefficient_j_m_p"] if law.coefficient_j_m_p is not None else 1e-7 * v["moment_a_m2"] ** 2
+    return lw.DIPOLE, [c / (E * L**p), v["distance_m"] / L, p], None
+
+
+def _table(law, v, L, E):
+    x, f = read_force_table(law)  # column 1: the start, offset by the caller when tables are concatenated
+    return lw.TABLE, [0.0, x.size], lw.spline_table(x / L, f / (E / L))
+
+
+def _table_stiffness(law, spacing_m):
+    x, f = read_force_table(law)
+    return abs(float(np.interp(0.0, x, np.gradient(f, x)))) or 1.0
+
+
+def _raney(law, v, L, E):
+    c = raney_coefficients(v["d_mm"])  # mJ/mm^k
+    return _poly(L, E, *(1e-3 * c[:, k] * 1e3 ** (k + 1) for k in range(c.shape[1])))
+
+
+@dataclass(frozen=True)
+class LawRule:
+    """How one law of ``config.mass_chain`` (by its ``law`` name) becomes kernel parameters:
+    ``columns(law, vals, L, E) -> (kernel code, [column 1, 2, ...], spline table or None)`` from the
+    per-element SI values ``vals`` in the length and energy units L, E; ``stiffness(law, spacing_m)``
+    a positive stiffness (N/m) near rest, for the time scale."""
+
+    columns: Callable
+    stiffness: Callable = lambda law, spacing_m: 1.0
+
+
+#: every law, keyed by its config ``law`` name
+LAWS: dict[str, LawRule] = {
+    "linear": LawRule(lambda law, v, L, E: _poly(L, E, 0.0, 0.5 * v["k_n_per_m"]), lambda law, h: law.k_n_per_m),
+    "polynomial": LawRule(lambda law, v, L, E: _poly(L, E, 0.0, v["k1_n_per_m"] / 2, v["k2_n_per_m2"] / 3,
+                                                     v["k3_n_per_m3"] / 4), lambda law, h: abs(law.k1_n_per_m) or 1.0),
+    "polynomial_energy": LawRule(lambda law, v, L, E: _poly(L, E, *law.coefficients)),
+    "raney2016": LawRule(_raney),
+    "bistable_cubic": LawRule(lambda law, v, L, E: _poly(
+        L, E, 0.0, v["alpha_n_per_m3"] * v["beta"] * v["jump_m"] * v["jump_m"] / 2,
+        -v["alpha_n_per_m3"] * (1 + v["beta"]) * v["jump_m"] / 3, v["alpha_n_per_m3"] / 4)),
+    "phi4": LawRule(lambda law, v, L, E: _poly(L, E, 0.0, -2 * v["barrier_j"] / v["half_distance_m"]**2, 0.0,
+                                               v["barrier_j"] / v["half_distance_m"]**4)),
+    "constant_force": LawRule(lambda law, v, L, E: _poly(L, E, -v["force_n"])),
+    "sine": LawRule(lambda law, v, L, E: (lw.SINE, [v["amplitude_j"] / E, 2 * math.pi * L / v["period_m"]], None)),
+    "hertz": LawRule(lambda law, v, L, E: (lw.HERTZ, [v["stiffness_n_per_m_p"] * L**v["exponent"] / (E / L),
+                                                      v["exponent"], v["precompression_m"] / L], None),
+                     lambda law, h: law.stiffness_n_per_m_p * law.exponent
+                     * (law.precompression_m if law.precompression_m > 0 else h) ** (law.exponent - 1)),
+    "toda": LawRule(lambda law, v, L, E: (lw.TODA, [v["a_n"] / (E / L), v["b_per_m"] * L], None),
+                    lambda law, h: law.a_n * law.b_per_m),
+    "dipole": LawRule(_dipole, lambda law, h: law.exponent * (law.exponent + 1) * law.coefficient
+                      / law.distance_m ** (law.exponent + 2)),
+    "table": LawRule(_table, _table_stiffness),
+}
+
+
 def rest_stiffness(law, spacing_m: float) -> float:
     """A positive stiffness (N/m) characterising ``law`` near rest, for the time scale."""
-    kind = law.law
-    if kind == "linear":
-        return law.k_n_per_m
-    if kind == "polynomial":
-        return abs(law.k1_n_per_m) or 1.0
-    if kind == "hertz":
-        d0 = law.precompression_m
-        return law.stiffness_n_per_m_p * law.exponent * (d0 if d0 > 0 else spacing_m) ** (law.exponent - 1)
-    if kind == "toda":
-        return law.a_n * law.b_per_m
-    if kind == "dipole":
-        p = law.exponent
-        return p * (p + 1) * law.coefficient / law.distance_m ** (p + 2)
-    if kind == "table":
-        x, f = read_force_table(law)
-        return abs(float(np.interp(0.0, x, np.gradient(f, x)))) or 1.0
-    return 1.0
+    return LAWS[law.law].stiffness(law, spacing_m)
 
 
 def law_rows(law, vals: dict[str, np.ndarray], sc: Scales, n: int) -> tuple[int, np.ndarray, np.ndarray | None]:
@@ -78,62 +127,9 @@ def law_rows(law, vals: dict[str, np.ndarray], sc: Scales, n: int) -> tuple[int,
 
     ``vals`` maps each numeric field name of ``law`` to its (n,) per-element values (SI).
     """
-    L, E = sc.length_m, sc.energy
-    F = E / L
     rows = np.zeros((n, lw.N_LAW_PRM))
-    rows[:, 0] = -vals["offset_m"] / L
-    kind = law.law
-
-    def poly(*coeffs_si):  # c_k in J/m^k for k = 1, 2, ...
-        for k, c in enumerate(coeffs_si, start=1):
-            rows[:, k] = c * L**k / E
-        return lw.POLY, rows, None
-
-    if kind == "linear":
-        return poly(0.0, 0.5 * vals["k_n_per_m"])
-    if kind == "polynomial":
-        return poly(0.0, vals["k1_n_per_m"] / 2, vals["k2_n_per_m2"] / 3, vals["k3_n_per_m3"] / 4)
-    if kind == "polynomial_energy":
-        return poly(*law.coefficients)
-    if kind == "raney2016":
-        c = raney_coefficients(vals["d_mm"])  # mJ/mm^k
-        return poly(*(1e-3 * c[:, k] * 1e3 ** (k + 1) for k in range(c.shape[1])))
-    if kind == "bistable_cubic":
-        a, b, j = vals["alpha_n_per_m3"], vals["beta"], vals["jump_m"]
-        return poly(0.0, a * b * j * j / 2, -a * (1 + b) * j / 3, a / 4)
-    if kind == "phi4":
-        h, w = vals["barrier_j"], vals["half_distance_m"]
-        return poly(0.0, -2 * h / w**2, 0.0, h / w**4)
-    if kind == "constant_force":
-        return poly(-vals["force_n"])
-    if kind == "sine":
-        rows[:, 1] = vals["amplitude_j"] / E
-        rows[:, 2] = 2 * math.pi * L / vals["period_m"]
-        return lw.SINE, rows, None
-    if kind == "hertz":
-        p = vals["exponent"]
-        rows[:, 1] = vals["stiffness_n_per_m_p"] * L**p / F
-        rows[:, 2] = p
-        rows[:, 3] = vals["precompression_m"] / L
-        return lw.HERTZ, rows, None
-    if kind == "toda":
-        rows[:, 1] = vals["a_n"] / F
-        rows[:, 2] = vals["b_per_m"] * L
-        return lw.TODA, rows, None
-    if kind == "dipole":
-        p = vals["exponent"]
-        if law.coefficient_j_m_p is not None:
-            c = vals["coefficient_j_m_p"]
-        else:
-            c = 1e-7 * vals["moment_a_m2"] ** 2
-        rows[:, 1] = c / (E * L**p)
-        rows[:, 2] = vals["distance_m"] / L
-        rows[:, 3] = p
-        return lw.DIPOLE, rows, None
-    if kind == "table":
-        x, f = read_force_table(law)
-        tab = lw.spline_table(x / L, f / F)
-        rows[:, 1] = 0.0  # start, offset by the caller when tables are concatenated
-        rows[:, 2] = x.size
-        return lw.TABLE, rows, tab
-    raise ValueError(f"unknown law {kind!r}")
+    rows[:, 0] = -vals["offset_m"] / sc.length_m
+    code, columns, tab = LAWS[law.law].columns(law, vals, sc.length_m, sc.energy)
+    for k, c in enumerate(columns, start=1):
+        rows[:, k] = c
+    return code, rows, tab

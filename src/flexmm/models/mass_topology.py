@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexmm.config.lattice import MODELS
+
 
 @dataclass
 class Topology:
@@ -35,10 +37,11 @@ def second_neighbours(n_sites: int, bonds: np.ndarray) -> np.ndarray:
     return np.array(pairs, np.int64).reshape(-1, 2)
 
 
-def chain(n: int, spacing_m: float, periodic: bool = False) -> Topology:
-    """n sites in a row; ends 'left' = [0], 'right' = [n − 1]. ``periodic``: a ring, the bonds
-    (n − 1, 0) and second-neighbour bonds (n − 2, 0), (n − 1, 1) close it (elongation u_0 − u_{n−1}:
-    site 0 sits one spacing beyond site n − 1)."""
+def chain(cfg) -> Topology:
+    """n sites in a row; ends 'left' = [0], 'right' = [n − 1]. A ring (``left: periodic``): the
+    bonds (n − 1, 0) and second-neighbour bonds (n − 2, 0), (n − 1, 1) close it (elongation
+    u_0 − u_{n−1}: site 0 sits one spacing beyond site n − 1)."""
+    n, spacing_m, periodic = cfg.n_units, cfg.spacing_m, cfg.left == "periodic"
     i = np.arange(n if periodic else n - 1, dtype=np.int64)
     bonds = np.stack([i, (i + 1) % n], axis=1)
     j = np.arange(n if periodic else max(n - 2, 0), dtype=np.int64)
@@ -72,8 +75,9 @@ def network(cfg) -> Topology:
     return Topology(start, bonds, second_neighbours(start, bonds), ends, {"x": x}, groups)
 
 
-def grid(nx: int, ny: int, spacing_m: float) -> Topology:
+def grid(cfg) -> Topology:
     """Site i + nx·j; horizontal bonds first, then vertical; bonds2 are the two diagonals."""
+    nx, ny, spacing_m = cfg.nx, cfg.ny, cfg.spacing_m
     idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
     h = np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], axis=1)
     v = np.stack([idx[:-1, :].ravel(), idx[1:, :].ravel()], axis=1)
@@ -89,11 +93,5 @@ def grid(nx: int, ny: int, spacing_m: float) -> Topology:
 
 
 def build_topology(cfg) -> Topology:
-    """The topology of a MassChain, MassNetwork or MassGrid config."""
-    if cfg.kind == "mass_chain":
-        return chain(cfg.n_units, cfg.spacing_m, cfg.left == "periodic")
-    if cfg.kind == "mass_network":
-        return network(cfg)
-    if cfg.kind == "mass_grid":
-        return grid(cfg.nx, cfg.ny, cfg.spacing_m)
-    raise ValueError(f"not a mass lattice: {cfg.kind!r}")
+    """The topology of a lattice of masses (its kind's ``topology`` hook, ``config.lattice.MODELS``)."""
+    return MODELS[cfg.kind].hook("topology")(cfg)

@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from dataclasses import asdict
 
 import numpy as np
 
 from flexmm.config.rigid import RotatingSquaresChain
 from flexmm.models import predeform, variation
-from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, RotatingSquaresND, System, UnitShapes, square_units
+from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, System, UnitShapes, square_units
 from flexmm.models.hinge import (
     ChainArgs,
     H_KL,
@@ -40,6 +39,14 @@ def nondimensional(cfg: RotatingSquaresChain) -> dict[str, float]:
         "Ktheta": cfg.k_rot_n_m_per_rad / (cfg.k_long_n_per_m * cfg.a_m**2),
         "alpha2": cfg.inertia_kg_m2 / (cfg.mass_kg * cfg.a_m**2),
     }
+
+
+def theory_parameters(cfg: RotatingSquaresChain):
+    """The chain's ``theory.rotating.RotatingChainND`` (docs/physics.md §1.1): what its soliton
+    launcher and the analysis' theory read."""
+    from flexmm.theory.rotating import RotatingChainND
+
+    return RotatingChainND(theta0=cfg.theta0_rad, n_v=cfg.n_lateral, s_v=int(cfg.lateral_stretch), **nondimensional(cfg))
 
 
 def hinge_pairs(n: int, periodic: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -73,6 +80,12 @@ def chain_tables(
     sprm[:, 1] = n_lateral * (1.0 if lateral_stretch else 0.0) * 0.5
     sprm[:, 2] = 2.0 * n_lateral * np.broadcast_to(np.asarray(Ktheta, float), (ha.size,)).mean()
     return ChainArgs(ha, hb, hprm, sprm, np.zeros(n), np.zeros(n))
+
+
+def lattice_hinges(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(a, b, axis) of the chain's hinges, all along x (its ``ModelSpec.hinges``)."""
+    a, b = hinge_pairs(cfg.n_units, cfg.left == "periodic")
+    return a, b, np.zeros(a.size, np.int64)
 
 
 def varied_tables(cfg: RotatingSquaresChain) -> tuple[tuple, np.ndarray, np.ndarray]:
@@ -139,9 +152,6 @@ def build(cfg: RotatingSquaresChain) -> System:
         longitudinal_field="u",
         rotation_field="theta",
         omega_ref=1.0,
-        rotating_squares=RotatingSquaresND(
-            theta0=cfg.theta0_rad, n_v=cfg.n_lateral, s_v=int(cfg.lateral_stretch), **nd
-        ),
     )
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
@@ -163,7 +173,7 @@ def chain_shapes(args, x: np.ndarray, n_lateral: int) -> UnitShapes:
                         image_vertex=np.array([BOTTOM, TOP][:n_lateral], np.int64))
 
 
-def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
+def launch_soliton(system: System, cfg: RotatingSquaresChain, amplitude: float, center: int, direction: int) -> None:
     """Overwrite q0, v0 with the exact continuum vector soliton (docs/physics.md §1.3).
 
     On a predeformed chain (``system.rest_state``) this is the prestressed soliton of
@@ -171,10 +181,10 @@ def launch_soliton(system: System, amplitude: float, center: int, direction: int
     displacement from the rest state (the caller adds the rest state).
     """
     from flexmm.theory.prestressed import prestressed_chain, soliton_window
-    from flexmm.theory.rotating import RotatingChainND, soliton_exists, soliton_initial_state
+    from flexmm.theory.rotating import soliton_exists, soliton_initial_state
 
     n = system.n_sites
-    p = RotatingChainND(**asdict(system.rotating_squares))
+    p = theory_parameters(cfg)
     rest = system.rest_state
     if rest is not None:
         theta = rest[n : 2 * n]

@@ -18,17 +18,15 @@ from __future__ import annotations
 
 import math
 from functools import partial
-from dataclasses import asdict
 
 import numpy as np
 
-from flexmm.config.rigid import RotatingSquaresSheet
+from flexmm.config.rigid import HINGE_TARGETS, SITE_TARGETS, RotatingSquaresSheet
 from flexmm.models import predeform, variation
-from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, RotatingSquaresND, System, UnitShapes, square_units
+from flexmm.models.base import BOTTOM, LEFT, RIGHT, TOP, FieldSpec, System, UnitShapes, square_units
 from flexmm.models.hinge import (H_HALF_A, H_HALF_B, H_KL, H_KS, H_KT, H_REST, H_SIGN,
                                  N_HINGE_PARAMS)
 from flexmm.models.joints import empty_joints
-from flexmm.models.rotating_chain import hinge_pairs as chain_hinge_pairs
 from flexmm.models.magnets import MU0_OVER_4PI, empty_dipoles, face_magnets
 from flexmm.models.loads import empty_loads
 from flexmm.models.sheet_kernels import SheetArgs
@@ -70,18 +68,18 @@ def hinge_pairs(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, sk
     return a, b, axis
 
 
-def lattice_hinges(lat) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(a, b, axis, wrap) of the hinges of a rotating-squares chain or sheet or a linkage config, in
-    the builder's order (its own ``hinge_pairs``); ``wrap`` marks the periodic wraps (b before a)."""
-    if lat.kind == "rotating_squares_chain":
-        a, b = chain_hinge_pairs(lat.n_units, lat.left == "periodic")
-        axis = np.zeros(a.size, np.int64)
-    elif lat.kind == "bistable_linkage":
-        a, b, axis = hinge_pairs(2, lat.n_cols, False, False)
-    else:
-        a, b, axis = hinge_pairs(lat.n_rows, lat.n_cols, lat.left == "periodic", lat.bottom == "periodic",
-                                 lat.skew_cols)
-    return a, b, axis, b <= a
+def lattice_hinges(cfg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(a, b, axis) of the sheet's hinges, in the builder's order (its ``ModelSpec.hinges``)."""
+    return hinge_pairs(cfg.n_rows, cfg.n_cols, cfg.left == "periodic", cfg.bottom == "periodic", cfg.skew_cols)
+
+
+def element_counts(cfg) -> dict[str, int]:
+    """Target -> number of elements, of each per-unit and per-hinge target of a rotating-squares
+    chain or sheet (its ``ModelSpec.elements``)."""
+    from flexmm.models import MODELS
+
+    n_hinges = MODELS[cfg.kind].hook("hinges")(cfg)[0].size
+    return {t: cfg.n_units for t in SITE_TARGETS} | {t: n_hinges for t in HINGE_TARGETS}
 
 
 def magnet_pairs(n_rows: int, n_cols: int, periodic_x: bool, periodic_y: bool, h: float):
@@ -138,7 +136,7 @@ def build(cfg: RotatingSquaresSheet) -> System:
     m, J, kl, a = cfg.unit_mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
     scales = Scales(a, math.sqrt(m / kl), m)
     px, py = cfg.left == "periodic", cfg.bottom == "periodic"
-    ha, hb, hax, _ = lattice_hinges(cfg)
+    ha, hb, hax = lattice_hinges(cfg)
     row, col = np.divmod(np.arange(n), nc)
     base = {"theta0_rad": cfg.theta0_rad, "mass_kg": m, "inertia_kg_m2": J, "k_long_n_per_m": kl,
             "k_shear_n_per_m": cfg.k_shear_n_per_m, "k_rot_n_m_per_rad": cfg.k_rot_n_m_per_rad}
@@ -181,10 +179,6 @@ def build(cfg: RotatingSquaresSheet) -> System:
         neighbour_pairs=np.stack([ha[horiz], hb[horiz]], 1),
         shapes=partial(sheet_shapes, nr, nc, ha, hb, hax, sigma, theta0, h,
                        markers=None if cfg.magnets is None else dip[2]),
-        rotating_squares=RotatingSquaresND(
-            theta0=cfg.theta0_rad, Ks=cfg.k_shear_n_per_m / kl, Ktheta=cfg.k_rot_n_m_per_rad / (kl * a * a),
-            alpha2=J / (m * a * a), n_v=2, s_v=1,
-        ),
     )
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
@@ -212,15 +206,25 @@ def sheet_shapes(nr: int, nc: int, ha, hb, hax, sigma, theta0, spacing: float, o
                         link_joints=link_joints)
 
 
-def launch_soliton(system: System, amplitude: float, center: int, direction: int) -> None:
+def theory_parameters(cfg: RotatingSquaresSheet):
+    """The ``theory.rotating.RotatingChainND`` of the sheet's planar waves: the chain with n_v = 2,
+    s_v = 1 (docs/physics.md §1.2)."""
+    from flexmm.theory.rotating import RotatingChainND
+
+    m, J, kl, a = cfg.unit_mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
+    return RotatingChainND(theta0=cfg.theta0_rad, Ks=cfg.k_shear_n_per_m / kl, Ktheta=cfg.k_rot_n_m_per_rad / (kl * a * a),
+                           alpha2=J / (m * a * a), n_v=2, s_v=1)
+
+
+def launch_soliton(system: System, cfg: RotatingSquaresSheet, amplitude: float, center: int, direction: int) -> None:
     """Add a planar vector soliton (chain theory with n_v = 2, s_v = 1) centred on column ``center``.
 
     Every row gets the chain profile of docs/physics.md §1.3 (v = 0): exact for a sheet periodic in y,
     the natural launch for a wide sheet.
     """
-    from flexmm.theory.rotating import RotatingChainND, soliton_initial_state
+    from flexmm.theory.rotating import soliton_initial_state
 
-    p = RotatingChainND(**asdict(system.rotating_squares))  # n_v = 2, s_v = 1
+    p = theory_parameters(cfg)
     (nr, nc), n = system.grid_shape, system.n_sites
     U, T, dU, dT = soliton_initial_state(p, amplitude, nc, center, direction)
     for k, (vals, rates) in enumerate(((U, dU), (np.zeros(nc), np.zeros(nc)), (T, dT))):

@@ -38,50 +38,65 @@ def noise(v, n: int) -> np.ndarray:
     return rng.uniform(-1.0, 1.0, n) * sigma * math.sqrt(3.0)
 
 
-def _on_lines(v, line: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(new value, selected) per site of a gradient or interface entry."""
-    if v.kind == "interface":
-        return np.full(line.shape, float(v.value)), line >= v.position
+def _ramp(v, line: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(new value, selected) per site of a Gradient entry: as np.linspace over first..last (exact
+    ``start`` at first and ``end`` at last)."""
     first = v.first or 0
     last = size - 1 if v.last is None else v.last
-    # as np.linspace over first..last: exact ``start`` at first and ``end`` at last
     ramp = np.where(line == last, v.end, (line - first) * ((v.end - v.start) / (last - first)) + v.start)
     return ramp, (line >= first) & (line <= last)
 
 
-def _selected_sites(v, col: np.ndarray, row: np.ndarray) -> np.ndarray:
-    """Boolean per site: the sites a Defects entry lists, plus its box."""
-    hit = np.zeros(col.size, bool)
+def _step(v, line: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(new value, selected) per site of an Interface entry."""
+    return np.full(line.shape, float(v.value)), line >= v.position
+
+
+def _on_lines(profile):
+    """The rule of an entry that sets sites by their line (``profile``: ``_ramp``, ``_step``)."""
+    def rule(v, old, col, row, pair):
+        line = row if v.axis == "y" else col
+        new, sel = profile(v, line, int(line.max()) + 1)
+        if pair is None:
+            return np.where(sel, new, old)
+        a, b = pair
+        return 0.5 * (np.where(sel[a], new[a], old) + np.where(sel[b], new[b], old))
+    return rule
+
+
+def _random(v, old, col, row, pair):
+    eps = noise(v, old.size)
+    return old + eps if v.std is not None else old * (1.0 + eps)
+
+
+def _values(v, old, col, row, pair):
+    if len(v.values) != old.size:
+        element = "site" if pair is None else "bond (hinge)"
+        raise ValueError(f"a variation of kind values lists {len(v.values)} values for {v.target}; the lattice "
+                         f"has {old.size} elements of it (one value per {element}, in element order)")
+    return np.array(v.values, float)
+
+
+def _defects(v, old, col, row, pair):
+    hit = np.zeros(col.size, bool)  # the sites the entry lists, plus its box
     hit[np.asarray(v.sites, np.int64)] = True
     if v.box is not None:
         i0, i1, j0, j1 = v.box
         hit |= (col >= i0) & (col <= i1) & (row >= j0) & (row <= j1)
-    return hit
+    mask = hit if pair is None else hit[pair[0]] | hit[pair[1]]
+    out = old.copy()
+    out[mask] = v.value if v.value is not None else old[mask] * v.factor
+    return out
+
+
+#: entry kind -> ``rule(entry, old, col, row, pair)``: the values of one target after the entry
+RULES = {"gradient": _on_lines(_ramp), "interface": _on_lines(_step), "random": _random, "values": _values,
+         "defects": _defects}
 
 
 def vary(v, old: np.ndarray, col: np.ndarray, row: np.ndarray, pair) -> np.ndarray:
     """The values of one target after one entry; ``pair`` = (a, b) of a bond target, else None."""
-    if v.kind == "random":
-        eps = noise(v, old.size)
-        return old + eps if v.std is not None else old * (1.0 + eps)
-    if v.kind == "values":
-        if len(v.values) != old.size:
-            kind = "site" if pair is None else "bond (hinge)"
-            raise ValueError(f"a variation of kind values lists {len(v.values)} values for {v.target}; the lattice "
-                             f"has {old.size} elements of it (one value per {kind}, in element order)")
-        return np.array(v.values, float)
-    if v.kind == "defects":
-        hit = _selected_sites(v, col, row)
-        mask = hit if pair is None else hit[pair[0]] | hit[pair[1]]
-        out = old.copy()
-        out[mask] = v.value if v.value is not None else old[mask] * v.factor
-        return out
-    line = row if v.axis == "y" else col
-    new, sel = _on_lines(v, line, int(line.max()) + 1)
-    if pair is None:
-        return np.where(sel, new, old)
-    a, b = pair
-    return 0.5 * (np.where(sel[a], new[a], old) + np.where(sel[b], new[b], old))
+    return RULES[v.kind](v, old, col, row, pair)
 
 
 def apply_variations(values: dict[str, np.ndarray], variations, col: np.ndarray, row: np.ndarray,

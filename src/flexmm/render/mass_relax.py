@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 
 from flexmm.linalg import central_difference
+from flexmm.models.mass_topology import build_topology
 from flexmm.render.laws import law_energy_j
 
 
@@ -22,17 +23,10 @@ def _numeric(law) -> list[str]:
 
 
 def held_sites(p) -> np.ndarray:
-    """Sites of the chain's (grid's) fixed or driven ends."""
+    """Sites of the chain's (grid's) fixed or driven ends (a network's ends are lists of branches,
+    never held)."""
     lat = p.lattice
-    if lat.kind == "mass_network":
-        return np.zeros(0, np.int64)
-    n = p.n_sites
-    if lat.kind == "mass_chain":
-        ends = {"left": [0], "right": [n - 1]}
-    else:
-        nx, ny = p.grid_shape
-        idx = np.arange(n).reshape(ny, nx)
-        ends = {"left": idx[:, 0].tolist(), "right": idx[:, -1].tolist()}
+    ends = build_topology(lat).ends
     out = [s for end, sites in ends.items() if getattr(lat, end) in ("fixed", "driven") for s in sites]
     return np.asarray(sorted(set(out)), np.int64)
 

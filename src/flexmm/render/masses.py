@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexmm.config.lattice import MODELS
 from flexmm.models.mass_topology import Topology, build_topology
 from flexmm.models.variation import mass_values
 from flexmm.render.laws import barriers, law_energy_j
@@ -119,11 +120,11 @@ def mass_params(lat, rest: tuple[np.ndarray, np.ndarray] | None = None) -> MassP
     positions of the other sites are then NaN. Without it they are relaxed from the config.
     """
     a = lat.spacing_m
-    ring = lat.kind == "mass_chain" and lat.left == "periodic"  # drawn open, without its closing bonds
+    ring = getattr(lat, "left", None) == "periodic"  # drawn open, without its closing bonds
     topo = build_topology(lat.model_copy(update={"left": "free", "right": "free"}) if ring else lat)
     n, bonds, bonds2, grid_shape, groups = topo.n_sites, topo.bonds, topo.bonds2, topo.grid_shape, topo.groups
     vals = mass_values(lat, n, bonds, bonds2, grid_shape)
-    if lat.kind == "mass_network":
+    if MODELS[lat.kind].branched:
         xy, dirs = network_layout(lat, topo)
     else:
         xy = np.stack([topo.coords["x"], topo.coords.get("y", np.zeros(n))], 1)

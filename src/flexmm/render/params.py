@@ -17,7 +17,8 @@ from flexmm.models import rotating_chain
 from flexmm.models.energies import joint_energies
 from flexmm.models.hinge import S_KG, S_KR
 from flexmm.models.linkage import joint_stiffness
-from flexmm.models.rotating_sheet import checkerboard, lattice_hinges
+from flexmm.models import lattice_hinges
+from flexmm.models.rotating_sheet import checkerboard
 from flexmm.models.variation import parameter_arrays
 
 

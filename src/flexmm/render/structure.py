@@ -13,12 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.config.lattice import MODELS
 from flexmm.errors import UsageError
 from flexmm.io.run_dataset import OUTLINES, shape_variables
 from flexmm.render.masses import MassParams, mass_params
 from flexmm.render.params import rigid_params
 
-MASS_KINDS = ("mass_chain", "mass_network", "mass_grid")
 #: draw springs as zigzags up to this many bonds (straight lines beyond)
 ZIGZAG_MAX_BONDS = 400
 
@@ -213,7 +213,7 @@ def make_structure(source, lattice, shape: str | None, scale: float):
     written before they were stored: from its model built again), or its masses."""
     if "x" not in source.coords:
         raise UsageError(f"{source.path} has no site positions (coordinate 'x'): cannot draw its structure")
-    if lattice.kind in MASS_KINDS:
+    if MODELS[lattice.kind].topology is not None:  # a lattice of masses
         stored = source.coords.get("u_rest")  # u is measured from it (no relaxation needed)
         rest = None if stored is None else (source.sites, np.asarray(stored, float))
         return MassStructure(mass_params(lattice, rest), source.sites, scale)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexmm.config.lattice import MODELS
 from flexmm.errors import UsageError
 from flexmm.render.colour import Colouring
 from flexmm.render.figure import bounds
@@ -15,9 +16,6 @@ from flexmm.render.structure import Drawing, MassStructure, ShapeStructure
 
 #: rows of the space–time diagram at most
 SPACETIME_ROWS = 600
-MODEL_LABELS = {"rotating_squares_chain": "rotating-squares chain", "rotating_squares_sheet": "rotating-squares sheet",
-                "bistable_linkage": "bistable linkage", "mass_chain": "chain of masses",
-                "mass_network": "network of chains of masses", "mass_grid": "grid of masses"}
 
 
 @dataclass
@@ -63,11 +61,16 @@ def view_extent(structure, drawings, sites: tuple[int, int] | None) -> tuple[flo
         drawings = [_only(d, pick) for d in drawings]
     b = np.array([bounds(d) for d in drawings])
     x0, x1, y0, y1 = b[:, 0].min(), b[:, 1].max(), b[:, 2].min(), b[:, 3].max()
-    if sites is not None and not (isinstance(structure, MassStructure) and structure.p.kind == "mass_network"):
+    if sites is not None and not _branched(structure):
         yb = np.array([bounds(d)[2:] for d in drawings])  # rows: keep the whole height in view
         y0, y1 = min(y0, yb[:, 0].min()), max(y1, yb[:, 1].max())
     pad = 0.25 * structure.spacing_m
     return x0 - pad, x1 + pad, y0 - pad, y1 + pad
+
+
+def _branched(structure) -> bool:
+    """A lattice of masses on branches (a network): its sites are not along x."""
+    return isinstance(structure, MassStructure) and MODELS[structure.p.kind].branched
 
 
 def _only(d: Drawing, pick: np.ndarray) -> Drawing:
@@ -90,7 +93,7 @@ def make_spacetime(src: RunSource, structure, colouring: Colouring, indices: np.
     pick_row = (n_rows // 2 if row is None else row)
     if not 0 <= pick_row < n_rows:
         raise UsageError(f"--row {pick_row}: the lattice has rows 0 to {n_rows - 1}")
-    network = isinstance(structure, MassStructure) and structure.p.kind == "mass_network"
+    network = _branched(structure)
     sel = np.flatnonzero(r == pick_row)
     x = structure.rest_xy[sel, 0] if not network else structure.sites[sel].astype(float)
     order = np.argsort(x, kind="stable")
@@ -124,7 +127,7 @@ def describe(src: RunSource, lattice, structure, scale: float) -> tuple[str, str
     scale_txt = "drawn to scale" if scale == 1 else f"{what} ×{scale:g} (exaggerated)"
     planned = str(src.attrs.get("plan_dimension", "kept"))
     reduced = "" if planned in ("kept", "") else f" ({planned})"
-    return title, f"{MODEL_LABELS.get(kind, kind)} · {size}{reduced} · {scale_txt}"
+    return title, f"{MODELS[kind].label or kind} · {size}{reduced} · {scale_txt}"
 
 
 def palette_colours(colouring: Colouring) -> np.ndarray | None:
@@ -145,5 +148,5 @@ def palette_colours(colouring: Colouring) -> np.ndarray | None:
     return (255 * np.concatenate([rgb, shaded])).astype(np.uint8)
 
 
-__all__ = ["MODEL_LABELS", "SpaceTime", "columns", "describe", "make_spacetime", "palette_colours", "rows",
+__all__ = ["SpaceTime", "columns", "describe", "make_spacetime", "palette_colours", "rows",
            "view_extent"]

@@ -132,8 +132,8 @@ MULTISTABLE = ("bistable_cubic", "phi4", "raney2016", "sine")
 
 
 def _chain(ctx):
-    lat = ctx.scene().lattice
-    if lat.kind != "mass_chain" or lat.variation or lat.bond2 is not None:
+    lat = ctx.scene().lattice  # a mass_chain: the kind whose theory hook this is
+    if lat.variation or lat.bond2 is not None:
         raise ValueError("relations of docs/physics.md §2 need a uniform nearest-neighbour chain")
     return lat
 

@@ -14,21 +14,33 @@ from flexmm.analysis.context import Comparison, ModelTheory
 _LONGITUDINAL = ("u", "u_dot", "strain", "strain:u", "velocity", "velocity:u")
 
 
-def pulse(ctx, p_meas) -> list[Comparison]:
-    """The speed row of a longitudinal pulse (a sheet's: a planar wave along x)."""
-    from flexmm.linear.triangles import chain_long_wave_speed, sheet_long_wave_speeds
+def _chain_speed(lat) -> tuple[float, str]:
+    from flexmm.linear.triangles import chain_long_wave_speed
 
-    lat = ctx.scene().lattice
-    if p_meas.field not in _LONGITUDINAL or lat.variation:  # the Bloch speed is a uniform lattice's
-        return []
-    if lat.kind == "rotating_triangles_chain":
-        c, what = chain_long_wave_speed(lat), "chain"
-    else:
-        c, what = sheet_long_wave_speeds(lat, 0.0)[1], "sheet, longitudinal planar wave"
-    c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.mass_kg)
-    return [Comparison("", "speed", float(p_meas.speed_m_s), c * c0, "m/s",
-                       f"linear long-wave speed, Bloch ({what}; docs/physics.md §1.6)")]
+    return chain_long_wave_speed(lat), "chain"
 
 
-#: the theory registered for both triangle kinds (``config.lattice.MODELS``)
-THEORY = ModelTheory(pulse=pulse, pulse_field="u")  # the Bloch long-wave speed is the longitudinal wave's
+def _sheet_speed(lat) -> tuple[float, str]:
+    from flexmm.linear.triangles import sheet_long_wave_speeds
+
+    return sheet_long_wave_speeds(lat, 0.0)[1], "sheet, longitudinal planar wave"
+
+
+def pulse_predictor(speed):
+    """The speed row of a longitudinal pulse, from ``speed(lattice) -> (c / c0, what)`` (a
+    sheet's: a planar wave along x)."""
+    def pulse(ctx, p_meas) -> list[Comparison]:
+        lat = ctx.scene().lattice
+        if p_meas.field not in _LONGITUDINAL or lat.variation:  # the Bloch speed is a uniform lattice's
+            return []
+        c, what = speed(lat)
+        c0 = lat.a_m * math.sqrt(lat.k_long_n_per_m / lat.mass_kg)
+        return [Comparison("", "speed", float(p_meas.speed_m_s), c * c0, "m/s",
+                           f"linear long-wave speed, Bloch ({what}; docs/physics.md §1.6)")]
+    return pulse
+
+
+#: the theories of the two triangle kinds (``config.lattice.MODELS``); the Bloch long-wave speed
+#: is the longitudinal wave's
+CHAIN = ModelTheory(pulse=pulse_predictor(_chain_speed), pulse_field="u")
+SHEET = ModelTheory(pulse=pulse_predictor(_sheet_speed), pulse_field="u")
