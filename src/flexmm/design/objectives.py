@@ -20,6 +20,7 @@ are reported in SI.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -61,12 +62,9 @@ class Term(Strict):
 
     @model_validator(mode="after")
     def _reference(self):
-        if (self.kind == "energy_share") != (self.reference is not None):
+        if TERMS[self.kind].shares != (self.reference is not None):
             raise ValueError("kind energy_share needs a reference region (and only energy_share takes one)")
         return self
-
-
-UNITS = {"peak_force": "N", "energy": "J", "peak_energy": "J", "arrival_time": "s", "energy_share": "1"}
 
 
 @dataclass
@@ -85,31 +83,28 @@ class BoundTerm:
     def sign(self) -> float:
         return -1.0 if self.spec.goal == "maximize" else 1.0
 
+    @property
+    def reads_forces(self) -> bool:
+        """It reads the forces on its region (else the kinetic energy)."""
+        return TERMS[self.spec.kind].forces
+
     def value(self, rec: Records, raw: Raw, times: np.ndarray) -> tuple:
         """(value in model units, dJ/dq, dJ/dv, dJ/df on the term's record columns — all of them for
         energy_share —, dJ/dminv (ndof,))."""
-        kind, p = self.spec.kind, self.spec.sharpness
+        kind = TERMS[self.spec.kind]
+        if kind.shares:
+            return self._share(rec, raw)
         nk = rec.q.shape[0]
         dq = np.zeros((nk, self.cols.size))
         dv = np.zeros_like(dq)
         df = np.zeros_like(dq)
         dminv = np.zeros(raw.minv.size)
-        if kind == "peak_force":
-            F = rec.f[:, self.cols].sum(axis=1)
-            val, dF = _pnorm(F, p)
+        if kind.forces:
+            val, dF = _pnorm(rec.f[:, self.cols].sum(axis=1), self.spec.sharpness)
             df[:] = dF[:, None]
             return val, dq, dv, df, dminv
-        if kind == "energy_share":
-            return self._share(rec, raw)
         mass, v, E = kinetic(rec, raw, self.cols, self.dofs)
-        if kind == "energy":
-            val, dE = E.mean(), np.full(nk, 1.0 / nk)
-        elif kind == "peak_energy":
-            val, dE = _pnorm(E, p)
-        else:
-            total = E.sum()
-            val = float((times * E).sum() / total)
-            dE = (times - val) / total
+        val, dE = kind.of_energy(E, self.spec.sharpness, times)
         dv[:] = dE[:, None] * mass * v
         dminv[self.dofs] = _dminv(dE, mass, v)
         return val, dq, dv, df, dminv
@@ -161,6 +156,38 @@ def _pnorm(x: np.ndarray, p: float) -> tuple[float, np.ndarray]:
     return float(val), grad
 
 
+def _arrival(E: np.ndarray, p: float, times: np.ndarray) -> tuple[float, np.ndarray]:
+    """Σ t E / Σ E and its gradient."""
+    total = E.sum()
+    val = float((times * E).sum() / total)
+    return val, (times - val) / total
+
+
+@dataclass(frozen=True)
+class TermKind:
+    """What a term kind measures: its SI ``units`` and ``scale`` (the ``Scales`` attribute that
+    converts it; None: the field's generalised force), whether it reads the forces on its region
+    (``forces``) or shares out the energy of a reference region (``shares``), else ``of_energy(E,
+    p, times) -> (value, dvalue/dE)`` from the region's kinetic energy over time."""
+
+    units: str
+    scale: str | None = "energy"
+    forces: bool = False
+    shares: bool = False
+    of_energy: Callable | None = None
+
+
+#: every term kind (the module docstring)
+TERMS = {
+    "peak_force": TermKind("N", None, forces=True),
+    "energy": TermKind("J", of_energy=lambda E, p, times: (E.mean(), np.full(E.size, 1.0 / E.size))),
+    "peak_energy": TermKind("J", of_energy=lambda E, p, times: _pnorm(E, p)),
+    "arrival_time": TermKind("s", "time_s", of_energy=_arrival),
+    "energy_share": TermKind("1", None, shares=True),
+}
+UNITS = {name: kind.units for name, kind in TERMS.items()}
+
+
 def bind_terms(terms: list[Term], system) -> tuple[list[BoundTerm], np.ndarray]:
     """Resolve the terms on a system: (bound terms, the observed DOFs they need)."""
     from flexmm.errors import FlexmmError
@@ -170,7 +197,7 @@ def bind_terms(terms: list[Term], system) -> tuple[list[BoundTerm], np.ndarray]:
     for t in terms:
         sites = _sites(t.region, system)
         ref = None
-        if t.kind == "peak_force":
+        if TERMS[t.kind].forces:
             field = t.field or system.longitudinal_field
             if field not in [f.name for f in system.fields]:
                 raise FlexmmError(f"objective field {field!r}: the model's fields are {[f.name for f in system.fields]}")
@@ -178,7 +205,8 @@ def bind_terms(terms: list[Term], system) -> tuple[list[BoundTerm], np.ndarray]:
             to_si = sc.generalised_force(system.fields[system.field_index(field)].kind)
         else:
             dofs = [system.dof(f.name, s) for f in system.fields for s in sites]
-            to_si = {"arrival_time": sc.time_s, "energy_share": 1.0}.get(t.kind, sc.energy)
+            scale = TERMS[t.kind].scale
+            to_si = 1.0 if scale is None else getattr(sc, scale)
             if t.reference is not None:
                 ref = np.asarray([system.dof(f.name, s) for f in system.fields for s in _sites(t.reference, system)],
                                  np.int64)
@@ -237,7 +265,7 @@ class Objective:
             self.last.append(val * t.to_si)
             c = t.sign * t.spec.weight / t.norm
             total += c * val
-            cols = slice(None) if t.spec.kind == "energy_share" else t.cols  # a share spans both regions
+            cols = slice(None) if TERMS[t.spec.kind].shares else t.cols  # a share spans both regions
             dq[:, cols] += c * tq
             dv[:, cols] += c * tv
             df[:, cols] += c * tf

@@ -57,6 +57,11 @@ class Constraint(Strict):
             raise ValueError("kind mean needs variable (the name of a design variable), and only mean takes one")
         return self
 
+    @property
+    def linear(self) -> bool:
+        """A mean, linear in the variables (the total mass is not)."""
+        return self.variable is not None
+
 
 class OptimizerOptions(Strict):
     max_iterations: int = Field(40, ge=1, le=10_000)
@@ -129,7 +134,7 @@ class DesignProblem:
         data, source, where = scene_data_of(spec.scene, spec_path, base_dir)
         names = [v.name for v in spec.variables]
         for k, c in enumerate(spec.constraints):
-            if c.kind == "mean" and c.variable not in names:
+            if c.linear and c.variable not in names:
                 raise ConfigError([ConfigIssue(str(spec_path), None, f"constraints[{k}].variable",
                                                f"no variable {c.variable!r} (the variables are {', '.join(names)})")])
         self._mean_weights: dict[str, np.ndarray] = {}
@@ -146,7 +151,7 @@ class DesignProblem:
                 raise ConfigError([ConfigIssue(str(spec_path), None, f"constraints[{k}]", (
                     f"the start mean of variable {c.variable!r} is {target:g}; a mean constraint needs a positive "
                     "target (give a positive value, or start the variable at a positive mean)")
-                    if c.kind == "mean" else f"the start total mass is {target:g} kg; it must be positive")])
+                    if c.linear else f"the start total mass is {target:g} kg; it must be positive")])
         self.problem = build_problem(self.design.scene(self.design.x0))
         s = self.problem.system
         check_differentiable(s, self.problem.terms)
@@ -199,7 +204,7 @@ class DesignProblem:
         return w
 
     def constraint_value(self, c: Constraint, x: np.ndarray) -> float:
-        return self.total_mass(x) if c.kind == "total_mass" else float(self.mean_weights(c.variable) @ x)
+        return float(self.mean_weights(c.variable) @ x) if c.linear else self.total_mass(x)
 
 
 @dataclass
@@ -277,7 +282,7 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
     lo, hi = des.bounds
     cache: dict[bytes, tuple[float, np.ndarray]] = {}
     opts = dp.spec.optimizer
-    means = [c for c in dp.spec.constraints if c.kind == "mean"]
+    means = [c for c in dp.spec.constraints if c.linear]
     project = (means and len(means) == len(dp.spec.constraints) and all(c.relation == "equal" for c in means)
                and len({c.variable for c in means}) == len(means)
                and (opts.mean_method == "projection" or (opts.mean_method == "auto" and des.x0.size > 100)))
@@ -305,7 +310,7 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
     cons = []
     for c, target in zip(dp.spec.constraints, dp.targets):
         lb, ub = {"equal": (target, target), "at_most": (-np.inf, target), "at_least": (target, np.inf)}[c.relation]
-        if c.kind == "mean":  # linear in the variables
+        if c.linear:
             cons.append(LinearConstraint((dp.mean_weights(c.variable) * scale / target)[None, :], lb / target, ub / target))
             continue
         cons.append(NonlinearConstraint(lambda z, target=target: dp.total_mass(z * scale) / target, lb / target,
@@ -315,7 +320,7 @@ def optimise(dp: DesignProblem, history: History | None = None, on_eval: Callabl
     if projection is not None:
         res = minimize(fg, z0, jac=True, method="L-BFGS-B", bounds=bounds,
                        options={"maxiter": opts.max_iterations, "ftol": opts.tolerance, "gtol": opts.tolerance})
-    elif cons and all(c.kind == "mean" for c in dp.spec.constraints):
+    elif cons and all(c.linear for c in dp.spec.constraints):
         # linear constraints only: SLSQP keeps every iterate on them (to rounding)
         slsqp = [{"type": "eq" if lc.lb[0] == lc.ub[0] else "ineq",
                   "fun": (lambda z, lc=lc: lc.A @ z - lc.lb) if lc.lb[0] > -np.inf else (lambda z, lc=lc: lc.ub - lc.A @ z),

@@ -92,7 +92,7 @@ def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Pa
     import matplotlib.pyplot as plt
 
     profiles = [v for v in dp.design.variables if v.target is not None]
-    energy_terms = [t for t in dp.objective.terms if t.spec.kind != "peak_force"]
+    energy_terms = [t for t in dp.objective.terms if not t.reads_forces]
     sheet_map = bool(energy_terms) and dp.problem.system.site_grid()[1].max() > 0
     n_rows = len(profiles) + len(dp.objective.terms) + int(sheet_map)
     fig = plt.figure(figsize=(9, 2.5 * n_rows + 0.4))
@@ -130,7 +130,7 @@ def design_figure(dp, x_start: np.ndarray, x_best: np.ndarray, path: Path) -> Pa
         ax = fig.add_subplot(grid[r, :])
         for label, style in (("start", "--"), ("best", "-")):
             rec, raw = recs[label], raws[label]
-            if term.spec.kind == "peak_force":
+            if term.reads_forces:
                 ax.plot(t, rec.f[:, term.cols].sum(axis=1) * term.to_si, style, lw=1, label=label)
                 ax.set_ylabel("force on region (N)")
                 continue

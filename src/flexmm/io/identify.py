@@ -89,19 +89,27 @@ def file_kind(path: str | Path) -> str | None:
         return None
 
 
+def _foreign(nc: Path, attrs: dict, variables: set[str]) -> str:
+    names = ", ".join(sorted(variables)[:8]) + (", ..." if len(variables) > 8 else "")
+    return (f"{nc} is a netCDF file that flexmm did not write as a run (a run's has time and site "
+            f"variables and the attributes config and model; this one holds: {names or 'no variables'})")
+
+
+#: file kind -> what a file of that kind is, for a message: ``say(nc, attrs, variables)``
+DESCRIPTIONS = {
+    RUN: lambda nc, attrs, variables: "",
+    ANALYSIS: lambda nc, attrs, variables: (f"{nc} is an analysis file (written by `flexmm analyze` from "
+                                            f"{attrs.get('source')}), not a run's dataset"),
+    SWEEP: lambda nc, attrs, variables: (
+        f"{nc} is a sweep's combined dataset (written by `flexmm sweep`), not a run's dataset: "
+        f"`flexmm analyze {nc}` summarises the sweep; its points' runs are in {nc.parent / 'points'}"),
+    FOREIGN: _foreign,
+}
+
+
 def describe(nc: Path, kind: str, attrs: dict, variables: set[str]) -> str:
     """What the file is, for a message (a run's dataset: '')."""
-    if kind == ANALYSIS:
-        return (f"{nc} is an analysis file (written by `flexmm analyze` from {attrs.get('source')}), "
-                f"not a run's dataset")
-    if kind == SWEEP:
-        return (f"{nc} is a sweep's combined dataset (written by `flexmm sweep`), not a run's dataset: "
-                f"`flexmm analyze {nc}` summarises the sweep; its points' runs are in {nc.parent / 'points'}")
-    if kind == FOREIGN:
-        names = ", ".join(sorted(variables)[:8]) + (", ..." if len(variables) > 8 else "")
-        return (f"{nc} is a netCDF file that flexmm did not write as a run (a run's has time and site "
-                f"variables and the attributes config and model; this one holds: {names or 'no variables'})")
-    return ""
+    return DESCRIPTIONS[kind](nc, attrs, variables)
 
 
 def run_dataset(path: str | Path) -> tuple[Path, dict]:
@@ -109,9 +117,9 @@ def run_dataset(path: str | Path) -> tuple[Path, dict]:
     RunNotFound saying what the path is and what was expected when it is not a run's dataset."""
     nc = dataset_path(path)
     attrs, variables = read_header(nc)
-    kind = kind_of(attrs, variables)
-    if kind != RUN:
-        raise RunNotFound(f"{describe(nc, kind, attrs, variables)}; {EXPECTED}")
+    what = describe(nc, kind_of(attrs, variables), attrs, variables)
+    if what:
+        raise RunNotFound(f"{what}; {EXPECTED}")
     return nc, attrs
 
 
