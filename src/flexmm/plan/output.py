@@ -11,6 +11,8 @@ saved sites per FWHM. Choices the user made in ``output`` (keys they set) are ne
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import get_args
 
 from flexmm.config.analysis import AnalysisRequest, RunPurpose
@@ -22,6 +24,27 @@ MIN_FRAMES, MAX_FRAMES = 21, 20_001
 KINDS = (*get_args(RunPurpose), "none")
 
 
+@dataclass(frozen=True)
+class Purpose:
+    """What a run for one analysis saves: ``field(model fields)`` its default field; ``energies``:
+    only the energies matter (one field, no rates, every ``ENERGY_STRIDE``-th site); ``passage``:
+    frames dense enough to follow a wave past a site; ``width``: sites dense enough to fit its width."""
+
+    field: Callable[[tuple[str, ...]], str]
+    energies: bool = False
+    passage: bool = False
+    width: bool = False
+
+
+ENERGY_STRIDE = 10
+#: every ``RunPurpose``
+PURPOSES = {
+    "pulse": Purpose(lambda fields: "theta" if "theta" in fields else "strain", passage=True, width=True),
+    "front": Purpose(lambda fields: fields[0], passage=True),
+    "energy": Purpose(lambda fields: fields[0], energies=True),
+}
+
+
 def parse_analysis(spec: str | None) -> AnalysisRequest | None:
     """``pulse``, ``pulse:theta``, ``front:u``, ``energy``, ``none`` (or None) -> request; a
     ConfigError naming ``--analysis``, the field and what was expected otherwise."""
@@ -30,11 +53,7 @@ def parse_analysis(spec: str | None) -> AnalysisRequest | None:
 
 def default_field(request: AnalysisRequest, model_fields: tuple[str, ...]) -> str:
     """The dataset field an analysis reads: its own, else θ for pulses, else strain of u."""
-    if request.field:
-        return request.field
-    if request.kind == "pulse" and "theta" in model_fields:
-        return "theta"
-    return "strain" if request.kind == "pulse" else model_fields[0]
+    return request.field or PURPOSES[request.kind].field(model_fields)
 
 
 def _stored(field: str, model_fields: tuple[str, ...]) -> tuple[list[str], bool]:
@@ -63,22 +82,21 @@ def output_plan(scene, request: AnalysisRequest | None, model_fields: tuple[str,
     out = scene.output
     user = scene.output.model_fields_set if user is None else user
     upd, notes = {}, []
+    purpose = PURPOSES[request.kind]
     fld = default_field(request, model_fields)
-    fields, rates = _stored(fld, model_fields)
-    if request.kind == "energy":
-        fields, rates = [model_fields[0]], False
+    fields, rates = ([model_fields[0]], False) if purpose.energies else _stored(fld, model_fields)
     if "fields" not in user and set(fields) != set(out.fields or model_fields):
         upd["fields"] = fields
     if "velocities" not in user and out.velocities != rates:
         upd["velocities"] = rates
-    if request.kind == "energy" and "site_stride" not in user:
-        upd["site_stride"] = max(1, out.site_stride, 10)
-    if passage_s and not ({"n_frames", "every_s"} & user) and request.kind in ("pulse", "front"):
+    if purpose.energies and "site_stride" not in user:
+        upd["site_stride"] = max(1, out.site_stride, ENERGY_STRIDE)
+    if passage_s and not ({"n_frames", "every_s"} & user) and purpose.passage:
         n = math.ceil(scene.solver.duration_s / (passage_s / FRAMES_PER_PASSAGE)) + 1
         n = min(max(n, MIN_FRAMES), MAX_FRAMES)
         if n != out.n_frames:
             upd["n_frames"] = n
-    if width_sites and "site_stride" not in user and request.kind == "pulse":
+    if width_sites and "site_stride" not in user and purpose.width:
         stride = max(1, int(width_sites // SITES_PER_WIDTH))
         if stride != out.site_stride:
             upd["site_stride"] = stride
@@ -87,7 +105,7 @@ def output_plan(scene, request: AnalysisRequest | None, model_fields: tuple[str,
                      + ", ".join(f"output.{k} = {v}" for k, v in upd.items()))
     else:
         notes.append(f"analysis {request}: output as declared already fits")
-    if not passage_s and request.kind in ("pulse", "front"):
+    if not passage_s and purpose.passage:
         notes.append("pulse duration unknown before the run: output cadence kept")
     return upd, notes
 

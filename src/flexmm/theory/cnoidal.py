@@ -129,31 +129,47 @@ def _real_band(a, e1, e2, e3, e4):
     return m, rate, 2 * float(special.ellipk(min(max(m, 0.0), 1.0))) / rate
 
 
-def _profile(w: CnoidalWave, zeta: np.ndarray) -> np.ndarray:
-    a, hi, lo = 0.5 * w.coefficients[3], w.crest, w.trough
-    r3, r4 = _remove(w.roots, (hi, lo))
-    if w.kind == "complex":
-        b, d = r3.real, abs(r3.imag)
-        A, B = math.hypot(hi - b, d), math.hypot(lo - b, d)
-        K = float(special.ellipk(w.m))
-        _, cn, _, _ = special.ellipj(math.sqrt(-a * A * B) * zeta + 2 * K, w.m)  # cn = -1 at the crest
-        return ((lo * A + hi * B) + (lo * A - hi * B) * cn) / ((A + B) + (A - B) * cn)
-    r3, r4 = sorted((r3.real, r4.real), reverse=True)
+def _complex(w: CnoidalWave, a: float, r3: complex, r4: complex, zeta: np.ndarray) -> np.ndarray:
+    """The profile of a wave whose other two roots are complex."""
+    hi, lo = w.crest, w.trough
+    b, d = r3.real, abs(r3.imag)
+    A, B = math.hypot(hi - b, d), math.hypot(lo - b, d)
     K = float(special.ellipk(w.m))
-    if w.kind == "inner":
-        e1, e2, e3, e4 = r3, hi, lo, r4
-        sn, _, _, _ = special.ellipj(0.5 * math.sqrt(a * (e1 - e3) * (e2 - e4)) * zeta + K, w.m)
-        s2 = sn * sn
-        return (e3 * (e2 - e4) - e4 * (e2 - e3) * s2) / ((e2 - e4) - (e2 - e3) * s2)
-    if w.kind == "real":
-        e1, e2, e3, e4, sign = hi, lo, r3, r4, 1.0
-    else:  # real_reflected: theta = -psi, psi in [-hi, -lo]
-        e1, e2, e3, e4, sign = -lo, -hi, -r4, -r3, -1.0
-    _, rate, _ = _real_band(a, e1, e2, e3, e4)
-    shift = K if sign > 0 else 0.0  # crest of theta: psi = e1 (sn^2 = 1) or psi = e2 (sn = 0)
-    sn, _, _, _ = special.ellipj(rate * zeta + shift, w.m)
+    _, cn, _, _ = special.ellipj(math.sqrt(-a * A * B) * zeta + 2 * K, w.m)  # cn = -1 at the crest
+    return ((lo * A + hi * B) + (lo * A - hi * B) * cn) / ((A + B) + (A - B) * cn)
+
+
+def _inner(w: CnoidalWave, a: float, r3: complex, r4: complex, zeta: np.ndarray) -> np.ndarray:
+    """The profile of a wave in the band between the two other real roots."""
+    r3, r4 = sorted((r3.real, r4.real), reverse=True)
+    e1, e2, e3, e4 = r3, w.crest, w.trough, r4
+    sn, _, _, _ = special.ellipj(0.5 * math.sqrt(a * (e1 - e3) * (e2 - e4)) * zeta + float(special.ellipk(w.m)), w.m)
     s2 = sn * sn
-    return sign * (e2 * (e1 - e3) - e3 * (e1 - e2) * s2) / ((e1 - e3) - (e1 - e2) * s2)
+    return (e3 * (e2 - e4) - e4 * (e2 - e3) * s2) / ((e2 - e4) - (e2 - e3) * s2)
+
+
+def _band(sign: float):
+    """The profile of a wave in the a < 0 band above the two other real roots (``sign`` −1: the
+    reflected band, theta = −psi with psi in [−crest, −trough])."""
+    def profile(w: CnoidalWave, a: float, r3: complex, r4: complex, zeta: np.ndarray) -> np.ndarray:
+        r3, r4 = sorted((r3.real, r4.real), reverse=True)
+        hi, lo = w.crest, w.trough
+        e1, e2, e3, e4 = (hi, lo, r3, r4) if sign > 0 else (-lo, -hi, -r4, -r3)
+        _, rate, _ = _real_band(a, e1, e2, e3, e4)
+        shift = float(special.ellipk(w.m)) if sign > 0 else 0.0  # crest of theta: psi = e1 (sn^2 = 1) or e2 (sn = 0)
+        sn, _, _, _ = special.ellipj(rate * zeta + shift, w.m)
+        s2 = sn * sn
+        return sign * (e2 * (e1 - e3) - e3 * (e1 - e2) * s2) / ((e1 - e3) - (e1 - e2) * s2)
+    return profile
+
+
+#: a wave's ``kind`` -> its ``profile(wave, a, r3, r4, zeta)`` (r3, r4: the roots other than crest and trough)
+PROFILES = {"complex": _complex, "inner": _inner, "real": _band(1.0), "real_reflected": _band(-1.0)}
+
+
+def _profile(w: CnoidalWave, zeta: np.ndarray) -> np.ndarray:
+    r3, r4 = _remove(w.roots, (w.crest, w.trough))
+    return PROFILES[w.kind](w, 0.5 * w.coefficients[3], r3, r4, zeta)
 
 
 # ---------------------------------------------------------------- driven waves of the rotating chain

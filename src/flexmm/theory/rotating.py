@@ -422,23 +422,27 @@ def cnoidal_wave(p: RotatingChainND, c: float, m: float, kind: str, zeta):
     if not 0 <= m <= 1:
         raise ValueError(f"elliptic parameter m must be in [0, 1], got {m}")
     C1, _, C3 = continuum_coefficients(p, c)
-    if kind in ("dn", "cn"):
-        if not (C1 > 0 and C3 < 0):
-            raise ValueError(f"{kind} waves need C1 > 0 and C3 < 0, got C1={C1:.3g}, C3={C3:.3g}")
-        if kind == "cn" and not m > 0.5:
-            raise ValueError("cn waves need m > 1/2")
-        denom = 2 - m if kind == "dn" else 2 * m - 1
-        k2, P2 = C1 / denom, -2 * (1 if kind == "dn" else m) * C1 / (denom * C3)
-    elif kind == "sn":
-        if not (C1 < 0 and C3 > 0):
-            raise ValueError(f"sn waves need C1 < 0 and C3 > 0, got C1={C1:.3g}, C3={C3:.3g}")
-        k2, P2 = -C1 / (1 + m), -2 * m * C1 / ((1 + m) * C3)
-    else:
+    if kind not in CNOIDAL:
         raise ValueError(f"kind must be 'dn', 'cn' or 'sn', got {kind!r}")
+    focusing, m_above, k2_P2, periods, which = CNOIDAL[kind]
+    if not ((C1 > 0 and C3 < 0) if focusing else (C1 < 0 and C3 > 0)):
+        signs = "C1 > 0 and C3 < 0" if focusing else "C1 < 0 and C3 > 0"
+        raise ValueError(f"{kind} waves need {signs}, got C1={C1:.3g}, C3={C3:.3g}")
+    if not m > m_above:
+        raise ValueError(f"{kind} waves need m > 1/2")
+    k2, P2 = k2_P2(C1, C3, m)
     k = math.sqrt(k2)
-    sn, cn, dn, _ = special.ellipj(k * np.asarray(zeta, dtype=float), m)
-    per = (2.0 if kind == "dn" else 4.0) * float(special.ellipk(m)) / k
-    return math.sqrt(P2) * {"dn": dn, "cn": cn, "sn": sn}[kind], per
+    jacobi = special.ellipj(k * np.asarray(zeta, dtype=float), m)  # sn, cn, dn, ph
+    return math.sqrt(P2) * jacobi[which], periods * float(special.ellipk(m)) / k
+
+
+#: ``cnoidal_wave``'s kinds: (C1 > 0 and C3 < 0 (else the opposite signs), m must exceed,
+#: (C1, C3, m) -> (k², P²), wavelength in K(m)/k, index of the Jacobi function in (sn, cn, dn))
+CNOIDAL = {
+    "dn": (True, -1.0, lambda C1, C3, m: (C1 / (2 - m), -2 * 1 * C1 / ((2 - m) * C3)), 2.0, 2),
+    "cn": (True, 0.5, lambda C1, C3, m: (C1 / (2 * m - 1), -2 * m * C1 / ((2 * m - 1) * C3)), 4.0, 1),
+    "sn": (False, -1.0, lambda C1, C3, m: (-C1 / (1 + m), -2 * m * C1 / ((1 + m) * C3)), 4.0, 0),
+}
 
 
 def _kq(p: RotatingChainND, q):
