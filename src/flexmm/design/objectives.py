@@ -185,7 +185,7 @@ TERMS = {
     "arrival_time": TermKind("s", "time_s", of_energy=_arrival),
     "energy_share": TermKind("1", None, shares=True),
 }
-UNITS = {name: kind.units for name, kind in TERMS.items()}
+UNITS = {name: term.units for name, term in TERMS.items()}
 
 
 def bind_terms(terms: list[Term], system) -> tuple[list[BoundTerm], np.ndarray]:

@@ -17,11 +17,17 @@ from flexmm.units import Scales
 
 @dataclass(frozen=True)
 class FieldSpec:
-    """One generalised coordinate per site: its name, kind ('length'/'angle') and long name."""
+    """One generalised coordinate per site: its name, kind ('length'/'angle'), long name and, for
+    a displacement, the axis it moves along ('x', 'y'): the roles ``System`` reads from them."""
 
     name: str
     kind: str
     long_name: str
+    axis: str | None = None
+
+
+#: the axis normal to each end of a lattice
+END_AXES = {"left": "x", "right": "x", "bottom": "y", "top": "y"}
 
 
 @dataclass(frozen=True)
@@ -164,14 +170,6 @@ class System:
     extra_dofs: dict[str, tuple[int, str]] = field(default_factory=dict)
     ends: dict[str, list[int]] = field(default_factory=dict)
     """End name ('left', 'right', 'bottom', 'top') -> its site indices (excitations, loads, fixed ends)."""
-    longitudinal_field: str = "u"
-    """Field along x: default field of ends, kicks and drives; dashpots and friction act on it."""
-    rotation_field: str | None = None
-    """Field of the unit rotations [rad]; None for models without rotations."""
-    axis_fields: dict[str, str] = field(default_factory=dict)
-    """Axis ('x', 'y') -> displacement field along it; filled with {'x': longitudinal_field} if empty."""
-    end_fields: dict[str, str] = field(default_factory=dict)
-    """End name -> the field normal to that end (drives, loads); ends not listed get longitudinal_field."""
     omega_ref: float = 1.0
     """Reference angular frequency (nondimensional) that viscous damping ratios are relative to."""
     grid_shape: tuple[int, int] | None = None
@@ -198,9 +196,20 @@ class System:
     """The lattice vectors and link shifts of a network with periodic boundaries (its links wrap: the
     Bloch cell of ``linear.network``); None for a network without, and for other models."""
 
-    def __post_init__(self) -> None:
-        if not self.axis_fields:
-            self.axis_fields = {"x": self.longitudinal_field}
+    @property
+    def axis_fields(self) -> dict[str, str]:
+        """Axis ('x', 'y') -> the displacement field along it (``FieldSpec.axis``)."""
+        return {f.axis: f.name for f in self.fields if f.axis is not None}
+
+    @property
+    def longitudinal_field(self) -> str:
+        """Field along x: default field of ends, kicks and drives; dashpots and friction act on it."""
+        return self.axis_fields["x"]
+
+    @property
+    def rotation_field(self) -> str | None:
+        """Field of the unit rotations [rad] (the angle field); None for models without rotations."""
+        return next((f.name for f in self.fields if f.kind == "angle"), None)
 
     def unit_shapes(self) -> UnitShapes | None:
         """``shapes``, made on first use."""
@@ -264,8 +273,9 @@ class System:
         return self.mass.shape[0]
 
     def end_field(self, end: str) -> str:
-        """The field normal to ``end`` (``end_fields``, else the longitudinal field)."""
-        return self.end_fields.get(end, self.longitudinal_field)
+        """The field normal to ``end`` (drives, loads): the displacement along its axis
+        (``END_AXES``), else the longitudinal field."""
+        return self.axis_fields.get(END_AXES.get(end, "x"), self.longitudinal_field)
 
     def field_index(self, name: str) -> int:
         for k, f in enumerate(self.fields):

@@ -31,7 +31,7 @@ from flexmm.models.mass_topology import Topology, build_topology
 from flexmm.models.variation import mass_values
 from flexmm.units import Scales
 
-FIELDS = (FieldSpec("u", "length", "displacement"),)
+FIELDS = (FieldSpec("u", "length", "displacement", "x"),)
 
 
 def _law_slots(cfg, topo: Topology) -> list[tuple[str, object, np.ndarray]]:
@@ -206,7 +206,7 @@ def build(cfg) -> System:
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=sc, mass=mass, inv_mass=inv_mass,
         args=args, q0=np.zeros(n), v0=np.zeros(n),
         spacing_m=cfg.spacing_m, site_coords=topo.coords,
-        ends=topo.ends, longitudinal_field="u", omega_ref=1.0,
+        ends=topo.ends,
         grid_shape=None if nx_ny is None else (nx_ny[1], nx_ny[0]),
         neighbour_pairs=topo.bonds, site_groups=topo.groups,
         friction=friction,

@@ -32,8 +32,8 @@ from flexmm.models.rotating_sheet import edge_sites, hold_fixed_ends
 from flexmm.units import Scales
 
 FIELDS = (
-    FieldSpec("u", "length", "displacement along x"),
-    FieldSpec("v", "length", "displacement along y"),
+    FieldSpec("u", "length", "displacement along x", "x"),
+    FieldSpec("v", "length", "displacement along y", "y"),
     FieldSpec("theta", "angle", "rotation"),
 )
 COORD_ATTRS = {"row": ("1", "row index of the unit"), "col": ("1", "column index of the unit")}
@@ -455,8 +455,7 @@ def build(cfg: RigidNetwork) -> System:
         model=cfg.kind, fields=FIELDS, n_sites=n, scales=Scales(a, math.sqrt(m / kl), m),
         mass=mass, inv_mass=inv_mass, args=args, q0=np.zeros(3 * n), v0=np.zeros(3 * n),
         spacing_m=spacing, site_coords=coords,
-        ends=ends, rotation_field="theta", axis_fields={"x": "u", "y": "v"},
-        end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
+        ends=ends,
         grid_shape=(cfg.n_rows, cfg.n_cols) if cfg.n_rows > 1 and net.full_grid else None,
         site_coord_attrs=attrs, site_groups=groups,
         neighbour_pairs=np.stack([ua[pairs], ub[pairs]], 1),

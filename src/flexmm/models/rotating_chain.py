@@ -24,10 +24,11 @@ from flexmm.models.hinge import (
     S_KR,
     S_THETA0,
 )
+from flexmm.models.rotating_sheet import hold_fixed_ends
 from flexmm.units import Scales
 
 FIELDS = (
-    FieldSpec("u", "length", "longitudinal displacement"),
+    FieldSpec("u", "length", "longitudinal displacement", "x"),
     FieldSpec("theta", "angle", "staggered rotation"),
 )
 
@@ -131,28 +132,12 @@ def build(cfg: RotatingSquaresChain) -> System:
     if cfg.variation:
         args, mass, x = varied_tables(cfg)
     inv_mass = 1.0 / mass
-    for end, site in (("left", 0), ("right", n - 1)):
-        if getattr(cfg, end) == "fixed":
-            inv_mass[[site, n + site]] = 0.0
+    ends = {"left": [0], "right": [n - 1]}
+    hold_fixed_ends(cfg, inv_mass, ends, n, n_fields=2)
     spacing = cfg.a_m * math.cos(cfg.theta0_rad)
-    system = System(
-        model=cfg.kind,
-        fields=FIELDS,
-        n_sites=n,
-        scales=scales,
-        mass=mass,
-        inv_mass=inv_mass,
-        args=args,
-        q0=np.zeros(2 * n),
-        v0=np.zeros(2 * n),
-        spacing_m=spacing,
-        site_coords={"x": x},
-        shapes=partial(chain_shapes, args, x / cfg.a_m, cfg.n_lateral),
-        ends={"left": [0], "right": [n - 1]},
-        longitudinal_field="u",
-        rotation_field="theta",
-        omega_ref=1.0,
-    )
+    system = System(model=cfg.kind, fields=FIELDS, n_sites=n, scales=scales, mass=mass, inv_mass=inv_mass, args=args,
+                    q0=np.zeros(2 * n), v0=np.zeros(2 * n), spacing_m=spacing, site_coords={"x": x},
+                    shapes=partial(chain_shapes, args, x / cfg.a_m, cfg.n_lateral), ends=ends)
     if cfg.predeform is not None:
         predeform.relax(system, cfg.predeform)
     return system

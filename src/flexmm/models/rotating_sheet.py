@@ -33,8 +33,8 @@ from flexmm.models.sheet_kernels import SheetArgs
 from flexmm.units import Scales
 
 FIELDS = (
-    FieldSpec("u", "length", "displacement along x"),
-    FieldSpec("v", "length", "displacement along y"),
+    FieldSpec("u", "length", "displacement along x", "x"),
+    FieldSpec("v", "length", "displacement along y", "y"),
     FieldSpec("theta", "angle", "staggered rotation"),
 )
 COORD_ATTRS = {"row": ("1", "row index of the unit"), "col": ("1", "column index of the unit")}
@@ -169,11 +169,6 @@ def build(cfg: RotatingSquaresSheet) -> System:
         spacing_m=spacing,
         site_coords={"x": col * spacing, "y": row * spacing, "row": row, "col": col},
         ends=ends,
-        longitudinal_field="u",
-        rotation_field="theta",
-        axis_fields={"x": "u", "y": "v"},
-        end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
-        omega_ref=1.0,
         grid_shape=(nr, nc),
         site_coord_attrs=COORD_ATTRS,
         neighbour_pairs=np.stack([ha[horiz], hb[horiz]], 1),

@@ -28,8 +28,8 @@ from flexmm.models.variation import parameter_arrays
 from flexmm.units import Scales
 
 FIELDS = (
-    FieldSpec("u", "length", "displacement along x"),
-    FieldSpec("v", "length", "displacement along y"),
+    FieldSpec("u", "length", "displacement along x", "x"),
+    FieldSpec("v", "length", "displacement along y", "y"),
     FieldSpec("theta", "angle", "staggered rotation"),
 )
 COORD_ATTRS = {"row": ("1", "row index of the triangle"), "col": ("1", "column index of the triangle")}
@@ -129,8 +129,7 @@ def _build(cfg, n_rows: int, n_cols: int, ends: dict[str, list[int]]) -> System:
         spacing_m=a * math.cos(cfg.theta0_rad),
         # a chain keeps x only: its centroids' zig-zag (y = ±d/4) is no second row of sites
         site_coords={"x": x * a} | ({"y": y * a, "row": row, "col": col} if n_rows > 1 else {}),
-        ends=ends, rotation_field="theta", axis_fields={"x": "u", "y": "v"},
-        end_fields={"left": "u", "right": "u", "bottom": "v", "top": "v"},
+        ends=ends,
         grid_shape=(n_rows, n_cols) if n_rows > 1 else None,
         site_coord_attrs=COORD_ATTRS if n_rows > 1 else {},
         neighbour_pairs=np.stack([net.unit_a[rows], net.unit_b[rows]], 1),

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Callable, Mapping
+from functools import partial
 
 import numpy as np
 
@@ -39,41 +40,26 @@ def noise(v, n: int) -> np.ndarray:
 
 
 def _ramp(v, line: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(new value, selected) per site of a Gradient entry: as np.linspace over first..last (exact
-    ``start`` at first and ``end`` at last)."""
-    first = v.first or 0
-    last = size - 1 if v.last is None else v.last
+    """(new value, selected) per site of a Gradient entry: as np.linspace over first..last."""
+    first, last = v.first or 0, size - 1 if v.last is None else v.last
     ramp = np.where(line == last, v.end, (line - first) * ((v.end - v.start) / (last - first)) + v.start)
     return ramp, (line >= first) & (line <= last)
 
 
-def _step(v, line: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(new value, selected) per site of an Interface entry."""
-    return np.full(line.shape, float(v.value)), line >= v.position
-
-
-def _on_lines(profile):
-    """The rule of an entry that sets sites by their line (``profile``: ``_ramp``, ``_step``)."""
-    def rule(v, old, col, row, pair):
-        line = row if v.axis == "y" else col
-        new, sel = profile(v, line, int(line.max()) + 1)
-        if pair is None:
-            return np.where(sel, new, old)
-        a, b = pair
-        return 0.5 * (np.where(sel[a], new[a], old) + np.where(sel[b], new[b], old))
-    return rule
-
-
-def _random(v, old, col, row, pair):
-    eps = noise(v, old.size)
-    return old + eps if v.std is not None else old * (1.0 + eps)
+def _on_lines(profile, v, old, col, row, pair):
+    """An entry that sets sites by their line; ``profile(v, line, size) -> (new value, selected)``."""
+    line = row if v.axis == "y" else col
+    new, sel = profile(v, line, int(line.max()) + 1)
+    if pair is None:
+        return np.where(sel, new, old)
+    return 0.5 * (np.where(sel[pair[0]], new[pair[0]], old) + np.where(sel[pair[1]], new[pair[1]], old))
 
 
 def _values(v, old, col, row, pair):
     if len(v.values) != old.size:
-        element = "site" if pair is None else "bond (hinge)"
         raise ValueError(f"a variation of kind values lists {len(v.values)} values for {v.target}; the lattice "
-                         f"has {old.size} elements of it (one value per {element}, in element order)")
+                         f"has {old.size} elements of it (one value per {'site' if pair is None else 'bond (hinge)'}"
+                         ", in element order)")
     return np.array(v.values, float)
 
 
@@ -90,8 +76,14 @@ def _defects(v, old, col, row, pair):
 
 
 #: entry kind -> ``rule(entry, old, col, row, pair)``: the values of one target after the entry
-RULES = {"gradient": _on_lines(_ramp), "interface": _on_lines(_step), "random": _random, "values": _values,
-         "defects": _defects}
+RULES = {
+    "gradient": partial(_on_lines, _ramp),
+    "interface": partial(_on_lines, lambda v, line, size: (np.full(line.shape, float(v.value)), line >= v.position)),
+    "random": lambda v, old, col, row, pair: (old + noise(v, old.size) if v.std is not None
+                                              else old * (1.0 + noise(v, old.size))),
+    "values": _values,
+    "defects": _defects,
+}
 
 
 def vary(v, old: np.ndarray, col: np.ndarray, row: np.ndarray, pair) -> np.ndarray:
