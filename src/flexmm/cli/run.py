@@ -167,9 +167,10 @@ def _print_summary(path, analysis: str | None = None) -> None:
     from flexmm.analysis.report.summary import principal, summary_lines
     from flexmm.cli.common import analysis_request
     from flexmm.plan.continuum import alongside
+    from flexmm.plan.output import PURPOSES
 
     request = analysis_request(analysis)
-    if request is not None and request.kind == "energy":
+    if request is not None and PURPOSES[request.kind].energies:  # a run for its energies: nothing to measure
         return
     kind = request.kind if request is not None else "auto"
     res, why = report.measure_run(path, kind=kind, field_spec=request.field if request else None)
