@@ -49,7 +49,7 @@ class ModelSpec:
       (``models.launch_chains``);
     - ``topology``: ``topology(cfg) -> models.mass_topology.Topology`` of a lattice of point masses
       (sites, bonds, ends; the renderer draws such a kind as masses); None for rigid units;
-    - ``hinges``: ``hinges(cfg) -> (a, b, axis, wrap)``, the hinges of a lattice of rotating units
+    - ``hinges``: ``hinges(cfg) -> (a, b, axis)``, the hinges of a lattice of rotating units
       in its builder's order (design variables and drawing read them without building);
     - ``elements``: ``elements(cfg) -> {target: count}``, the per-element targets of its
       ``variation`` (a design's ``profile: each``);

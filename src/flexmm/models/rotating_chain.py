@@ -43,8 +43,8 @@ def nondimensional(cfg: RotatingSquaresChain) -> dict[str, float]:
 
 
 def theory_parameters(cfg: RotatingSquaresChain):
-    """The chain's ``theory.rotating.RotatingChainND`` (docs/physics.md §1.1): what its soliton
-    launcher and the analysis' theory read."""
+    """The chain's ``theory.rotating.RotatingChainND`` (docs/physics.md §1.1), from its config:
+    what its soliton launcher reads."""
     from flexmm.theory.rotating import RotatingChainND
 
     return RotatingChainND(theta0=cfg.theta0_rad, n_v=cfg.n_lateral, s_v=int(cfg.lateral_stretch), **nondimensional(cfg))
