@@ -72,6 +72,34 @@ def _speed_theory(ctx, units: str, amplitude: float) -> float:
     return float(speed_at(ctx.config, units, [amplitude])[0])
 
 
+def _pulse(a, p) -> dict:
+    out = dict(speed=p.speed_m_s, speed_stderr=p.speed_stderr_m_s, amplitude=p.amplitude, width=p.fwhm_m,
+               n_sites_fitted=float(p.n_sites_fitted), speed_theory=_speed_theory(a.ctx, p.units, p.amplitude),
+               n_collisions=float(len(a.collisions)), formation_distance=p.formation_distance_m,
+               amplitude_min=p.amplitude_min, amplitude_max=p.amplitude_max, breathing_period=p.breathing_period_s)
+    if a.collisions:
+        c = a.collisions[0]
+        out.update(collision_shift=c.shift_a_m, collision_delay=c.delay_a_s,
+                   collision_amplitude_change=c.amplitude_change_a, collision_speed_change=c.speed_change_a,
+                   collision_passed={"passed through": 1.0, "reflected": 0.0}.get(c.outcome, math.nan))
+    return out
+
+
+def _front(a, f) -> dict:
+    out = dict(speed=f.speed_m_s, speed_stderr=f.speed_stderr_m_s, amplitude=f.jump, width=f.width_10_90_m,
+               n_sites_fitted=float(f.n_switched))
+    return out | ({"note": f"front arrested after {f.distance_m:.4g} m"} if f.arrested else {})
+
+
+#: analysis kind -> ``record(analysis, principal feature) -> observables`` of a point
+RECORDS = {
+    "pulse": _pulse,
+    "front": _front,
+    "modes": lambda a, g: dict(speed=g.speed_m_s),  # oblique plane waves: the fastest group
+    "driven": lambda a, d: dict(amplitude=d.amplitude_far, transmission=d.transmission),
+}
+
+
 def _full(ds, kind: str, opts) -> dict:
     from flexmm.analysis import FieldError, FrontNotFound, NotDriven, PulseNotFound
     from flexmm.analysis.measure.oblique import NoWaveGroups
@@ -84,26 +112,7 @@ def _full(ds, kind: str, opts) -> dict:
         return _nan_result(kind, opts.field or "", "", f"no {kind}: {exc}")
     out = _nan_result(a.kind, a.view.spec, a.view.units, "")
     item, m = principal(a)  # the feature flexmm run prints and analyze lists
-    if a.kind == "pulse":
-        out.update(speed=m.speed_m_s, speed_stderr=m.speed_stderr_m_s, amplitude=m.amplitude,
-                   width=m.fwhm_m, n_sites_fitted=float(m.n_sites_fitted),
-                   speed_theory=_speed_theory(a.ctx, m.units, m.amplitude), n_collisions=float(len(a.collisions)),
-                   formation_distance=m.formation_distance_m, amplitude_min=m.amplitude_min,
-                   amplitude_max=m.amplitude_max, breathing_period=m.breathing_period_s)
-        if a.collisions:
-            c = a.collisions[0]
-            out.update(collision_shift=c.shift_a_m, collision_delay=c.delay_a_s,
-                       collision_amplitude_change=c.amplitude_change_a, collision_speed_change=c.speed_change_a,
-                       collision_passed={"passed through": 1.0, "reflected": 0.0}.get(c.outcome, math.nan))
-    elif a.kind == "front":
-        out.update(speed=m.speed_m_s, speed_stderr=m.speed_stderr_m_s, amplitude=m.jump,
-                   width=m.width_10_90_m, n_sites_fitted=float(m.n_switched))
-        if m.arrested:
-            out["note"] = f"front arrested after {m.distance_m:.4g} m"
-    elif a.kind == "modes":  # oblique plane waves: the fastest group
-        out.update(speed=m.speed_m_s)
-    else:
-        out.update(amplitude=m.amplitude_far, transmission=m.transmission)
+    out.update(RECORDS[a.kind](a, m))
     for c in a.comparisons:
         if c.item == item and c.quantity == "speed" and c.predicted is not None and math.isnan(out["speed_theory"]):
             out["speed_theory"] = float(c.predicted)
