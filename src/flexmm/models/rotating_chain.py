@@ -47,7 +47,8 @@ def theory_parameters(cfg: RotatingSquaresChain):
     what its soliton launcher reads."""
     from flexmm.theory.rotating import RotatingChainND
 
-    return RotatingChainND(theta0=cfg.theta0_rad, n_v=cfg.n_lateral, s_v=int(cfg.lateral_stretch), **nondimensional(cfg))
+    return RotatingChainND.from_si(cfg.a_m, cfg.theta0_rad, cfg.k_long_n_per_m, cfg.k_shear_n_per_m, cfg.k_rot_n_m_per_rad,
+                                   cfg.mass_kg, cfg.inertia_kg_m2, cfg.n_lateral, int(cfg.lateral_stretch))
 
 
 def hinge_pairs(n: int, periodic: bool = False) -> tuple[np.ndarray, np.ndarray]:

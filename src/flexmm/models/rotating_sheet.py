@@ -206,9 +206,8 @@ def theory_parameters(cfg: RotatingSquaresSheet):
     s_v = 1 (docs/physics.md §1.2)."""
     from flexmm.theory.rotating import RotatingChainND
 
-    m, J, kl, a = cfg.unit_mass_kg, cfg.unit_inertia_kg_m2, cfg.k_long_n_per_m, cfg.a_m
-    return RotatingChainND(theta0=cfg.theta0_rad, Ks=cfg.k_shear_n_per_m / kl, Ktheta=cfg.k_rot_n_m_per_rad / (kl * a * a),
-                           alpha2=J / (m * a * a), n_v=2, s_v=1)
+    return RotatingChainND.from_si(cfg.a_m, cfg.theta0_rad, cfg.k_long_n_per_m, cfg.k_shear_n_per_m,
+                                   cfg.k_rot_n_m_per_rad, cfg.unit_mass_kg, cfg.unit_inertia_kg_m2, 2, 1)
 
 
 def launch_soliton(system: System, cfg: RotatingSquaresSheet, amplitude: float, center: int, direction: int) -> None:
