@@ -53,9 +53,10 @@ def params(ctx) -> tuple[rt.RotatingChainND, float, float]:
 def _prestressed(ctx, p: rt.RotatingChainND) -> rt.RotatingChainND:
     """The predeformed chain about its rest rotation θ_s in the middle (flexmm.theory.prestressed)."""
     from flexmm.analysis.features.rest import rest_fields
+    from flexmm.config.lattice import MODELS
     from flexmm.theory.prestressed import prestressed_chain
 
-    if ctx.scene().lattice.kind != "rotating_squares_chain":
+    if not MODELS[ctx.scene().lattice.kind].soliton_on_predeformed:  # the kinds that know the prestressed theory
         raise ValueError("the prestressed theory is for the chain only")
     theta = rest_fields(ctx)["theta"]
     return prestressed_chain(p, float(theta[theta.size // 2]))
