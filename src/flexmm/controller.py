@@ -114,7 +114,7 @@ class RunResult:
 @dataclass(frozen=True)
 class Schedule:
     """Step and frames of a run: ``h`` the step used, ``chunks`` the steps between successive
-    frames, ``interval`` the frame interval (nondimensional), ``notes`` what was rounded and why."""
+    frames, ``interval`` the frame interval (nondimensional), ``notes`` the changes made to land the frames on their times (``schedule``)."""
 
     h: float
     chunks: list[int]
