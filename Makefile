@@ -29,15 +29,23 @@ SITE_DIR ?= runs/site
 SWEEP_WORKERS ?= $(if $(filter -j%,$(MAKEFLAGS)),1,0)
 
 .DELETE_ON_ERROR:
-.PHONY: install demo test test-slow bench clean reproduce figures gallery docs release-check
+.PHONY: install precompile demo test test-slow bench clean reproduce figures gallery docs release-check
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test,dask,mp4]'
+	@echo "compiling the demo's kernels for this processor (once: ~30 s of CPU, cached in ~/.cache/flexmm/numba)"
+	$(BIN)/flexmm plan configs/lego_vector_soliton.yaml > $(VENV)/precompile.log 2>&1 || (cat $(VENV)/precompile.log; exit 1)
+	rm -f $(VENV)/precompile.log
 	touch $@
 
 install: $(STAMP)
+
+# `make precompile`: compile the kernels of every scene in configs/ now, so that no first run waits
+# for them (`flexmm plan` runs a scene's accuracy pilots, which compile what its run uses)
+precompile: $(STAMP)
+	@for c in $(CONFIGS); do echo "compiling $$c"; $(BIN)/flexmm plan $$c > /dev/null || exit 1; done
 
 demo: $(STAMP)
 	$(BIN)/flexmm run configs/lego_vector_soliton.yaml

@@ -299,11 +299,21 @@ if CACHE_NOTE:
     warnings.warn(f"flexmm: {CACHE_NOTE}", RuntimeWarning, stacklevel=2)
 
 
+_MODULE_DIRS: dict[tuple[Path, str], Path] = {}  # (cache root, module) -> its directory, found once a process
+
+
 def module_cache_dir(module: str) -> Path | None:
     """Where the compiled functions of ``module`` are cached: ``CACHE_DIR/<module>-<module_key>``
-    (its time stamp refreshed), or ``CACHE_DIR`` itself when set by ``NUMBA_CACHE_DIR``."""
+    (its time stamp refreshed), or ``CACHE_DIR`` itself when set by ``NUMBA_CACHE_DIR``.
+
+    Found, refreshed and pruned once per module and process, not once per function: a module
+    holds tens of kernels and the cache root hundreds of directories, and listing them for each
+    kernel cost ~0.4 s of every ``import flexmm.api``."""
     if CACHE_DIR is None or not CACHE_KEYED:
         return CACHE_DIR
+    known = _MODULE_DIRS.get((CACHE_DIR, module))
+    if known is not None:
+        return known
     name = f"{module}-{module_key(module)}"
     path = CACHE_DIR / name
     try:
@@ -312,6 +322,7 @@ def module_cache_dir(module: str) -> Path | None:
     except OSError:
         return None
     prune_cache(CACHE_DIR, keep=lambda d: d == name or not d.startswith(f"{module}-"))  # its other versions
+    _MODULE_DIRS[CACHE_DIR, module] = path
     return path
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from flexmm._signals import absorbed, signal_of
 from flexmm.assemble import Problem
 from flexmm.checkpoint import Checkpoint, CheckpointError, Checkpointing
+from flexmm.frames import frame_times
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.parallel import available_threads
@@ -113,7 +114,7 @@ class RunResult:
 @dataclass(frozen=True)
 class Schedule:
     """Step and frames of a run: ``h`` the step used, ``chunks`` the steps between successive
-    frames, ``interval`` the frame interval (nondimensional), ``notes`` what was rounded and why."""
+    frames, ``interval`` the frame interval (nondimensional), ``notes`` the changes made to land the frames on their times (``schedule``)."""
 
     h: float
     chunks: list[int]
@@ -125,45 +126,26 @@ class Schedule:
         return self.h * sum(self.chunks)
 
 
-def schedule(duration: float, dt: float, n_frames: int, every: float | None, *, exact: bool = False,
-             time_s: float = 1.0) -> Schedule:
-    """Frames at multiples of the step ``dt`` (the step is never bent to the frames).
+def schedule(duration: float, dt: float | None, n_frames: int, every: float | None, *, exact: bool = False,
+             given: bool = False, time_s: float = 1.0) -> Schedule:
+    """The frames of a run and the step that lands on them, in the problem's time unit: the rule of
+    every verb's plan (``flexmm.frames.frame_times``), for a problem run directly (``run_problem``
+    without ``flexmm.prepare``, which has already fitted the step and changes nothing here).
 
-    The frame interval (``every`` or duration/(n_frames − 1)) is rounded to the nearest whole
-    number of steps (at least one) and every frame interval is that long; the duration is rounded
-    up to whole frame intervals (so the frame count may differ from ``n_frames`` by the rounding);
-    both roundings are noted (a step the accuracy pilots chose already divides the interval:
-    ``flexmm.prepare``). ``exact=True`` (``output.exact_frame_times``) instead keeps the frame times and takes the largest step ≤ dt that divides the
-    interval (noted when it differs from dt). ``time_s`` only scales the notes to seconds.
+    Frames at 0, Δ, …, T (Δ = ``every`` or ``duration``/(``n_frames`` − 1)). A step flexmm chose
+    (``given`` False: ``solver.dt_fraction``), or any step with ``exact``, is shortened to the
+    largest that divides Δ — a change, returned in ``notes`` (``run_problem`` prints it and records it
+    in ``plan_changes``); a given step (``solver.dt_s``) that does not divide Δ, or an ``every`` that
+    does not divide the duration, is refused (``PlanError`` naming the nearest valid values): the
+    duration and the frame times are never rounded. ``dt`` None: an adaptive method, one call per
+    frame. ``time_s`` converts to seconds for the rule and its messages.
     """
-    if every is None:
-        every = duration / (n_frames - 1)
-    notes: list[str] = []
-    if exact:
-        spf = max(1, math.ceil(every / dt - 1e-9))
-        h = every / spf
-        if abs(h - dt) > 1e-9 * dt:
-            notes.append(f"step {dt * time_s:.6g} s reduced to {h * time_s:.6g} s so frames fall on whole steps "
-                         f"({spf} steps per frame interval of {every * time_s:.6g} s)")
-        n_full = int(math.floor(duration / every + 1e-9))
-        chunks = [spf] * n_full
-        rest = duration - n_full * every
-        if rest > 1e-9 * every:
-            chunks.append(max(1, round(rest / h)))
-        return Schedule(h, chunks, every, notes)
-    h = dt
-    n_steps = max(1, math.ceil(duration / h - 1e-9))
-    spf = max(1, round(every / h))  # the frame interval: the nearest whole number of steps
-    interval = spf * h
-    if abs(interval - every) > 1e-9 * every:
-        notes.append(f"frame interval {every * time_s:.6g} s rounded to {interval * time_s:.6g} s "
-                     f"= {spf} steps of {h * time_s:.6g} s (output.exact_frame_times: true keeps the frame "
-                     "times and shortens the step instead)")
-    n_int = max(1, math.ceil(n_steps / spf - 1e-9))  # uniform frames; the run ends on the last one
-    if abs(n_int * spf * h - duration) > 1e-9 * duration:
-        notes.append(f"duration {duration * time_s:.6g} s rounded up to {n_int} frame intervals = "
-                     f"{n_int * spf} steps = {n_int * spf * h * time_s:.6g} s")
-    return Schedule(h, [spf] * n_int, interval, notes)
+    frames, changes = frame_times(duration * time_s, n_frames, None if every is None else every * time_s,
+                                  None if dt is None else dt * time_s, given=given, exact=exact)
+    interval = frames.interval_s / time_s
+    if frames.dt_s is None:
+        return Schedule(interval, [1] * (frames.n_frames - 1), interval, changes)
+    return Schedule(frames.dt_s / time_s, [frames.steps_per_frame] * (frames.n_frames - 1), interval, changes)
 
 
 #: the step is reduced when it exceeds this fraction of the current state's stable limit ...
@@ -427,15 +409,12 @@ def run_problem(
     for note in problem.notes:
         say(note)
     every = scene.output.every_s / sc.time_s if scene.output.every_s else None
-    if spec.adaptive:  # one call per frame; the method picks its own steps in between
-        frame_dt = every if every is not None else problem.duration / (scene.output.n_frames - 1)
-        plan = schedule(problem.duration, frame_dt, scene.output.n_frames, every, exact=True)
-    else:
-        plan = schedule(problem.duration, problem.dt, scene.output.n_frames, every,
-                        exact=scene.output.exact_frame_times, time_s=sc.time_s)
+    plan = schedule(problem.duration, None if spec.adaptive else problem.dt, scene.output.n_frames, every,
+                    exact=scene.output.exact_frame_times, given=scene.solver.dt_s is not None, time_s=sc.time_s)
     h, chunks = plan.h, plan.chunks
-    for note in plan.notes:
-        say(note)
+    changes = [f"frames: {note}" for note in plan.notes]  # a problem flexmm.prepare did not fit to its frames
+    for change in changes:
+        say(f"plan: change: {change}")
     n_frames = len(chunks) + 1
     spill = None if checkpoints is None else checkpoints.directory  # an in-memory run's frames, for a checkpoint
     obs = _Observer(problem, run_dir / "dataset.nc", n_frames,
@@ -614,6 +593,7 @@ def run_problem(
         **({"resumed": "\n".join(resumptions), "n_resumptions": len(resumptions)} if resumptions else {}),
         **(extra_attrs or {}),
     }
+    attrs["plan_changes"] = "\n".join(c for c in (attrs.get("plan_changes", ""), *changes) if c)
     # the state the run ended in, which --resume (interrupted) or --extend go on from (a run kept in
     # memory: only when interrupted, its frames then written beside the checkpoint)
     final = (checkpoints is not None and early is None and status != "failed" and stepper.steps == at_frame[0]

@@ -11,7 +11,7 @@ the pilot's step doubling, over the whole run when that is cheap and else extrap
 duration with the error's growth over the pilot (``accuracy.run_estimate``; ``error_check: pilot``,
 the default for the default target, in the plan attrs) or ``accuracy_check(plan, problem)``, the whole run
 repeated at 2 dt after it (``error_check: run``, the default when the scene sets the target or
-the step). Then the frames: the step is fitted to the frame times (``plan.frames``: shortened to
+the step). Then the frames: the step is fitted to the frame times (``flexmm.frames``: shortened to
 divide the frame interval, or the request refused).
 
 ``resolve(scene, fidelity, analysis)`` is the one plan every verb shows — ``validate``, ``plan``,
@@ -34,7 +34,7 @@ from flexmm.integrators import INTEGRATORS
 from flexmm.plan.cost import Cost, estimate
 from flexmm.plan.cost import check_steps as cost_check_steps
 from flexmm.plan.domain import trim_scene
-from flexmm.plan.frames import FrameTimes, frame_times
+from flexmm.frames import FrameTimes, frame_times
 from flexmm.plan.planner import Plan, PlanStep, make_plan, replace_section
 
 
@@ -59,7 +59,7 @@ def prepare(plan: Plan, check_steps: Callable | None = None) -> Problem:
 
 
 def _frames(plan: Plan, problem: Problem) -> FrameTimes:
-    """Fit the step to the frame times (``plan.frames.frame_times``); the plan and problem follow a
+    """Fit the step to the frame times (``flexmm.frames.frame_times``); the plan and problem follow a
     shortened step, and a ``frames`` plan step records the frames and any change."""
     scene, ts = plan.scene, problem.system.scales.time_s
     spec, out = INTEGRATORS[scene.solver.integrator], scene.output

@@ -130,6 +130,22 @@ def test_default_cache_directory_is_one_per_module_keyed_by_its_sources(tmp_path
     assert not stale.exists() and recent.exists() and other.exists()  # only the module's own old versions
 
 
+def test_a_module_cache_directory_is_found_once_per_process(tmp_path, monkeypatch) -> None:
+    """Each kernel of a module asks for its directory; the cache root is listed (pruned) once per
+    module, not once per kernel (hundreds of directories × hundreds of kernels cost ~0.4 s an import)."""
+    from flexmm import _jit
+
+    monkeypatch.setattr(_jit, "CACHE_DIR", tmp_path)
+    monkeypatch.setattr(_jit, "CACHE_KEYED", True)
+    listed = []
+    monkeypatch.setattr(_jit, "prune_cache", lambda root, keep=None: listed.append(root))
+    first = [_jit.module_cache_dir("flexmm.models.hinge") for _ in range(5)]
+    assert first == [tmp_path / f"flexmm.models.hinge-{_jit.module_key('flexmm.models.hinge')}"] * 5
+    assert first[0].is_dir() and len(listed) == 1
+    _jit.module_cache_dir("flexmm.models.laws")
+    assert len(listed) == 2
+
+
 #: every module with compiled kernels, and which of them a change to one module's source must
 #: recompile (read off their imports: the chain laws reach the integrators through
 #: models.kernels; the hinge law reaches the sheet, the loads and the gradient kernels)

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from flexmm.cli import app
 from flexmm.errors import PlanError
-from flexmm.plan.frames import frame_times, interval
+from flexmm.frames import frame_times, interval
 
 LEGO = str(Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml")
 SHORT = ["--set", "lattice.n_units=60", "--set", "solver.duration_s=0.05", "--set", "output.n_frames=51"]

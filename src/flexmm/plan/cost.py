@@ -167,7 +167,7 @@ def _duration(seconds: float) -> str:
 
 def _frames(scene) -> int:
     """Frames saved (``frames.interval``; a request it refuses is counted as rounded up)."""
-    from flexmm.plan.frames import interval
+    from flexmm.frames import interval
 
     out = scene.output
     try:

@@ -2,7 +2,8 @@
 
 A run saves frames at t = 0, Δ, 2Δ, …, T with Δ = ``output.every_s`` or T/(``output.n_frames`` − 1)
 and T = ``solver.duration_s``. A fixed-step method reaches them only with a step that divides Δ, so
-``frame_times(...)`` decides, once, for every verb (``flexmm.prepare.resolve``):
+``frame_times(...)`` decides, once, for every verb (``flexmm.prepare.resolve``) and for a problem run
+without the plan (``controller.schedule``):
 
 - a step flexmm chose (accuracy pilots, ``solver.dt_fraction``), or a given ``solver.dt_s`` with
   ``output.exact_frame_times: true``: the largest step ≤ it that divides Δ — a change of step,
