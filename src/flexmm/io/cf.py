@@ -90,9 +90,7 @@ def describe(ds, previous_history: str | None = None):
 def write_netcdf(ds, path: str | Path, previous_history: str | None = None) -> Path:
     """Write ``ds`` to ``path`` (netCDF4 via h5netcdf) with CF metadata, atomically; its path."""
     from flexmm.io.atomic import atomic_target
-    from flexmm.io.lazy_xarray import xarray
 
-    xarray()  # its dask checks deferred: writing imports no dask
     target = Path(path)
     with atomic_target(target) as tmp:
         describe(ds, previous_history).to_netcdf(tmp, engine="h5netcdf")

@@ -29,7 +29,6 @@ import numpy as np
 
 from flexmm.io.atomic import temporary_name
 from flexmm.io.cf import global_attrs, variable_attrs
-from flexmm.io.lazy_xarray import xarray
 
 #: suffix of the site coordinates holding a run's rest state (``u_rest``, ``theta_rest``)
 REST_SUFFIX = "_rest"
@@ -460,7 +459,7 @@ def estimate_bytes(n_frames: int, n_site: int, n_site_vars: int, n_time_vars: in
 
 def open_run(path: str | Path):
     """Open a run's dataset (a run directory or the .nc file) as an xarray Dataset."""
-    xr = xarray()
+    import xarray as xr
 
     p = Path(path)
     if p.is_dir():
@@ -489,7 +488,7 @@ def load_run_quickly(path: str | Path):
     (what a sweep's points are). Anything else (groups, strings) is read by ``open_run``.
     """
     import h5py
-    xr = xarray()
+    import xarray as xr
 
     p = Path(path)
     if p.is_dir():
@@ -584,7 +583,7 @@ class MemoryWriter:
         self.n_written, self.t_written = n, (t_last if n else None)
 
     def close(self, attrs: dict) -> Path:
-        xr = xarray()
+        import xarray as xr
 
         n, frames = self.n_written, self.frames
         variables = {"time": (("time",), np.array([f[0] for f in frames], float).reshape(n),
