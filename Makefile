@@ -35,9 +35,6 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test,dask,mp4]'
-	@echo "compiling the demo's kernels for this processor (once: ~30 s of CPU, cached in ~/.cache/flexmm/numba)"
-	$(BIN)/flexmm plan configs/lego_vector_soliton.yaml > $(VENV)/precompile.log 2>&1 || (cat $(VENV)/precompile.log; exit 1)
-	rm -f $(VENV)/precompile.log
 	touch $@
 
 install: $(STAMP)
