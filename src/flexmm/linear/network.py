@@ -22,11 +22,13 @@ quads, networks with regions and geometry files keep their whole cell. Nondimens
 from __future__ import annotations
 
 import itertools
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from flexmm.errors import FlexmmError
-from flexmm.linalg import BlochCell, bloch_frequencies, read_cell
+from flexmm.linalg import BlochCell, bloch_eigen, bloch_frequencies, read_cell
 from flexmm.models.ligaments import NetworkArgs, network_hvp
 from flexmm.models.network import build
 
@@ -132,3 +134,53 @@ def band_path(lat, n_points: int = 64) -> dict:
     return {"k_rad_m": k / scales.length_m, "distance_rad_m": distance / scales.length_m,
             "labels": [(d / scales.length_m, name) for d, name in zip(at, names)],
             "frequency_hz": bloch_frequencies(cell, k) / (2 * np.pi * scales.time_s)}
+
+
+def region_medium(lat, region=None):
+    """The uniform, doubly periodic 2 × 2 medium of a generated network (``lat``, a ``RigidNetwork``
+    config) or of one of its regions (``config.network.Region``: its stiffnesses, density, and
+    geometry fields in place of the lattice's): the cell whose long waves a part of the sheet
+    carries. Unit (row, col) of the sheet copies cell unit 2·(row mod 2) + col mod 2."""
+    if lat.geometry is not None or lat.pattern == "random_quads":
+        raise NotPeriodic("a uniform medium is defined for generated patterns only (not a geometry file or random quads)")
+    update = {"n_rows": 2, "n_cols": 2, "left": "periodic", "right": "periodic", "bottom": "periodic",
+              "top": "periodic", "unit_sets": {}, "fixed_units": [], "regions": [], "mask": None}
+    if region is not None:
+        update |= {k: v for k, v in region.model_dump(exclude={"units"}).items() if v is not None}
+    return lat.model_copy(update=update)
+
+
+@dataclass(frozen=True)
+class LongWaveMode:
+    """The long-wave longitudinal Bloch mode along a direction e of a uniform medium
+    (docs/physics.md §1.9, "Long waves of a pre-rotated network"): its speed and impedance ρc (ρ
+    the mass per area; SI), ``band`` its branch at small k, and the unit motions of a slowly
+    varying displacement f(s) along e (s = e·x, f and s in the same length unit): q = ``shape`` f +
+    ``gradient`` df/ds, both (3, n) over the cell's units (u, v, θ; ``shape`` the translation e,
+    ``gradient`` in that unit per unit strain: rad for θ)."""
+
+    speed_m_s: float
+    impedance_kg_per_m_s: float
+    band: int
+    shape: np.ndarray
+    gradient: np.ndarray
+
+
+def long_wave_mode(medium, direction=(1.0, 0.0), dk: float = 1e-3) -> LongWaveMode:
+    """The ``LongWaveMode`` of the periodic network ``medium`` (``region_medium``) along
+    ``direction``: the branch at k = dk·e (1/a) whose mode moves the cell's mass most along e, its
+    mode x(k) normalised to a unit mean translation along e; shape Re x, gradient Im x / dk (the
+    first order in k of x(k) e^{ik·R}: the motion slaved to the strain, e.g. the counter-rotation
+    of pre-rotated squares; relative error O(dk²))."""
+    system = build(cell_lattice(medium))
+    if np.any(system.inv_mass == 0) or system.periodic.vectors.shape[0] != 2:
+        raise NotPeriodic("a long-wave mode needs a cell periodic in x and y with no held DOF")
+    e = np.asarray(direction, float) / math.hypot(*direction)
+    n, mass, sc = system.n_sites, system.mass, system.scales
+    lam, vec = bloch_eigen(network_cell(system), dk * e, vectors=True)
+    push = np.concatenate([e[0] * mass[:n], e[1] * mass[n:2 * n], np.zeros(n)])  # Σ m e·u of a mode
+    band = int(np.argmax(np.abs(push @ vec)))
+    x = vec[:, band] * (mass[:n].sum() / (push @ vec[:, band]))
+    speed = math.sqrt(max(float(lam[band]), 0.0)) / dk * sc.length_m / sc.time_s
+    density = mass[:n].sum() * sc.mass_kg / (abs(float(np.linalg.det(system.periodic.vectors))) * sc.length_m ** 2)
+    return LongWaveMode(speed, float(density * speed), band, x.real.reshape(3, n), (x.imag / dk).reshape(3, n))
