@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexmm.errors import FlexmmError
-from flexmm.linalg import BlochCell, bloch_eigen, bloch_frequencies, read_cell
+from flexmm.linalg import BlochCell, bloch_eigen, bloch_frequencies, bloch_matrices, read_cell
 from flexmm.models.ligaments import NetworkArgs, network_hvp
 from flexmm.models.network import build
 
@@ -184,3 +184,73 @@ def long_wave_mode(medium, direction=(1.0, 0.0), dk: float = 1e-3) -> LongWaveMo
     speed = math.sqrt(max(float(lam[band]), 0.0)) / dk * sc.length_m / sc.time_s
     density = mass[:n].sum() * sc.mass_kg / (abs(float(np.linalg.det(system.periodic.vectors))) * sc.length_m ** 2)
     return LongWaveMode(speed, float(density * speed), band, x.real.reshape(3, n), (x.imag / dk).reshape(3, n))
+
+
+@dataclass(frozen=True)
+class BranchSplit:
+    """A state of a generated sheet decomposed into Bloch waves (``bloch_split``): ``forward`` and
+    ``backward`` (d,) the energy (nondimensional) of each branch running along +e and −e, ``field``
+    (3N,) the displacements of the forward waves of branch ``band`` (None unless asked)."""
+
+    forward: np.ndarray
+    backward: np.ndarray
+    field: np.ndarray | None = None
+
+    @property
+    def total(self) -> float:
+        return float(self.forward.sum() + self.backward.sum())
+
+
+def bloch_split(medium, system, q, v, direction=(1.0, 0.0), band: int | None = None) -> BranchSplit:
+    """Split the state (q, v) (3N,) of ``system``, a generated sheet (even ``n_rows`` and ``n_cols``)
+    of the uniform ``medium`` (``region_medium``, same scales), into the Bloch waves of its 2 × 2
+    cell (docs/physics.md §1.9, "Long waves of a pre-rotated network"). The sheet is read as one
+    period of a torus of n_rows/2 × n_cols/2 cells (exact for a state that vanishes near its edges):
+    Q(k) = Σ_cells q e^{−ik·R} (R each unit's rest centre) at the wave vectors that fit it; with the
+    mass-normalised modes x_b(k), a_b = x_bᴴ M Q, ȧ_b = x_bᴴ M V, the part (a_b + iȧ_b/ω_b)/2 of
+    e^{i(k·R − ω_b t)} runs with the group velocity ∇ω_b (sign along e from the Hellmann–Feynman
+    derivative xᴴ ∂D x / 2ω), the part (a_b − iȧ_b/ω_b)/2 against it; each carries ω_b²|·|²/C of the
+    energy (C the number of cells; the energies sum to the state's). ``field``: the forward waves of
+    ``band`` plus the uniform translation (k = 0, no energy) — the pulse that branch carries."""
+    cell_system = build(cell_lattice(medium))
+    cell = network_cell(cell_system)
+    nr, nc, n = system.grid_shape[0] if system.grid_shape else 1, None, system.n_sites
+    nc = n // nr
+    if nr % 2 or nc % 2 or cell.size != 12 * (cell_system.n_sites // 4):
+        raise NotPeriodic("bloch_split reads a generated sheet of even n_rows and n_cols on its 2 × 2 cell")
+    e = np.asarray(direction, float) / math.hypot(*direction)
+    row, col = np.divmod(np.arange(n), nc)
+    unit, c = 2 * (row % 2) + col % 2, (row // 2) * (nc // 2) + col // 2
+    centres = system.unit_shapes().centres
+    vectors = cell_system.periodic.vectors
+    size = (nc // 2, nr // 2)
+    recip = 2 * np.pi * np.linalg.inv(vectors).T
+    mass = cell_system.mass
+    d = cell.size
+    forward, backward = np.zeros(d), np.zeros(d)
+    field = None if band is None else np.zeros(3 * n)
+    state = [np.asarray(s, float).reshape(3, n) for s in (q, v)]
+    for m1, m2 in itertools.product(range(size[0]), range(size[1])):
+        k = (m1 / size[0] - (m1 >= (size[0] + 1) // 2)) * recip[0] + (m2 / size[1] - (m2 >= (size[1] + 1) // 2)) * recip[1]
+        phase = np.exp(-1j * centres @ k)
+        qk, vk = (np.stack([np.bincount(unit, (s[f] * phase).real, 4) + 1j * np.bincount(unit, (s[f] * phase).imag, 4)
+                            for f in range(3)]).ravel() for s in state)
+        lam, x = bloch_eigen(cell, k, vectors=True)
+        h = 1e-6
+        slope = (bloch_matrices(cell, k + h * e) - bloch_matrices(cell, k - h * e)) / (2 * h)
+        om = np.sqrt(np.clip(lam, 0.0, None))
+        moving = om > 1e-9 * max(1.0, float(om.max()))
+        vg = np.where(moving, np.einsum("ib,ij,jb->b", x.conj(), slope, x).real / (2 * np.where(moving, om, 1.0)), 0.0)
+        a, ad = x.conj().T @ (mass * qk), x.conj().T @ (mass * vk)
+        w = np.where(moving, om, 1.0)
+        ahead, behind = 0.5 * (a + 1j * ad / w), 0.5 * (a - 1j * ad / w)
+        ea, eb = np.where(moving, om**2 * np.abs(ahead) ** 2, 0.0), np.where(moving, om**2 * np.abs(behind) ** 2, 0.0)
+        forward += np.where(vg >= 0, ea, eb)
+        backward += np.where(vg >= 0, eb, ea)
+        if band is not None:  # the branch's forward waves, and the translation (k = 0) it rides on
+            parts = np.where(moving, 0.0, a)
+            if moving[band]:
+                parts[band] = ahead[band] if vg[band] >= 0 else behind[band]
+            field += ((x @ parts).reshape(3, 4)[:, unit] / phase).real.ravel()
+    cells = size[0] * size[1]
+    return BranchSplit(forward / cells, backward / cells, None if field is None else field / cells)
