@@ -97,8 +97,8 @@ def _across(theta0: float, ratio: float, density: float, mode_launch: bool = Tru
     q0, v0 = (shape * g + grad * slope).ravel(), (-c * (shape * slope + grad * curvature)).ravel()
 
     plain = build(lat.model_copy(update={"regions": []}))  # the launch lies in the near medium
-    split = bloch_split(region_medium(lat), plain, q0, v0, band=near.band)
-    ahead = split.forward[near.band] / split.total
+    split = bloch_split(region_medium(lat), plain, q0, v0, near)
+    ahead = split.mode_forward / split.total
     tr = integrate(problem, "pefrl", h=problem.dt / 2, n_frames=2, t_end=140 * pitch / c, q0=q0, v0=v0)
     assert tr.status == "finished"
     q, v = tr.q[-1], tr.v[-1]
@@ -152,9 +152,9 @@ def test_the_bloch_split_of_a_mode_launch_runs_one_way():
     cell = 2 * (row % 2) + col % 2
     shape, grad = mode.shape[:, cell], mode.gradient[:, cell]
     q, v = (shape * g + grad * slope).ravel(), (-c * (shape * slope + grad * curvature)).ravel()
-    split = bloch_split(region_medium(lat), system, q, v, band=mode.band)
+    split = bloch_split(region_medium(lat), system, q, v, mode)
     energy = system.energy(q, system.args) + 0.5 * np.sum(system.mass * v * v)
     assert split.total == pytest.approx(energy, rel=1e-9)
-    assert split.forward[mode.band] / energy > 0.998
+    assert split.mode_forward / energy > 0.998
     assert split.backward.sum() / energy < 2e-3
     assert_allclose(split.field[:n], g, atol=2e-3 * g.max())

@@ -110,7 +110,7 @@ MODELS: dict[str, ModelSpec] = _registry(
               theory="flexmm.analysis.predict.rotating_triangles:THEORY"),
     ModelSpec(RotatingTrianglesSheet, "flexmm.models.rotating_triangles:build_sheet", "n_cols",
               theory="flexmm.analysis.predict.rotating_triangles:THEORY"),
-    ModelSpec(RigidNetwork, "flexmm.models.network:build", "n_cols"),
+    ModelSpec(RigidNetwork, "flexmm.models.network:build", "n_cols", theory="flexmm.analysis.predict.network:THEORY"),
 )
 
 #: the ``lattice`` section of a scene: any registered config class, discriminated on ``kind``

@@ -136,18 +136,25 @@ def band_path(lat, n_points: int = 64) -> dict:
             "frequency_hz": bloch_frequencies(cell, k) / (2 * np.pi * scales.time_s)}
 
 
-def region_medium(lat, region=None):
-    """The uniform, doubly periodic 2 × 2 medium of a generated network (``lat``, a ``RigidNetwork``
-    config) or of one of its regions (``config.network.Region``: its stiffnesses, density, and
-    geometry fields in place of the lattice's): the cell whose long waves a part of the sheet
-    carries. Unit (row, col) of the sheet copies cell unit 2·(row mod 2) + col mod 2."""
+def uniform_sheet(lat, region=None):
+    """A generated network (``lat``, a ``RigidNetwork`` config) without its regions, with those of
+    its fields that ``region`` (``config.network.Region``) gives in place of the lattice's: the sheet
+    made of one of its media everywhere (same units, numbering and length scale)."""
     if lat.geometry is not None or lat.pattern == "random_quads":
         raise NotPeriodic("a uniform medium is defined for generated patterns only (not a geometry file or random quads)")
-    update = {"n_rows": 2, "n_cols": 2, "left": "periodic", "right": "periodic", "bottom": "periodic",
-              "top": "periodic", "unit_sets": {}, "fixed_units": [], "regions": [], "mask": None}
+    update = {"regions": []}
     if region is not None:
         update |= {k: v for k, v in region.model_dump(exclude={"units"}).items() if v is not None}
     return lat.model_copy(update=update)
+
+
+def region_medium(lat, region=None):
+    """The uniform, doubly periodic 2 × 2 cell of ``uniform_sheet(lat, region)``: the medium whose
+    long waves that part of the sheet carries. Unit (row, col) of the sheet copies cell unit
+    2·(row mod 2) + col mod 2."""
+    return uniform_sheet(lat, region).model_copy(update={
+        "n_rows": 2, "n_cols": 2, "left": "periodic", "right": "periodic", "bottom": "periodic", "top": "periodic",
+        "unit_sets": {}, "fixed_units": [], "mask": None})
 
 
 @dataclass(frozen=True)
@@ -189,19 +196,23 @@ def long_wave_mode(medium, direction=(1.0, 0.0), dk: float = 1e-3) -> LongWaveMo
 @dataclass(frozen=True)
 class BranchSplit:
     """A state of a generated sheet decomposed into Bloch waves (``bloch_split``): ``forward`` and
-    ``backward`` (d,) the energy (nondimensional) of each branch running along +e and −e, ``field``
-    (3N,) the displacements of the forward waves of branch ``band`` (None unless asked)."""
+    ``backward`` (d,) the energy (nondimensional) running along +e and −e in each band (ascending ω
+    at each k); ``mode_forward``, ``mode_backward`` that of the branch of a ``LongWaveMode`` (at each
+    k the band whose shape is closest to the mode's), and ``field`` (3N,) the displacements of its
+    forward waves with the uniform translation (k = 0) they ride on: the pulse that branch carries."""
 
     forward: np.ndarray
     backward: np.ndarray
-    field: np.ndarray | None = None
+    mode_forward: float
+    mode_backward: float
+    field: np.ndarray
 
     @property
     def total(self) -> float:
         return float(self.forward.sum() + self.backward.sum())
 
 
-def bloch_split(medium, system, q, v, direction=(1.0, 0.0), band: int | None = None) -> BranchSplit:
+def bloch_split(medium, system, q, v, mode: LongWaveMode, direction=(1.0, 0.0)) -> BranchSplit:
     """Split the state (q, v) (3N,) of ``system``, a generated sheet (even ``n_rows`` and ``n_cols``)
     of the uniform ``medium`` (``region_medium``, same scales), into the Bloch waves of its 2 × 2
     cell (docs/physics.md §1.9, "Long waves of a pre-rotated network"). The sheet is read as one
@@ -210,28 +221,28 @@ def bloch_split(medium, system, q, v, direction=(1.0, 0.0), band: int | None = N
     mass-normalised modes x_b(k), a_b = x_bᴴ M Q, ȧ_b = x_bᴴ M V, the part (a_b + iȧ_b/ω_b)/2 of
     e^{i(k·R − ω_b t)} runs with the group velocity ∇ω_b (sign along e from the Hellmann–Feynman
     derivative xᴴ ∂D x / 2ω), the part (a_b − iȧ_b/ω_b)/2 against it; each carries ω_b²|·|²/C of the
-    energy (C the number of cells; the energies sum to the state's). ``field``: the forward waves of
-    ``band`` plus the uniform translation (k = 0, no energy) — the pulse that branch carries."""
+    energy (C the number of cells; the energies sum to the state's). The branch of ``mode``
+    (``long_wave_mode`` along e) is, at each k, the band with the largest overlap |x_bᴴ M t| with
+    t = shape + i (k·e) gradient."""
     cell_system = build(cell_lattice(medium))
     cell = network_cell(cell_system)
-    nr, nc, n = system.grid_shape[0] if system.grid_shape else 1, None, system.n_sites
+    n = system.n_sites
+    nr = system.grid_shape[0] if system.grid_shape else 1
     nc = n // nr
-    if nr % 2 or nc % 2 or cell.size != 12 * (cell_system.n_sites // 4):
+    if nr % 2 or nc % 2 or cell.size != 12 or system.periodic is None and nr > 2:
         raise NotPeriodic("bloch_split reads a generated sheet of even n_rows and n_cols on its 2 × 2 cell")
     e = np.asarray(direction, float) / math.hypot(*direction)
     row, col = np.divmod(np.arange(n), nc)
-    unit, c = 2 * (row % 2) + col % 2, (row // 2) * (nc // 2) + col // 2
+    unit = 2 * (row % 2) + col % 2
     centres = system.unit_shapes().centres
-    vectors = cell_system.periodic.vectors
+    recip = 2 * np.pi * np.linalg.inv(cell_system.periodic.vectors).T
     size = (nc // 2, nr // 2)
-    recip = 2 * np.pi * np.linalg.inv(vectors).T
     mass = cell_system.mass
-    d = cell.size
-    forward, backward = np.zeros(d), np.zeros(d)
-    field = None if band is None else np.zeros(3 * n)
+    forward, backward, along = np.zeros(12), np.zeros(12), np.zeros(2)
+    field = np.zeros(3 * n)
     state = [np.asarray(s, float).reshape(3, n) for s in (q, v)]
     for m1, m2 in itertools.product(range(size[0]), range(size[1])):
-        k = (m1 / size[0] - (m1 >= (size[0] + 1) // 2)) * recip[0] + (m2 / size[1] - (m2 >= (size[1] + 1) // 2)) * recip[1]
+        k = (m1 / size[0] - (2 * m1 >= size[0])) * recip[0] + (m2 / size[1] - (2 * m2 >= size[1])) * recip[1]
         phase = np.exp(-1j * centres @ k)
         qk, vk = (np.stack([np.bincount(unit, (s[f] * phase).real, 4) + 1j * np.bincount(unit, (s[f] * phase).imag, 4)
                             for f in range(3)]).ravel() for s in state)
@@ -240,17 +251,21 @@ def bloch_split(medium, system, q, v, direction=(1.0, 0.0), band: int | None = N
         slope = (bloch_matrices(cell, k + h * e) - bloch_matrices(cell, k - h * e)) / (2 * h)
         om = np.sqrt(np.clip(lam, 0.0, None))
         moving = om > 1e-9 * max(1.0, float(om.max()))
-        vg = np.where(moving, np.einsum("ib,ij,jb->b", x.conj(), slope, x).real / (2 * np.where(moving, om, 1.0)), 0.0)
-        a, ad = x.conj().T @ (mass * qk), x.conj().T @ (mass * vk)
         w = np.where(moving, om, 1.0)
+        vg = np.where(moving, np.einsum("ib,ij,jb->b", x.conj(), slope, x).real / (2 * w), 0.0)
+        a, ad = x.conj().T @ (mass * qk), x.conj().T @ (mass * vk)
         ahead, behind = 0.5 * (a + 1j * ad / w), 0.5 * (a - 1j * ad / w)
         ea, eb = np.where(moving, om**2 * np.abs(ahead) ** 2, 0.0), np.where(moving, om**2 * np.abs(behind) ** 2, 0.0)
-        forward += np.where(vg >= 0, ea, eb)
-        backward += np.where(vg >= 0, eb, ea)
-        if band is not None:  # the branch's forward waves, and the translation (k = 0) it rides on
-            parts = np.where(moving, 0.0, a)
-            if moving[band]:
-                parts[band] = ahead[band] if vg[band] >= 0 else behind[band]
-            field += ((x @ parts).reshape(3, 4)[:, unit] / phase).real.ravel()
+        on = vg >= 0
+        forward += np.where(on, ea, eb)
+        backward += np.where(on, eb, ea)
+        parts = np.where(moving, 0.0, a)  # the translation at k = 0
+        template = (mode.shape + 1j * float(k @ e) * mode.gradient).ravel()
+        b = int(np.argmax(np.abs(x.conj().T @ (mass * template))))
+        if moving[b]:
+            along += (ea[b], eb[b]) if on[b] else (eb[b], ea[b])
+            parts[b] = ahead[b] if on[b] else behind[b]
+        field += ((x @ parts).reshape(3, 4)[:, unit] / phase).real.ravel()
     cells = size[0] * size[1]
-    return BranchSplit(forward / cells, backward / cells, None if field is None else field / cells)
+    return BranchSplit(forward / cells, backward / cells, float(along[0] / cells), float(along[1] / cells),
+                       field / cells)
