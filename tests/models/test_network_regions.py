@@ -65,21 +65,22 @@ def _speed_m_s(**law) -> float:
     return float(network_bands(lat, np.array([[k, 0.0]]))[0, 1] / k * scales.length_m / scales.time_s)
 
 
-def _across(theta0: float, ratio: float, density: float, mode_launch: bool = True):
+def _across(theta0: float, ratio: float, density: float, mode_launch: bool = True, region=None, **lattice):
     """A right-going long-wave pulse (gaussian of 10 pitches) in a strip of squares at rest rotation
-    ``theta0`` periodic in y meets a region with stiffnesses × ``ratio`` and density × ``density``:
-    (energy beyond the interface once the pulse has split / total, the impedances Z₁, Z₂ of the
-    Bloch long-wave modes, the share of the launch's energy in right-going acoustic waves). The launch is the
-    acoustic mode (``long_wave_mode``: u = g, θ its slaved counter-rotation) or, without
-    ``mode_launch``, u = g alone."""
+    ``theta0`` periodic in y meets a region with stiffnesses × ``ratio`` and density × ``density``
+    (or the fields ``region``): (energy beyond the interface once the pulse has split / total, the
+    impedances Z₁, Z₂ of the Bloch long-wave modes, the share of the launch's energy in right-going
+    acoustic waves). The launch is the acoustic mode (``long_wave_mode``: u = g, θ its slaved
+    counter-rotation) or, without ``mode_launch``, u = g alone."""
     nc = 400
-    region = {"k_long_n_per_m": ratio * 1e4, "k_shear_n_per_m": ratio * 3e3, "k_rot_n_m_per_rad": ratio * 2e-3,
-              "areal_density_kg_m2": density * 20.0}
-    pitch = math.cos(theta0)
+    if region is None:
+        region = {"k_long_n_per_m": ratio * 1e4, "k_shear_n_per_m": ratio * 3e3, "k_rot_n_m_per_rad": ratio * 2e-3,
+                  "areal_density_kg_m2": density * 20.0}
+    pitch = math.cos(theta0) + lattice.get("ligament_length_m", 0.0) / 0.01
     scene = scene_from_dict({"name": "t", "solver": {"duration_s": 1e-3}, "lattice": {
         "kind": "rigid_network", "n_rows": 2, "n_cols": nc, **LAW, "theta0_rad": theta0, "bottom": "periodic",
         "top": "periodic", "unit_sets": {"far": {"box_m": [(nc / 2 - 0.5) * pitch * 0.01, -1, 100, 1]}},
-        "regions": [{"units": "far", **region}]}})
+        "regions": [{"units": "far", **region}], **lattice}})
     problem = build_problem(scene)
     system, lat = problem.system, scene.lattice
     n = system.n_sites
@@ -158,3 +159,68 @@ def test_the_bloch_split_of_a_mode_launch_runs_one_way():
     assert split.mode_forward / energy > 0.998
     assert split.backward.sum() / energy < 2e-3
     assert_allclose(split.field[:n], g, atol=2e-3 * g.max())
+
+
+def test_a_region_of_another_rest_rotation_transmits_by_the_impedances():
+    """Squares at θ0 = 0.05 (ligaments 0.32 a) meet a region at θ0 = 0.3 on the same grid (its ligaments
+    0.363 a, the interface's 0.362 a and skewed): the more rotated squares are softer (Z₂/Z₁ = 0.784),
+    and of the mode pulse's forward acoustic energy the interface reflects (Z₁ − Z₂)²/(Z₁ + Z₂)², Z from
+    each side's Bloch mode (measured 0.01434 against 0.01461: the pulse's finite width)."""
+    transmitted, z1, z2, ahead = _across(0.05, 1.0, 1.0, region={"theta0_rad": 0.3}, ligament_length_m=0.0032)
+    assert z2 / z1 == pytest.approx(0.784, abs=2e-3)
+    assert ahead > 0.998
+    reflected = 1 - transmitted / ahead
+    assert reflected == pytest.approx(((z1 - z2) / (z1 + z2)) ** 2, rel=4e-2)
+
+
+def test_a_region_of_another_rest_rotation_is_built_on_the_lattice_grid():
+    """Its squares turn by ±θ0 of the region about the lattice's centres, the reference is stress-free,
+    and the ligaments inside it and across its boundary span what the pitch leaves."""
+    net = build(lattice(n_rows=2, n_cols=6, theta0_rad=0.1, ligament_length_m=0.002,
+                        unit_sets={"r": {"box_m": [0.03, -1, 1, 1]}}, regions=[{"units": "r", "theta0_rad": 0.2}]))
+    plain = build(lattice(n_rows=2, n_cols=6, theta0_rad=0.1, ligament_length_m=0.002))
+    shapes, ref = net.unit_shapes(), plain.unit_shapes()
+    assert_allclose(shapes.centres, ref.centres, rtol=0, atol=1e-15)
+    col = np.arange(12) % 6
+    turn = np.arctan2(shapes.vertices[:, 0, 1], shapes.vertices[:, 0, 0])  # the right vertex's direction
+    sigma = np.where((np.arange(12) // 6 + col) % 2 == 0, 1.0, -1.0)
+    assert_allclose(turn, sigma * np.where(col >= 3, 0.2, 0.1), atol=1e-14)
+    q = np.zeros(3 * 12)
+    assert net.energy(q, net.args) < 1e-30
+    a, b, lig = net.args.unit_a, net.args.unit_b, net.args.ligaments
+    length = lig[:, lg.L_LEN] * 0.01
+    pitch = 0.01 * math.cos(0.1) + 0.002
+    inside = (col[a] >= 3) & (col[b] >= 3)
+    across = (col[a] >= 3) != (col[b] >= 3)
+    assert_allclose(length[inside], pitch - 0.01 * math.cos(0.2), rtol=1e-12)
+    skew = math.hypot(pitch - 0.005 * (math.cos(0.1) + math.cos(0.2)), 0.005 * (math.sin(0.2) - math.sin(0.1)))
+    assert_allclose(length[across], skew, rtol=1e-12)
+
+
+def test_regions_whose_squares_do_not_meet_are_refused_at_their_line(tmp_path):
+    path = tmp_path / "s.yaml"
+    path.write_text("""name: t
+solver: {duration_s: 1.0e-3}
+lattice:
+  kind: rigid_network
+  n_rows: 2
+  n_cols: 6
+  a_m: 0.01
+  k_long_n_per_m: 1.0e4
+  k_shear_n_per_m: 3.0e3
+  k_rot_n_m_per_rad: 2.0e-3
+  areal_density_kg_m2: 20.0
+  unit_sets:
+    r: {box_m: [0.03, -1, 1, 1]}
+  regions:
+    - {units: r, theta0_rad: 0.2}
+""")
+    from flexmm.config import load_scene
+
+    with pytest.raises(ConfigError, match=r"s.yaml:15: lattice.regions.0.theta0_rad.*do not meet.*0\.0009983 m long"):
+        load_scene(path)
+    with pytest.raises(ConfigError, match="wider"):
+        lattice(n_rows=2, n_cols=6, theta0_rad=0.3, unit_sets=HALF, regions=[{"units": "right", "theta0_rad": 0.1}])
+    with pytest.raises(ConfigError, match="pattern rotating_squares"):
+        lattice(n_rows=2, n_cols=6, pattern="rectangles", aspect_ratio=0.5, unit_sets=HALF,
+                regions=[{"units": "right", "theta0_rad": 0.1}])

@@ -137,15 +137,11 @@ def band_path(lat, n_points: int = 64) -> dict:
 
 
 def uniform_sheet(lat, region=None):
-    """A generated network (``lat``, a ``RigidNetwork`` config) without its regions, with those of
-    its fields that ``region`` (``config.network.Region``) gives in place of the lattice's: the sheet
-    made of one of its media everywhere (same units, numbering and length scale)."""
+    """A generated network (``lat``, a ``RigidNetwork`` config) made of one of its media everywhere:
+    ``lat.region_lattice(region)`` (same units, numbering and length scale)."""
     if lat.geometry is not None or lat.pattern == "random_quads":
         raise NotPeriodic("a uniform medium is defined for generated patterns only (not a geometry file or random quads)")
-    update = {"regions": []}
-    if region is not None:
-        update |= {k: v for k, v in region.model_dump(exclude={"units"}).items() if v is not None}
-    return lat.model_copy(update=update)
+    return lat.region_lattice(region)
 
 
 def region_medium(lat, region=None):

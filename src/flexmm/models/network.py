@@ -41,16 +41,34 @@ COORD_ATTRS = {"row": ("1", "row index of the unit"), "col": ("1", "column index
 X_LINK, Y_LINK = (0, 2, (1.0, 0.0)), (1, 3, (0.0, 1.0))
 
 
+def square_centres(cfg: RigidNetwork) -> np.ndarray:
+    """(N, 2) centres of the rotating squares (grid of pitch cos θ0 + ℓ/a), in units of a."""
+    r, c = np.divmod(np.arange(cfg.n_rows * cfg.n_cols), cfg.n_cols)
+    pitch = math.cos(cfg.theta0_rad) + cfg.ligament_length_m / cfg.a_m
+    return np.stack([c * pitch, r * pitch], 1)
+
+
+def unit_theta0(cfg: RigidNetwork) -> np.ndarray:
+    """(N,) the rest rotation magnitude of each square: the lattice's θ0, or its region's."""
+    theta = np.full(cfg.n_rows * cfg.n_cols, cfg.theta0_rad)
+    tilted = [r for r in cfg.regions if r.theta0_rad is not None]
+    if tilted:
+        groups = named_sets({r.units: cfg.unit_sets[r.units] for r in tilted}, square_centres(cfg) * cfg.a_m)
+        for region in tilted:
+            theta[groups[region.units]] = region.theta0_rad
+    return theta
+
+
 def square_vertices(cfg: RigidNetwork) -> np.ndarray:
-    """(N, 4, 2) vertices of the units in the reference geometry, in units of a."""
+    """(N, 4, 2) vertices of the units in the reference geometry, in units of a (each square at
+    its ``unit_theta0``)."""
     nr, nc = cfg.n_rows, cfg.n_cols
     r, c = np.divmod(np.arange(nr * nc), nc)
-    phi = np.where((r + c) % 2 == 0, 1.0, -1.0) * cfg.theta0_rad
-    pitch = math.cos(cfg.theta0_rad) + cfg.ligament_length_m / cfg.a_m
+    phi = np.where((r + c) % 2 == 0, 1.0, -1.0) * unit_theta0(cfg)
     cp, sp = 0.5 * np.cos(phi), 0.5 * np.sin(phi)
     corners = np.stack([np.stack([cp, sp], 1), np.stack([-sp, cp], 1), np.stack([-cp, -sp], 1),
                         np.stack([sp, -cp], 1)], 1)
-    centres = np.stack([c * pitch, r * pitch], 1)
+    centres = square_centres(cfg)
     vertices = centres[:, None, :] + corners
     if cfg.pattern == "random_quads":
         rng = np.random.default_rng(cfg.seed)
@@ -254,7 +272,11 @@ def generated(cfg: RigidNetwork) -> Network:
 def refuse_overlap(cfg: RigidNetwork) -> None:
     """GeometryError if the units of a periodic pattern overlap (checked on a 3 × 3 patch, which
     holds every pair of neighbours of the whole sheet)."""
-    vertices, _ = geometry(cfg.model_copy(update={"n_rows": min(cfg.n_rows, 3), "n_cols": min(cfg.n_cols, 3)}))
+    for region in cfg.regions:  # a region of its own rest rotation is its own pattern
+        if region.theta0_rad is not None:
+            refuse_overlap(cfg.region_lattice(region))
+    vertices, _ = geometry(cfg.model_copy(update={"n_rows": min(cfg.n_rows, 3), "n_cols": min(cfg.n_cols, 3),
+                                                  "regions": []}))
     pairs = geo.overlapping_pairs(list(vertices), 1e-9)
     if pairs:
         p, q = pairs[0]
