@@ -12,7 +12,7 @@ from flexmm.config import scene_from_dict
 
 A, PITCH = 0.016, 0.016 * math.cos(0.2)
 X0, W = 60 * PITCH, 10 * PITCH
-PULSE = f"1e-4 * exp(-((x - {X0}) / {W})**2)"
+PULSE = f"1e-4 * exp(-((i * {PITCH} - {X0}) / {W})**2)"  # x = i · a_m on networks: the column's position
 
 
 def scene():
@@ -25,7 +25,7 @@ def scene():
                     "unit_sets": {"stiff": {"box_m": [149.5 * PITCH, -1.0, 10.0, 1.0]}},
                     "regions": [{"units": "stiff", **{k: 4 * v for k, v in law.items()}}]},
         # u alone, right-going at the lattice's long-wave speed (44.25 m/s): not the acoustic mode
-        "initial": {"fields": [{"field": "u", "value": PULSE, "rate": f"-44.2524 * -2 * (x - {X0}) / {W}**2 * {PULSE}"}]},
+        "initial": {"fields": [{"field": "u", "value": PULSE, "rate": f"-44.2524 * -2 * (i * {PITCH} - {X0}) / {W}**2 * {PULSE}"}]},
     })
 
 
