@@ -246,7 +246,6 @@ class RigidNetwork(GridUnits):
             if check_periodic(self, a, b, n, what, "the units alternate"):
                 why = ("the geometry file gives its periods (lattice_vectors_m)" if self.geometry is not None
                        else "a mask cuts the sheet" if self.mask is not None
-                       else "contact between units across the wrap is not supported" if self.contact is not None
                        else None)
                 if why:
                     raise ValueError(f"{a}/{b} periodic: {why}")

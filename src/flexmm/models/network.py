@@ -443,11 +443,8 @@ def build(cfg: RigidNetwork) -> System:
         gap = net.rest_gap
         rows = ~np.isnan(gap[:, 0])
         lig[np.ix_(rows, [lg.L_OX, lg.L_OY])] = (centres[ub] + image - centres[ua] - gap)[rows]
-    if cfg.contact is not None and net.cell is not None:
-        raise geo.GeometryError("lattice.contact: contact between units across a periodic file's cell boundary is "
-                                "not supported; remove contact or lattice_vectors_m")
     contact = () if cfg.contact is None else uc.contact_pairs(
-        vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a)
+        vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a, image)
     args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n), law, *contact)
     mass = np.concatenate([mass_si / m, mass_si / m, inertia_si / (m * a * a)])
     inv_mass = 1.0 / mass
