@@ -79,7 +79,10 @@ class Region(Strict):
     stiffness is 2 k₁k₂/(k₁ + k₂) of the two sides' (docs/physics.md §1.9). Springs a geometry file
     gives a ligament stay the file's. A region of rotating squares may have its own rest rotation
     ``theta0_rad`` on the lattice's grid of centres; the ligaments across its boundary must then reach:
-    each no longer than the longer of the two sides' ligaments (``RigidNetwork.interface_issue``)."""
+    each no longer than the longer of the two sides' ligaments (``RigidNetwork.interface_issue``).
+    ``ligament_law`` mixes the paper's law and DifFlexMM's linearised one (the network runs the
+    latter, whose ℓ = 0 case is the paper's law): the region's inner ligaments take it, those across
+    its boundary the lattice's."""
 
     units: str = Field(description="the named unit set (lattice.unit_sets, a geometry file's sets) of the region")
     k_long_n_per_m: Positive | None = None
@@ -90,6 +93,9 @@ class Region(Strict):
     theta0_rad: Finite | None = Field(
         None, description="rotating_squares: the region's rest rotation (its units turn ±θ0 about the lattice's "
         "centres; its ligaments span the rest of the pitch, pitch − a cos θ0)")
+    ligament_law: Literal["paper", "difflexmm_linear"] | None = Field(
+        None, description="the law of the ligaments between two of the region's units (paper or difflexmm_linear; "
+        "those across its boundary keep the lattice's)")
 
     @model_validator(mode="after")
     def _something(self):
@@ -99,7 +105,8 @@ class Region(Strict):
 
 
 #: the lattice fields a region may replace
-REGION_FIELDS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad", "areal_density_kg_m2", "theta0_rad")
+REGION_FIELDS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad", "areal_density_kg_m2", "theta0_rad",
+                 "ligament_law")
 
 
 class RigidNetwork(GridUnits):
@@ -274,6 +281,11 @@ class RigidNetwork(GridUnits):
                 if issue:
                     at = second if second.theta0_rad is not None else first
                     raise ValueError(f"regions.{self.regions.index(at)}.theta0_rad: {issue}")
+        mixed = [r for r in self.regions if r.ligament_law not in (None, self.ligament_law)]
+        if mixed and self.ligament_law == "difflexmm":
+            raise ValueError(f"regions.{self.regions.index(mixed[0])}.ligament_law: the nonlinear difflexmm law "
+                             "cannot share a network with another law (one law per network kernel); use "
+                             "difflexmm_linear for the lattice")
         if self.pattern != "rectangles" and self.aspect_ratio != 1.0:
             raise ValueError("aspect_ratio shapes the units of rectangles: set pattern: rectangles")
         if self.pattern != "random_quads" and self.vertex_jitter:

@@ -414,6 +414,24 @@ def apply_regions(cfg: RigidNetwork, groups: dict[str, list[int]], lig: np.ndarr
         lig[touched, col] = k[:, j] / scale
 
 
+def as_paper(cfg: RigidNetwork, groups: dict[str, list[int]], lig: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+             axis: np.ndarray) -> None:
+    """In a network that mixes the paper's law with DifFlexMM's linearised one (run as the latter),
+    make the ligaments of the paper's law that law, in place: rest length ℓ = 0 and the link's axis
+    (docs/physics.md §1.9: at ℓ = 0 the linearised law is the paper's). A ligament between two units
+    of a region with a ``ligament_law`` has that law; every other ligament the lattice's."""
+    law = np.full(ua.size, cfg.ligament_law, dtype=object)
+    region = np.full(int(max(ua.max(), ub.max())) + 1, -1)
+    for r, spec in enumerate(cfg.regions):
+        region[np.asarray(groups[spec.units], np.int64)] = r
+    for r, spec in enumerate(cfg.regions):
+        if spec.ligament_law is not None:
+            law[(region[ua] == r) & (region[ub] == r)] = spec.ligament_law
+    paper = law == "paper"
+    lig[paper, lg.L_LEN] = 0.0
+    lig[np.ix_(paper, [lg.L_EX, lg.L_EY])] = axis[paper]
+
+
 def build(cfg: RigidNetwork) -> System:
     """The network as a System: state (u, v, θ) of its units; edges free or fixed (all DOFs held),
     named unit sets held by ``fixed_units``."""
@@ -430,13 +448,16 @@ def build(cfg: RigidNetwork) -> System:
     m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
     ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
-    law = lg.LAWS[cfg.ligament_law]
+    laws = {cfg.ligament_law} | {r.ligament_law for r in cfg.regions if r.ligament_law is not None}
+    law = lg.LAWS["difflexmm_linear" if len(laws) > 1 else cfg.ligament_law]
     image = net.images()
     lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law,
                          image)
     if cfg.regions:
         given = None if net.mass_kg is None else ~np.isnan(net.mass_kg)
         apply_regions(cfg, groups, lig, ua, ub, mass_si, inertia_si, given)
+    if len(laws) > 1:
+        as_paper(cfg, groups, lig, ua, ub, links[4])
     if net.stiffness is not None:  # per-ligament springs and rest gaps of a geometry file
         for col, scale, k in ((lg.L_KL, kl, 0), (lg.L_KS, kl, 1), (lg.L_KT, kl * a * a, 2)):
             lig[:, col] = np.where(np.isnan(net.stiffness[:, k]), lig[:, col], net.stiffness[:, k] / scale)
