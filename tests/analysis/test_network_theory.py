@@ -46,3 +46,26 @@ def test_an_interface_at_theta0_is_predicted_from_the_launch_s_acoustic_pulse(tm
         assert abs(amplitude.rel_diff) < {"reflected": 2.5e-2}.get(what, 1e-2)
     transmitted = next(item for item, what in notes.items() if what == "transmitted")
     assert rows[(transmitted, "speed")].predicted == pytest.approx(2 * 44.2524, rel=1e-4)  # √4 × the lattice's
+
+
+def test_no_bulk_prediction_for_a_sheet_with_free_rows():
+    """A sheet with free top and bottom rows carries a strip's waves, not the bulk medium's: no
+    speed row (the theory declines with a reason, which analyze turns into no prediction)."""
+    from types import SimpleNamespace
+
+    from flexmm.analysis.context import RunContext
+    from flexmm.analysis.predict.network import pulse
+    from flexmm.analysis.report.theory_comparison import _safe
+
+    config = {"name": "t", "solver": {"duration_s": 1e-3}, "excitation": {"kind": "impact", "end": "left",
+                                                                          "velocity_m_s": 1.0},
+              "lattice": {"kind": "rigid_network", "n_rows": 4, "n_cols": 10, "a_m": A, "k_long_n_per_m": 1e4,
+                          "k_shear_n_per_m": 3e3, "k_rot_n_m_per_rad": 2e-3, "areal_density_kg_m2": 20.0}}
+    ctx = RunContext(model="rigid_network", config=config)
+    with pytest.raises(ValueError, match="periodic across its rows"):
+        pulse(ctx, SimpleNamespace(field="u"))
+    assert _safe(pulse, ctx, SimpleNamespace(field="u")) == []
+    periodic = dict(config, lattice=dict(config["lattice"], bottom="periodic", top="periodic"))
+    rows = pulse(RunContext(model="rigid_network", config=periodic),
+                 SimpleNamespace(field="u", sites=[3, 4, 5], speed_m_s=30.0))
+    assert [r.quantity for r in rows] == ["speed"] and rows[0].predicted == pytest.approx(31.6228, rel=1e-4)

@@ -1,6 +1,7 @@
 """Predictions for a generated rigid network (docs/physics.md §1.9) from a run's config: the speed
 of a longitudinal pulse along x against the long-wave Bloch speed of the medium it runs in (the
-lattice's, or its region's), and, across the interface of a network with one region, the
+lattice's, or its region's; planar waves: a sheet periodic across its rows, driven along a whole
+edge or launched by its initial state), and, across the interface of a network with one region, the
 amplitudes of the transmitted and reflected pulses, 2Z₁/(Z₁ + Z₂) and (Z₁ − Z₂)/(Z₁ + Z₂) of the
 incident acoustic pulse (Z = ρc of the two media's long-wave modes). The incident pulse is the
 forward acoustic part of the run's initial state (``linear.network.bloch_split``): at θ0 ≠ 0 a
@@ -24,9 +25,14 @@ def _media(ctx) -> dict:
         from flexmm.linear.network import long_wave_mode, region_medium
         from flexmm.models.network import build
 
-        lat = ctx.scene().lattice
+        scene = ctx.scene()
+        lat = scene.lattice
         if lat.geometry is not None or lat.pattern == "random_quads" or lat.mask is not None:
             raise ValueError("no uniform medium: a geometry file, random quads or a mask")
+        if lat.n_rows > 1 and lat.bottom != "periodic":
+            raise ValueError("the bulk medium's waves are the planar waves of a sheet periodic across its rows")
+        if scene.excitation.kind != "none" and scene.excitation.planar_issue() is not None:
+            raise ValueError(scene.excitation.planar_issue())
         system = build(lat)
         medium = np.full(system.n_sites, -1)
         for r, spec in enumerate(lat.regions):
@@ -48,6 +54,8 @@ def _incident(ctx, media) -> tuple[int, float, int] | None:
     if len(lat.regions) != 1 or ds is None or "u_initial" not in ds.coords:
         return None
     n = system.n_sites
+    if not np.any(ds["u_initial"].values):  # a driven run: no launch to split
+        return None
     peak = int(np.argmax(np.abs(ds["u_initial"].values)))
     near = int(medium[peak])
     x = system.unit_shapes().centres[:, 0]
@@ -65,9 +73,14 @@ def _incident(ctx, media) -> tuple[int, float, int] | None:
 
 def pulse(ctx, p_meas) -> list[Comparison]:
     """The speed row of a longitudinal pulse along x; amplitude rows across a single interface."""
+    from flexmm.linear.network import NotPeriodic
+
     if p_meas.field not in _LONGITUDINAL:
         return []
-    media = _media(ctx)
+    try:
+        media = _media(ctx)
+    except NotPeriodic as exc:  # no uniform periodic medium to compare with
+        raise ValueError(str(exc)) from exc
     sites = np.asarray(p_meas.sites, int)
     here = int(np.bincount(media["medium"][sites] + 1).argmax()) - 1
     mode = media["modes"][here]
