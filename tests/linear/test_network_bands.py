@@ -132,9 +132,6 @@ def test_periodic_network_config_errors():
         lattice(kind="rigid_network", n_rows=2, n_cols=5, left="periodic", right="periodic", **LAW)
     with pytest.raises(ConfigError, match="left and right must both be periodic"):
         lattice(kind="rigid_network", n_rows=2, n_cols=4, left="periodic", **LAW)
-    with pytest.raises(ConfigError, match="contact"):
-        lattice(kind="rigid_network", n_rows=2, n_cols=4, left="periodic", right="periodic",
-                contact={"stiffness_n_per_m": 1.0, "cutoff_m": 1e-4}, **LAW)
     with pytest.raises(NotPeriodic, match="not periodic"):
         network_bands(lattice(kind="rigid_network", n_rows=2, n_cols=4, **LAW), np.zeros((1, 2)))
 

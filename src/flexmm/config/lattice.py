@@ -142,7 +142,8 @@ MODELS: dict[str, ModelSpec] = _registry(
               theory="flexmm.analysis.predict.rotating_triangles:CHAIN"),
     ModelSpec(RotatingTrianglesSheet, _M + "rotating_triangles:build_sheet", "n_cols",
               theory="flexmm.analysis.predict.rotating_triangles:SHEET"),
-    ModelSpec(RigidNetwork, _M + "network:build", "n_cols", bands="flexmm.linear.network:band_path"),
+    ModelSpec(RigidNetwork, _M + "network:build", "n_cols", theory="flexmm.analysis.predict.network:THEORY",
+              bands="flexmm.linear.network:band_path"),
 )
 
 #: the ``lattice`` section of a scene: any registered config class, discriminated on ``kind``

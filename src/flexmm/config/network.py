@@ -77,7 +77,12 @@ class Region(Strict):
     lattice's for the ligaments between two of its units and for its units' mass. A ligament joining a
     unit of the region to a unit outside it (the interface) is two half-ligaments in series: each
     stiffness is 2 k₁k₂/(k₁ + k₂) of the two sides' (docs/physics.md §1.9). Springs a geometry file
-    gives a ligament stay the file's."""
+    gives a ligament stay the file's. A region of rotating squares may have its own rest rotation
+    ``theta0_rad`` on the lattice's grid of centres; the ligaments across its boundary must then reach:
+    each no longer than the longer of the two sides' ligaments (``RigidNetwork.interface_issue``).
+    ``ligament_law`` mixes the paper's law and DifFlexMM's linearised one (the network runs the
+    latter, whose ℓ = 0 case is the paper's law): the region's inner ligaments take it, those across
+    its boundary the lattice's."""
 
     units: str = Field(description="the named unit set (lattice.unit_sets, a geometry file's sets) of the region")
     k_long_n_per_m: Positive | None = None
@@ -85,6 +90,12 @@ class Region(Strict):
     k_rot_n_m_per_rad: NonNegative | None = None
     areal_density_kg_m2: Positive | None = Field(
         None, description="the region's units' mass per area (units whose mass a geometry file gives keep it)")
+    theta0_rad: Finite | None = Field(
+        None, description="rotating_squares: the region's rest rotation (its units turn ±θ0 about the lattice's "
+        "centres; its ligaments span the rest of the pitch, pitch − a cos θ0)")
+    ligament_law: Literal["paper", "difflexmm_linear"] | None = Field(
+        None, description="the law of the ligaments between two of the region's units (paper or difflexmm_linear; "
+        "those across its boundary keep the lattice's)")
 
     @model_validator(mode="after")
     def _something(self):
@@ -94,7 +105,8 @@ class Region(Strict):
 
 
 #: the lattice fields a region may replace
-REGION_FIELDS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad", "areal_density_kg_m2")
+REGION_FIELDS = ("k_long_n_per_m", "k_shear_n_per_m", "k_rot_n_m_per_rad", "areal_density_kg_m2", "theta0_rad",
+                 "ligament_law")
 
 
 class RigidNetwork(GridUnits):
@@ -166,6 +178,43 @@ class RigidNetwork(GridUnits):
             data["a_m"] = sizes[len(sizes) // 2] if sizes and sizes[len(sizes) // 2] > 0 else 1.0
         return data
 
+    def pitch_m(self) -> float:
+        """The distance between neighbouring rotating squares (m): a cos θ0 + ℓ."""
+        return self.a_m * math.cos(self.theta0_rad) + self.ligament_length_m
+
+    def region_lattice(self, region: Region | None = None) -> "RigidNetwork":
+        """This lattice with no regions and the fields ``region`` gives in place of its own: the
+        uniform medium of that part of the network. A region's own θ0 keeps the lattice's pitch, its
+        ligaments spanning the rest (pitch − a cos θ0)."""
+        update: dict = {"regions": []}
+        if region is not None:
+            update |= {k: getattr(region, k) for k in REGION_FIELDS if getattr(region, k) is not None}
+            if region.theta0_rad is not None:
+                update["ligament_length_m"] = max(self.pitch_m() - self.a_m * math.cos(region.theta0_rad), 0.0)
+        return self.model_copy(update=update)
+
+    def interface_issue(self, first: Region | None, second: Region | None) -> str | None:
+        """Why the ligaments between the squares of two media (None: the lattice's) cannot join them,
+        or None: a medium's squares wider than the pitch, or an interface ligament (right vertex of
+        one square to the left vertex of its neighbour, rest rotations ±θ₁ and ∓θ₂) longer than the
+        longer of the two media's ligaments, (p − a(cos θ₁ + cos θ₂)/2, a(sin θ₂ − sin θ₁)/2)."""
+        sides = [self.region_lattice(r) for r in (first, second)]
+        for side, region in zip(sides, (first, second)):
+            if region is not None and region.theta0_rad is not None and \
+                    self.a_m * math.cos(region.theta0_rad) > self.pitch_m() * (1 + 1e-12):
+                return (f"region {region.units!r}: its squares at theta0_rad = {region.theta0_rad:g} are wider "
+                        f"({self.a_m * math.cos(region.theta0_rad):.4g} m) than the pitch {self.pitch_m():.4g} m")
+        t1, t2 = (s.theta0_rad for s in sides)
+        gap = math.hypot(self.pitch_m() - 0.5 * self.a_m * (math.cos(t1) + math.cos(t2)),
+                         0.5 * self.a_m * (math.sin(t2) - math.sin(t1)))
+        reach = max(s.ligament_length_m for s in sides)
+        if gap > reach + 1e-9 * self.a_m:
+            names = " and ".join("the lattice" if r is None else f"region {r.units!r}" for r in (first, second))
+            return (f"the squares of {names} (theta0_rad {t1:g}, {t2:g}) do not meet: the ligaments between them "
+                    f"would be {gap:.4g} m long, longer than either side's ({reach:.4g} m); make the rotations "
+                    "closer or the ligaments longer (ligament_length_m)")
+        return None
+
     def unit_set_names(self) -> list[str]:
         """The names ``fixed_units`` and ``excitation.units`` may use: ``unit_sets`` and the file's ``sets``."""
         names = list(self.unit_sets)
@@ -204,7 +253,6 @@ class RigidNetwork(GridUnits):
             if check_periodic(self, a, b, n, what, "the units alternate"):
                 why = ("the geometry file gives its periods (lattice_vectors_m)" if self.geometry is not None
                        else "a mask cuts the sheet" if self.mask is not None
-                       else "contact between units across the wrap is not supported" if self.contact is not None
                        else None)
                 if why:
                     raise ValueError(f"{a}/{b} periodic: {why}")
@@ -221,6 +269,23 @@ class RigidNetwork(GridUnits):
             if unknown:
                 raise ValueError(f"{what} {unknown}: not a named unit set (unit_sets"
                                  f"{', geometry sets' if self.geometry else ''}: {', '.join(names) or 'none'})")
+        tilted = [r for r in self.regions if r.theta0_rad is not None]
+        if tilted and (self.pattern != "rotating_squares" or self.geometry is not None):
+            raise ValueError(f"regions.{self.regions.index(tilted[0])}.theta0_rad: a region's own rest rotation "
+                             "turns the squares of pattern rotating_squares (not a geometry file or another pattern)")
+        for i, first in enumerate([None, *self.regions]):
+            for second in self.regions[i:]:
+                if first is not None and first.theta0_rad is None and second.theta0_rad is None:
+                    continue
+                issue = self.interface_issue(first, second)
+                if issue:
+                    at = second if second.theta0_rad is not None else first
+                    raise ValueError(f"regions.{self.regions.index(at)}.theta0_rad: {issue}")
+        mixed = [r for r in self.regions if r.ligament_law not in (None, self.ligament_law)]
+        if mixed and self.ligament_law == "difflexmm":
+            raise ValueError(f"regions.{self.regions.index(mixed[0])}.ligament_law: the nonlinear difflexmm law "
+                             "cannot share a network with another law (one law per network kernel); use "
+                             "difflexmm_linear for the lattice")
         if self.pattern != "rectangles" and self.aspect_ratio != 1.0:
             raise ValueError("aspect_ratio shapes the units of rectangles: set pattern: rectangles")
         if self.pattern != "random_quads" and self.vertex_jitter:

@@ -22,11 +22,13 @@ quads, networks with regions and geometry files keep their whole cell. Nondimens
 from __future__ import annotations
 
 import itertools
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from flexmm.errors import FlexmmError
-from flexmm.linalg import BlochCell, bloch_frequencies, read_cell
+from flexmm.linalg import BlochCell, bloch_eigen, bloch_frequencies, bloch_matrices, read_cell
 from flexmm.models.ligaments import NetworkArgs, network_hvp
 from flexmm.models.network import build
 
@@ -132,3 +134,134 @@ def band_path(lat, n_points: int = 64) -> dict:
     return {"k_rad_m": k / scales.length_m, "distance_rad_m": distance / scales.length_m,
             "labels": [(d / scales.length_m, name) for d, name in zip(at, names)],
             "frequency_hz": bloch_frequencies(cell, k) / (2 * np.pi * scales.time_s)}
+
+
+def uniform_sheet(lat, region=None):
+    """A generated network (``lat``, a ``RigidNetwork`` config) made of one of its media everywhere:
+    ``lat.region_lattice(region)`` (same units, numbering and length scale)."""
+    if lat.geometry is not None or lat.pattern == "random_quads":
+        raise NotPeriodic("a uniform medium is defined for generated patterns only (not a geometry file or random quads)")
+    return lat.region_lattice(region)
+
+
+def region_medium(lat, region=None):
+    """The uniform, doubly periodic 2 × 2 cell of ``uniform_sheet(lat, region)``: the medium whose
+    long waves that part of the sheet carries. Unit (row, col) of the sheet copies cell unit
+    2·(row mod 2) + col mod 2."""
+    return uniform_sheet(lat, region).model_copy(update={
+        "n_rows": 2, "n_cols": 2, "left": "periodic", "right": "periodic", "bottom": "periodic", "top": "periodic",
+        "unit_sets": {}, "fixed_units": [], "mask": None})
+
+
+@dataclass(frozen=True)
+class LongWaveMode:
+    """The long-wave longitudinal Bloch mode along a direction e of a uniform medium
+    (docs/physics.md §1.9, "Long waves of a pre-rotated network"): its speed and impedance ρc (ρ
+    the mass per area; SI), ``band`` its branch at small k, and the unit motions of a slowly
+    varying displacement f(s) along e (s = e·x, f and s in the same length unit): q = ``shape`` f +
+    ``gradient`` df/ds, both (3, n) over the cell's units (u, v, θ; ``shape`` the translation e,
+    ``gradient`` in that unit per unit strain: rad for θ)."""
+
+    speed_m_s: float
+    impedance_kg_per_m_s: float
+    band: int
+    shape: np.ndarray
+    gradient: np.ndarray
+
+
+def long_wave_mode(medium, direction=(1.0, 0.0), dk: float = 1e-3) -> LongWaveMode:
+    """The ``LongWaveMode`` of the periodic network ``medium`` (``region_medium``) along
+    ``direction``: the branch at k = dk·e (1/a) whose mode moves the cell's mass most along e, its
+    mode x(k) normalised to a unit mean translation along e; shape Re x, gradient Im x / dk (the
+    first order in k of x(k) e^{ik·R}: the motion slaved to the strain, e.g. the counter-rotation
+    of pre-rotated squares; relative error O(dk²))."""
+    system = build(cell_lattice(medium))
+    if np.any(system.inv_mass == 0) or system.periodic.vectors.shape[0] != 2:
+        raise NotPeriodic("a long-wave mode needs a cell periodic in x and y with no held DOF")
+    e = np.asarray(direction, float) / math.hypot(*direction)
+    n, mass, sc = system.n_sites, system.mass, system.scales
+    lam, vec = bloch_eigen(network_cell(system), dk * e, vectors=True)
+    push = np.concatenate([e[0] * mass[:n], e[1] * mass[n:2 * n], np.zeros(n)])  # Σ m e·u of a mode
+    band = int(np.argmax(np.abs(push @ vec)))
+    x = vec[:, band] * (mass[:n].sum() / (push @ vec[:, band]))
+    speed = math.sqrt(max(float(lam[band]), 0.0)) / dk * sc.length_m / sc.time_s
+    density = mass[:n].sum() * sc.mass_kg / (abs(float(np.linalg.det(system.periodic.vectors))) * sc.length_m ** 2)
+    return LongWaveMode(speed, float(density * speed), band, x.real.reshape(3, n), (x.imag / dk).reshape(3, n))
+
+
+@dataclass(frozen=True)
+class BranchSplit:
+    """A state of a generated sheet decomposed into Bloch waves (``bloch_split``): ``forward`` and
+    ``backward`` (d,) the energy (nondimensional) running along +e and −e in each band (ascending ω
+    at each k); ``mode_forward``, ``mode_backward`` that of the branch of a ``LongWaveMode`` (at each
+    k the band whose shape is closest to the mode's), and ``field`` (3N,) the displacements of its
+    forward waves with the uniform translation (k = 0) they ride on: the pulse that branch carries."""
+
+    forward: np.ndarray
+    backward: np.ndarray
+    mode_forward: float
+    mode_backward: float
+    field: np.ndarray
+
+    @property
+    def total(self) -> float:
+        return float(self.forward.sum() + self.backward.sum())
+
+
+def bloch_split(medium, system, q, v, mode: LongWaveMode, direction=(1.0, 0.0)) -> BranchSplit:
+    """Split the state (q, v) (3N,) of ``system``, a generated sheet (even ``n_rows`` and ``n_cols``)
+    of the uniform ``medium`` (``region_medium``, same scales), into the Bloch waves of its 2 × 2
+    cell (docs/physics.md §1.9, "Long waves of a pre-rotated network"). The sheet is read as one
+    period of a torus of n_rows/2 × n_cols/2 cells (exact for a state that vanishes near its edges):
+    Q(k) = Σ_cells q e^{−ik·R} (R each unit's rest centre) at the wave vectors that fit it; with the
+    mass-normalised modes x_b(k), a_b = x_bᴴ M Q, ȧ_b = x_bᴴ M V, the part (a_b + iȧ_b/ω_b)/2 of
+    e^{i(k·R − ω_b t)} runs with the group velocity ∇ω_b (sign along e from the Hellmann–Feynman
+    derivative xᴴ ∂D x / 2ω), the part (a_b − iȧ_b/ω_b)/2 against it; each carries ω_b²|·|²/C of the
+    energy (C the number of cells; the energies sum to the state's). The branch of ``mode``
+    (``long_wave_mode`` along e) is, at each k, the band with the largest overlap |x_bᴴ M t| with
+    t = shape + i (k·e) gradient."""
+    cell_system = build(cell_lattice(medium))
+    cell = network_cell(cell_system)
+    n = system.n_sites
+    nr = system.grid_shape[0] if system.grid_shape else 1
+    nc = n // nr
+    if nr % 2 or nc % 2 or cell.size != 12 or system.periodic is None and nr > 2:
+        raise NotPeriodic("bloch_split reads a generated sheet of even n_rows and n_cols on its 2 × 2 cell")
+    e = np.asarray(direction, float) / math.hypot(*direction)
+    row, col = np.divmod(np.arange(n), nc)
+    unit = 2 * (row % 2) + col % 2
+    centres = system.unit_shapes().centres
+    recip = 2 * np.pi * np.linalg.inv(cell_system.periodic.vectors).T
+    size = (nc // 2, nr // 2)
+    mass = cell_system.mass
+    forward, backward, along = np.zeros(12), np.zeros(12), np.zeros(2)
+    field = np.zeros(3 * n)
+    state = [np.asarray(s, float).reshape(3, n) for s in (q, v)]
+    for m1, m2 in itertools.product(range(size[0]), range(size[1])):
+        k = (m1 / size[0] - (2 * m1 >= size[0])) * recip[0] + (m2 / size[1] - (2 * m2 >= size[1])) * recip[1]
+        phase = np.exp(-1j * centres @ k)
+        qk, vk = (np.stack([np.bincount(unit, (s[f] * phase).real, 4) + 1j * np.bincount(unit, (s[f] * phase).imag, 4)
+                            for f in range(3)]).ravel() for s in state)
+        lam, x = bloch_eigen(cell, k, vectors=True)
+        h = 1e-6
+        slope = (bloch_matrices(cell, k + h * e) - bloch_matrices(cell, k - h * e)) / (2 * h)
+        om = np.sqrt(np.clip(lam, 0.0, None))
+        moving = om > 1e-6 * float(om.max())  # not a translation (ω² of round-off at k = 0)
+        w = np.where(moving, om, 1.0)
+        vg = np.where(moving, np.einsum("ib,ij,jb->b", x.conj(), slope, x).real / (2 * w), 0.0)
+        a, ad = x.conj().T @ (mass * qk), x.conj().T @ (mass * vk)
+        ahead, behind = 0.5 * (a + 1j * ad / w), 0.5 * (a - 1j * ad / w)
+        ea, eb = np.where(moving, om**2 * np.abs(ahead) ** 2, 0.0), np.where(moving, om**2 * np.abs(behind) ** 2, 0.0)
+        on = vg >= 0
+        forward += np.where(on, ea, eb)
+        backward += np.where(on, eb, ea)
+        parts = np.where(moving, 0.0, a)  # the translation at k = 0
+        template = (mode.shape + 1j * float(k @ e) * mode.gradient).ravel()
+        b = int(np.argmax(np.abs(x.conj().T @ (mass * template))))
+        if moving[b]:
+            along += (ea[b], eb[b]) if on[b] else (eb[b], ea[b])
+            parts[b] = ahead[b] if on[b] else behind[b]
+        field += ((x @ parts).reshape(3, 4)[:, unit] / phase).real.ravel()
+    cells = size[0] * size[1]
+    return BranchSplit(forward / cells, backward / cells, float(along[0] / cells), float(along[1] / cells),
+                       field / cells)

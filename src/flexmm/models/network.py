@@ -41,16 +41,34 @@ COORD_ATTRS = {"row": ("1", "row index of the unit"), "col": ("1", "column index
 X_LINK, Y_LINK = (0, 2, (1.0, 0.0)), (1, 3, (0.0, 1.0))
 
 
+def square_centres(cfg: RigidNetwork) -> np.ndarray:
+    """(N, 2) centres of the rotating squares (grid of pitch cos θ0 + ℓ/a), in units of a."""
+    r, c = np.divmod(np.arange(cfg.n_rows * cfg.n_cols), cfg.n_cols)
+    pitch = math.cos(cfg.theta0_rad) + cfg.ligament_length_m / cfg.a_m
+    return np.stack([c * pitch, r * pitch], 1)
+
+
+def unit_theta0(cfg: RigidNetwork) -> np.ndarray:
+    """(N,) the rest rotation magnitude of each square: the lattice's θ0, or its region's."""
+    theta = np.full(cfg.n_rows * cfg.n_cols, cfg.theta0_rad)
+    tilted = [r for r in cfg.regions if r.theta0_rad is not None]
+    if tilted:
+        groups = named_sets({r.units: cfg.unit_sets[r.units] for r in tilted}, square_centres(cfg) * cfg.a_m)
+        for region in tilted:
+            theta[groups[region.units]] = region.theta0_rad
+    return theta
+
+
 def square_vertices(cfg: RigidNetwork) -> np.ndarray:
-    """(N, 4, 2) vertices of the units in the reference geometry, in units of a."""
+    """(N, 4, 2) vertices of the units in the reference geometry, in units of a (each square at
+    its ``unit_theta0``)."""
     nr, nc = cfg.n_rows, cfg.n_cols
     r, c = np.divmod(np.arange(nr * nc), nc)
-    phi = np.where((r + c) % 2 == 0, 1.0, -1.0) * cfg.theta0_rad
-    pitch = math.cos(cfg.theta0_rad) + cfg.ligament_length_m / cfg.a_m
+    phi = np.where((r + c) % 2 == 0, 1.0, -1.0) * unit_theta0(cfg)
     cp, sp = 0.5 * np.cos(phi), 0.5 * np.sin(phi)
     corners = np.stack([np.stack([cp, sp], 1), np.stack([-sp, cp], 1), np.stack([-cp, -sp], 1),
                         np.stack([sp, -cp], 1)], 1)
-    centres = np.stack([c * pitch, r * pitch], 1)
+    centres = square_centres(cfg)
     vertices = centres[:, None, :] + corners
     if cfg.pattern == "random_quads":
         rng = np.random.default_rng(cfg.seed)
@@ -254,7 +272,11 @@ def generated(cfg: RigidNetwork) -> Network:
 def refuse_overlap(cfg: RigidNetwork) -> None:
     """GeometryError if the units of a periodic pattern overlap (checked on a 3 × 3 patch, which
     holds every pair of neighbours of the whole sheet)."""
-    vertices, _ = geometry(cfg.model_copy(update={"n_rows": min(cfg.n_rows, 3), "n_cols": min(cfg.n_cols, 3)}))
+    for region in cfg.regions:  # a region of its own rest rotation is its own pattern
+        if region.theta0_rad is not None:
+            refuse_overlap(cfg.region_lattice(region))
+    vertices, _ = geometry(cfg.model_copy(update={"n_rows": min(cfg.n_rows, 3), "n_cols": min(cfg.n_cols, 3),
+                                                  "regions": []}))
     pairs = geo.overlapping_pairs(list(vertices), 1e-9)
     if pairs:
         p, q = pairs[0]
@@ -392,6 +414,24 @@ def apply_regions(cfg: RigidNetwork, groups: dict[str, list[int]], lig: np.ndarr
         lig[touched, col] = k[:, j] / scale
 
 
+def as_paper(cfg: RigidNetwork, groups: dict[str, list[int]], lig: np.ndarray, ua: np.ndarray, ub: np.ndarray,
+             axis: np.ndarray) -> None:
+    """In a network that mixes the paper's law with DifFlexMM's linearised one (run as the latter),
+    make the ligaments of the paper's law that law, in place: rest length ℓ = 0 and the link's axis
+    (docs/physics.md §1.9: at ℓ = 0 the linearised law is the paper's). A ligament between two units
+    of a region with a ``ligament_law`` has that law; every other ligament the lattice's."""
+    law = np.full(ua.size, cfg.ligament_law, dtype=object)
+    region = np.full(int(max(ua.max(), ub.max())) + 1, -1)
+    for r, spec in enumerate(cfg.regions):
+        region[np.asarray(groups[spec.units], np.int64)] = r
+    for r, spec in enumerate(cfg.regions):
+        if spec.ligament_law is not None:
+            law[(region[ua] == r) & (region[ub] == r)] = spec.ligament_law
+    paper = law == "paper"
+    lig[paper, lg.L_LEN] = 0.0
+    lig[np.ix_(paper, [lg.L_EX, lg.L_EY])] = axis[paper]
+
+
 def build(cfg: RigidNetwork) -> System:
     """The network as a System: state (u, v, θ) of its units; edges free or fixed (all DOFs held),
     named unit sets held by ``fixed_units``."""
@@ -408,24 +448,24 @@ def build(cfg: RigidNetwork) -> System:
     m = cfg.areal_density_kg_m2 * a * a / 2  # the nominal square's mass: scales that the geometry does not move
     kl = cfg.k_long_n_per_m
     ua, ub = links[0].astype(np.int64), links[1].astype(np.int64)
-    law = lg.LAWS[cfg.ligament_law]
+    laws = {cfg.ligament_law} | {r.ligament_law for r in cfg.regions if r.ligament_law is not None}
+    law = lg.LAWS["difflexmm_linear" if len(laws) > 1 else cfg.ligament_law]
     image = net.images()
     lig = ligament_table(vertices, centres, links, cfg.k_shear_n_per_m / kl, cfg.k_rot_n_m_per_rad / (kl * a * a), law,
                          image)
     if cfg.regions:
         given = None if net.mass_kg is None else ~np.isnan(net.mass_kg)
         apply_regions(cfg, groups, lig, ua, ub, mass_si, inertia_si, given)
+    if len(laws) > 1:
+        as_paper(cfg, groups, lig, ua, ub, links[4])
     if net.stiffness is not None:  # per-ligament springs and rest gaps of a geometry file
         for col, scale, k in ((lg.L_KL, kl, 0), (lg.L_KS, kl, 1), (lg.L_KT, kl * a * a, 2)):
             lig[:, col] = np.where(np.isnan(net.stiffness[:, k]), lig[:, col], net.stiffness[:, k] / scale)
         gap = net.rest_gap
         rows = ~np.isnan(gap[:, 0])
         lig[np.ix_(rows, [lg.L_OX, lg.L_OY])] = (centres[ub] + image - centres[ua] - gap)[rows]
-    if cfg.contact is not None and net.cell is not None:
-        raise geo.GeometryError("lattice.contact: contact between units across a periodic file's cell boundary is "
-                                "not supported; remove contact or lattice_vectors_m")
     contact = () if cfg.contact is None else uc.contact_pairs(
-        vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a)
+        vertices, centres, links, cfg.contact.stiffness_n_per_m / kl, cfg.contact.cutoff_m / a, image)
     args = lg.NetworkArgs(ua, ub, lig, np.zeros(n), np.zeros(n), law, *contact)
     mass = np.concatenate([mass_si / m, mass_si / m, inertia_si / (m * a * a)])
     inv_mass = 1.0 / mass

@@ -300,36 +300,41 @@ def contacts_reference(q: np.ndarray, n: int, units: np.ndarray, table: np.ndarr
     return energy, f
 
 
-def contact_pairs(vertices: np.ndarray, centres: np.ndarray, links, k: float, cutoff: float):
+def contact_pairs(vertices: np.ndarray, centres: np.ndarray, links, k: float, cutoff: float,
+                  image: np.ndarray | float = 0.0):
     """The contact pairs (units (C, 2) int64 [vertex's unit, edge's unit], table (C, N_CONTACT_PARAMS))
     of a network with counter-clockwise polygons ``vertices`` (N, V, 2), their ``centres`` (N, 2)
     and ligaments ``links`` (units a, units b, vertex of a, vertex of b, ...): on each side of
-    each ligament, each facing edge's far vertex against the other edge (module docstring). Raises
-    ContactError if a pair is already within the cutoff in the reference geometry."""
+    each ligament, each facing edge's far vertex against the other edge (module docstring). A link
+    of a periodic network that joins the copy of b at X_b + ``image`` (L, 2) (a wrap: the lattice
+    shift of its ligament) gives pairs with that copy: their rest separation D is taken to it, so
+    the pair acts between a and b across the cell's boundary. Raises ContactError if a pair is
+    already within the cutoff in the reference geometry."""
     a, b, va, vb = (np.asarray(x, np.int64) for x in links[:4])
+    shift = np.broadcast_to(np.asarray(image, float), (a.size, 2))
     nv = vertices.shape[1]
     seen, units, rows = set(), [], []
 
-    def add(pu, pv, eu, e0, e1):
-        key = (pu, pv, eu, e0, e1)
-        if key in seen or pu == eu:
+    def add(pu, pv, eu, e0, e1, dx, dy):
+        key = (pu, pv, eu, e0, e1, dx, dy)
+        if key in seen or (pu == eu and dx == dy == 0.0):
             return
         seen.add(key)
         row = np.zeros(N_CONTACT_PARAMS)
         row[[C_PX, C_PY]] = vertices[pu, pv] - centres[pu]
         row[[C_0X, C_0Y]] = vertices[eu, e0] - centres[eu]
         row[[C_1X, C_1Y]] = vertices[eu, e1] - centres[eu]
-        row[[C_DX, C_DY]] = centres[pu] - centres[eu]
+        row[[C_DX, C_DY]] = centres[pu] - centres[eu] + (dx, dy)
         row[[C_K, C_CUT]] = k, cutoff
         units.append((pu, eu))
         rows.append(row)
 
-    for ua, ub, i, j in zip(a.tolist(), b.tolist(), va.tolist(), vb.tolist()):
+    for ua, ub, i, j, (sx, sy) in zip(a.tolist(), b.tolist(), va.tolist(), vb.tolist(), shift.tolist()):
         ip, im, jp, jm = (i + 1) % nv, (i - 1) % nv, (j + 1) % nv, (j - 1) % nv
-        add(ua, ip, ub, jm, j)  # one side: A's edge i→i+1 faces B's edge j−1→j
-        add(ub, jm, ua, i, ip)
-        add(ua, im, ub, j, jp)  # the other side: A's edge i−1→i faces B's edge j→j+1
-        add(ub, jp, ua, im, i)
+        add(ua, ip, ub, jm, j, -sx, -sy)  # one side: A's edge i→i+1 faces B's edge j−1→j
+        add(ub, jm, ua, i, ip, sx, sy)
+        add(ua, im, ub, j, jp, -sx, -sy)  # the other side: A's edge i−1→i faces B's edge j→j+1
+        add(ub, jp, ua, im, i, sx, sy)
     if not rows:
         return NO_PAIRS, NO_CONTACTS
     table = np.array(rows)
