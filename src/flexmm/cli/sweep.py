@@ -47,6 +47,11 @@ class _Bar:
 
     def __call__(self, outcome: dict) -> None:
         status = outcome["status"]
+        if status in ("busy", "elsewhere"):  # another worker holds or stored it (flexmm.sweep.lease)
+            if self.lines:
+                params = ", ".join(f"{k}={v}" for k, v in outcome["params"].items())
+                typer.echo(f"[point {outcome['index']}] not run here: {params}: {outcome.get('reason')}", err=True)
+            return
         if status == "interrupted":
             return
         self.finished += status == "finished"
@@ -148,7 +153,8 @@ def sweep(
         for msg in report.errors:
             typer.echo(f"error: {msg}", err=True)
         say(f"{report.n_finished} finished ({report.n_run} run now, {report.n_cached} already done), "
-            f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}")
+            f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}"
+            + (f"; {report.n_elsewhere} left to another worker that held them" if report.n_elsewhere else ""))
         if report.interrupted:
             typer.echo(f"interrupted: {report.n_finished} of {report.n_points} points finished; "
                        "rerun the same command to resume", err=True)
