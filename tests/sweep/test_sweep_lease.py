@@ -14,7 +14,7 @@ import sys
 import time
 
 import pytest
-from test_sweep_shard import N_POINTS, VALUES, points_run, shard_cmd, spec_path
+from test_sweep_shard import CLI, N_POINTS, VALUES, points_run, shard_cmd, spec_path
 
 from flexmm.io.rundir import lock_holder
 from flexmm.sweep.lease import Lease
@@ -112,3 +112,34 @@ def test_a_point_stored_by_another_worker_meanwhile_is_not_run_again(tmp_path, s
     out = run_point(spec, 2, store, scratch)
     assert out["status"] == ELSEWHERE and state in out["reason"]
     assert store.read()["note"][2].decode() == "stored by the other worker"
+
+
+def test_a_point_held_elsewhere_is_waited_for_and_taken_over_when_its_holder_dies(tmp_path):
+    # another process holds point 0's lease; the sweep runs point 1 (the rest of that batch), then
+    # waits for point 0 instead of running it beside its holder; the holder killed, it runs it
+    spec, out = spec_path(tmp_path), tmp_path / "sw"
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(out / "store")], stdout=subprocess.PIPE, text=True)
+    sweep = None
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        sweep = subprocess.Popen([*CLI, str(spec), "--out", str(out), "--workers", "1", "--batch-size", "2"],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        store, t0 = SweepStore(out), time.monotonic()
+        while not (store.exists() and store.state(1) == FINISHED):
+            assert sweep.poll() is None, sweep.communicate()
+            assert time.monotonic() - t0 < 600
+            time.sleep(0.1)
+        time.sleep(2)  # waiting for the lease, not running point 0 (nor the next batch)
+        assert store.state(0) == PENDING and store.state(2) == PENDING and sweep.poll() is None
+        os.kill(holder.pid, signal.SIGKILL)
+        holder.wait(timeout=30)
+        _, err = sweep.communicate(timeout=600)
+    finally:
+        holder.kill()
+        holder.wait()
+        if sweep is not None and sweep.poll() is None:
+            sweep.kill()
+            sweep.wait()
+    assert sweep.returncode == 0, err
+    assert sorted(points_run(err)) == VALUES  # point 0 run here, once, after its holder died
+    assert SweepStore(out).status().tolist() == [CODE[FINISHED]] * N_POINTS
