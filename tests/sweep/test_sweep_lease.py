@@ -83,6 +83,18 @@ def test_a_lease_on_another_host_is_taken_over_only_after_its_heartbeat_stops(tm
     old.release()
 
 
+def test_an_empty_lease_is_taken_over_only_after_the_ttl(tmp_path):
+    # its creator died between creating the file (O_EXCL) and writing its name in it
+    lease = Lease(tmp_path, 5, ttl_s=60)
+    lease.path.parent.mkdir(parents=True)
+    lease.path.write_text("")
+    assert lease.acquire() is not None  # might be being written this instant
+    then = time.time() - 61
+    os.utime(lease.path, (then, then))
+    assert lease.acquire() is None and lease.held()
+    lease.release()
+
+
 def test_the_heartbeat_keeps_a_lease_fresh_and_a_taken_over_lease_is_not_ours(tmp_path):
     lease = Lease(tmp_path, 0, heartbeat_s=0.1)
     assert lease.acquire() is None

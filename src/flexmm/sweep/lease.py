@@ -76,6 +76,12 @@ class Lease:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         mine = {**lock_holder(), "thread": threading.get_ident()}
         holder = claim(self.path, mine, self.stale)
+        if holder == {} and self._abandoned():  # its creator died before writing who it was
+            aside = self.path.with_name(f"{self.path.name}.abandoned.{os.getpid()}")
+            with contextlib.suppress(FileNotFoundError):
+                os.rename(self.path, aside)  # atomic: of two workers, one moves it
+                aside.unlink()
+            holder = claim(self.path, mine, self.stale)
         if holder is not None:
             return describe(holder)
         self.mine = mine
@@ -83,6 +89,14 @@ class Lease:
         self._beat = threading.Thread(target=self._heartbeat, name=f"flexmm-lease-{self.path.stem}", daemon=True)
         self._beat.start()
         return None
+
+    def _abandoned(self) -> bool:
+        """The lease file says nothing (its creator died between creating and writing it) and has
+        not been touched for the TTL."""
+        try:
+            return read_holder(self.path) is None and time.time() - self.path.stat().st_mtime > self.ttl_s
+        except FileNotFoundError:
+            return False
 
     def _heartbeat(self) -> None:
         while not self._stop.wait(self.heartbeat_s):
@@ -108,7 +122,7 @@ class Lease:
         """Until the lease file is gone or stale (KeyboardInterrupt stops the wait)."""
         while True:
             holder = read_holder(self.path)
-            if holder is None and not self.path.exists():
+            if holder is None and (not self.path.exists() or self._abandoned()):
                 return
             if holder is not None and self.stale(holder):
                 return
