@@ -5,7 +5,7 @@
                                               #              | roofline | sheet_throughput | contention | sheet | workprecision
                                               #              | render | gradient | gradient_dashpots | gradient_splitting | gradient_midpoint
                                               #              | gradient_models
-                                              #              | accuracy | demo_stages
+                                              #              | accuracy | demo_stages | signal_latency
     python benchmarks/run.py workprecision    # flexmm bench on benchmarks/configs/*.yaml (slow)
 
 Every timing is the minimum and the median over repeats after a compile warm-up, with the load
@@ -1675,7 +1675,8 @@ SECTIONS = {"checkpoints": checkpoints, "checkpoints_sheet": checkpoints_sheet, 
             "gradient": gradient, "gradient_dashpots": gradient_dashpots, "gradient_splitting": gradient_splitting,
             "gradient_midpoint": gradient_midpoint,
             "gradient_models": gradient_models, "accuracy": accuracy, "network": network,
-            "demo_stages": demo_stages}
+            "demo_stages": demo_stages,
+            "signal_latency": lambda: __import__("signal_latency").signal_latency()}
 
 
 def main(argv: list[str]) -> None:

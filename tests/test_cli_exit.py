@@ -55,12 +55,17 @@ def test_a_success_ends_after_the_handlers_and_the_output(monkeypatch, ending, c
     assert capsys.readouterr().out == "out\n"
 
 
-@pytest.mark.parametrize(("raised", "status"), [(2, 2), (130, 130), ("bad", 1)])
+@pytest.mark.parametrize(("raised", "status"), [(2, 2), (130, 130), (143, 143), ("bad", 1)])
 def test_a_failure_exits_the_ordinary_way_with_its_status(monkeypatch, ending, capsys, raised, status):
+    import gc
+
+    frozen = []
+    monkeypatch.setattr(gc, "freeze", lambda: frozen.append(True))  # not this test process's objects
     monkeypatch.setattr(cli, "app", lambda: (_ for _ in ()).throw(SystemExit(raised)))
     with pytest.raises(SystemExit) as exc:
         cli.main()
     assert exc.value.code == status and ending == []
+    assert frozen == ([True] if status in (130, 143) else [])  # after a signal: the teardown skips the collection
     assert capsys.readouterr().err == ("bad\n" if raised == "bad" else "")
 
 

@@ -55,6 +55,7 @@ import numpy as np
 from flexmm.errors import PlanError
 from flexmm.integrators import INTEGRATORS
 from flexmm.integrators.stepper import make_stepper
+from flexmm.io.pause import pause_point
 
 SAFETY = 0.3
 PILOT_STEP = 1 / 3  # the pilot's step as a fraction of the stable step (near where a 4th-order method lands)
@@ -182,6 +183,7 @@ def _sampled(system) -> tuple[np.ndarray, np.ndarray | None]:
 def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
     """Run ``n_steps`` equal steps to ``t_end`` (a multiple of ``n_samples``) and sample every
     ``n_steps/n_samples`` steps (``Trace``: the fields, and the strain where runs report it)."""
+    pause_point("pilot")
     st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False).bounded_calls()
     idx, pairs = _sampled(st.system)
 

@@ -15,6 +15,7 @@ from flexmm.config.excitation import EXCITATIONS
 from flexmm.config.scene import RandomRotation, RotationSeed, Scene
 from flexmm.errors import FlexmmError
 from flexmm.integrators import INTEGRATORS
+from flexmm.io.pause import pause_point
 from flexmm.integrators.common import MODE_DISPLACEMENT, MODE_FORCE, MODE_FRICTION, SHAPES, Terms, empty_terms
 from flexmm.models import MODELS, System
 from flexmm.models.predeform import INWARD
@@ -381,6 +382,7 @@ def absorbing_damping(system: System, layer) -> np.ndarray:
 
 def build_system(scene: Scene) -> tuple[System, Terms]:
     """The scene's system with its imperfection, excitation and friction applied (no dt analysis)."""
+    pause_point("build")
     try:
         system = MODELS[scene.lattice.kind].build(scene.lattice)
     except SceneError:

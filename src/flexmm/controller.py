@@ -26,6 +26,7 @@ from flexmm.integrators.dopri5 import S_ATOL, S_RTOL
 from flexmm.integrators.parallel import available_threads
 from flexmm.integrators.stepper import DEFAULT_RTOL, Outcome, Stepper, make_stepper
 from flexmm.io.run_dataset import DatasetWriter, MemoryWriter, add_state, estimate_bytes, shape_variables
+from flexmm.io.pause import pause_point
 from flexmm.io.provenance import provenance_attrs
 from flexmm.units import UNITS
 
@@ -294,6 +295,7 @@ class _Observer:
 
     def frame(self, st: Stepper) -> None:
         """Write the stepper's current state as one SI frame."""
+        pause_point("frame")
         s, sc = self.sys, self.sc
         q, v = st.q, st.v
         site_vals, time_vals = {}, {}

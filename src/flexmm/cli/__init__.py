@@ -83,7 +83,10 @@ def main() -> None:
     interpreter's teardown when nothing else runs (issue 37: freeing numba's, scipy's and
     xarray's modules costs ~0.25 s of CPU and more of wall time, a quarter of a small run). Exit
     handlers run and the output is flushed first. A failure, an interruption (a signal may have
-    stopped a kernel mid-call) or other threads alive: the ordinary exit."""
+    stopped a kernel mid-call) or other threads alive: the ordinary exit — after a signal, with every
+    object alive frozen out of the collector (``gc.freeze``), whose passes over them were most of
+    the ~0.4 s of CPU between the run's last output and the exit (``benchmarks/signal_latency.py``):
+    the outputs are committed and closed by then, and module teardown still runs."""
     try:
         app()
         code = 0
@@ -94,7 +97,9 @@ def main() -> None:
 
 def _end(code) -> None:
     import atexit
+    import gc
     import os
+    import signal
     import sys
     import threading
 
@@ -107,6 +112,8 @@ def _end(code) -> None:
     if writer is not None:
         writer.leave(code)  # a dataset HDF5 could not write is never closed: exit without its crash
     if code != 0 or threading.active_count() > 1:
+        if code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
+            gc.freeze()
         sys.exit(code)
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):

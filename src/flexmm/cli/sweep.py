@@ -47,6 +47,11 @@ class _Bar:
 
     def __call__(self, outcome: dict) -> None:
         status = outcome["status"]
+        if status in ("busy", "elsewhere"):  # another worker holds or stored it (flexmm.sweep.lease)
+            if self.lines:
+                params = ", ".join(f"{k}={v}" for k, v in outcome["params"].items())
+                typer.echo(f"[point {outcome['index']}] not run here: {params}: {outcome.get('reason')}", err=True)
+            return
         if status == "interrupted":
             return
         self.finished += status == "finished"
@@ -88,11 +93,13 @@ def sweep(
                              "(default: the spec's keep:, else none)."),
     shard: str = typer.Option(None, "--shard", help="Run slice K of N of the points (K = 0..N-1) into the "
                               "sweep directory; shards run at once share one store. E.g. --shard $SLURM_ARRAY_TASK_ID/4."),
-    cluster: str = typer.Option(None, "--cluster", help="'slurm': submit the sweep as a job array of --shards "
-                                "tasks (with --dry-run: print its batch script)."),
+    cluster: str = typer.Option(None, "--cluster", help="'slurm' or 'pbs': submit the sweep as a job array of "
+                                "--shards tasks (with --dry-run: print its batch script)."),
     shards: int = typer.Option(4, "--shards", min=1, help="Tasks of the --cluster job array."),
-    sbatch: list[str] = typer.Option(None, "--sbatch", help="Extra #SBATCH option of the job array, e.g. "
-                                     "--sbatch=--partition=short --sbatch=--time=2:00:00 (repeatable)."),
+    job_options: list[str] = typer.Option(
+        None, "--job-option", "--sbatch", "--qsub",
+        help="Extra directive of the --cluster job script, after #SBATCH or #PBS, e.g. --sbatch=--partition=short "
+             "or --qsub='-l walltime=2:00:00' (repeatable)."),
     checkpoint_s: float = typer.Option(None, "--checkpoint-s", metavar="SECONDS", show_default=False,
                                        help="Wall time between a running point's checkpoints (default 60; 0: only "
                                             "when Ctrl-C/SIGTERM stops it). A stopped or killed point goes on "
@@ -107,9 +114,12 @@ def sweep(
     if scheduler and local_dask:
         raise error("give --scheduler or --local-dask, not both")
     part = parse_shard(shard) if shard is not None else None
-    if cluster is not None and (cluster != "slurm" or part is not None):
-        raise error(f"--cluster {cluster!r}: expected slurm (and no --shard: the job array gives each task its own)"
-                    if cluster != "slurm" else "--cluster slurm makes the shards itself: give --shards N, not --shard")
+    if cluster is not None:
+        from flexmm.sweep.jobarray import scheduler as batch_system
+
+        batch_system(cluster)  # a UsageError naming the valid ones
+        if part is not None:
+            raise error(f"--cluster {cluster} makes the shards itself: give --shards N, not --shard")
     sw = _load(spec, list(vary or []), zip_axes, list(overrides or []))
     if keep is not None:
         import dataclasses
@@ -121,8 +131,8 @@ def sweep(
     base = sw.base_scene()
     sweep_dir = check_output_dir(Path(out) if out else Path(base.output.directory) / "sweeps" / sw.name)
     if cluster:
-        _job_array(sw, spec, vary, zip_axes, overrides, keep, retry_failed, Path(sweep_dir), shards, workers,
-                   tuple(sbatch or ()), dry_run, quiet)
+        _job_array(sw, spec, vary, zip_axes, overrides, keep, retry_failed, Path(sweep_dir), cluster, shards,
+                   workers, tuple(job_options or ()), dry_run, quiet)
         return
     with sweep_lock(Path(sweep_dir), part):  # one sweep per directory, or distinct shards of it
         plan = prepare(sw, sweep_dir, retry_failed=retry_failed, shard=part)
@@ -148,7 +158,8 @@ def sweep(
         for msg in report.errors:
             typer.echo(f"error: {msg}", err=True)
         say(f"{report.n_finished} finished ({report.n_run} run now, {report.n_cached} already done), "
-            f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}")
+            f"{report.n_failed} failed, {report.n_pending} pending; {report.wall_s:.1f} s on {report.backend}"
+            + (f"; {report.n_elsewhere} left to another worker that held them" if report.n_elsewhere else ""))
         if report.interrupted:
             typer.echo(f"interrupted: {report.n_finished} of {report.n_points} points finished; "
                        "rerun the same command to resume", err=True)
@@ -189,23 +200,23 @@ def _every(checkpoint_s: float | None) -> float:
 
 
 def _job_array(sw, spec: str, vary, zip_axes: bool, overrides, keep, retry_failed: bool, sweep_dir: Path,
-               shards: int, workers: int, sbatch: tuple, dry_run: bool, quiet: bool) -> None:
-    """Print (--dry-run) or submit the sweep as a SLURM job array of ``shards`` tasks."""
+               system: str, shards: int, workers: int, options: tuple, dry_run: bool, quiet: bool) -> None:
+    """Print (--dry-run) or submit the sweep as a job array of ``shards`` tasks (SLURM, PBS)."""
     from flexmm.sweep.execute import prepare
-    from flexmm.sweep.slurm import ArrayJob, job_script, submit
+    from flexmm.sweep.jobarray import ArrayJob, job_script, submit
 
     prepare(sw, sweep_dir)  # the spec checked, a store of another spec refused, before anything is queued
     args = [str(Path(spec).resolve())]
     args += [f"--vary={v}" for v in vary or []] + (["--zip"] if zip_axes else [])
     args += [f"--set={o}" for o in overrides or []] + ([f"--keep={keep}"] if keep is not None else [])
     args += ["--retry-failed"] if retry_failed else []
-    job = ArrayJob(sw.name, tuple(args), sweep_dir.resolve(), shards, workers or 1, sbatch)
+    job = ArrayJob(sw.name, tuple(args), sweep_dir.resolve(), shards, workers or 1, options, system)
     if dry_run:
         typer.echo(job_script(job), nl=False)
         return
     script, job_id = submit(job)
-    typer.echo(job_id if quiet else f"submitted SLURM job array {job_id} ({shards} tasks, script {script}; "
-               f"logs in {sweep_dir / 'slurm'}); sweep.nc is written by the last task to finish")
+    typer.echo(job_id if quiet else f"submitted {system.upper()} job array {job_id} ({shards} tasks, script "
+               f"{script}; logs in {job.logs}); sweep.nc is written by the last task to finish")
 
 
 def _list_points(plan) -> None:

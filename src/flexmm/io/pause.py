@@ -6,7 +6,8 @@ that set it then acts at exactly that moment â€” fills the disk, sends SIGKILL â
 (or SIGKILL). Nothing is injected into the writes themselves: what fails afterwards fails on
 the real filesystem. Unset (always, outside the fault tests), ``pause_point`` does nothing.
 
-Points: ``checkpoint`` (before a checkpoint file is written), ``commit`` (a run's outputs are
+Points: ``plan`` (a scene's planning starts), ``build`` (a lattice is built), ``pilot`` (an
+accuracy pilot starts), ``frame`` (a frame of the run is written), ``checkpoint`` (before a checkpoint file is written), ``commit`` (a run's outputs are
 complete in its work or staging directory; before config.yaml, run.log and the rename that
 publishes them), ``commit:exchanged`` (the new directory swapped into place, the old one not yet
 removed), ``commit:moved-old`` (no atomic exchange on this filesystem: the old directory moved

@@ -23,21 +23,33 @@ def resolved_config(scene) -> dict:
 
 
 def config_text(scene) -> str:
-    """The resolved config as YAML text (the last scene's text is reused: a run asks for it
-    several times, and a frozen scene's text never changes)."""
-    last = _LAST_TEXT[0]  # (scene, text), read once: threads may replace it meanwhile
-    if last[0] is not scene:
-        last = _LAST_TEXT[0] = (scene, yaml.safe_dump(resolved_config(scene), sort_keys=False))
-    return last[1]
-
-
-_LAST_TEXT: list = [(None, "")]
+    """The resolved config as YAML text (remembered for the last few scenes: ``_remembered``)."""
+    return _remembered(scene, "text", lambda: yaml.safe_dump(resolved_config(scene), sort_keys=False))
 
 
 def config_hash(scene) -> str:
     """sha256 of the canonical JSON of the resolved config (independent of YAML layout)."""
-    canon = json.dumps(resolved_config(scene), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(canon.encode()).hexdigest()
+    def digest() -> str:
+        canon = json.dumps(resolved_config(scene), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(canon.encode()).hexdigest()
+
+    return _remembered(scene, "sha256", digest)
+
+
+def _remembered(scene, what: str, compute) -> str:
+    """``compute()`` for ``scene``, reused for the last few scenes asked about: a run asks for its
+    source's and its planned scene's text and hash several times, and a frozen scene's never change."""
+    recent = _RECENT[0]  # read once: threads may replace it meanwhile
+    for known, kind, value in recent:
+        if known is scene and kind == what:
+            return value
+    value = compute()
+    _RECENT[0] = ((scene, what, value), *recent[: _N_RECENT - 1])
+    return value
+
+
+_N_RECENT = 8
+_RECENT: list = [()]
 
 
 @lru_cache(maxsize=1)

@@ -141,7 +141,7 @@ def lock_is_stale(holder: dict, host: str | None = None) -> bool:
     return holder.get("start") is not None and start is not None and start != holder["start"]
 
 
-def _read_holder(path: Path) -> dict | None:
+def read_holder(path: Path) -> dict | None:
     try:
         holder = json.loads(path.read_text())
     except (OSError, ValueError):
@@ -155,48 +155,59 @@ def _describe(holder: dict | None) -> str:
     return f"pid {holder.get('pid')} on host {holder.get('host')} since {holder.get('since', '?')}"
 
 
+def claim(path: Path, mine: dict, stale=None) -> dict | None:
+    """Create ``path`` with O_EXCL holding ``mine`` (JSON): None once it is ours, else what the
+    file says about its live holder (``{}`` if unreadable). A file whose holder ``stale(holder,
+    file)`` calls dead (default: ``lock_is_stale(holder)``) is broken first: renamed aside (atomic: of two breakers, the second finds nothing)
+    and put back if a live holder's file was made meanwhile. OSError if the file cannot be made."""
+    stale = stale or (lambda holder, _file: lock_is_stale(holder))
+    for _attempt in range(3):
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            holder = read_holder(path)
+            if holder is None:  # being written by its creator this instant, or left unreadable
+                time.sleep(0.2)
+                holder = read_holder(path)
+            if holder is not None and stale(holder, path):
+                broken = path.with_name(f"{path.name}.stale.{os.getpid()}")
+                with contextlib.suppress(FileNotFoundError):
+                    os.rename(path, broken)
+                    taken = read_holder(broken)
+                    if taken is not None and not stale(taken, broken):  # a live holder's file made meanwhile
+                        with contextlib.suppress(OSError):
+                            os.link(broken, path)  # put it back (never over a newer one)
+                    broken.unlink(missing_ok=True)
+                continue
+            return holder or {}
+        with os.fdopen(fd, "w") as fh:
+            json.dump(mine, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        return None
+    return read_holder(path) or {}
+
+
 @contextlib.contextmanager
 def _exclusive_file(path: Path, what: str):
     """The fallback where ``flock`` is unsupported: ``path`` created with O_EXCL, holding
     ``lock_holder()``; removed when the block ends. A lock left by a dead process on this host is
     broken (``lock_is_stale``); any other is reported with how to remove it by hand."""
     mine = lock_holder()
-    for _attempt in range(3):
-        try:
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            holder = _read_holder(path)
-            if holder is None:  # being written by its creator this instant, or left unreadable
-                time.sleep(0.2)
-                holder = _read_holder(path)
-            if holder is not None and lock_is_stale(holder):
-                broken = path.with_name(f"{path.name}.stale.{os.getpid()}")
-                with contextlib.suppress(FileNotFoundError):
-                    os.rename(path, broken)  # atomic: of two breakers, the second finds nothing
-                    taken = _read_holder(broken)
-                    if taken is not None and not lock_is_stale(taken):  # a live lock made meanwhile
-                        with contextlib.suppress(OSError):
-                            os.link(broken, path)  # put it back (never over a newer one)
-                    broken.unlink(missing_ok=True)
-                continue
-            raise OutputError(
-                f"{what} is in use by {_describe(holder)} (lock file {path}, created with O_EXCL because this "
-                "filesystem does not support flock); wait for it to finish or choose another output. If no "
-                f"flexmm process runs there any more, remove {path} by hand") from None
-        except OSError as exc:
-            raise OutputError(f"cannot lock {what} with an O_EXCL lock file {path} (this filesystem does not "
-                              f"support flock): {exc.strerror or exc}") from None
-        with os.fdopen(fd, "w") as fh:
-            json.dump(mine, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        break
-    else:
-        raise OutputError(f"cannot lock {what}: the O_EXCL lock file {path} keeps changing hands")
+    try:
+        holder = claim(path, mine)
+    except OSError as exc:
+        raise OutputError(f"cannot lock {what} with an O_EXCL lock file {path} (this filesystem does not "
+                          f"support flock): {exc.strerror or exc}") from None
+    if holder is not None:
+        raise OutputError(
+            f"{what} is in use by {_describe(holder or None)} (lock file {path}, created with O_EXCL because this "
+            "filesystem does not support flock); wait for it to finish or choose another output. If no "
+            f"flexmm process runs there any more, remove {path} by hand")
     try:
         yield
     finally:
-        if _read_holder(path) == mine:
+        if read_holder(path) == mine:
             path.unlink(missing_ok=True)
 
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexmm.errors import PlanError
+from flexmm.io.pause import pause_point
 from flexmm.plan.continuum import ContinuumPrediction, NeedsAmplitude, NoContinuum, predict
 from flexmm.plan.dimension import reduce_dimension
 from flexmm.assemble import build_system
@@ -256,6 +257,7 @@ def make_plan(scene, fidelity: str = "auto", analysis: AnalysisRequest | None = 
     """Plan a scene (module docstring); PlanError for impossible requests."""
     if fidelity not in FIDELITIES:
         raise PlanError(f"unknown fidelity {fidelity!r}; valid: {', '.join(FIDELITIES)}")
+    pause_point("plan")
     t0 = time.perf_counter()
     steps = []
     cur, st = _dimension(scene, fidelity)

@@ -37,7 +37,9 @@ from flexmm.errors import UsageError
 from flexmm.sweep.shard import Shard, store_lock
 from flexmm.sweep.spec import SweepSpec, spec_summary
 from flexmm.sweep.store import CODE, FAILED, FINISHED, PENDING, SweepStore, spec_fingerprint, write_json_atomic
-from flexmm.sweep.worker import CHECKPOINT_S, INTERRUPTED, ONE_THREAD, Batch, init_worker, run_batch
+from flexmm.sweep.worker import (
+    BUSY, CHECKPOINT_S, ELSEWHERE, INTERRUPTED, ONE_THREAD, Batch, init_worker, run_batch,
+)
 
 MAX_BATCH = 8
 BATCHES_PER_WORKER = 3
@@ -94,6 +96,7 @@ class SweepReport:
     n_finished: int = 0
     n_failed: int = 0
     n_pending: int = 0
+    n_elsewhere: int = 0  # points handed to this sweep that another worker held (flexmm.sweep.lease)
     interrupted: bool = False
     result_path: Path | None = None
     wall_s: float = 0.0
@@ -157,10 +160,11 @@ def batch_size_for(n_tasks: int, n_workers: int, batch_size: int = 0) -> int:
     return batch_size or min(MAX_BATCH, max(1, math.ceil(n_tasks / (BATCHES_PER_WORKER * n_workers))))
 
 
-def batches(tasks: np.ndarray, root: str, size: int, checkpoint_s: float = CHECKPOINT_S) -> Iterator[Batch]:
+def batches(tasks: np.ndarray, root: str, size: int, checkpoint_s: float = CHECKPOINT_S,
+            retry_failed: bool = False) -> Iterator[Batch]:
     """The tasks in consecutive batches of ``size`` points (made as they are submitted)."""
     for i in range(0, len(tasks), size):
-        yield Batch(tuple(int(k) for k in tasks[i : i + size]), root, checkpoint_s)
+        yield Batch(tuple(int(k) for k in tasks[i : i + size]), root, checkpoint_s, retry_failed)
 
 
 def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler: str | None = None,
@@ -191,7 +195,7 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
 
     if len(plan.tasks):
         size = batch_size_for(len(plan.tasks), n_workers, batch_size)
-        work = batches(plan.tasks, str(store.root.resolve()), size, checkpoint_s)
+        work = batches(plan.tasks, str(store.root.resolve()), size, checkpoint_s, plan.retry_failed)
         n_batches = math.ceil(len(plan.tasks) / size)
         if scheduler or local_dask:
             report.backend = f"dask {scheduler}" if scheduler else "dask LocalCluster"
@@ -201,7 +205,8 @@ def execute(plan: SweepPlan, *, workers: int = 0, batch_size: int = 0, scheduler
             report.backend = f"local processes ({min(n_workers, n_batches)})"
             report.interrupted = _run_local(plan.spec, work, min(n_workers, n_batches), record, report.errors)
     report.interrupted |= any(o["status"] == INTERRUPTED for o in seen)
-    report.n_run = sum(1 for o in seen if o["status"] != INTERRUPTED)
+    report.n_run = sum(1 for o in seen if o["status"] not in (INTERRUPTED, BUSY, ELSEWHERE))
+    report.n_elsewhere = sum(1 for o in seen if o["status"] in (BUSY, ELSEWHERE))
     plan.status = store.status()
     report.n_finished, report.n_failed, report.n_pending = (plan.count(s) for s in (FINISHED, FAILED, PENDING))
     report.wall_s = time.perf_counter() - t0

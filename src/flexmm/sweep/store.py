@@ -9,13 +9,15 @@ Layout of a sweep directory::
     SWEEP_DIR/store/observables.npy     float64 (point, observable), NaN where not measured
     SWEEP_DIR/store/note.npy            fixed-width UTF-8 per point: why a value is missing / why it failed
     SWEEP_DIR/store/label.npy           fixed-width UTF-8 (point, 3): kind, field and amplitude units measured
+    SWEEP_DIR/store/leases/<i>.lease    who runs point i now (``flexmm.sweep.lease``), removed after it
     SWEEP_DIR/points/<h[:2]>/<h>/       a kept point's run (``keep:``), <h> = its config sha256
     SWEEP_DIR/work/<i>/                 checkpoints of point i while it runs (not kept), removed once it is stored
 
 Points are numbered in C order over the sweep's shape (``SweepSpec.point_at``). The arrays are
 laid out once, up front (sparse files), by the process that plans the sweep; afterwards every
 worker writes only the byte ranges of its own points (``os.pwrite``), so no lock is needed and
-two workers (or two processes running slices of one sweep) never touch the same bytes. A point's
+two workers (or two processes running slices of one sweep) never touch the same bytes; two
+workers handed the *same* point run it once, by its lease (``flexmm.sweep.lease``). A point's
 values are written first and its status byte last, so a point killed at any instant stays
 *pending* and is run again. Resuming reads status.npy alone: one byte per point.
 """
@@ -171,6 +173,15 @@ class SweepStore:
         if not self.exists():
             return np.zeros(0, np.uint8)
         return np.load(self.dir / "status.npy")
+
+    def state(self, index: int) -> str:
+        """The state of one point, read from its status byte."""
+        info = self._array_info()["status"]
+        fd = os.open(info.path, os.O_RDONLY)
+        try:
+            return STATES[os.pread(fd, 1, info.offset + index)[0]]
+        finally:
+            os.close(fd)
 
     def read(self) -> dict[str, np.ndarray]:
         """Every array of the store (memory-mapped, read-only)."""

@@ -26,6 +26,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 INTERRUPTED = "interrupted"
+#: outcomes of a point another worker held (``flexmm.sweep.lease``): still running there when this
+#: batch was stopped (BUSY), or stored by that worker (ELSEWHERE); neither is run here
+BUSY, ELSEWHERE = "busy", "elsewhere"
 ONE_THREAD = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 FINISHED, FAILED = "finished", "failed"
 
@@ -45,6 +48,7 @@ class Batch:
     indices: tuple[int, ...]
     root: str
     checkpoint_s: float = CHECKPOINT_S
+    retry_failed: bool = False  # a point found failed is run again (else only pending ones are)
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -123,20 +127,35 @@ def _one_thread() -> None:
 
 
 def run_batch(batch: Batch, spec=None) -> list[dict]:
-    """Run points in order; stop at the first interruption. Returns one outcome per point tried."""
+    """Run points in order; stop at the first interruption. Returns one outcome per point tried.
+
+    A point leased by another live worker (``flexmm.sweep.lease``) is left until the batch's other
+    points are done, then waited for: stored there (ELSEWHERE) or pending again (run here)."""
+    from flexmm.sweep.lease import Lease
     from flexmm.sweep.store import SweepStore
 
     spec = spec if spec is not None else _SPEC
     main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGINT, signal.default_int_handler) if main else None
-    outcomes = []
+    outcomes: list[dict] = []
+    busy: dict[int, dict] = {}
     store = SweepStore(batch.root)
     scratch = Path(tempfile.mkdtemp(prefix="flexmm-point-", dir=_scratch_root()))
     try:
         _one_thread()
-        for i in batch.indices:
-            outcomes.append(run_point(spec, i, store, scratch, batch.checkpoint_s))
-            if outcomes[-1]["status"] == INTERRUPTED:
+        todo = list(batch.indices)
+        while todo:
+            i = todo.pop(0)
+            if i in busy:  # its other points are done: wait for the worker that holds it
+                Lease(store.dir, i).wait()
+            o = run_point(spec, i, store, scratch, batch.checkpoint_s, batch.retry_failed)
+            if o["status"] == BUSY:
+                busy[i] = o
+                todo.append(i)
+                continue
+            busy.pop(i, None)
+            outcomes.append(o)
+            if o["status"] == INTERRUPTED:
                 break
     except KeyboardInterrupt:
         pass
@@ -144,7 +163,7 @@ def run_batch(batch: Batch, spec=None) -> list[dict]:
         shutil.rmtree(scratch, ignore_errors=True)
         if main:
             signal.signal(signal.SIGINT, old)
-    return outcomes
+    return outcomes + list(busy.values())
 
 
 def _scratch_root() -> str | None:
@@ -153,8 +172,14 @@ def _scratch_root() -> str | None:
     return str(shm) if shm.is_dir() and os.access(shm, os.W_OK) else None
 
 
-def run_point(spec, index: int, store, scratch: Path, checkpoint_s: float = CHECKPOINT_S) -> dict:
+def run_point(spec, index: int, store, scratch: Path, checkpoint_s: float = CHECKPOINT_S,
+              retry_failed: bool = False) -> dict:
     """Validate, integrate and measure point ``index``; publish it in the store (status last).
+
+    The point's lease is taken first (``flexmm.sweep.lease``): held by another live worker, the
+    point is not touched (BUSY); once taken, a point that another worker has stored meanwhile
+    (finished, or failed without ``retry_failed``) is not run again (ELSEWHERE); and the point is
+    published only if the lease is still this worker's (ELSEWHERE if it was taken over).
 
     The point's run writes checkpoints every ``checkpoint_s`` of wall time and when a signal stops
     it (a kept point's into its run directory's work directory, ``flexmm run``'s; another's into
@@ -164,18 +189,31 @@ def run_point(spec, index: int, store, scratch: Path, checkpoint_s: float = CHEC
     ``<dir>.interrupted``); the store write itself runs with SIGINT blocked, so it is all or
     nothing; the point's checkpoints are removed after it.
     """
+    from flexmm.sweep.lease import Lease
+
     t0 = time.perf_counter()
     outcome = {"index": index, "params": _plain_params(spec.params_at(index)), "pid": os.getpid()}
+    lease = Lease(store.dir, index)
     try:
+        holder = lease.acquire()
+        if holder is not None:
+            return {**outcome, "status": BUSY, "reason": f"being run by {holder} (lease {lease.path})"}
+        state = store.state(index)
+        if state == FINISHED or (state == FAILED and not retry_failed):
+            return {**outcome, "status": ELSEWHERE, "reason": f"{state} by another worker"}
         info, values, labels = _compute(spec, index, store, scratch, outcome, checkpoint_s)
         info["wall_s"] = time.perf_counter() - t0
         if info["status"] != INTERRUPTED:
             with _sigint_blocked():
+                if not lease.held():
+                    return {**outcome, "status": ELSEWHERE,
+                            "reason": f"its lease {lease.path} was taken over (no heartbeat for {lease.ttl_s:g} s)"}
                 store.write_point(index, info["status"], values, info.get("reason") or "", labels)
             shutil.rmtree(store.work_dir(index), ignore_errors=True)
     except KeyboardInterrupt:
         return {**outcome, "status": INTERRUPTED, "reason": "interrupted"}
     finally:
+        lease.release()
         for p in scratch.iterdir():
             shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
     return info
