@@ -47,10 +47,11 @@ precompile: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/flexmm run configs/lego_vector_soliton.yaml
 
-test: $(STAMP)
+# the suite builds the documentation site (quick in the default suite, in full as a slow test)
+test: $(STAMP) $(DOCS_STAMP)
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
-test-slow: $(STAMP)
+test-slow: $(STAMP) $(DOCS_STAMP)
 	$(BIN)/python -m pytest -m slow $(PYTEST_ARGS)
 
 reproduce: $(RUN_OUT) $(SWEEP_OUT)

@@ -37,7 +37,9 @@ LEGO_SHEET = {"kind": "rotating_squares_sheet", **LEGO_PARAMETERS}
 #: stiff hinges on the LEGO chain (nondimensional K_s = 0.5, K_θ = 0.02): pulses a few sites wide
 LEGO_STIFF_HINGES = {"k_shear_n_per_m": 0.5 * LEGO_PARAMETERS["k_long_n_per_m"],
                      "k_rot_n_m_per_rad": 0.02 * LEGO_PARAMETERS["k_long_n_per_m"] * LEGO_PARAMETERS["a_m"] ** 2}
-# configs/lego_vector_soliton.yaml, as a dict (tests/test_cli.py checks that they agree).
+# The LEGO impact of configs/lego_vector_soliton.yaml on a 200-unit chain with a free far end, for
+# 0.8 s: the demo's scene at the size tests run (the demo is this with DEMO_CHANGES; tests/test_cli.py
+# checks that they agree).
 LEGO_LATTICE = {**LEGO_CHAIN, "n_units": 200, "theta0_rad": 0.0, "left": "driven", "right": "free"}
 LEGO_SCENE = {
     "name": "lego_vector_soliton",
@@ -48,6 +50,15 @@ LEGO_SCENE = {
     "solver": {"integrator": "velocity_verlet", "duration_s": 0.8},
     "output": {"n_frames": 801},
 }
+#: what configs/lego_vector_soliton.yaml changes in LEGO_SCENE (dotted): a chain long enough for the
+#: soliton to form and travel, with an absorbing far end
+DEMO_CHANGES = {"lattice.n_units": 900, "damping.absorbing": {"end": "right", "n_units": 120},
+                "solver.duration_s": 2.0, "output.n_frames": 1001}
+#: dotted overrides that turn the shipped demo into LEGO_SCENE's chain (200 units, free far end)
+DEMO_AS_LEGO_SCENE = {"lattice.n_units": 200, "damping.absorbing": None, "solver.duration_s": 0.8,
+                      "output.n_frames": 801}
+#: the same as ``--set``/``load_scene`` strings
+DEMO_AS_LEGO_SCENE_SETS = [f"{k}={'null' if v is None else v}" for k, v in DEMO_AS_LEGO_SCENE.items()]
 
 
 def _chain(**changes) -> dict:
@@ -215,7 +226,7 @@ def set_path(data: dict, dotted: str, value) -> None:
 
 @pytest.fixture
 def lego_config() -> dict:
-    """A fresh (deep) copy of the LEGO scene dict of configs/lego_vector_soliton.yaml."""
+    """A fresh (deep) copy of LEGO_SCENE (the demo's LEGO impact on a 200-unit free-ended chain)."""
     return copy.deepcopy(LEGO_SCENE)
 
 

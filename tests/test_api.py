@@ -1,7 +1,7 @@
 """The notebook API (``flexmm.run``, ``flexmm.analyze``, ``flexmm.render``; docs/api.md).
 
-One short LEGO impact run (0.3 s of configs/lego_vector_soliton.yaml) is shared by the tests
-that need a run; the config-error tests run nothing.
+One short LEGO impact run (0.3 s of configs/lego_vector_soliton.yaml on a 200-unit chain with a free
+far end) is shared by the tests that need a run; the config-error tests run nothing.
 """
 
 from __future__ import annotations
@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 import flexmm
-from conftest import LEGO_SCENE
+from conftest import DEMO_AS_LEGO_SCENE, LEGO_SCENE
 from flexmm.config import ConfigError, Scene, scene_from_dict
 from flexmm.errors import FlexmmError, UsageError
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
 #: long enough for the vector soliton to form and be fitted over 10+ sites, short enough for a test
-SHORT = {"solver.duration_s": 0.3, "output.n_frames": 301}
+SHORT = {**DEMO_AS_LEGO_SCENE, "solver.duration_s": 0.3, "output.n_frames": 301}
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +137,7 @@ def test_a_bad_dict_raises_config_error_with_the_dotted_path():
 
 
 def test_a_bad_yaml_string_names_its_line():
-    text = DEMO.read_text().replace("n_units: 200", "n_units: -3")
+    text = DEMO.read_text().replace("n_units: 900", "n_units: -3")
     line = next(i for i, s in enumerate(text.splitlines(), 1) if "n_units: -3" in s)
     with pytest.raises(ConfigError, match=rf"<string>:{line}: lattice.n_units: got -3 \(int\); expected: "):
         flexmm.run(text)

@@ -105,8 +105,8 @@ def test_dataset_is_self_describing_si(declared_run):
 
 
 def test_set_overrides_land_in_resolved_config(short_lego, tmp_path):
-    _, ds = run(short_lego, tmp_path / "run", "--set", "lattice.n_units=40", "--set",
-                "damping.viscous.damping_ratio=1e-3", "-s", "output.n_frames=11")
+    _, ds = run(short_lego, tmp_path / "run", "--set", "lattice.n_units=40", "--set", "damping.absorbing=null",
+                "--set", "damping.viscous.damping_ratio=1e-3", "-s", "output.n_frames=11")
     resolved = yaml.safe_load(ds.attrs["config"])
     assert resolved["lattice"]["n_units"] == 40 and ds.sizes["site"] == 40
     assert resolved["damping"]["viscous"]["damping_ratio"] == 1e-3 and ds.sizes["time"] == 11
@@ -164,7 +164,11 @@ def test_unstable_dt_exits_2_and_forced_blow_up_exits_1(short_lego, tmp_path):
 
 
 def test_lego_fixture_matches_shipped_config(lego_config, make_scene):
-    """tests/conftest.py's LEGO dict is the shipped configs/lego_vector_soliton.yaml."""
+    """tests/conftest.py's LEGO dict with DEMO_CHANGES is the shipped configs/lego_vector_soliton.yaml,
+    and the shipped file with DEMO_AS_LEGO_SCENE is the dict."""
+    from conftest import DEMO_AS_LEGO_SCENE_SETS, DEMO_CHANGES
+
     from flexmm.config import load_scene
 
-    assert make_scene(lego_config) == load_scene(SHIPPED)
+    assert make_scene(lego_config, DEMO_CHANGES) == load_scene(SHIPPED)
+    assert load_scene(SHIPPED, DEMO_AS_LEGO_SCENE_SETS) == make_scene(lego_config)

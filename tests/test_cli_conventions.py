@@ -128,6 +128,7 @@ def test_run_quiet_prints_only_the_dataset_path(tmp_path):
 
     cfg = yaml.safe_load(CONFIG.read_text())
     cfg["lattice"]["n_units"] = 30
+    cfg["damping"] = {}
     cfg["solver"]["duration_s"] = 2e-3
     cfg["output"] = {"n_frames": 5}
     path = tmp_path / "small.yaml"

@@ -18,13 +18,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import default_sigint
+from conftest import DEMO_AS_LEGO_SCENE_SETS, default_sigint
 
 from flexmm.io.run_dataset import open_run
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "configs" / "lego_vector_soliton.yaml"
 FLEXMM = str(Path(sys.executable).with_name("flexmm"))
+#: the demo's impact on its 200-unit chain with a free end (the sweeps here run whole points)
+SMALL_DEMO = ["--set", "lattice.n_units=200", "--set", "damping.absorbing=null"]
 SHORT = ["--set", "solver.duration_s=0.02", "--set", "output.n_frames=11", "--fidelity", "full"]
 # fault handling during the time loop: no accuracy pilots before it (they would delay the stepping)
 LONG = ["--set", "solver.duration_s=200", "--set", "output.n_frames=2001", "--fidelity", "full",
@@ -118,7 +120,7 @@ def test_disk_full_stops_the_run_and_keeps_the_frames_written(tmp_path, monkeypa
 
     monkeypatch.setattr(run_dataset.DatasetWriter, "flush", full_after_300)
     monkeypatch.setattr(run_dataset, "BUFFER_BYTES", 8 * 400 * 2 * 100)  # flush every 100 frames
-    res = run_scene(load_scene(DEMO), run_dir=tmp_path / "demo")
+    res = run_scene(load_scene(DEMO, DEMO_AS_LEGO_SCENE_SETS), run_dir=tmp_path / "demo")  # 200 units: 400 DOFs
     assert res.status == "failed" and "No space left on device" in res.reason
     assert res.path == tmp_path / "demo.failed" / "dataset.nc" and not (tmp_path / "demo").exists()
     ds = open_run(res.path)
@@ -160,7 +162,7 @@ def test_sweep_workers_die_with_their_parent_and_the_sweep_resumes(tmp_path) -> 
     import psutil
 
     sweep = tmp_path / "sw"
-    vary = ["--vary", "excitation.velocity_m_s=0.5:3:2", "--set", "solver.duration_s=5"]
+    vary = ["--vary", "excitation.velocity_m_s=0.5:3:2", *SMALL_DEMO, "--set", "solver.duration_s=5"]
     proc = start("sweep", DEMO, "--out", sweep, "--workers", "1", *vary)
     t0 = time.monotonic()
     workers: list[int] = []
@@ -187,7 +189,7 @@ def test_sweep_workers_die_with_their_parent_and_the_sweep_resumes(tmp_path) -> 
 
 def test_two_sweeps_on_one_directory_do_not_mix(tmp_path) -> None:
     sweep = tmp_path / "sw"
-    vary = ["--vary", "excitation.velocity_m_s=0.5:3:3", "--set", "solver.duration_s=40"]
+    vary = ["--vary", "excitation.velocity_m_s=0.5:3:3", *SMALL_DEMO, "--set", "solver.duration_s=40"]
     proc = start("sweep", DEMO, "--out", sweep, "--workers", "1", *vary)
     try:
         t0 = time.monotonic()
@@ -257,7 +259,7 @@ def test_a_sweep_stopped_at_a_random_moment_resumes_to_a_true_summary(tmp_path, 
     from flexmm.sweep.store import SweepStore
 
     sweep = tmp_path / "sw"
-    vary = ["--vary", "excitation.velocity_m_s=0.5:3:6", "--set", "solver.duration_s=2", "--workers", "2",
+    vary = ["--vary", "excitation.velocity_m_s=0.5:3:6", *SMALL_DEMO, "--set", "solver.duration_s=2", "--workers", "2",
             "--set", "solver.accuracy=null"]
     proc = start("sweep", DEMO, "--out", sweep, *vary)
     time.sleep(random.Random(int(sig)).uniform(3.0, 6.0))

@@ -101,7 +101,7 @@ def test_the_wheel_installs_and_runs_outside_the_repository(wheel, tmp_path):
     assert _run([exe, "--version"], cwd=tmp_path, env=env).stdout.strip() == f"flexmm {flexmm.__version__}"
     out = _run([exe, "validate", "scene.yaml"], cwd=tmp_path, env=env)
     assert "scene.yaml" in out.stdout + out.stderr
-    bad = (tmp_path / "scene.yaml").read_text().replace("n_units: 200", "n_units: -3")
+    bad = (tmp_path / "scene.yaml").read_text().replace("n_units: 900", "n_units: -3")
     (tmp_path / "bad.yaml").write_text(bad)
     res = subprocess.run([exe, "validate", "bad.yaml"], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert res.returncode == 2 and "lattice.n_units" in res.stderr and "Traceback" not in res.stderr

@@ -10,7 +10,7 @@ import hashlib
 from flexmm.assemble import build_problem
 from flexmm.config import load_scene
 from flexmm.integrators.runner import integrate
-sc = load_scene("configs/lego_vector_soliton.yaml", ["lattice.n_units=60", "lattice.left=free",
+sc = load_scene("configs/lego_vector_soliton.yaml", ["lattice.n_units=60", "lattice.left=free", "damping.absorbing=null",
                 "excitation={kind: soliton, amplitude_rad: 0.45, center_site: 8}", "solver.duration_s=0.06"])
 p = build_problem(sc)
 for name in ("velocity_verlet", "pefrl"):

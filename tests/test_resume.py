@@ -210,8 +210,8 @@ def test_every_integrator_continues_bit_identical_from_a_checkpoint(tmp_path, in
     from flexmm.config import load_scene
     from flexmm.controller import run_problem
 
-    base = ["lattice.n_units=60", "solver.accuracy=null", f"solver.integrator={integrator}",
-            "output.every_s=0.002"]
+    base = ["lattice.n_units=60", "damping.absorbing=null", "solver.accuracy=null",
+            f"solver.integrator={integrator}", "output.every_s=0.002"]
 
     def problem(duration: float):
         return build_problem(load_scene(DEMO, [*base, f"solver.duration_s={duration}"]))

@@ -14,7 +14,8 @@ scene is remade only when its file changes)::
 
 As a hook (mkdocs.yml), it makes any entry that is missing or stale (the scene file's hash or the
 flexmm version differs), then adds the gallery pages: an index with one row per scene and one page
-per scene, listed in the navigation under "Gallery".
+per scene, listed in the navigation under "Gallery". In a quick build (docs/hooks/quick.py) it runs
+nothing: a scene without a current entry gets a page that says so (``skipped_entry``).
 """
 
 from __future__ import annotations
@@ -114,6 +115,16 @@ def make_entry(config: Path, out_dir: Path, budget: float = BUDGET_UNIT_STEPS) -
     return entry
 
 
+def skipped_entry(config: Path) -> dict:
+    """The entry of a scene the quick build does not run: its name and description, no picture."""
+    from flexmm.config import load_scene
+
+    text = config.read_text()
+    scene = load_scene(config)
+    return {"name": scene.name, "config": _shown(config), "description": scene.description or "",
+            "header": _header(text), "mode": "skipped", "picture": None, "summary": [], "comparisons": []}
+
+
 def load_entry(config: Path, out_dir: Path) -> dict | None:
     """The entry of ``config`` if it is there and current (same scene text, same flexmm version)."""
     import flexmm
@@ -143,6 +154,8 @@ def _cell(text) -> str:
 
 def headline(entry: dict) -> str:
     """One line for the index: the principal measurement, or why there is none."""
+    if entry["mode"] == "skipped":
+        return "not run in this quick build of the site (`make docs` runs it)"
     if entry["mode"] == "structure":
         return f"not run for the site (≈ {entry['work_unit_steps']:.2g} unit-steps): structure at rest"
     if entry["status"] != "finished":
@@ -153,9 +166,13 @@ def headline(entry: dict) -> str:
 def scene_page(entry: dict, config_text: str) -> str:
     """The Markdown of one scene's page."""
     name = entry["name"]
-    lines = [f"# {name}", "", entry["description"], "",
-             f"![{name}]({entry['picture']})", ""]
-    if entry["mode"] == "run":
+    lines = [f"# {name}", "", entry["description"], ""]
+    if entry["picture"]:
+        lines += [f"![{name}]({entry['picture']})", ""]
+    if entry["mode"] == "skipped":
+        lines += [f"*Not run in this quick build of the site*: `make docs` runs it, or run it yourself "
+                  f"with `flexmm run {entry['config']}`.", ""]
+    elif entry["mode"] == "run":
         est = entry["error_estimate"]
         lines += [f"*Made by this site's build from `{entry['config']}`*: `flexmm run {entry['config']}` "
                   f"(status {entry['status']}, {entry['wall_s']:.1f} s, any compilation included"
@@ -194,8 +211,9 @@ def index_page(entries: list[dict]) -> str:
              "rest instead of run). The [scenes guide](../scenes.md) explains what each shows and its caveats.",
              "", "| scene | picture | measured against theory |", "| --- | --- | --- |"]
     for e in entries:
-        lines.append(f"| [{e['name']}]({e['name']}.md)<br>{_cell(e['description'])} | "
-                     f"![{e['name']}]({e['picture']}){{ width=240 }} | {_cell(headline(e))} |")
+        picture = f"![{e['name']}]({e['picture']}){{ width=240 }}" if e["picture"] else ""
+        lines.append(f"| [{e['name']}]({e['name']}.md)<br>{_cell(e['description'])} | {picture} | "
+                     f"{_cell(headline(e))} |")
     return "\n".join(lines) + "\n"
 
 
@@ -225,15 +243,20 @@ def on_files(files, config):
 
     root = _root(config)
     out_dir = root / ENTRIES
+    quick = config.extra.get("quick_build", False)  # docs/hooks/quick.py
     entries = []
     for path in _scenes(config):
         entry = load_entry(path, out_dir)
-        if entry is None:
+        if entry is None and quick:
+            entry = skipped_entry(path)
+        elif entry is None:
             print(f"gallery: making the entry of {path.name}", file=sys.stderr, flush=True)
             entry = make_entry(path, out_dir)
         entries.append(entry)
         files.append(File.generated(config, f"gallery/{path.stem}.md", content=scene_page(entry, path.read_text())))
-        files.append(File.generated(config, f"gallery/{entry['picture']}", abs_src_path=str(out_dir / entry["picture"])))
+        if entry["picture"]:
+            files.append(File.generated(config, f"gallery/{entry['picture']}",
+                                        abs_src_path=str(out_dir / entry["picture"])))
     files.append(File.generated(config, "gallery/index.md", content=index_page(entries)))
     return files
 

@@ -57,7 +57,7 @@ def test_quick_reader_gives_the_dataset_open_run_gives(tmp_path) -> None:
 
     demo = Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml"
     # as many frames as sites: the dimensions are told apart by name, not by length
-    scene = load_scene(demo, ["lattice.n_units=20", "solver.duration_s=0.002", "output.n_frames=20"])
+    scene = load_scene(demo, ["lattice.n_units=20", "damping.absorbing=null", "solver.duration_s=0.002", "output.n_frames=20"])
     path = run_scene(scene, run_dir=tmp_path / "r").path
     a, b = open_run(path), load_run_quickly(path)
     xr.testing.assert_identical(a, b)
@@ -77,7 +77,7 @@ def test_a_run_kept_in_memory_is_the_dataset_its_file_would_hold(tmp_path) -> No
     from pathlib import Path
 
     demo = Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml"
-    scene = load_scene(demo, ["lattice.n_units=20", "solver.duration_s=0.002", "output.n_frames=20"])
+    scene = load_scene(demo, ["lattice.n_units=20", "damping.absorbing=null", "solver.duration_s=0.002", "output.n_frames=20"])
     on_disk = load_run_quickly(run_scene(scene, run_dir=tmp_path / "file").path)
     result = run_scene(scene, run_dir=tmp_path / "mem", in_memory=True, atomic=False)
     assert result.path is None and not (tmp_path / "mem" / "dataset.nc").exists()

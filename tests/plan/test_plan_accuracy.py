@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import LEGO_CHAIN
+from conftest import DEMO_AS_LEGO_SCENE_SETS, LEGO_CHAIN
 
 from flexmm.accuracy import Trace, quantity_error, state_error, trace
 from flexmm.api import run_scene
@@ -115,7 +115,9 @@ def test_a_run_builds_its_model_once(tmp_path, monkeypatch):
         return build(cfg)
 
     monkeypatch.setattr(rotating_chain, "build", counting)
-    demo = load_scene(Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml")
+    # the demo's impact on 200 units (a longer chain's plan also builds the bands' 256-unit copy)
+    demo = load_scene(Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml",
+                      DEMO_AS_LEGO_SCENE_SETS)
     assert run_scene(demo, run_dir=tmp_path / "demo", fidelity="auto").ok
     assert len(calls) == 1, calls  # not trimmed: the plan's build runs
     calls.clear()

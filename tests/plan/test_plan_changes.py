@@ -16,7 +16,7 @@ from flexmm.errors import PlanError
 from flexmm.frames import frame_times, interval
 
 LEGO = str(Path(__file__).resolve().parents[2] / "configs" / "lego_vector_soliton.yaml")
-SHORT = ["--set", "lattice.n_units=60", "--set", "solver.duration_s=0.05", "--set", "output.n_frames=51"]
+SHORT = ["--set", "lattice.n_units=60", "--set", "damping.absorbing=null", "--set", "solver.duration_s=0.05", "--set", "output.n_frames=51"]
 
 
 def run(tmp_path, *sets: str):

@@ -24,6 +24,7 @@ TINY = f"""\
     set:
       lattice.n_units: 60
       lattice.left: free
+      damping.absorbing: null
       excitation: {{kind: soliton, amplitude_rad: 0.4, center_site: 8}}
       solver.duration_s: 0.06
       solver.dt_fraction: 0.5

@@ -26,6 +26,7 @@ BASE = f"""\
     base: {LEGO}
     set:
       lattice.left: free
+      damping.absorbing: null
       excitation: {{kind: soliton, amplitude_rad: 0.4, center_site: 8}}
       solver.duration_s: 0.02
       solver.dt_fraction: 0.5
@@ -86,7 +87,7 @@ def test_a_bad_axis_value_is_still_an_up_front_error(tmp_path):
     with pytest.raises(ConfigError) as exc:
         prepare(spec, tmp_path / "sw")
     [msg] = [str(i) for i in exc.value.issues]
-    assert msg.startswith(f"{tmp_path / 's.yaml'}:12: excitation.amplitude_rad:") and "'big'" in msg
+    assert msg.startswith(f"{tmp_path / 's.yaml'}:13: excitation.amplitude_rad:") and "'big'" in msg
 
 
 def test_a_store_of_another_spec_is_refused(tmp_path):

@@ -153,7 +153,7 @@ def _print_error_estimate(acc: dict, quiet: bool) -> None:
     parts = (f"amplitudes {acc['accuracy_estimate_amplitude']:.2g}, speeds {acc['accuracy_estimate_speed']:.2g}; "
              if "accuracy_estimate_speed" in acc else "")
     line = (f"error estimate: {est:.3g} of the wave amplitudes and speeds (target {target:g}; {parts}"
-            f"{acc.get('accuracy_check', '')})")
+            f"{acc.get('accuracy_check', '').rstrip(',')})")  # the plan's wording continues after its comma
     if not quiet:
         typer.echo(line)
     if not acc.get("accuracy_met", 1):
