@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import default_sigint, mounted_tmpfs
+from conftest import DEMO_AS_LEGO_SCENE_SETS, default_sigint, mounted_tmpfs
 from test_faults import DEMO, FLEXMM, LONG, SHORT, flexmm, wait_until_stepping
 
 from flexmm.io.run_dataset import open_run
@@ -165,8 +165,8 @@ def test_a_live_lock_of_another_host_is_reported_never_taken(tmp_path) -> None:
 
 # -- a really full disk ---------------------------------------------------------------------------
 
-#: 2003 frames of u and theta on 200 units: 6.2 MiB, on a 3 MiB filesystem
-FILLS_3M = ["--set", "solver.duration_s=20", "--set", "output.n_frames=2001", "--fidelity", "full",
+#: 2003 frames of u and theta on the demo's 200-unit free-ended chain: 6.2 MiB, on a 3 MiB filesystem
+FILLS_3M = [*(a for s in DEMO_AS_LEGO_SCENE_SETS for a in ("--set", s)), "--set", "solver.duration_s=20", "--set", "output.n_frames=2001", "--fidelity", "full",
             "--set", "solver.accuracy=null", "--set", "output.velocities=false", "--force"]
 
 

@@ -66,7 +66,8 @@ def test_spec_errors_name_the_keep_line(tmp_path):
         with pytest.raises(ConfigError) as exc:
             load_sweep(p)
         [issue] = exc.value.issues
-        assert str(issue).startswith(f"{p}:12: keep:") and message in str(issue), str(issue)
+        line = textwrap.dedent(SPEC).count("\n") + 1  # the keep: line, after the spec
+        assert str(issue).startswith(f"{p}:{line}: keep:") and message in str(issue), str(issue)
 
 
 def test_keep_where_keeps_exactly_the_points_meeting_the_condition(tmp_path, in_process_scheduler):
