@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexmm.design import midpoint, splitting, sweeps
+from flexmm.design import forward, midpoint, splitting, sweeps
 from flexmm.design.kernels import (N_V, chain_add_columns, sheet_grid_add, sheet_uniform,
                                    sheet_uniform_scratch, with_tables)
 from flexmm.design.tape import (ENGINE_MIN_STEPS, GradientError, Raw, Records, Steps, chain_segment, stack,
@@ -49,8 +49,64 @@ TILE_MIN_SITES = 8192
 TILE_SITES = 2048
 
 
+#: no observed DOFs, no records (a replay)
+_NONE, _NO_RECORD = np.empty(0, np.int64), np.empty((1, 0))
+
+
 class _Common(Steps):
-    """What every integrator's steps share: the reverse of the run's start."""
+    """What every integrator's steps share: the run and the replay of a segment by the one compiled
+    loop (``forward.run``) with the integrator's step contract (``step``), keeping what its
+    reverse step reads (``keep``), and the reverse of the run's start."""
+
+    #: what the reverse step reads besides (q, v, f, t), kept by the forward run (``forward.run``'s K)
+    K: np.ndarray
+
+    @property
+    def step(self) -> tuple:
+        """The compiled step contract (``forward.VerletStep``, ``SplitStep``, ``MidpointStep``)."""
+        raise NotImplementedError
+
+    def keep(self, rows: int | None, where: str) -> np.ndarray:
+        """``forward.run``'s K for ``rows`` steps (None: nothing kept), named by ``where``
+        (``Trajectory._scratch_array``)."""
+        raise NotImplementedError
+
+    def states(self, SQ, SV, SF, ST, K) -> tuple:
+        """The states as ``reverse`` reads them."""
+        return SQ, SV, SF, ST, K
+
+    def check(self, failed: int) -> None:
+        """Refuse a run whose step ``failed`` (≥ 0) did not converge."""
+
+    def forward(self, seg, scratch=False, keep=False):
+        traj = self.traj
+        q, v, f = self.start(self.args, self.terms)
+        ck = traj._buffers(self.n, traj.nsteps // seg + 1, "checkpoints" if scratch else "")
+        rec = traj._records()
+        self.K = self.keep(traj.nsteps if keep else None, "checkpoints")
+        self._run(q, v, f, seg, ck, rec)
+        return rec, (*ck, seg)
+
+    def _run(self, q, v, f, seg, ck, rec) -> None:
+        traj = self.traj
+        _, failed = forward.run(self.step, q, v, f, traj.t0, traj.h, traj.nsteps, seg, traj.stride, traj.obs, *ck,
+                                self.K, rec.q, rec.v, rec.f)
+        self.check(failed)
+
+    def kept(self, checkpoints):
+        return self.states(*checkpoints[:4], self.K)
+
+    def replay(self, checkpoints, c, m):
+        seg = checkpoints[4]
+        SQ, SV, SF, ST = self.traj._buffers(self.n, seg + 1, "segment")
+        K = self.keep(seg, "segment")
+        self._replay(*(x[c] for x in checkpoints[:4]), m, SQ, SV, SF, ST, K)
+        return self.states(SQ, SV, SF, ST, K)
+
+    def _replay(self, q0, v0, f0, t0, m, SQ, SV, SF, ST, K) -> None:
+        """The m steps from a checkpoint, every state kept (the run's: ``forward.run``)."""
+        forward.run(self.step, q0.copy(), v0.copy(), f0.copy(), t0, self.traj.h, m, 1, m + 1, _NONE, SQ, SV, SF, ST,
+                    K, _NO_RECORD, _NO_RECORD, _NO_RECORD)
 
     def reverse_start(self, args, terms) -> None:
         """Reverse of the run's start (prescription, initial force): (lq, lv) become the gradients
@@ -80,47 +136,22 @@ class _Common(Steps):
 
 
 class Verlet(_Common):
-    """Velocity Verlet (``sweeps.forward``, ``replay``, ``reverse``, ``tangent``): a state is (q, v,
+    """Velocity Verlet (``forward.VerletStep``; ``sweeps.reverse``, ``tangent``): a state is (q, v,
     f, t), with velocity terms also the f_a of the step into it (``integrators.verlet.step_force``)."""
 
     def __init__(self, traj, raw, form):
         super().__init__(traj, raw, form)
         self.args, self.terms, self.kick, self.pre, self.post = traj.bind(raw)
         self.state_bytes = (4 if traj._vdep else 3) * self.n * 8  # q, v, f (and f_a)
-        self.CA = np.empty((0, self.n))
 
-    def forward(self, seg, scratch=False, keep=False):
-        traj = self.traj
-        q, v, f = self.start(self.args, self.terms)
-        rows = traj.nsteps // seg + 1
-        CQ, CV, CF, CT = traj._buffers(q.size, rows, "checkpoints" if scratch else "")
-        rec = traj._records()
-        self._run(q, v, f, seg, scratch, (CQ, CV, CF, CT), rec)
-        return rec, (CQ, CV, CF, CT, seg)
+    @property
+    def step(self):
+        return forward.VerletStep(self.args, self.terms, self.kick, self.pre, self.post)
 
-    def _run(self, q, v, f, seg, scratch, ck, rec) -> None:
-        """The run (with velocity terms, the gradient's run keeping every state keeps each step's
-        f_a too)."""
-        traj = self.traj
-        keep_fa = scratch and traj._vdep and seg == 1
-        self.CA = traj._scratch_array("checkpoints.fa", (ck[0].shape[0] if keep_fa else 0, q.size))
-        sweeps.forward(self.args, self.terms, self.kick, self.pre, self.post, q, v, f, traj.t0, traj.h, traj.nsteps,
-                       seg, traj.stride, traj.obs, *ck, self.CA, rec.q, rec.v, rec.f)
-
-    def kept(self, checkpoints):
-        return (*checkpoints[:4], self.CA)
-
-    def replay(self, checkpoints, c, m):
-        traj, n, seg = self.traj, self.n, checkpoints[4]
-        CQ, CV, CF, CT = checkpoints[:4]
-        SQ, SV, SF, ST = traj._buffers(n, seg + 1, "segment")
-        SA = traj._scratch_array("segment.fa", (seg + 1 if traj._vdep else 0, n))
-        self._replay(CQ[c], CV[c], CF[c], CT[c], m, SQ, SV, SF, ST, SA)
-        return SQ, SV, SF, ST, SA
-
-    def _replay(self, q0, v0, f0, t0, m, SQ, SV, SF, ST, SA) -> None:
-        sweeps.replay(self.args, self.terms, self.kick, self.pre, self.post, q0, v0, f0, t0, self.traj.h, m,
-                      SQ, SV, SF, ST, SA)
+    def keep(self, rows, where):
+        if rows is None or not self.traj._vdep:
+            return np.empty((0, self.n))
+        return self.traj._scratch_array(f"{where}.fa", (rows + 1, self.n))
 
     def begin(self, adj):
         super().begin(adj)
@@ -177,7 +208,7 @@ class ChainColumns(Verlet):
     def segment(self, nsteps, memory_mb, asked):
         return asked or chain_segment(nsteps, self.n, 2 * self.n * 8, memory_mb)  # replayed states: q, v
 
-    def _run(self, q, v, f, seg, scratch, ck, rec):
+    def _run(self, q, v, f, seg, ck, rec):
         if not self._engine_run(q, v, f, seg, ck, rec):
             form, traj = self.form, self.traj
             sweeps.chain_forward(form[3], form[1] != 0, form[10], form[11], self.terms, self.kick, self.pre, self.post,
@@ -214,7 +245,7 @@ class ChainColumns(Verlet):
                                                            m, ledger)
             k += m
 
-    def _replay(self, q0, v0, f0, t0, m, SQ, SV, SF, ST, SA):
+    def _replay(self, q0, v0, f0, t0, m, SQ, SV, SF, ST, K):
         form = self.form
         sweeps.chain_replay(form[3], form[1] != 0, form[10], form[11], self.terms, self.kick, self.pre, self.post,
                             q0, v0, f0, t0, self.traj.h, m, SQ, SV, ST)
@@ -335,7 +366,7 @@ def field_factors(kick, pre, post, nf: int) -> tuple:
 
 
 class Split(_Common):
-    """A kick/drift splitting (``splitting.forward``, ``reverse``, ``tangent``): a state is (q, v,
+    """A kick/drift splitting (``forward.SplitStep``; ``splitting.reverse``, ``tangent``): a state is (q, v,
     f, t) and the step's stage forces, kept by the run or replay (``stages`` = False: the reverse
     step evaluates them again, one more forward run; the same bits)."""
 
@@ -352,7 +383,6 @@ class Split(_Common):
         E, G = splitting.field_factors(self.E, self.G, {sweeps.FORM_CHAIN: 2, sweeps.FORM_GRID: 3}.get(form[0], 1))
         self.method = (kicks, drifts, E, G, fsal)
         self.uni = self.uniform()
-        self.FS = None
 
     def uniform(self) -> splitting.Uniform:
         """The ``uni`` argument of the sweeps (``splitting.Uniform``): none here."""
@@ -371,33 +401,14 @@ class Split(_Common):
     def segment(self, nsteps, memory_mb, asked):
         return asked or chain_segment(nsteps, self.n, self.state_bytes, memory_mb)  # states and stage forces in cache
 
-    def _stage_rows(self, rows: int) -> np.ndarray:
-        """The stage forces of ``rows`` steps (``splitting.forward``'s FS; no columns: none kept)."""
+    @property
+    def step(self):
+        return forward.SplitStep(self.args, self.terms, self.uni, *self.method)
+
+    def keep(self, rows, where):
+        """The stage forces of ``rows`` steps (one array for the run's and the segments')."""
         ns, n = self.n_stages, self.n
-        return self.traj._scratch_array("stages", (rows, ns, n)) if ns else np.empty((1, 0, n))
-
-    def forward(self, seg, scratch=False, keep=False):
-        traj = self.traj
-        q, v, f = self.start(self.args, self.terms)
-        CQ, CV, CF, CT = traj._buffers(q.size, traj.nsteps // seg + 1, "checkpoints" if scratch else "")
-        rec = traj._records()
-        self.FS = self._stage_rows(traj.nsteps) if keep else np.empty((1, 0, q.size))
-        splitting.forward(self.args, self.terms, self.uni, *self.method, q, v, f, traj.t0, traj.h, traj.nsteps, seg,
-                          traj.stride, traj.obs, CQ, CV, CF, CT, rec.q, rec.v, rec.f, self.FS)
-        return rec, (CQ, CV, CF, CT, seg)
-
-    def kept(self, checkpoints):
-        return (*checkpoints[:4], self.FS)
-
-    def replay(self, checkpoints, c, m):
-        traj, seg = self.traj, checkpoints[4]
-        SQ, SV, SF, ST = traj._buffers(self.n, seg + 1, "segment")
-        FS = self._stage_rows(seg)
-        none, no_record = np.empty(0, np.int64), np.empty((1, 0))
-        splitting.forward(self.args, self.terms, self.uni, *self.method, *(x[c].copy() for x in checkpoints[:3]),
-                          checkpoints[3][c], traj.h, m, 1, m + 1, none, SQ, SV, SF, ST, no_record, no_record,
-                          no_record, FS)
-        return SQ, SV, SF, ST, FS
+        return self.traj._scratch_array("stages", (rows, ns, n)) if ns and rows is not None else np.empty((1, 0, n))
 
     def begin(self, adj):
         super().begin(adj)
@@ -463,14 +474,13 @@ class UniformSheetSplit(Split):
 
 
 class Midpoint(_Common):
-    """The implicit midpoint rule (``midpoint.forward``, ``reverse``, ``tangent``): a state is (q, v,
+    """The implicit midpoint rule (``forward.MidpointStep``; ``midpoint.reverse``, ``tangent``): a state is (q, v,
     f, t) and the step's midpoint velocity; one linear solve per reverse step."""
 
     def __init__(self, traj, raw, form):
         super().__init__(traj, raw, form)
         self.args, self.terms = traj.bind(raw)[:2]
         self.state_bytes = 4 * self.n * 8  # q, v, f, V
-        self.SW = np.empty((0, self.n))
 
     @property
     def mv(self) -> tuple:
@@ -492,30 +502,19 @@ class Midpoint(_Common):
     def prm(self) -> tuple:
         return self.args, self.terms, self.raw.minv, self.raw.damp
 
-    def forward(self, seg, scratch=False, keep=False):
-        traj, n, N = self.traj, self.n, self.traj.nsteps
-        q, v, f = self.start(self.args, self.terms)
-        CQ, CV, CF, CT = traj._buffers(n, N // seg + 1)
-        self.SW = np.empty((N if keep else 0, n))
-        rec = traj._records()
-        _, failed = midpoint.forward(*self.prm, midpoint.NEWTON_RTOL, q, v, f, traj.t0, traj.h, N, seg, traj.stride,
-                                     traj.obs, CQ, CV, CF, CT, self.SW, rec.q, rec.v, rec.f)
+    @property
+    def step(self):
+        return forward.MidpointStep(self.args, self.terms, self.raw.minv, self.raw.damp, midpoint.NEWTON_RTOL)
+
+    def keep(self, rows, where):
+        """The midpoint velocity of each of ``rows`` steps."""
+        return np.empty((0, self.n)) if rows is None else self.traj._scratch_array(f"{where}.V", (rows, self.n))
+
+    def states(self, SQ, SV, SF, ST, K):
+        return SQ, SV, K, ST
+
+    def check(self, failed):
         self.failed(failed, "Newton's iteration (to the design tolerance)")
-        return rec, (CQ, CV, CF, CT, seg)
-
-    def kept(self, checkpoints):
-        CQ, CV, _, CT = checkpoints[:4]
-        return CQ, CV, self.SW, CT
-
-    def replay(self, checkpoints, c, m):
-        traj, n, seg = self.traj, self.n, checkpoints[4]
-        SQ, SV, SF, ST = traj._buffers(n, seg + 1, "segment")
-        if self.SW.shape != (seg, n):
-            self.SW = np.empty((seg, n))
-        none, no_record = np.empty(0, np.int64), np.empty((1, 0))
-        midpoint.forward(*self.prm, midpoint.NEWTON_RTOL, *(x[c].copy() for x in checkpoints[:3]), checkpoints[3][c],
-                         traj.h, m, 1, m + 1, none, SQ, SV, SF, ST, self.SW, no_record, no_record, no_record)
-        return SQ, SV, self.SW, ST
 
     def begin(self, adj):
         super().begin(adj)
