@@ -1487,7 +1487,7 @@ def gradient_models(names=MODEL_SCENES, steps: int = 2_000, repeats: int = 5) ->
     """Cost of an exact gradient on the shipped scenes of every other model kind (chains of
     masses with bistable, softening, polynomial, on-site and contact laws, ground friction, a
     spring network, magnet and linkage sheets, a loaded chain, rotating triangles; the general
-    sweeps: ``forward.run``, ``sweeps.reverse`` with ``model_adjoint``) as a multiple of one forward
+    sweeps: ``sweeps.forward``, ``reverse`` with ``model_adjoint``) as a multiple of one forward
     run of the engine's Stepper on the same problem (the scene's h, ``steps`` steps or the
     scene's duration if shorter), interleaved; objective ½ Σ q(T)² over every DOF; wall and
     CPU time (min and median of ``repeats``)."""

@@ -1,6 +1,5 @@
-"""Compiled reverse and tangent sweeps of the implicit midpoint rule (``integrators.implicit``,
-docs/physics.md §3); the forward run and the replay are the tape's loop (``design.forward.run``
-with a ``MidpointStep``).
+"""Compiled forward (with checkpoints, or every state: the replay), reverse and tangent sweeps of
+the implicit midpoint rule (``integrators.implicit``, docs/physics.md §3).
 
 One step from (q, v) at t, with held DOFs H (m⁻¹ = 0: fixed, or prescribed by g) and free DOFs:
 
@@ -45,6 +44,7 @@ import numpy as np
 
 from flexmm._jit import jit
 from flexmm.design.sweeps import (
+    _checkpoint,
     _force_adjoint,
     _force_tangent,
     _inject,
@@ -143,6 +143,36 @@ def _record_state(args, terms, q, v, t, fr, obs, Rq, Rv, Rf, j):
     """Record (q, v, F(q, v, t))[obs] (the total force at the state, into fr)."""
     total_force(args, q, v, t, fr, terms)
     _record(q, v, fr, obs, Rq, Rv, Rf, j)
+
+
+@jit
+def forward(args, terms, minv, damp, rtol, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, SW,
+            Rq, Rv, Rf):
+    """Run ``nsteps`` midpoint steps from (q, v, f, t) (f: the total force at the start, the
+    first predictor) in place; checkpoint (q, v, f, t) every ``seg`` steps, record every
+    ``stride`` steps, keep each step's midpoint velocity V in the rows of SW if it has any.
+    Returns (t, the first step whose Newton iteration failed or −1)."""
+    n = q.shape[0]
+    cd = free_damping(damp, minv)
+    work = np.empty((14, n))
+    acc = np.zeros(2)  # the ledger only (no counters)
+    fr = np.empty(n)
+    keep = SW.shape[0] > 0
+    for k in range(nsteps + 1):
+        if k % seg == 0:
+            _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
+        if k % stride == 0:
+            if k == 0:
+                _record(q, v, f, obs, Rq, Rv, Rf, 0)
+            else:
+                _record_state(args, terms, q, v, t, fr, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            if not step(args, terms, minv, damp, cd, q, v, f, t, h, acc, work, rtol):
+                return t, k
+            if keep:
+                SW[k, :] = work[7]
+            t += h
+    return t, -1
 
 
 @jit

@@ -1,5 +1,5 @@
-"""Compiled step, reverse and tangent sweeps of a kick/drift splitting (PEFRL, BM6); the forward run
-and the replay are the tape's loop (``design.forward.run`` with a ``SplitStep``).
+"""Compiled forward (with checkpoints, or every state: the replay), reverse and tangent sweeps of a
+kick/drift splitting (PEFRL, BM6).
 
 One step of ``integrators.splitting.split_step`` (the engine's ``advance`` and the forward sweep
 here both take it; a uniform chain's or sheet's: ``uniform_step``) with M drifts and M + 1
@@ -21,7 +21,7 @@ A kick-first method (BM6) carries the force of the step's end to the next step, 
 force it records, F(q_n, t_n), is one more evaluation at each recorded step, differentiated too.
 
 ``reverse`` is the exact transpose of this step: it redoes the step's kicks and drifts from the
-state at its start (q, v, f, t), reading the stage forces the replay kept (``forward.run``'s K, one
+state at its start (q, v, f, t), reading the stage forces the replay kept (``forward``'s FS, one
 row per force evaluation: PEFRL 4, BM6 11 a step, written there straight by the force) instead
 of evaluating them (the same bits; with none kept it evaluates them, one more forward step), the
 stage positions and the velocities entering the kicks in (2M + 1) × ndof scratch, and runs back
@@ -60,6 +60,7 @@ from flexmm._jit import jit, runtime
 from flexmm.design.kernels import (U_TH0, V_COS, V_SIN, W_COS, W_SIN, chain_uniform_force, chain_uniform_gather,
                                    chain_uniform_hinges, chain_uniform_sites, sheet_uniform_adjoint)
 from flexmm.design.sweeps import (
+    _checkpoint,
     _force_adjoint,
     _force_tangent,
     _inject,
@@ -136,7 +137,7 @@ def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.
 
 # ---------------------------------------------------------------- the sweeps
 #
-# Every sweep takes ``uni`` (``Uniform``, built by ``steps.Split.uniform``): the
+# Every sweep takes ``uni`` (``Uniform``, built by ``gradient.Trajectory._split_uniform``): the
 # model's own kernels, or a uniform chain's or grid sheet's shared law (the module docstring).
 
 #: ``Uniform.kind``: the model's own kernels, a uniform chain, a uniform grid sheet
@@ -144,7 +145,7 @@ UNI_NONE, UNI_CHAIN, UNI_SHEET = 0, 1, 2
 
 
 class Uniform(NamedTuple):
-    """What the sweeps read of a uniform chain or grid sheet (``steps.Split.uniform``;
+    """What the sweeps read of a uniform chain or grid sheet (``gradient.Trajectory._split_uniform``;
     kind UNI_NONE: nothing, every array empty)."""
 
     #: UNI_NONE, UNI_CHAIN, UNI_SHEET
@@ -210,7 +211,7 @@ def _stage_force(args, terms, uni, q, v, t, f):
 
 def n_stage_forces(drifts: np.ndarray, fsal: bool) -> int:
     """The forces a step evaluates (after each drift but a drift-first method's last): the rows
-    of a step's stage forces kept by the replay (``forward.run``'s K)."""
+    of a step's stage forces kept by the replay (``forward``'s FS)."""
     return drifts.size if fsal else drifts.size - 1
 
 
@@ -268,6 +269,30 @@ def _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, j):
     else:
         _total_force(args, terms, uni, q, t, fr)
         _record(q, v, fr, obs, Rq, Rv, Rf, j)
+
+
+@jit
+def forward(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT,
+            Rq, Rv, Rf, FS):
+    """Run ``nsteps`` from (q, v, f, t) (f: the force at the start) in place; checkpoint every
+    ``seg`` steps, record every ``stride`` steps (as ``sweeps.forward``); returns t. With
+    ``seg`` = 1 it is the replay of a segment (every state kept). FS (nsteps, stage forces,
+    ndof) keeps each step's stage forces for ``reverse``; with no columns (shape (1, 0, ndof))
+    none are kept."""
+    n = q.shape[0]
+    save = FS.shape[1] > 0
+    fr = np.empty(n)
+    for k in range(nsteps + 1):
+        if k % seg == 0:
+            _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
+        if k % stride == 0:
+            if k == 0:  # the caller's f is the force at the start
+                _record(q, v, f, obs, Rq, Rv, Rf, 0)
+            else:
+                _record_state(args, terms, uni, fsal, q, v, f, t, fr, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            t = split_step(args, terms, uni, kicks, drifts, E, G, fsal, q, v, f, t, h, FS[k if save else 0])
+    return t
 
 
 @jit

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexmm.design import forward, midpoint, splitting, sweeps
+from flexmm.design import midpoint, splitting, sweeps
 from flexmm.design.kernels import (N_V, chain_add_columns, sheet_grid_add, sheet_uniform,
                                    sheet_uniform_scratch, with_tables)
 from flexmm.design.tape import (ENGINE_MIN_STEPS, GradientError, Raw, Records, Steps, chain_segment, stack,
@@ -54,20 +54,22 @@ _NONE, _NO_RECORD = np.empty(0, np.int64), np.empty((1, 0))
 
 
 class _Common(Steps):
-    """What every integrator's steps share: the run and the replay of a segment by the one compiled
-    loop (``forward.run``) with the integrator's step contract (``step``), keeping what its
-    reverse step reads (``keep``), and the reverse of the run's start."""
+    """What every integrator's steps share: the run and the replay of a segment by the
+    integrator's compiled loop (``loop``: checkpoints every ``seg`` steps, records every
+    ``stride``; with seg = 1 and no records, a replay), keeping what its reverse step reads
+    (``keep``), and the reverse of the run's start."""
 
-    #: what the reverse step reads besides (q, v, f, t), kept by the forward run (``forward.run``'s K)
+    #: what the reverse step reads besides (q, v, f, t), kept by the forward run (``loop``'s K)
     K: np.ndarray
 
-    @property
-    def step(self) -> tuple:
-        """The compiled step contract (``forward.VerletStep``, ``SplitStep``, ``MidpointStep``)."""
+    def loop(self, q, v, f, t, nsteps, seg, stride, obs, ck, K, rec) -> int:
+        """``nsteps`` steps from (q, v, f, t) in place by the integrator's compiled loop (checkpoints
+        ``ck`` = (CQ, CV, CF, CT), records ``rec`` = (Rq, Rv, Rf), K: ``keep``'s); returns the first
+        step that did not converge, or −1."""
         raise NotImplementedError
 
     def keep(self, rows: int | None, where: str) -> np.ndarray:
-        """``forward.run``'s K for ``rows`` steps (None: nothing kept), named by ``where``
+        """``loop``'s K for ``rows`` steps (None: nothing kept), named by ``where``
         (``Trajectory._scratch_array``)."""
         raise NotImplementedError
 
@@ -89,9 +91,8 @@ class _Common(Steps):
 
     def _run(self, q, v, f, seg, ck, rec) -> None:
         traj = self.traj
-        _, failed = forward.run(self.step, q, v, f, traj.t0, traj.h, traj.nsteps, seg, traj.stride, traj.obs, *ck,
-                                self.K, rec.q, rec.v, rec.f)
-        self.check(failed)
+        self.check(self.loop(q, v, f, traj.t0, traj.nsteps, seg, traj.stride, traj.obs, ck, self.K,
+                             (rec.q, rec.v, rec.f)))
 
     def kept(self, checkpoints):
         return self.states(*checkpoints[:4], self.K)
@@ -104,9 +105,8 @@ class _Common(Steps):
         return self.states(SQ, SV, SF, ST, K)
 
     def _replay(self, q0, v0, f0, t0, m, SQ, SV, SF, ST, K) -> None:
-        """The m steps from a checkpoint, every state kept (the run's: ``forward.run``)."""
-        forward.run(self.step, q0.copy(), v0.copy(), f0.copy(), t0, self.traj.h, m, 1, m + 1, _NONE, SQ, SV, SF, ST,
-                    K, _NO_RECORD, _NO_RECORD, _NO_RECORD)
+        """The m steps from a checkpoint, every state kept (the run's loop)."""
+        self.loop(q0.copy(), v0.copy(), f0.copy(), t0, m, 1, m + 1, _NONE, (SQ, SV, SF, ST), K, (_NO_RECORD,) * 3)
 
     def reverse_start(self, args, terms) -> None:
         """Reverse of the run's start (prescription, initial force): (lq, lv) become the gradients
@@ -136,7 +136,7 @@ class _Common(Steps):
 
 
 class Verlet(_Common):
-    """Velocity Verlet (``forward.VerletStep``; ``sweeps.reverse``, ``tangent``): a state is (q, v,
+    """Velocity Verlet (``sweeps.forward``, ``reverse``, ``tangent``): a state is (q, v,
     f, t), with velocity terms also the f_a of the step into it (``integrators.verlet.step_force``)."""
 
     def __init__(self, traj, raw, form):
@@ -144,9 +144,10 @@ class Verlet(_Common):
         self.args, self.terms, self.kick, self.pre, self.post = traj.bind(raw)
         self.state_bytes = (4 if traj._vdep else 3) * self.n * 8  # q, v, f (and f_a)
 
-    @property
-    def step(self):
-        return forward.VerletStep(self.args, self.terms, self.kick, self.pre, self.post)
+    def loop(self, q, v, f, t, nsteps, seg, stride, obs, ck, K, rec):
+        sweeps.forward(self.args, self.terms, self.kick, self.pre, self.post, q, v, f, t, self.traj.h, nsteps, seg,
+                       stride, obs, *ck, K, *rec)
+        return -1
 
     def keep(self, rows, where):
         if rows is None or not self.traj._vdep:
@@ -366,7 +367,7 @@ def field_factors(kick, pre, post, nf: int) -> tuple:
 
 
 class Split(_Common):
-    """A kick/drift splitting (``forward.SplitStep``; ``splitting.reverse``, ``tangent``): a state is (q, v,
+    """A kick/drift splitting (``splitting.forward``, ``reverse``, ``tangent``): a state is (q, v,
     f, t) and the step's stage forces, kept by the run or replay (``stages`` = False: the reverse
     step evaluates them again, one more forward run; the same bits)."""
 
@@ -401,9 +402,10 @@ class Split(_Common):
     def segment(self, nsteps, memory_mb, asked):
         return asked or chain_segment(nsteps, self.n, self.state_bytes, memory_mb)  # states and stage forces in cache
 
-    @property
-    def step(self):
-        return forward.SplitStep(self.args, self.terms, self.uni, *self.method)
+    def loop(self, q, v, f, t, nsteps, seg, stride, obs, ck, K, rec):
+        splitting.forward(self.args, self.terms, self.uni, *self.method, q, v, f, t, self.traj.h, nsteps, seg, stride,
+                          obs, *ck, *rec, K)
+        return -1
 
     def keep(self, rows, where):
         """The stage forces of ``rows`` steps (one array for the run's and the segments')."""
@@ -474,7 +476,7 @@ class UniformSheetSplit(Split):
 
 
 class Midpoint(_Common):
-    """The implicit midpoint rule (``forward.MidpointStep``; ``midpoint.reverse``, ``tangent``): a state is (q, v,
+    """The implicit midpoint rule (``midpoint.forward``, ``reverse``, ``tangent``): a state is (q, v,
     f, t) and the step's midpoint velocity; one linear solve per reverse step."""
 
     def __init__(self, traj, raw, form):
@@ -502,9 +504,9 @@ class Midpoint(_Common):
     def prm(self) -> tuple:
         return self.args, self.terms, self.raw.minv, self.raw.damp
 
-    @property
-    def step(self):
-        return forward.MidpointStep(self.args, self.terms, self.raw.minv, self.raw.damp, midpoint.NEWTON_RTOL)
+    def loop(self, q, v, f, t, nsteps, seg, stride, obs, ck, K, rec):
+        return midpoint.forward(*self.prm, midpoint.NEWTON_RTOL, q, v, f, t, self.traj.h, nsteps, seg, stride, obs,
+                                *ck, K, *rec)[1]
 
     def keep(self, rows, where):
         """The midpoint velocity of each of ``rows`` steps."""

@@ -1,6 +1,4 @@
-"""Compiled reverse (adjoint) and tangent sweeps of velocity Verlet (docs/physics.md §3), and the
-forward run and replay of a chain's column form; the forward run itself is the tape's
-(``design.forward.run``).
+"""Compiled forward, reverse (adjoint) and tangent sweeps of velocity Verlet (docs/physics.md §3).
 
 One step of ``integrators.verlet`` (``verlet.step``: the forward run and the replay take it)
 with on-site damping, written with the per-DOF factors K = h/2 m⁻¹, P = 1 − hγ/2,
@@ -19,7 +17,7 @@ The reverse of a step, given the adjoints (λq, λv, λf) of (q', v', f'):
 The products with the integrator factors are folded per state: with z = λw (of the step out
 of state j) + S λv (of v_j), ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (as
 v_j = S (w + K f_j), prescribed DOFs included), two per-DOF sums from which ∂J/∂m⁻¹ and ∂J/∂c
-follow (``steps.Verlet.end``).
+follow (``gradient.Trajectory.gradient``).
 
 Velocity-dependent external terms V (dashpots between DOFs, ground friction) enter as the
 engine takes them (``verlet.step_force``): at the predicted end-of-step velocity u. With G the
@@ -111,6 +109,46 @@ def _checkpoint(q, v, f, t, CQ, CV, CF, CT, c):
     CV[c, :] = v
     CF[c, :] = f
     CT[c] = t
+
+
+@jit
+def forward(args, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs, CQ, CV, CF, CT, CA, Rq, Rv, Rf):
+    """Run ``nsteps`` from (q, v, f, t) in place; checkpoint every ``seg`` steps (rows of CQ, CV,
+    CF, CT; with velocity terms and rows in CA, also the f_a of the step into the state,
+    ``verlet.step_force``: what ``reverse`` reads when every state is kept, seg = 1), record
+    (q, v, f)[obs] every ``stride`` steps (rows of Rq, Rv, Rf); returns t."""
+    g, fa, u = verlet.scratch(terms, q.shape[0])
+    keep_fa = fa.shape[0] > 0 and CA.shape[0] > 0
+    for k in range(nsteps + 1):
+        if k % seg == 0:
+            _checkpoint(q, v, f, t, CQ, CV, CF, CT, k // seg)
+            if keep_fa and k > 0:
+                CA[k // seg, :] = fa
+        if k % stride == 0:
+            _record(q, v, f, obs, Rq, Rv, Rf, k // stride)
+        if k < nsteps:
+            t = verlet.step(args, terms, kick, pre, post, q, v, f, t, h, g, fa, u)
+    return t
+
+
+@jit
+def replay(args, terms, kick, pre, post, q0, v0, f0, t0, h, nsteps, SQ, SV, SF, ST, SA):
+    """States 0..nsteps of a segment from its checkpoint into rows of SQ, SV, SF, ST (with
+    velocity terms, the f_a of the step into each later state into SA: ``verlet.step_force``)."""
+    q = q0.copy()
+    v = v0.copy()
+    f = f0.copy()
+    t = t0
+    g, fa, u = verlet.scratch(terms, q.shape[0])
+    for s in range(nsteps + 1):
+        SQ[s, :] = q
+        SV[s, :] = v
+        SF[s, :] = f
+        ST[s] = t
+        if s > 0 and fa.shape[0] > 0:
+            SA[s, :] = fa
+        if s < nsteps:
+            t = verlet.step(args, terms, kick, pre, post, q, v, f, t, h, g, fa, u)
 
 
 #: the model part of a reverse step (``_force_adjoint``'s ``form``): ``model_adjoint`` into the
@@ -381,11 +419,11 @@ def apply_prescribed_only(terms, q, v, t):
 # the forward run and the replay step with the column force (bit-identical to ``verlet.step``);
 # the replay keeps (q, v) only, and the reverse step takes the force at each state again with
 # its Hessian-vector product (cos/sin once per site). With velocity terms the run and replay
-# are the general ones (``forward.run``), and only the reverse step's model part takes
+# are the general ones (``forward``, ``replay``), and only the reverse step's model part takes
 # the column form (``_chain_adjoint``; a uniform chain's by its fused kernels). The
 # integrator-factor adjoints are folded: with z = λw(step j) + S λv(into j), the products at
 # state j are ∂J/∂K += z ⊙ f_j and ∂J/∂P + S² ∂J/∂S += z ⊙ v_j (v_j = S (w + K f_j)), so two
-# per-DOF accumulators GK, GV (``steps.Verlet.end`` turns them into m⁻¹, c).
+# per-DOF accumulators GK, GV (``gradient.Trajectory.gradient`` turns them into m⁻¹, c).
 
 
 @jit
@@ -445,7 +483,7 @@ def _chain_force_at(cols, with_kg, ldof, lval, terms, q, v, f, t, w):
 @jit
 def chain_forward(cols, with_kg, ldof, lval, terms, kick, pre, post, q, v, f, t, h, nsteps, seg, stride, obs,
                   CQ, CV, CF, CT, Rq, Rv, Rf):
-    """``forward.run`` of velocity Verlet with the column force (the same arithmetic: the same run). Between the states
+    """``forward`` with the column force (the same arithmetic: the same run). Between the states
     it keeps, the closing kick of a step and the opening of the next take one pass."""
     w = np.empty((N_R, cols.shape[1] + 1))
     for k in range(nsteps + 1):
