@@ -136,7 +136,7 @@ class _Common(Steps):
 
 
 class Verlet(_Common):
-    """Velocity Verlet (``sweeps.forward``, ``reverse``, ``tangent``): a state is (q, v,
+    """Velocity Verlet (``sweeps.forward``, ``replay``, ``reverse``, ``tangent``): a state is (q, v,
     f, t), with velocity terms also the f_a of the step into it (``integrators.verlet.step_force``)."""
 
     def __init__(self, traj, raw, form):
@@ -148,6 +148,10 @@ class Verlet(_Common):
         sweeps.forward(self.args, self.terms, self.kick, self.pre, self.post, q, v, f, t, self.traj.h, nsteps, seg,
                        stride, obs, *ck, K, *rec)
         return -1
+
+    def _replay(self, q0, v0, f0, t0, m, SQ, SV, SF, ST, K):
+        sweeps.replay(self.args, self.terms, self.kick, self.pre, self.post, q0, v0, f0, t0, self.traj.h, m,
+                      SQ, SV, SF, ST, K)
 
     def keep(self, rows, where):
         if rows is None or not self.traj._vdep:
