@@ -1230,7 +1230,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 5
     """
     import tracemalloc
 
-    from flexmm.design.gradient import CACHE_MB, MEMORY_MB, Trajectory, _chain_segment, _tile_segment, raw_of
+    from flexmm.design.gradient import Trajectory, raw_of
+    from flexmm.design.steps import CACHE_MB, UniformChain, UniformSheet
+    from flexmm.design.tape import MEMORY_MB, chain_segment, tile_segment
     from flexmm.integrators import INTEGRATORS
     from flexmm.integrators.stepper import Stepper
 
@@ -1249,11 +1251,9 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 5
         raw = raw_of(system, terms, damp)
         old = dataclasses.replace(traj, uniform_sweeps=False, engine_forward=False)
         runners = [_from_start(st, steps), lambda: traj.gradient(raw, objective)]
-        kick, pre, post = traj.bind(raw)[2:]
-        columns, form = traj.columns(raw), traj.form(raw)
-        uniform = (columns and traj._uniform(form, kick, pre, post) is not None
-                   or traj._sheet_uniform(raw, form, kick, pre, post) is not None)
-        tiled = kind == "chain" and uniform and traj._tiled(form, _tile_segment(steps, system.ndof, MEMORY_MB))
+        columns, form, path = traj.columns(raw), traj.form(raw), traj.steps(raw)
+        uniform = isinstance(path, (UniformChain, UniformSheet))
+        tiled = isinstance(path, UniformChain) and path._tiled(tile_segment(steps, system.ndof, MEMORY_MB))
         whole = dataclasses.replace(traj, tiles=False)
         if compare_old and (kind == "chain" or uniform):
             runners.append(lambda: old.gradient(raw, objective))
@@ -1275,10 +1275,10 @@ def gradient(cases=((1_000, 4_000), (10_000, 1_000), (20_000, 1_000), (40_000, 5
         keep_all = (steps + 1) * (3 * n + 1) * 8 <= budget * 1e6
         # the chain-column replay keeps (q, v) only; a uniform chain's also f and cos/sin of θ0+θ
         per_state = (4 if uniform and columns else 3 if not columns else 2) * n * 8
-        seg = _chain_segment(steps, n, per_state, MEMORY_MB) if columns else max(1, math.isqrt(steps))
+        seg = chain_segment(steps, n, per_state, MEMORY_MB) if columns else max(1, math.isqrt(steps))
         if tiled:  # checkpoints every TILE_STEPS steps; one window's states at a time
-            seg = _tile_segment(steps, n, MEMORY_MB)
-            length = traj._windows(seg)[1]
+            seg = tile_segment(steps, n, MEMORY_MB)
+            length = path.windows(seg)[1]
             per_state = 4 * 2 * length * 8
         if keep_all:
             stored = (steps + 1) * 3 * n * 8

@@ -22,9 +22,10 @@ from conftest import LEGO_CHAIN, LEGO_SHEET
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
 from flexmm.design import sweeps
-from flexmm.design.gradient import (ENGINE_MIN_STEPS, ENGINE_SITES, MEMORY_MB, SEGMENT_MB, TILE_SITES, TILE_STEPS,
-                                    GradientError, Trajectory,
-                                    _chain_segment, _tile_segment, raw_of, trajectory_of)
+from flexmm.design import steps as fast
+from flexmm.design.gradient import GradientError, Trajectory, raw_of, trajectory_of
+from flexmm.design.steps import ENGINE_SITES, TILE_SITES, ChainColumns, UniformChain, UniformSheet
+from flexmm.design.tape import ENGINE_MIN_STEPS, MEMORY_MB, SEGMENT_MB, TILE_STEPS, chain_segment, tile_segment
 from flexmm.design.kernels import N_R, N_V, chain_columns, chain_force_columns
 from flexmm.design.sweeps import FORM_CHAIN, FORM_TABLES
 from flexmm.integrators.common import MODE_FRICTION, SHAPES
@@ -311,7 +312,9 @@ def test_uniform_sweeps_match_the_general_sweeps(name, free):
         problem = build_problem(scene_from_dict(data))
     traj, raw = trajectory_of(problem, nsteps=120, stride=3)
     args, terms, kick, pre, post = traj.bind(raw)
-    u, fac = traj._uniform(traj.form(raw), kick, pre, post)
+    uniform = traj.steps(raw)
+    assert type(uniform) is UniformChain
+    u, fac = uniform.u, uniform.fac
     assert all(isinstance(x, float) for x in fac) == free
     states = []
     loads = traj._columns(raw)[2:]
@@ -349,13 +352,11 @@ def test_uniform_sheet_sweeps_match_the_general_sweeps(excitation):
                               "ramp_cycles": 1.0}
     traj, raw = trajectory_of(build_problem(scene_from_dict(data)), nsteps=120, stride=3)
     raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
-    kick, pre, post = traj.bind(raw)[2:]
-    sheet = traj._sheet_uniform(raw, traj.form(raw), kick, pre, post)
-    assert sheet is not None and all(isinstance(x, float) for x in sheet[3]) == (excitation == "shaker")
+    sheet = traj.steps(raw)
+    assert type(sheet) is UniformSheet and all(isinstance(x, float) for x in sheet.fac) == (excitation == "shaker")
     objective = _objective((traj.n_samples, traj.obs.size), seed=7)
     refs = [dataclasses.replace(traj, column_sweeps=False), dataclasses.replace(traj, uniform_sweeps=False)]
-    assert refs[1].form(raw)[0] == sweeps.FORM_GRID and refs[1]._sheet_uniform(raw, refs[1].form(raw), kick, pre,
-                                                                              post) is None
+    assert refs[1].form(raw)[0] == sweeps.FORM_GRID and type(refs[1].steps(raw)) is fast.Verlet
     _assert_same_gradients(traj, refs, raw, objective)
 
 
@@ -367,16 +368,14 @@ def test_tiled_sweeps_are_the_whole_chain_sweeps(name, monkeypatch):
     prescribed displacement, with a fixed end: factors per DOF), damped, every third step
     observed at a scattered half of the DOFs. With halos one site a step (half the needed
     width) the windows' ends reach their interiors and the gradient differs."""
-    import flexmm.design.gradient as gradient
-
     data = {"name": "grad"} | copy.deepcopy(SCENES[name])
     data["lattice"]["n_units"] = 200
     problem = build_problem(scene_from_dict(data))
     obs = np.random.default_rng(3).permutation(problem.system.ndof)[: problem.system.ndof // 2]
     traj, raw = trajectory_of(problem, nsteps=60, stride=3, obs=obs)
     raw.v0[:] = np.random.default_rng(5).normal(scale=0.02, size=raw.v0.size)
-    monkeypatch.setattr(gradient, "TILE_MIN_SITES", 1)
-    monkeypatch.setattr(gradient, "TILE_SITES", 64)
+    monkeypatch.setattr(fast, "TILE_MIN_SITES", 1)
+    monkeypatch.setattr(fast, "TILE_SITES", 64)
     calls = []
     tiles = sweeps.chain_uniform_tiles
     monkeypatch.setattr(sweeps, "chain_uniform_tiles", lambda *a: calls.append(a[9]) or tiles(*a))
@@ -411,15 +410,15 @@ def _assert_same_gradients(traj, refs, raw, objective):
 
 def test_engine_forward_is_the_column_forward():
     """A long damped chain under a prescribed displacement runs forward by the engine's fused
-    kernel (``Trajectory._engine_run``): the same checkpoints and records bit for bit as
+    kernel (``steps.ChainColumns._engine_run``): the same checkpoints and records bit for bit as
     ``sweeps.chain_forward``."""
     data = {"name": "grad"} | copy.deepcopy(SCENES["chain-displacement-damped"])
     data["lattice"]["n_units"] = ENGINE_SITES
     traj, raw = trajectory_of(build_problem(scene_from_dict(data)), nsteps=96, stride=32)
-    args, terms = traj.bind(raw)[:2]
+    steps = traj.steps(raw)
+    assert isinstance(steps, ChainColumns)
     q = raw.q0.copy()
-    assert traj._engine_run(raw, args, terms, q, raw.v0.copy(), np.zeros_like(q), 48, *traj._buffers(q.size, 3),
-                            traj._records())
+    assert steps._engine_run(q, raw.v0.copy(), np.zeros_like(q), 48, traj._buffers(q.size, 3), traj._records())
     rec, checkpoints = traj.run(raw, segment=48)
     rec_ref, ref = dataclasses.replace(traj, engine_forward=False).run(raw, segment=48)
     for a, b in zip((rec.q, rec.v, rec.f) + checkpoints[:4], (rec_ref.q, rec_ref.v, rec_ref.f) + ref[:4]):
@@ -447,7 +446,7 @@ def test_chain_segment_fits_the_cache_with_bounded_memory(nsteps, ndof, state):
     """A chain's default segment: √N steps, or fewer where a segment's replayed states would pass
     SEGMENT_MB, never below ENGINE_MIN_STEPS nor so short that the checkpoints pass the memory
     budget (so a 10⁶-step run stays bounded)."""
-    seg = _chain_segment(nsteps, ndof, state * ndof * 8, MEMORY_MB)
+    seg = chain_segment(nsteps, ndof, state * ndof * 8, MEMORY_MB)
     assert 1 <= seg <= max(1, math.isqrt(nsteps))
     fits = seg * state * ndof * 8 <= SEGMENT_MB * 1e6
     checkpoints_mb = (nsteps // seg + 1) * 3 * ndof * 8 / 1e6
@@ -461,7 +460,7 @@ def test_tile_segment_is_bounded_in_memory(nsteps, ndof):
     """A tiled chain's segment: TILE_STEPS steps (at most the run), longer only where the
     checkpoints would pass the memory budget (a 10⁷-step run of 10⁵ units stays bounded); its
     windows hold their halos."""
-    seg = _tile_segment(nsteps, ndof, MEMORY_MB)
+    seg = tile_segment(nsteps, ndof, MEMORY_MB)
     assert 1 <= seg <= nsteps
     assert (nsteps // seg + 1) * 3 * ndof * 8 <= MEMORY_MB * 1e6
     assert seg == min(nsteps, TILE_STEPS) or seg > TILE_STEPS
@@ -499,7 +498,7 @@ def test_velocity_terms_take_the_general_run_and_the_column_reverse():
     whose dashpot coefficients do not match the dashpots are refused."""
     traj, raw = trajectory_of(_problem("chain-dashpots-damped"), nsteps=4, stride=1)
     assert raw.dash.size == traj.terms.dash_ij.shape[0] > 0
-    assert traj.columns(raw) and not traj._column_run(raw) and traj.form(raw)[0] == FORM_CHAIN
+    assert traj.columns(raw) and type(traj.steps(raw)) is fast.Verlet and traj.form(raw)[0] == FORM_CHAIN
     with pytest.raises(ValueError, match="dashpots"):
         traj.run(dataclasses.replace(raw, dash=raw.dash[:-1]))
 

@@ -21,7 +21,7 @@ import yaml
 
 from flexmm.assemble import build_problem
 from flexmm.config import scene_from_dict
-from flexmm.design import splitting
+from flexmm.design import splitting, tape
 from flexmm.design.fit import load_fit, solve
 from flexmm.design.gradient import GradientError, Trajectory, trajectory_of
 from flexmm.design.optimize import check_gradient, load_design
@@ -103,7 +103,7 @@ def test_uniform_forces_give_the_engine_run_bit_for_bit(name, integrator):
     model's: the forward sweep is the Stepper's run bit for bit."""
     problem = _problem(name)
     traj, raw = trajectory_of(problem, nsteps=120, stride=40, integrator=integrator)
-    assert traj._split_bind(raw)[2].kind == (splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN)
+    assert traj.steps(raw).uni.kind == (splitting.UNI_SHEET if name.startswith("sheet") else splitting.UNI_CHAIN)
     rec, _ = traj.run(raw)
     stepper = make_stepper(problem, integrator, h=traj.h)
     for j in range(1, 4):
@@ -134,8 +134,10 @@ def test_kept_stage_forces_give_the_recomputed_gradient(integrator):
     kicks, drifts, fsal = traj._split
     stages = drifts.size if fsal else drifts.size - 1
     for segment in (None, 13):
-        v_ref, ref, _ = traj._split_gradient(raw, objective, segment, 256.0, stages=False)
-        value, grad, _ = traj._split_gradient(raw, objective, segment, 256.0)
+        recomputing = traj.steps(raw)
+        recomputing.stages = False
+        v_ref, ref, _ = tape.gradient(recomputing, objective, segment, 256.0)
+        value, grad, _ = tape.gradient(traj.steps(raw), objective, segment, 256.0)
         assert traj._scratch["stages"].shape == (60 if segment is None else 13, stages, raw.q0.size)
         assert value == v_ref
         for (k, a), (_, b) in zip(grad.items(), ref.items()):
@@ -178,7 +180,7 @@ def test_uniform_reverse_matches_the_general_reverse(name, graded, integrator, m
     raw.v0[:] = np.random.default_rng(6).normal(scale=0.01, size=raw.v0.size)  # moving from the start
     if graded:
         raw.t1[:, H_KT] *= np.linspace(0.8, 1.2, raw.t1.shape[0])
-    E = traj._split_bind(raw)[3][2]
+    E = traj.steps(raw).method[2]
     assert E.shape[1] == ((2 if name.startswith("chain") else 3) if name in FREE else raw.q0.size)
     kinds = []
     reverse = splitting.reverse
