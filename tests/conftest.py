@@ -285,6 +285,56 @@ def pytest_generate_tests(metafunc):
     metafunc.parametrize("example_lattice", params)
 
 
+#: Directories whose tests compile the most numba kernels on an empty cache (a fresh clone, CI), each
+#: its own family of kernels (the gradient sweeps; the integrators' steppers): under pytest-xdist's
+#: ``--dist worksteal`` (``make test``), each leads one worker's share (``pytest_collection_modifyitems``).
+COLD_COMPILE_FIRST = ("tests/design/", "tests/integrators/")
+
+
+def worksteal_shares(n_items: int, workers: int) -> list[int]:
+    """The sizes of the contiguous shares ``--dist worksteal`` first sends its workers, in order
+    (xdist's ``WorkStealingScheduling.check_schedule``: each gets the pending count over the workers
+    left); a worker that runs out then steals the back half of the longest queue."""
+    sizes, left = [], n_items
+    for k in range(workers):
+        sizes.append(left // (workers - k))
+        left -= sizes[-1]
+    return sizes
+
+
+def lead_shares(items: list, workers: int, first=COLD_COMPILE_FIRST) -> list:
+    """``items`` reordered so that the tests under ``first[g]`` open worker ``g % workers``'s share
+    (``worksteal_shares``), the rest keeping their order: the compile-heavy families start at once
+    on different workers, and what is left to steal at the end is many short tests. Where a
+    share cannot hold its leading tests, the order is kept."""
+    lead = [[] for _ in range(workers)]
+    rest = []
+    for item in items:
+        g = next((g for g, d in enumerate(first) if item.nodeid.startswith(d)), None)
+        (rest if g is None else lead[g % workers]).append(item)
+    sizes = worksteal_shares(len(items), workers)
+    if any(len(a) > b for a, b in zip(lead, sizes)):
+        return items
+    out = []
+    for w in range(workers):
+        take = sizes[w] - len(lead[w])
+        out += lead[w] + rest[:take]
+        rest = rest[take:]
+    return out
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items) -> None:
+    """In pytest-xdist workers (several), the compile-heavy directories lead the workers' shares
+    (``lead_shares``, dealt as ``--dist worksteal`` deals them; a worker sees its own ``dist`` as
+    "no", so the mode is not checked); every worker collects the same order. A run in one
+    process keeps pytest's order."""
+    workerinput = getattr(config, "workerinput", None)
+    workers = int(workerinput["workercount"]) if workerinput is not None else 1
+    if workers > 1:
+        items[:] = lead_shares(items, workers)
+
+
 def default_sigint() -> None:
     """``preexec_fn`` of a test's child process that receives SIGINT: its disposition back to the
     default, so Python turns SIGINT into KeyboardInterrupt even when the tests run with SIGINT

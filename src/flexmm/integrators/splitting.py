@@ -1,9 +1,9 @@
 """Symplectic splittings of drifts and kicks, with damping by exact flows (docs/physics.md §3).
 
 ``split_step`` is one step of any splitting given its coefficients as data (PEFRL below;
-Blanes–Moan's 6th-order method, ``composition``): ``make_splitting_advance(kicks, drifts)``
-compiles the engine's ``advance`` around it, and the gradient's sweeps (``design.splitting``)
-step with it too.
+Blanes–Moan's 6th-order method, ``composition``): ``splitting_advance`` is the engine's loop
+around it, compiled once per argument types for every splitting (``make_splitting_advance``
+binds a method's coefficients), and the gradient's sweeps (``design.splitting``) step with it too.
 
 PEFRL: 4th-order symplectic splitting (Omelyan, Mryglod & Folk, Comput. Phys. Commun. 146,
 188 (2002), "position-extended Forest–Ruth-like").
@@ -233,8 +233,72 @@ def _kick_work(q, f, ts, terms, tau, acc):
         acc[ACC_WORK] += tau * stage_power(q, f, ts, terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm)
 
 
-def make_splitting_advance(kicks: tuple, drifts: tuple):
-    """Compiled ``advance`` for the splitting K(k₀h) D(d₀h) K(k₁h) … D(d_{m−1}h) K(k_m h).
+@jit
+def splitting_advance(kicks, drifts, values, slot, fsal, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+    """Advance ``nsteps`` steps of size ``h`` from ``t`` of the splitting with coefficients
+    ``kicks``, ``drifts`` (``split_step``; ``values`` the distinct kick coefficients and ``slot``
+    each kick's index among them, ``fsal`` whether it is kick-first); returns the new time.
+
+    The coefficients are data, so every splitting runs the one compiled loop per argument types
+    (``make_splitting_advance`` binds them). ``f`` is scratch (the last kick's force); ``acc`` as
+    in ``common.ACC_*``.
+    """
+    drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
+    n = q.shape[0]
+    cd = free_damping(damp, minv)
+    damped = False
+    for k in range(n):
+        damped = damped or damp[k] * minv[k] != 0.0
+    vdep = has_velocity_terms(terms)
+    dissipative = damped or terms.dash_ij.shape[0] > 0
+    E, G = kick_factors(values, minv, damp, h)  # a row per distinct kick (less to stream)
+    if not damped:
+        E = E[:, :0]  # e = 1: ``kick``'s undamped loop
+    work = np.empty((6, n if vdep else 0))
+    d0, p0 = _ledger_rates(v, cd, terms, dissipative)
+    acc[ACC_WORK] -= applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
+    if fsal:
+        stage_force(args, terms, q, v, t, f)
+    tf = t  # stage time of the force in f
+    no_stages = np.empty((0, n))
+    for _ in range(nsteps):
+        t, tf = split_step(args, terms, kicks, drifts, E, G, slot, fsal, q, v, f, t, tf, h, no_stages, acc, minv,
+                           damp, work)
+        d1, p1 = _ledger_rates(v, cd, terms, dissipative)
+        acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
+        acc[ACC_WORK] += 0.5 * h * (p0 + p1)
+        d0, p0 = d1, p1
+    acc[ACC_WORK] += applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
+    if acc.shape[0] > ACC_STEPS:
+        evals = drifts.shape[0] if fsal else drifts.shape[0] - 1
+        acc[ACC_FEVALS] += evals * nsteps + (1 if fsal else 0)
+        acc[ACC_STEPS] += nsteps
+    return t
+
+
+class SplittingAdvance:
+    """The ``advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc) -> t`` of one splitting:
+    ``splitting_advance`` with its coefficients bound (``make_splitting_advance``); other
+    attributes (numba's ``signatures``, ``stats``) are those of the compiled loop."""
+
+    def __init__(self, kicks: tuple, drifts: tuple):
+        self.kicks, self.drifts = np.array(kicks), np.array(drifts)
+        values = tuple(dict.fromkeys(kicks))  # the distinct kick coefficients, and each kick's
+        self.values = np.array(values)
+        self.slot = np.array([values.index(c) for c in kicks], dtype=np.int64)
+        self.fsal = kicks[0] != 0.0
+        self.__name__ = "splitting_advance"
+
+    def __call__(self, args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
+        return splitting_advance(self.kicks, self.drifts, self.values, self.slot, self.fsal, args, q, v, f, minv,
+                                 damp, terms, t, h, nsteps, acc)
+
+    def __getattr__(self, name):
+        return getattr(splitting_advance, name)
+
+
+def make_splitting_advance(kicks: tuple, drifts: tuple) -> SplittingAdvance:
+    """The ``advance`` of the splitting K(k₀h) D(d₀h) K(k₁h) … D(d_{m−1}h) K(k_m h).
 
     ``kicks`` has one more entry than ``drifts``. A drift-first method (PEFRL) has k₀ = k_m = 0
     and m − 1 force evaluations per step; a kick-first one (a composition of velocity Verlet
@@ -242,59 +306,13 @@ def make_splitting_advance(kicks: tuple, drifts: tuple):
     (first same as last): m evaluations per step, plus one at the start of each call. Kicks are
     the exact damped flows of the module docstring (an RK4 kick with dashpots or friction).
     """
-    KICKS = tuple(float(c) for c in kicks)
-    DRIFTS = tuple(float(c) for c in drifts)
-    if len(KICKS) != len(DRIFTS) + 1:
+    kicks = tuple(float(c) for c in kicks)
+    drifts = tuple(float(c) for c in drifts)
+    if len(kicks) != len(drifts) + 1:
         raise ValueError("a splitting needs one kick more than drifts (pad with zero kicks)")
-    FSAL = KICKS[0] != 0.0
-    if not FSAL and KICKS[-1] != 0.0:
+    if kicks[0] == 0.0 and kicks[-1] != 0.0:
         raise ValueError("a drift-first splitting must also end with a drift (last kick 0)")
-    M = len(DRIFTS)
-    VALUES = tuple(dict.fromkeys(KICKS))  # the distinct kick coefficients, and each kick's
-    SLOT = tuple(VALUES.index(c) for c in KICKS)
-    EVALS = M if FSAL else M - 1
-
-    @jit
-    def advance(args, q, v, f, minv, damp, terms, t, h, nsteps, acc):
-        """Advance ``nsteps`` steps of size ``h`` from ``t`` (``split_step``); returns the new time.
-
-        ``f`` is scratch (the last kick's force); ``acc`` as in ``common.ACC_*``.
-        """
-        drv_dof, drv_mode, drv_shape, drv_prm = terms.drv_dof, terms.drv_mode, terms.drv_shape, terms.drv_prm
-        n = q.shape[0]
-        kicks = np.array(KICKS)
-        drifts = np.array(DRIFTS)
-        cd = free_damping(damp, minv)
-        damped = False
-        for k in range(n):
-            damped = damped or damp[k] * minv[k] != 0.0
-        vdep = has_velocity_terms(terms)
-        dissipative = damped or terms.dash_ij.shape[0] > 0
-        E, G = kick_factors(np.array(VALUES), minv, damp, h)  # a row per distinct kick (less to stream)
-        if not damped:
-            E = E[:, :0]  # e = 1: ``kick``'s undamped loop
-        slot = np.array(SLOT)
-        work = np.empty((6, n if vdep else 0))
-        d0, p0 = _ledger_rates(v, cd, terms, dissipative)
-        acc[ACC_WORK] -= applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        if FSAL:
-            stage_force(args, terms, q, v, t, f)
-        tf = t  # stage time of the force in f
-        no_stages = np.empty((0, n))
-        for _ in range(nsteps):
-            t, tf = split_step(args, terms, kicks, drifts, E, G, slot, FSAL, q, v, f, t, tf, h, no_stages, acc, minv,
-                               damp, work)
-            d1, p1 = _ledger_rates(v, cd, terms, dissipative)
-            acc[ACC_DISSIPATED] += 0.5 * h * (d0 + d1)
-            acc[ACC_WORK] += 0.5 * h * (p0 + p1)
-            d0, p0 = d1, p1
-        acc[ACC_WORK] += applied_force_energy(q, t, drv_dof, drv_mode, drv_shape, drv_prm)
-        if acc.shape[0] > ACC_STEPS:
-            acc[ACC_FEVALS] += EVALS * nsteps + (1 if FSAL else 0)
-            acc[ACC_STEPS] += nsteps
-        return t
-
-    return advance
+    return SplittingAdvance(kicks, drifts)
 
 
 pefrl_advance = make_splitting_advance((0.0, *KICKS, 0.0), DRIFTS)
