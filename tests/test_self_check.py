@@ -1,0 +1,72 @@
+"""Self-check: every shipped scene at its default settings against an independent converged reference.
+
+For each configs/*.yaml, the plan ``flexmm run`` makes (``prepare.resolve``: domain, method, step,
+and the error estimate it prints) is taken as is. The true error of what the run reports — the
+amplitudes and arrival-time speeds of ``flexmm.accuracy.quantity_error`` over the whole run — is
+then measured against a reference run with another method (the highest-order one the scene allows
+that is not the run's own) at a quarter of the run's step; the reference's own error is measured
+by its step doubling (h/2 against h/4) and allowed for: the true error is known within ± that. The
+test asserts that the printed estimate is not demonstrably below the true error, i.e. that it bounds it (issue 32: "the estimate must bound the true error of what the run reports,
+for every shipped scene").
+
+Slow (the plan's pilots, then three whole-run traces per scene): ``pytest -m slow tests/test_self_check.py -s``
+prints one ``self-check:`` line per scene (method, step, estimate, true error, their ratio).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+
+#: true errors below this fraction of the target are round-off of the traces, not integration errors
+NEGLIGIBLE = 1e-3
+
+
+def reference_method(problem, spec):
+    """The highest-order explicit method the problem allows other than ``spec`` (ties: fewer force evaluations)."""
+    from flexmm.accuracy import candidates, force_evals
+
+    others = [s for s in candidates(problem) if s.name != spec.name]
+    return max(others, key=lambda s: (s.order, -force_evals(s)))
+
+
+def true_error(problem, spec, h: float):
+    """(error of the run at step h, error of the reference) over the whole run: the run's trace
+    against a reference method's at h/4, and that reference's own error from its h/2 trace."""
+    from flexmm.accuracy import quantity_error, trace, window_grid
+
+    ref = reference_method(problem, spec)
+    n, n_samples, t_w = window_grid(problem.duration, h)
+    run = trace(problem, spec, n, t_w, n_samples)
+    r2, r4 = (trace(problem, ref, k * n, t_w, n_samples) for k in (2, 4))
+    ref_err = quantity_error(r2, r4).total / (2**ref.order - 1)  # Richardson: the error of the h/4 trace
+    return quantity_error(run, r4).total, ref_err, ref.name
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("config", CONFIGS, ids=[c.stem for c in CONFIGS])
+def test_printed_estimate_bounds_the_true_error(config):
+    from flexmm.config import load_scene
+    from flexmm.integrators import INTEGRATORS
+    from flexmm.prepare import resolve
+
+    rp = resolve(load_scene(config), "auto")
+    if rp.problem is None:
+        pytest.skip("the continuum replaces the discrete run")
+    attrs = rp.attrs()
+    est, target = attrs.get("accuracy_estimate"), attrs.get("accuracy_requested")
+    if est is None:
+        pytest.skip(f"no error estimate printed ({attrs.get('plan_accuracy')})")
+    problem = rp.problem
+    spec = INTEGRATORS[rp.plan.scene.solver.integrator]
+    err, ref_err, ref = true_error(problem, spec, problem.dt)
+    ratio = err / est if est > 0 else math.inf
+    print(f"self-check: {config.stem}: {spec.name} dt {problem.dt * problem.system.scales.time_s:.4g} s, "
+          f"estimate {est:.3g}, true {err:.3g} (reference {ref} at dt/4, its error {ref_err:.2g}), "
+          f"true/estimate {ratio:.3g} ± {ref_err / est if est > 0 else math.inf:.2g}")
+    # the true error is err within ± ref_err: the estimate fails only if it is demonstrably below it
+    assert err - ref_err <= max(est, NEGLIGIBLE * target), f"true {err:.3g} ± {ref_err:.2g} > estimate {est:.3g}"
