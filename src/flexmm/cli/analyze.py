@@ -147,8 +147,9 @@ def _spectra(runs, options, console, wrote) -> None:
         shape = " × ".join(str(n) for n in spec.power.shape[1:])
         line = (f"{r}: ω–k spectrum of {spec.field}: {spec.power.shape[0]} frequencies × {shape} wavenumbers "
                 f"(Δω = {spec.d_omega:.4g} rad/s, Δk = {spec.k[0][1] - spec.k[0][0]:.4g} rad/site); {spec.note}")
-        if spec.bands is not None:
-            line += f"; {spec.band_power_fraction():.1%} of the power within 2 frequency bins of them"
+        fraction = spec.band_power_fraction()
+        if fraction == fraction:  # bands were drawn (NaN: none)
+            line += f"; {fraction:.1%} of the power within 2 frequency bins of them"
         console.print(line)
         where = Path(r) if Path(r).is_dir() else Path(r).parent
         with writing(where):
