@@ -24,6 +24,9 @@ CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"
 
 #: true errors below this fraction of the target are round-off of the traces, not integration errors
 NEGLIGIBLE = 1e-3
+#: the estimate is Richardson's leading term of the error (exact as h → 0); the next order adds a few
+#: per cent either way, so "bounds" is checked as true ≤ SLACK × estimate
+SLACK = 1.05
 
 
 def reference_method(problem, spec):
@@ -69,4 +72,4 @@ def test_printed_estimate_bounds_the_true_error(config):
           f"estimate {est:.3g}, true {err:.3g} (reference {ref} at dt/4, its error {ref_err:.2g}), "
           f"true/estimate {ratio:.3g} ± {ref_err / est if est > 0 else math.inf:.2g}")
     # the true error is err within ± ref_err: the estimate fails only if it is demonstrably below it
-    assert err - ref_err <= max(est, NEGLIGIBLE * target), f"true {err:.3g} ± {ref_err:.2g} > estimate {est:.3g}"
+    assert err - ref_err <= max(SLACK * est, NEGLIGIBLE * target), f"true {err:.3g} ± {ref_err:.2g} > estimate {est:.3g}"

@@ -179,16 +179,31 @@ def _sampled(system) -> tuple[np.ndarray, np.ndarray | None]:
     return idx, np.stack([i, i + 1])
 
 
-def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
-    """Run ``n_steps`` equal steps to ``t_end`` (a multiple of ``n_samples``) and sample every
-    ``n_steps/n_samples`` steps (``Trace``: the fields, and the strain where runs report it)."""
-    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False).bounded_calls()
-    idx, pairs = _sampled(st.system)
+def sampler(system):
+    """The function q -> the values a ``Trace`` keeps of state q (fields × sites, with the strain
+    where runs report it, ``_sampled``)."""
+    idx, pairs = _sampled(system)
 
     def values(q: np.ndarray) -> np.ndarray:
         v = q[idx]
         return v if pairs is None else np.vstack([v, (q[pairs[1]] - q[pairs[0]])[None, :]])
 
+    return values
+
+
+def frames_trace(system, q: np.ndarray, dt: float) -> Trace:
+    """The ``Trace`` of saved states q (n_frames, ndof) ``dt`` apart (nondimensional): what a run's
+    frames give for ``quantity_error`` (the work–precision chart measures methods on it)."""
+    values = sampler(system)
+    x = np.abs(np.stack([values(row) for row in q]) - values(q[0]))
+    return Trace(x, dt, 0, bool(np.all(np.isfinite(x))))
+
+
+def trace(problem, spec, n_steps: int, t_end: float, n_samples: int) -> Trace:
+    """Run ``n_steps`` equal steps to ``t_end`` (a multiple of ``n_samples``) and sample every
+    ``n_steps/n_samples`` steps (``Trace``: the fields, and the strain where runs report it)."""
+    st = make_stepper(problem, spec, h=t_end / n_steps, threads=1, check_energy=False).bounded_calls()
+    values = sampler(st.system)
     x0 = values(st.q)
     x = np.zeros((n_samples + 1, *x0.shape))
     k = [0]
