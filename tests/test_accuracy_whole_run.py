@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from flexmm import accuracy as acc
 from flexmm.analysis.report.analyze import analyze_dataset
 from flexmm.analysis.report.summary import principal
@@ -47,3 +49,23 @@ def test_demo_estimate_bounds_the_error_against_a_4x_finer_step(tmp_path):
     _, pf = principal(analyze_dataset(fine.dataset))
     assert abs(p.speed_m_s / pf.speed_m_s - 1) <= estimate
     assert abs(p.amplitude / pf.amplitude - 1) <= estimate
+
+
+def test_an_error_growing_at_the_cap_is_measured_over_the_whole_run(monkeypatch):
+    """A pilot whose error grew at MAX_GROWTH (or faster: the measured γ is clipped) is no basis for
+    an extrapolation, which is then only a lower bound: the whole run is measured up to SATURATED_WORK
+    times the usual cost; a slower growth is extrapolated as before."""
+    from types import SimpleNamespace
+
+    spec = INTEGRATORS["pefrl"]
+    # 1000 steps of 2500 units: a whole-run check costs 7 × 1000 × 4 × 2500 = 7e7 unit force evaluations
+    problem = SimpleNamespace(duration=10.0, system=SimpleNamespace(n_sites=2500))
+    h = problem.duration / 1000
+    assert acc.WHOLE_RUN_WORK < 7e7 <= acc.SATURATED_WORK * acc.WHOLE_RUN_WORK
+    monkeypatch.setattr(acc, "_whole_run", lambda problem, spec, h, pilot: "measured")
+    pilot = lambda growth: acc.Estimate(1e-6, 1e-6, 1e-7, 1.0, "step doubling on a pilot", 0.0, growth)
+    assert acc.run_estimate(problem, spec, h, pilot(acc.MAX_GROWTH)) == "measured"
+    slow = acc.run_estimate(problem, spec, h, pilot(1.0))
+    assert slow.error == pytest.approx(1e-5) and "extrapolated" in slow.method and "at least" not in slow.method
+    problem.system.n_sites = 25000  # beyond even the saturated budget: extrapolated, and said to be a lower bound
+    assert "at least" in acc.run_estimate(problem, spec, h, pilot(acc.MAX_GROWTH)).method

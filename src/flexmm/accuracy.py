@@ -485,6 +485,10 @@ MAX_GROWTH = 2.0
 #: a whole-run check (traces at h, h/2 and h/4: 7 runs' worth of steps) is made instead of an
 #: extrapolation when it costs at most this many unit force evaluations (~1–5 s on one core)
 WHOLE_RUN_WORK = 5e7
+#: ... or at most this many times more when the pilot's growth reached MAX_GROWTH: the error grows
+#: at least that fast, so the extrapolation is only a lower bound (a cnoidal shaker's amplitudes:
+#: extrapolated 3.5e-5 as t², measured 3.5e-4 over the whole run)
+SATURATED_WORK = 4.0
 
 
 def _growth(a: Trace, b: Trace, order: float, err: float) -> float:
@@ -528,14 +532,19 @@ def run_estimate(problem, spec, h: float, pilot: Estimate) -> Estimate:
     When cheap (``whole_run_cheap``), measured: step doubling over the whole run, plus a trace at
     h/4 that tells whether the difference shrinks with the step (``converges``). Otherwise the
     pilot's estimate extrapolated to the run's duration T: err · (T / T_w)^γ with the growth γ
-    measured over the pilot window (γ = 0 for an intensive error: a steady pulse's speed)."""
+    measured over the pilot window (γ = 0 for an intensive error: a steady pulse's speed). A growth
+    at the cap MAX_GROWTH makes the extrapolation a lower bound: the whole run is then measured up
+    to SATURATED_WORK times the usual cost, and an extrapolation beyond it says "at least"."""
     T = problem.duration
     if pilot.window >= T * (1 - 1e-9):
         return pilot
-    if whole_run_cheap(problem, spec, h):
+    saturated = pilot.growth >= MAX_GROWTH
+    if whole_run_cheap(problem, spec, h, WHOLE_RUN_WORK * (SATURATED_WORK if saturated else 1.0)):
         return _whole_run(problem, spec, h, pilot)
     f = (T / pilot.window) ** pilot.growth
-    how = (f"{pilot.method}, extrapolated to the whole run as t^{pilot.growth:.2g}," if pilot.growth > 0
+    how = (f"{pilot.method}, extrapolated to the whole run as t^{pilot.growth:.2g} (at least: its growth "
+           f"over the pilot reached the cap)," if saturated
+           else f"{pilot.method}, extrapolated to the whole run as t^{pilot.growth:.2g}," if pilot.growth > 0
            else f"{pilot.method}, an error that does not grow along it,")
     return Estimate(pilot.error * f, pilot.amplitude * f, pilot.speed * f, pilot.window, how,
                     pilot.wall_s, pilot.growth)
