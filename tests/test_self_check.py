@@ -30,10 +30,10 @@ KNOWN = {
     "sine_gordon_breather": "extrapolated from a pilot over a tenth of the run that sees the released bump's first "
                             "peaks only (growth 0), while the breather's later peaks carry a growing phase error "
                             "(true 8.6e-5, estimate 1.75e-5); a whole-run check costs 3x the cheap budget",
-    "l_grid_guide": "extrapolated from a pilot over a tenth of its 3 s: the guided wave's error grows faster "
-                    "after it (true 1.5e-4, estimate 9.4e-6)",
-    "k_linkage_transition_wave": "PEFRL at h and h/2 agree to 8e-4 but the RK4 reference (converged to 5e-3) "
-                                 "puts the snaps elsewhere by 8e-2: the front's snap timing; not yet understood",
+    "l_grid_guide": "extrapolated from a pilot over a third of its 3 s that saw no growth (the guided wave's "
+                    "error grows after it: true 1.5e-4, estimate 9.4e-6)",
+    "k_linkage_transition_wave": "extrapolated as t^1.2 from a pilot over a tenth of the run (the run warns that "
+                                 "its 7.9e-4 misses the target); the snaps' timing error grows faster: true 8.2e-2",
 }
 #: the estimate is Richardson's leading term of the error (exact as h → 0); the next order adds a few
 #: per cent either way, so "bounds" is checked as true ≤ SLACK × estimate
