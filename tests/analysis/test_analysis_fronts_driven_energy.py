@@ -48,6 +48,22 @@ def test_two_way_fronts_from_a_trigger():
         assert f.speed_m_s == pytest.approx(1.5, rel=5e-3)
 
 
+@pytest.mark.parametrize("width", [2.0, 6.0])
+def test_a_front_present_at_the_start_is_one_front(width):
+    """A launched kink: the front is already there at t = 0, its own sites part-way between the wells.
+    Measured from where they started, those sites make a second edge that walks back to the kink's
+    start (a spurious front); measured between their wells, the kink is the only front."""
+    x = np.arange(200.0)
+    t = np.linspace(0, 60, 241)
+    centre = 40 + 1.5 * t
+    u = 0.5 * (1 - np.tanh((x[None] - centre[:, None]) / width))
+    ds = xr.Dataset({"u": (("time", "site"), u, {"units": "m"})},
+                    coords={"time": t, "x": ("site", x)}, attrs={"spacing_m": 1.0})
+    (f,) = measure_fronts(field_view(ds, "u"))
+    assert f.direction == 1 and f.speed_m_s == pytest.approx(1.5, rel=5e-3)
+    assert f.start_m == pytest.approx(40.0, abs=3.0)  # where a 3-site run has switched
+
+
 def test_no_front():
     with pytest.raises(FrontNotFound):
         measure_fronts(field_view(pulse_dataset([], field="u", units="m"), "u"))

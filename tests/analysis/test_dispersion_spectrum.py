@@ -80,3 +80,40 @@ def test_a_sheet_dataset_gives_an_omega_kx_ky_spectrum():
     i, a, b = np.unravel_index(np.argmax(spec.power), spec.power.shape)
     assert spec.power.shape == (33, 8, 16) and "sheet" in spec.note
     assert spec.omega[i] == pytest.approx(w) and spec.k[1][b] == pytest.approx(qx) and spec.k[0][a] == pytest.approx(qy)
+
+
+@pytest.fixture(scope="module")
+def sheet_run(tmp_path_factory):
+    """A fully periodic 16 x 16 rotating-squares sheet from 1 µm of frozen noise in u, v and 1 µrad in θ."""
+    sc = scene_from_dict({
+        "name": "sheet_noise", "solver": {"duration_s": 0.1023}, "output": {"n_frames": 1024},
+        "lattice": {"kind": "rotating_squares_sheet", "n_rows": 16, "n_cols": 16, "a_m": 0.01, "theta0_rad": 0.2,
+                    "k_long_n_per_m": 10000, "k_shear_n_per_m": 3300, "k_rot_n_m_per_rad": 0.002,
+                    "areal_density_kg_m2": 20.0, "left": "periodic", "right": "periodic",
+                    "bottom": "periodic", "top": "periodic"},
+        "initial": {"fields": [{"field": "u", "value": "1e-6 * normal(3)"}, {"field": "v", "value": "1e-6 * normal(4)"},
+                               {"field": "theta", "value": "1e-6 * normal(5)"}]}})
+    return run_scene(sc, run_dir=tmp_path_factory.mktemp("sheet") / "sheet").path
+
+
+def test_a_sheets_spectrum_lies_on_its_bloch_bands(sheet_run):
+    """The sheet's ω–k_x and ω–k_y cuts get the bands of its two-unit Bloch cell, and a small random
+    state's power lies on them (at every k of each cut the strongest ω is within two bins of a band)."""
+    spec = run_spectrum(RunContext.from_dataset(open_dataset(sheet_run)))
+    assert spec.cut_bands is not None and "Bloch cell" in spec.note
+    for k, power, bands, _ in spec.cuts():
+        assert bands.shape == (spec.band_k.size, 6)
+        moving = k != 0
+        top = spec.omega[np.argmax(power, axis=0)]
+        on_k = np.stack([np.interp(np.abs(k), spec.band_k, bands[:, b]) for b in range(6)], axis=1)  # (n_k, 6)
+        near = np.nanmin(np.abs(top[:, None] - on_k), axis=1)
+        assert np.all(near[moving] <= 2 * spec.d_omega), near
+    assert spec.band_power_fraction() > 0.9
+
+
+def test_cli_sheet_spectrum_draws_the_bands(sheet_run):
+    r = CliRunner().invoke(app, ["analyze", str(sheet_run.parent), "--spectrum", "--field", "theta"])
+    assert r.exit_code == 0, r.output
+    out = " ".join(r.output.split())
+    assert "Bloch cell" in out and "of the power within 2 frequency bins" in out
+    assert (sheet_run.parent / "spectrum_theta.png").stat().st_size > 1000

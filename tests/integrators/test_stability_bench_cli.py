@@ -68,4 +68,5 @@ def test_bench_command(tiny_config, tmp_path) -> None:
     assert set(ds.method.values) == {"velocity_verlet", "RK45"}
     assert "11 frames" in res.output  # the scene's output.n_frames
     assert (ds.final_error.values > 0).all() and (ds.force_evaluations.values > 0).all()
+    assert (ds.quantity_error.values > 0).all()  # the chart's error: the reported amplitudes and speeds
     assert "faster" in res.output and (out / "workprecision.png").exists()

@@ -147,8 +147,9 @@ def _spectra(runs, options, console, wrote) -> None:
         shape = " × ".join(str(n) for n in spec.power.shape[1:])
         line = (f"{r}: ω–k spectrum of {spec.field}: {spec.power.shape[0]} frequencies × {shape} wavenumbers "
                 f"(Δω = {spec.d_omega:.4g} rad/s, Δk = {spec.k[0][1] - spec.k[0][0]:.4g} rad/site); {spec.note}")
-        if spec.bands is not None:
-            line += f"; {spec.band_power_fraction():.1%} of the power within 2 frequency bins of them"
+        fraction = spec.band_power_fraction()
+        if fraction == fraction:  # bands were drawn (NaN: none)
+            line += f"; {fraction:.1%} of the power within 2 frequency bins of them"
         console.print(line)
         where = Path(r) if Path(r).is_dir() else Path(r).parent
         with writing(where):
@@ -161,7 +162,8 @@ def analyze(
     analysis: str = typer.Option("auto", "--analysis", "-a", help="auto, pulse, front, driven or modes (oblique plane waves on a skew-periodic sheet)."),
     row: int = typer.Option(None, "--row", help="Row of a 2D lattice to analyse (default: middle)."),
     threshold: float = typer.Option(None, "--threshold",
-                                    help="Pulse detection level, fraction of the peak, 0.01 to 1 (default 0.25)."),
+                                    help="Pulse detection level, fraction of the largest peak held over 2 % of the "
+                                         "frames, 0.01 to 1 (default 0.25)."),
     jump: float = typer.Option(None, "--jump", help="Well-to-well jump of a front (default: measured)."),
     json_out: str = typer.Option(None, "--json", help="Write a JSON summary to this file ('-': stdout)."),
     csv_out: str = typer.Option(None, "--csv", help="Write the measured/predicted table as CSV ('-': stdout)."),

@@ -34,7 +34,9 @@ def bench(
 
     The equations are those `flexmm run` would integrate (its plan, printed first: trimmed domain,
     pruned output, frames); the plan's method and step are one point of the chart's ladders. A
-    chaotic scene (a reference at 1000x its tolerance ends far from it) is refused unless --force."""
+    scene whose reported quantities are chaotic (a reference at 1000x its tolerance reports other
+    wave amplitudes and speeds) is refused unless --force. The chart's error is that of those
+    quantities (the run's error estimate's), the final state's is in the dataset."""
     from flexmm.diagnostics import baseline
     from flexmm.diagnostics import workprecision as wp
     from flexmm.integrators import INTEGRATORS

@@ -44,6 +44,11 @@ def _periodic_copy(lat: RotatingSquaresSheet) -> RotatingSquaresSheet:
 def squares_cell(lat: RotatingSquaresSheet) -> BlochCell:
     """The ``BlochCell`` of the sheet's two-unit cell (``cell_couplings``; unit 0: σ = +1 at row 0,
     col 0, unit 1 its right neighbour), offsets in units of a."""
+    return _cell(lat)[0]
+
+
+def _cell(lat: RotatingSquaresSheet):
+    """(``squares_cell``, the periodic copy's built system)."""
     from flexmm.models.rotating_sheet import build
 
     system = build(_periodic_copy(lat))
@@ -52,7 +57,18 @@ def squares_cell(lat: RotatingSquaresSheet) -> BlochCell:
     row, col = np.divmod(np.arange(n), nc)
     wrap = lambda d: (d + nc // 2) % nc - nc // 2  # noqa: E731 - minimum image on the torus
     offsets = np.stack([wrap(col) * h, wrap(row) * h], axis=1)
-    return cell_couplings(system, offsets, (row + col) % 2)
+    return cell_couplings(system, offsets, (row + col) % 2), system
+
+
+def site_bands(lat: RotatingSquaresSheet, k_site: np.ndarray) -> np.ndarray:
+    """ω (rad/s) of the sheet's six branches (…, 6) at wave vectors ``k_site`` (…, 2) in rad per
+    site, (k_x along the columns, k_y along the rows): every mode of that wave vector modulo the
+    two-unit cell's reciprocal lattice, as a field sampled per site shows them."""
+    from flexmm.linalg import bloch_frequencies
+
+    cell, system = _cell(lat)
+    h = system.spacing_m / system.scales.length_m
+    return bloch_frequencies(cell, np.asarray(k_site, float) / h) / system.scales.time_s
 
 
 def cell_couplings(system, offsets: np.ndarray, sublattice: np.ndarray) -> BlochCell:

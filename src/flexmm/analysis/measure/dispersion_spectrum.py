@@ -11,7 +11,9 @@ few bins). A plane wave e^{i(kn − ωt)} with ω > 0 lands at (ω, k): a wave m
 Only ω ≥ 0 is kept: a real field's spectrum is symmetric under (ω, k) → (−ω, −k).
 
 The linear bands of a 1D model come from its Bloch eigenproblem (``flexmm.linear.dispersion``,
-built on a short copy of the lattice), unfolded to k per site when the cell holds several sites.
+built on a short copy of the lattice), unfolded to k per site when the cell holds several sites; a
+sheet's, for the kinds in ``SHEET_BANDS``, from its cell's Bloch matrix at (k_x, 0) and (0, k_y) —
+the two cuts the figure draws.
 """
 
 from __future__ import annotations
@@ -21,11 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexmm.errors import FlexmmError
 
 @dataclass
 class Spectrum:
     """power (n_ω, n_k) for a chain or (n_ω, n_ky, n_kx) for a sheet; omega (n_ω,) rad/s; k: one
-    (n,) array per space axis, rad per site; bands: ω (rad/s) of each branch on ``band_k``."""
+    (n,) array per space axis, rad per site; bands: ω (rad/s) of each branch on ``band_k`` (a chain);
+    cut_bands: a sheet's, along k_x (k_y = 0) and along k_y (k_x = 0), each (n_band_k, n_b)."""
 
     field: str
     omega: np.ndarray
@@ -35,6 +39,17 @@ class Spectrum:
     bands: np.ndarray | None = None
     note: str = ""
     extra: dict = field(default_factory=dict)
+    cut_bands: list[np.ndarray] | None = None
+
+    def cuts(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray | None, str]]:
+        """(k, power (n_ω, n_k), bands on ``band_k`` or None, axis label) of each ω–k plane drawn:
+        a chain's one; a sheet's k_x cut at k_y = 0 and k_y cut at k_x = 0."""
+        if self.power.ndim == 2:
+            return [(self.k[0], self.power, self.bands, "k (rad/site)")]
+        ky, kx = self.k
+        bands = self.cut_bands or [None, None]
+        return [(kx, self.power[:, np.argmin(np.abs(ky)), :], bands[0], "k_x (rad/site), k_y = 0"),
+                (ky, self.power[:, :, np.argmin(np.abs(kx))], bands[1], "k_y (rad/site), k_x = 0")]
 
     @property
     def d_omega(self) -> float:
@@ -45,17 +60,19 @@ class Spectrum:
         return self.omega[np.argmax(self.power, axis=0)]
 
     def band_power_fraction(self, bins: float = 2.0) -> float:
-        """Fraction of the power (k ≠ 0) within ``bins`` frequency bins of a linear band (chains)."""
-        if self.bands is None or self.power.ndim != 2:
-            return float("nan")
-        k = self.k[0]
-        near = np.zeros(self.power.shape, bool)
-        for b in range(self.bands.shape[1]):
-            w = np.interp(np.abs(k), self.band_k, self.bands[:, b])
-            near |= np.abs(self.omega[:, None] - w[None, :]) <= bins * self.d_omega
-        keep = np.broadcast_to(k != 0, self.power.shape)
-        total = float(self.power[keep].sum())
-        return float(self.power[near & keep].sum() / total) if total > 0 else float("nan")
+        """Fraction of the power (k ≠ 0) within ``bins`` frequency bins of a linear band, over the
+        ω–k planes that have bands (``cuts``)."""
+        inside = total = 0.0
+        for k, power, bands, _ in self.cuts():
+            if bands is None:
+                continue
+            near = np.zeros(power.shape, bool)
+            for b in range(bands.shape[1]):
+                w = np.interp(np.abs(k), self.band_k, bands[:, b])
+                near |= np.abs(self.omega[:, None] - w[None, :]) <= bins * self.d_omega
+            keep = np.broadcast_to(k != 0, power.shape)
+            inside, total = inside + float(power[near & keep].sum()), total + float(power[keep].sum())
+        return inside / total if total > 0 else float("nan")
 
 
 def power_spectrum(values: np.ndarray, dt: float) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
@@ -110,7 +127,13 @@ def run_spectrum(ctx, spec: str | None = None, row: int | None = None) -> Spectr
     grid = _sheet_grid(ds, spec) if row is None else None
     if grid is not None:
         omega, ks, power = power_spectrum(grid, dt)
-        return Spectrum(spec, omega, ks, power, note="sheet: ω–k_y–k_x spectrum (no band overlay)")
+        out = Spectrum(spec, omega, ks, power, band_k=np.linspace(0.0, math.pi, 257))
+        try:
+            out.cut_bands, how = model_sheet_bands(ctx, out.band_k)
+            out.note = f"sheet: ω–k_y–k_x spectrum; {how}"
+        except (ValueError, KeyError, ArithmeticError, FlexmmError) as exc:  # FlexmmError: no scene recorded
+            out.band_k, out.note = None, f"sheet: ω–k_y–k_x spectrum; no linear bands: {exc}"
+        return out
     view = field_view(ds, spec, row=row)
     omega, ks, power = power_spectrum(view.values, dt)
     out = Spectrum(view.spec, omega, ks, power)
@@ -151,3 +174,24 @@ def model_chain_bands(ctx, k: np.ndarray) -> tuple[np.ndarray, str]:
         raise ValueError(f"{ctx.model} is not a chain with n_units")
     system = MODELS[lat.kind].build(lat.model_copy(update={"n_units": 32}))
     return chain_bands(system, k)
+
+
+def _squares_sheet_bands(lat, k_site):
+    from flexmm.linear.sheet import site_bands
+
+    return site_bands(lat, k_site)
+
+
+#: lattice kinds whose sheet bands are drawn: kind -> f(lattice config, k (…, 2) rad per site) -> ω (…, n_b) rad/s
+SHEET_BANDS = {"rotating_squares_sheet": _squares_sheet_bands}
+
+
+def model_sheet_bands(ctx, k: np.ndarray) -> tuple[list[np.ndarray], str]:
+    """A sheet's bands (``SHEET_BANDS``) at |k| along k_x (k_y = 0) and along k_y (k_x = 0)."""
+    lat = ctx.scene().lattice
+    bands = SHEET_BANDS.get(lat.kind)
+    if bands is None:
+        raise ValueError(f"no Bloch cell registered for a {lat.kind} (bands of: {', '.join(SHEET_BANDS)})")
+    zero = np.zeros_like(k)
+    cuts = [bands(lat, np.stack(pair, axis=-1)) for pair in ((k, zero), (zero, k))]
+    return cuts, "linear bands of the sheet's two-unit Bloch cell along k_x and k_y"

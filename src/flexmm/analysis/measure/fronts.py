@@ -1,7 +1,8 @@
 """Transition fronts: sites switching from one well to another (Raney et al. PNAS 2016 method).
 
 Each site's progress is s_i(t) = (u_i(t) − u_i(0))/L, with L the well-to-well jump (given, or
-the median final jump of the sites that switched). Front position = where s crosses ½ between
+the median final jump of the sites that switched); a site that starts part-way between two wells
+(inside a front present at t = 0: a launched kink) is measured from its well instead (``progress``). Front position = where s crosses ½ between
 neighbouring sites (linear interpolation), followed through time with the pulse tracker, so two
 fronts leaving a trigger in opposite directions are measured separately; crossings between runs
 shorter than three sites (ringing behind a front) are ignored. Per front:
@@ -102,6 +103,31 @@ def switched_sites(u: np.ndarray, jump: float | None = None, tail: int = 5) -> t
     return (final / jump) > 0.5, jump
 
 
+IN_WELL = 0.25  # a site whose net move is within this many jumps of a whole number started in a well
+
+
+def progress(u: np.ndarray, jump: float, tail: int = 5) -> np.ndarray:
+    """Each site's progress s (n_time, n_pos) from the well it started in towards the next, in jumps.
+
+    Normally s = (u − u(0))/L. When the initial state itself holds a front — its two ends lie half
+    a jump or more apart (a launched kink) — the sites that start part-way between its two sides
+    (by more than ``IN_WELL`` of the difference from either) and move by a part of a jump (not a
+    whole number of jumps within ``IN_WELL``) are measured from their well instead, k = round(net/L)
+    jumps before their final state: s = (u − u_final + k L)/L, so they cross ½ when the front's
+    centre passes them. Measured from their start, the kink's own sites cross ½ early and make a
+    second edge that walks back to the launch site: a spurious front. (A front that stops part-way
+    through a site, in a lattice that started in its wells, keeps the first convention.)"""
+    final = np.median(u[-tail:], axis=0)
+    r = (final - u[0]) / jump
+    k = np.floor(r + 0.5)
+    ends = u[0, -1] - u[0, 0]
+    if abs(ends) < 0.5 * abs(jump):
+        return (u - u[0]) / jump
+    side = (u[0] - u[0, 0]) / ends  # 0 at the first site's initial value, 1 at the last's
+    inside = (side > IN_WELL) & (side < 1 - IN_WELL) & (np.abs(r - k) > IN_WELL)
+    return (u - np.where(inside, final - k * jump, u[0])) / jump
+
+
 STEADY_TRIM = 0.2  # fraction of the path left out at each end of the steady-speed fit
 
 
@@ -160,7 +186,7 @@ def measure_fronts(view, *, jump: float | None = None, min_travel_sites: float =
     mask, L = switched_sites(u, jump)
     if L == 0 or not mask.any():
         raise FrontNotFound(f"no site of {view.spec!r} switched state (no persistent jump)")
-    s = (u - u[0]) / L
+    s = progress(u, L)
     h = view.spacing_m
     dets = [[(float(p), 1.0) for p in _front_crossings(view.x, s[j])] for j in range(view.n_time)]
     tracks = merge_tracks(link(view.time, dets, gate=4 * h, max_gap=10), 4 * h, rel_speed=0.9)

@@ -137,29 +137,24 @@ def spectrum(driven, path, *, title: str = "") -> Path:
 
 def omega_k(spec, path, *, title: str = "") -> Path:
     """log10 of an ω–k power spectrum (``analysis.dispersion_spectrum``) with the linear bands
-    drawn over it (chains); a sheet's ω–k_x (k_y = 0) and ω–k_y (k_x = 0) cuts."""
-    if spec.power.ndim == 2:
-        cuts = [(spec.k[0], spec.power, "k (rad/site)")]
-    else:
-        ky, kx = spec.k
-        cuts = [(kx, spec.power[:, np.argmin(np.abs(ky)), :], "k_x (rad/site), k_y = 0"),
-                (ky, spec.power[:, :, np.argmin(np.abs(kx))], "k_y (rad/site), k_x = 0")]
+    drawn over it; a sheet's ω–k_x (k_y = 0) and ω–k_y (k_x = 0) cuts (``Spectrum.cuts``)."""
+    cuts = spec.cuts()
     fig, axes = plt.subplots(1, len(cuts), figsize=(5.6 * len(cuts), 4.2), squeeze=False)
-    for ax, (k, p, xlabel) in zip(axes[0], cuts):
+    for ax, (k, p, bands, xlabel) in zip(axes[0], cuts):
         logp = np.log10(np.maximum(p, np.max(p) * 1e-12 if np.max(p) > 0 else 1e-300))
         dk = k[1] - k[0] if k.size > 1 else 1.0
         im = ax.imshow(logp, origin="lower", aspect="auto", cmap="magma", interpolation="nearest",
                        extent=(k[0] - dk / 2, k[-1] + dk / 2, 0, spec.omega[-1]), vmin=logp.max() - 8)
         fig.colorbar(im, ax=ax, label="log10 power")
-        if spec.bands is not None and p is spec.power:
-            for b in range(spec.bands.shape[1]):
+        top = spec.omega[-1]
+        if bands is not None:
+            for b in range(bands.shape[1]):
                 for sign in (1, -1):
-                    ax.plot(sign * spec.band_k, spec.bands[:, b], "c--", lw=0.8,
+                    ax.plot(sign * spec.band_k, bands[:, b], "c--", lw=0.8,
                             label="linear bands" if (b, sign) == (0, 1) else None)
             ax.legend(loc="upper right", fontsize=8)
-        top = spec.omega[-1]
-        if spec.bands is not None and np.isfinite(spec.bands).any():  # up to the bands, not the frames' Nyquist
-            top = min(top, 1.3 * float(np.nanmax(spec.bands)))
+            if np.isfinite(bands).any():  # up to the bands, not the frames' Nyquist
+                top = min(top, 1.3 * float(np.nanmax(bands)))
         ax.set(xlabel=xlabel, ylabel="ω (rad/s)", title=title, ylim=(0, top))
     return _save(fig, path)
 
