@@ -137,7 +137,7 @@ def kick_factor_gradients(kicks, minv, damp, h, GE, GG) -> tuple[np.ndarray, np.
 
 # ---------------------------------------------------------------- the sweeps
 #
-# Every sweep takes ``uni`` (``Uniform``, built by ``gradient.Trajectory._split_uniform``): the
+# Every sweep takes ``uni`` (``Uniform``, built by ``steps.Split.uniform``): the
 # model's own kernels, or a uniform chain's or grid sheet's shared law (the module docstring).
 
 #: ``Uniform.kind``: the model's own kernels, a uniform chain, a uniform grid sheet
@@ -145,7 +145,7 @@ UNI_NONE, UNI_CHAIN, UNI_SHEET = 0, 1, 2
 
 
 class Uniform(NamedTuple):
-    """What the sweeps read of a uniform chain or grid sheet (``gradient.Trajectory._split_uniform``;
+    """What the sweeps read of a uniform chain or grid sheet (``steps.Split.uniform``;
     kind UNI_NONE: nothing, every array empty)."""
 
     #: UNI_NONE, UNI_CHAIN, UNI_SHEET
