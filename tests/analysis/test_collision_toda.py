@@ -21,9 +21,9 @@ def test_equal_solitons_shift_by_ln_cosh_over_kappa():
 
 
 def test_toda_head_on_collision_shifts_match_the_exact_solution(tmp_path):
-    """κ = 1 and κ = 0.5 at analyze's default settings: the smaller soliton (28 % of the larger, but
-    23 % of their sum while they overlap, under a level of 25 % of the largest value) is found, both
-    speeds match β/κ and both shifts −ln A12/(2κ)."""
+    """κ = 1 and κ = 0.5: the smaller soliton (28 % of the larger, but 23 % of their sum while they
+    overlap, under the default level of 25 % of the largest value) is found at a level of 15 %,
+    both speeds match β/κ and both shifts −ln A12/(2κ)."""
     k1, k2, a, m, b = 1.0, 0.5, 0.01, 0.01, 100.0
     sc = scene_from_dict({
         "name": "toda_collision", "solver": {"duration_s": 1.6, "accuracy": 1e-6}, "output": {"n_frames": 1601},
@@ -31,7 +31,7 @@ def test_toda_head_on_collision_shifts_match_the_exact_solution(tmp_path):
                     "bond": {"law": "toda", "a_n": 1.0, "b_per_m": 100.0}},
         "initial": {"launch": [{"kind": "toda_soliton", "kappa": k1, "center_site": 60, "direction": 1},
                                {"kind": "toda_soliton", "kappa": k2, "center_site": 240, "direction": -1}]}})
-    res = report.analyze_run(run_scene(sc, run_dir=tmp_path / "toda").path)
+    res = report.analyze_run(run_scene(sc, run_dir=tmp_path / "toda").path, threshold_fraction=0.15)
     (c,) = res.collisions
     assert c.outcome == "passed through" and abs(c.amplitude_change_a) < 1e-3 and abs(c.speed_change_a) < 1e-3
     right = "a" if res.pulses[c.pulse_a].direction > 0 else "b"

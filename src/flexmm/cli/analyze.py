@@ -162,8 +162,7 @@ def analyze(
     analysis: str = typer.Option("auto", "--analysis", "-a", help="auto, pulse, front, driven or modes (oblique plane waves on a skew-periodic sheet)."),
     row: int = typer.Option(None, "--row", help="Row of a 2D lattice to analyse (default: middle)."),
     threshold: float = typer.Option(None, "--threshold",
-                                    help="Pulse detection level, fraction of the largest peak held over 2 % of the "
-                                         "frames, 0.01 to 1 (default 0.25)."),
+                                    help="Pulse detection level, fraction of the peak, 0.01 to 1 (default 0.25)."),
     jump: float = typer.Option(None, "--jump", help="Well-to-well jump of a front (default: measured)."),
     json_out: str = typer.Option(None, "--json", help="Write a JSON summary to this file ('-': stdout)."),
     csv_out: str = typer.Option(None, "--csv", help="Write the measured/predicted table as CSV ('-': stdout)."),

@@ -43,8 +43,7 @@ class AnalysisOptions(Strict):
                                                       "the displacement for fronts and drives)")
     row: int | None = Field(None, ge=0, description="row of a 2D lattice (default: the middle one)")
     threshold_fraction: float = Field(0.25, ge=0.01, le=1.0,
-                                      description="pulse detection level, fraction of the largest peak "
-                                                  "held over 2 % of the frames")
+                                      description="pulse detection level, fraction of the peak")
     jump: Finite | None = Field(None, description="well-to-well jump of a front (default: measured)")
 
 

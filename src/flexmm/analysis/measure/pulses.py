@@ -318,33 +318,13 @@ def noise_level(values: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(v - np.median(v)))) if v.size else 0.0
 
 
-HOLD_FRACTION = 0.02  # a peak counts as the field's largest only if held this fraction of the frames
-
-
-def held_peak(vals: np.ndarray) -> float:
-    """Largest value of ``vals`` (n_time, n_pos) held over HOLD_FRACTION of the frames: the maximum
-    over time of the running minimum of each frame's maximum. Two pulses that meet add up for a
-    moment; that spike is not the height of either (a Toda soliton of κ = 0.5 is 28 % of one of
-    κ = 1, but only 23 % of their sum during a head-on collision)."""
-    top = np.fmax.reduce(vals, axis=1) if vals.ndim == 2 else np.atleast_1d(np.nanmax(vals))
-    top = top[np.isfinite(top)]
-    if top.size == 0:
-        return float("nan")
-    window = max(1, int(round(HOLD_FRACTION * top.size)))
-    padded = np.pad(top, (window // 2, window - 1 - window // 2), mode="edge")  # numpy: no scipy.ndimage import
-    return float(np.max(np.lib.stride_tricks.sliding_window_view(padded, window).min(axis=1)))
-
-
 def _thresholds(vals: np.ndarray, fraction: float, floor: float, per_sign: bool) -> tuple[float, float]:
     """Detection levels for (positive, negative) peaks; inf switches a polarity off.
 
-    Global: ``fraction`` of the largest held |value| (``held_peak``), for both signs. Per sign:
-    ``fraction`` of the largest held value of that sign. Never below ``floor`` (the noise level
-    times NOISE_FACTOR); a polarity whose largest value is within the floor is off.
+    Global: ``fraction`` of the largest |value|, for both signs. Per sign: ``fraction`` of the
+    largest value of that sign. Never below ``floor`` (the noise level times NOISE_FACTOR).
     """
     peaks = (float(np.nanmax(vals)), float(-np.nanmin(vals)))
-    held = (held_peak(vals), held_peak(-vals))
-    peaks = tuple(h if h > floor else p for p, h in zip(peaks, held))
     top = max(peaks)
     return tuple(max(fraction * (p if per_sign else top), floor) if p > floor else np.inf for p in peaks)
 
