@@ -59,7 +59,7 @@ class Plan:
     plan_s: float = 0.0
     built: tuple | None = None  # (scene, system, terms) the domain step built (``built_for``)
     error_check: str | None = None  # 'pilot' or 'run', once ``flexmm.prepare`` has decided (None: no estimate)
-    frames: object | None = None  # plan.frames.``flexmm.frames.FrameTimes``, once ``flexmm.prepare`` has fitted the step to them
+    frames: object | None = None  # ``flexmm.frames.FrameTimes``, once ``flexmm.prepare`` has fitted the step to them
 
     @property
     def skip_discrete(self) -> bool:
